@@ -1,0 +1,28 @@
+"""Shared fixtures. x64 is switched on by importing uq (uq/_jax.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import uq._jax  # noqa: F401  (float64 before anything traces)
+
+ROOT = Path(__file__).resolve().parents[1]
+N50_CSV = ROOT / "data" / "n50" / "recordings.csv"
+
+
+@pytest.fixture(scope="session")
+def n50_recordings():
+    from uq._recordings import read_recordings
+
+    return read_recordings(N50_CSV)
+
+
+@pytest.fixture(scope="session")
+def n50_fit(n50_recordings):
+    """The bundled campaign fitted once with the default settings and seed (about 35 s)."""
+    from uq._cmd_common import DEFAULT_SEED
+    from uq._cubic import fit_campaign
+
+    return fit_campaign(n50_recordings, seed=DEFAULT_SEED)

@@ -219,6 +219,10 @@ def read_recordings(
 
 def _make_test(path: str, p: float, rows: list[tuple], min_points: int) -> Test:
     label = f"{p:g} bar test"
+    if len({round(r[1], 6) for r in rows}) == 1:
+        raise InputError(
+            f"{where(path, rows[0][0], 'height_mm')}: the {label} has a single height ({rows[0][1]:g} mm); a characteristic needs the element stepped through several heights"
+        )
     by_step: dict[int, tuple] = {}
     by_place: dict[tuple[bool, float], int] = {}
     for r in rows:
@@ -246,10 +250,6 @@ def _make_test(path: str, p: float, rows: list[tuple], min_points: int) -> Test:
     height = np.array([r[1] for r in ordered]) * 1e-3
     comp = np.array([r[4] for r in ordered], dtype=bool)
 
-    if np.unique(height).size == 1:
-        raise InputError(
-            f"{where(path, rows[0][0], 'height_mm')}: the {label} has a single height ({height[0] * 1e3:g} mm); a characteristic needs the element stepped through several heights"
-        )
     if len(ordered) < min_points or np.unique(np.round(height, 9)).size < 4:
         raise InputError(
             f"{where(path, rows[0][0])}: the {label} has {len(ordered)} points at {np.unique(np.round(height, 9)).size} heights; the model needs at least {min_points} points at 4 or more heights"

@@ -1,0 +1,300 @@
+"""Derived quantities of a campaign with credible bands (the paper's Figures 2-5 and section 5).
+
+Pure numpy on posterior draws of the per-pressure cubics (``uq._cubic``). For every test, on
+a common height grid x (m), u = x - x0:
+
+* force P(x) (eq. 8): the 90 % band of the mean curve, and the posterior predictive band of a
+  new reading (mean curve plus noise with the test's heteroscedastic sd
+  sqrt(sigma0^2 + (rel |P(x)|)^2));
+* piston coordinate L(x) (eq. 9), mean band and predictive band (sd sigma_L);
+* volume increment dV(x) = S [L(x) - L(x_max)] (eq. 10), x_max the test's largest height;
+* effective area from the force, F_eff(x) = P(x) / p_u (eq. 1, p_u in Pa);
+* the traditional force characteristic p_u F_eff,V(x) with F_eff,V = -d dV/dx = -S dL/dx
+  (eq. 1, second formula), (a) from the volume curve of one reference test (5 bar, as in the
+  paper's Figure 5) and (b) from the test's own volume curve, and the spread traditional minus
+  experimental, absolute (N) and relative (% of the experimental force).
+
+Across tests: the paper's scatter of F_eff among the tests from 1 to 10 bar (all tests with
+p_u >= 1 bar): half the range over the mean, at each height and for each joint draw.
+
+Tests are fitted independently, so a "joint draw" pairs the i-th subsampled draw of every test.
+Everything is seeded. The core, :func:`bands_from_coefficients`, takes coefficient arrays, so
+the same code runs on Table 1 itself (one "draw" per test) or on a posterior.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._summary import band
+from ._summary import estimate as _estimate
+
+LEVEL = 0.90
+BAR_PA = 1.0e5
+REFERENCE_BAR = 5.0  # the paper's Figure 5 uses the 5-bar volume curve
+SCATTER_MIN_BAR = 1.0  # the paper's Figure 4 / scatter: tests from 1 to 10 bar
+EXTRA_HEIGHT_M = 0.075  # Table 1 gives the paper's "8.51 % at x_min" at 75 mm
+
+
+@dataclass(frozen=True)
+class Band:
+    """Posterior mean and equal-tailed 90 % band on the grid (arrays of the grid's shape)."""
+
+    mean: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+    @classmethod
+    def of(cls, draws: np.ndarray, level: float = LEVEL) -> Band:
+        m, lo, hi = band(draws, axis=0, level=level)
+        return cls(m, lo, hi)
+
+    def contains(self, values) -> np.ndarray:
+        v = np.asarray(values)
+        return (self.lo <= v) & (v <= self.hi)
+
+
+@dataclass(eq=False)
+class TestBands:
+    """Bands of one test on the campaign grid ``x_m`` (SI: N, m, m^3, m^2, %)."""
+
+    pressure_bar: float
+    x_max_m: float
+    force: Band  # mean curve P(x), N
+    force_pred: Band  # posterior predictive of a new reading, N
+    piston: Band  # mean curve L(x), m
+    piston_pred: Band  # predictive, m
+    dV: Band  # volume increment S [L(x) - L(x_max)], m^3
+    feff: Band  # P / p_u, m^2
+    feff_volume: Band  # -S dL/dx from the own volume curve, m^2
+    trad_own: Band  # p_u (-S dL/dx), own volume curve, N
+    trad_ref: Band  # p_u (-S dL_ref/dx), reference test's volume curve, N
+    spread_own: Band  # trad_own - P, N
+    spread_own_pct: Band  # 100 (trad_own - P) / P, %
+    spread_ref: Band  # trad_ref - P, N
+    spread_ref_pct: Band  # 100 (trad_ref - P) / P, %
+    at_x0: dict = field(default_factory=dict)  # name -> {"mean","sd","q05","q95"} at x0
+
+    @property
+    def pressure_Pa(self) -> float:
+        return self.pressure_bar * BAR_PA
+
+
+@dataclass(eq=False)
+class CampaignBands:
+    x_m: np.ndarray  # (G,) height grid
+    x0_m: float
+    piston_area_m2: float
+    tests: list[TestBands]
+    reference_bar: float  # pressure of the test whose volume curve gives the traditional force
+    reference_note: str  # how the reference test was chosen
+    scatter_pressures_bar: list[float]  # tests entering the F_eff scatter
+    scatter: Band | None  # half range / mean of F_eff across those tests, % (None if < 2 tests)
+    scatter_at: dict  # label -> {"height_m", "mean", "sd", "q05", "q95"} (%)
+    n_draws: int
+    seed: int
+
+    def at(self, pressure_bar: float) -> TestBands:
+        for t in self.tests:
+            if abs(t.pressure_bar - pressure_bar) < 1e-9:
+                return t
+        raise KeyError(pressure_bar)
+
+    def summary(self) -> dict:
+        """JSON-ready summary (SI, % where named): scatter and the x0 values of every test."""
+        return {
+            "n_draws": self.n_draws,
+            "seed": self.seed,
+            "reference_bar": self.reference_bar,
+            "reference_note": self.reference_note,
+            "feff_scatter_pct": {
+                "pressures_bar": self.scatter_pressures_bar,
+                "definition": "half the range of F_eff = P/p_u across the tests over their mean, per joint draw",
+                "at": self.scatter_at,
+            },
+            "tests_at_x0": [{"pressure_bar": t.pressure_bar} | t.at_x0 for t in self.tests],
+        }
+
+
+def estimate(draws) -> dict:
+    """{"mean", "sd", "q05", "q95"} as floats (sd 0 for a single draw)."""
+    d = np.asarray(draws, float).reshape(-1)
+    if d.size < 2:
+        v = float(d[0])
+        return {"mean": v, "sd": 0.0, "q05": v, "q95": v}
+    return {k: float(v) for k, v in _estimate(d).items()}
+
+
+def _poly(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """coef (..., 4), u (G,) -> (..., G): a + b u + c u^2 + d u^3."""
+    c = np.asarray(coef, float)[..., None, :]
+    u = np.asarray(u, float)
+    return c[..., 0] + u * (c[..., 1] + u * (c[..., 2] + u * c[..., 3]))
+
+
+def _slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
+    c = np.asarray(coef, float)[..., None, :]
+    u = np.asarray(u, float)
+    return c[..., 1] + u * (2.0 * c[..., 2] + 3.0 * u * c[..., 3])
+
+
+def choose_reference(pressures_bar, preferred: float = REFERENCE_BAR) -> tuple[int, str]:
+    """Index of the test whose volume curve gives the traditional force, and why it was chosen."""
+    p = np.asarray(pressures_bar, float)
+    hit = np.flatnonzero(np.isclose(p, preferred, atol=1e-9))
+    if hit.size:
+        return int(hit[0]), f"the {preferred:g}-bar test's volume curve, as in the paper's Figure 5"
+    mid = 0.5 * (p.min() + p.max())
+    i = int(np.argmin(np.abs(p - mid)))
+    return i, (f"no {preferred:g}-bar test in the data: the {p[i]:g}-bar test's volume curve is used "
+               f"(the test nearest to the middle of the pressure range, {mid:g} bar)")
+
+
+def feff_scatter(feff: np.ndarray) -> np.ndarray:
+    """Half range over mean across tests, in %: feff (T, ..., G) -> (..., G)."""
+    return 100.0 * 0.5 * (feff.max(axis=0) - feff.min(axis=0)) / feff.mean(axis=0)
+
+
+def bands_from_coefficients(
+    pressures_bar,
+    force,
+    piston,
+    *,
+    x_grid,
+    x0_m: float,
+    piston_area_m2: float,
+    x_max_m=None,
+    noise=None,
+    reference_bar: float = REFERENCE_BAR,
+    scatter_min_bar: float = SCATTER_MIN_BAR,
+    extra_heights: dict | None = None,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> CampaignBands:
+    """Bands from coefficient draws.
+
+    pressures_bar (T,); force, piston (T, D, 4) paper-basis coefficients (SI, u in m), draw i
+    of every test forming joint draw i (D = 1 for point values such as Table 1); noise
+    (T, D, 3) = sigma0_N, rel_force, sigma_L_m or None (predictive bands then equal the mean
+    bands); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
+    label -> height (m) where the scatter is also reported (defaults: x0, x_max, x_min of the
+    grid and 75 mm).
+    """
+    p_bar = np.asarray(pressures_bar, float)
+    force = np.asarray(force, float)
+    piston = np.asarray(piston, float)
+    T, D, _ = force.shape
+    x = np.asarray(x_grid, float)
+    u = x - x0_m
+    S = float(piston_area_m2)
+    x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
+    rng = np.random.default_rng(seed)
+    ref, note = choose_reference(p_bar, reference_bar)
+
+    P = _poly(force, u)  # (T, D, G)
+    L = _poly(piston, u)
+    dLdx = _slope(piston, u)
+    L_top = _poly(piston, np.atleast_1d(x_max - x0_m))  # (T, D, T): column t is test t's x_max
+    L_top = L_top[np.arange(T), :, np.arange(T)][..., None]  # (T, D, 1)
+    dV = S * (L - L_top)
+    p_pa = (p_bar * BAR_PA)[:, None, None]
+    feff = P / p_pa
+    feff_vol = -S * dLdx
+    trad_own = p_pa * feff_vol
+    trad_ref = p_pa * feff_vol[ref][None]
+    if noise is not None:
+        nz = np.asarray(noise, float)
+        sd_f = np.sqrt(nz[..., 0:1] ** 2 + (nz[..., 1:2] * np.abs(P)) ** 2)
+        P_pred = P + sd_f * rng.standard_normal(P.shape)
+        L_pred = L + nz[..., 2:3] * rng.standard_normal(L.shape)
+    else:
+        P_pred, L_pred = P, L
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pct_own = 100.0 * (trad_own - P) / P
+        pct_ref = 100.0 * (trad_ref - P) / P
+
+    quantities = {
+        "force": P, "force_pred": P_pred, "piston": L, "piston_pred": L_pred, "dV": dV,
+        "feff": feff, "feff_volume": feff_vol, "trad_own": trad_own, "trad_ref": trad_ref,
+        "spread_own": trad_own - P, "spread_own_pct": pct_own, "spread_ref": trad_ref - P,
+        "spread_ref_pct": pct_ref,
+    }
+    a = (1.0 - level) / 2.0
+    summaries = {}
+    for name, arr in quantities.items():  # one batched quantile per quantity: (2, T, G)
+        summaries[name] = (arr.mean(axis=1), np.quantile(arr, [a, 1.0 - a], axis=1))
+    tests = []
+    for t in range(T):
+        B = {name: Band(m[t], q[0, t], q[1, t]) for name, (m, q) in summaries.items()}
+        # Values at x0 exactly (from the coefficients, whatever the grid).
+        a_P, b_L = force[t, :, 0], piston[t, :, 1]
+        tr_own0 = p_bar[t] * BAR_PA * (-S * b_L)
+        tr_ref0 = p_bar[t] * BAR_PA * (-S * piston[ref, :, 1])
+        at0 = {
+            "force_N": estimate(a_P),
+            "feff_m2": estimate(a_P / (p_bar[t] * BAR_PA)),
+            "feff_volume_m2": estimate(-S * b_L),
+            "trad_own_N": estimate(tr_own0),
+            "trad_ref_N": estimate(tr_ref0),
+            "spread_own_pct": estimate(100.0 * (tr_own0 - a_P) / a_P),
+            "spread_ref_pct": estimate(100.0 * (tr_ref0 - a_P) / a_P),
+        }
+        tests.append(TestBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, **B))
+
+    sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
+    heights = {"x0": x0_m, "x_max": float(x.max()), "x_min": float(x.min()), "75 mm": EXTRA_HEIGHT_M}
+    if extra_heights is not None:
+        heights = dict(extra_heights)
+    scatter, scatter_at = None, {}
+    if sel.size >= 2:
+        scatter = Band.of(feff_scatter(feff[sel]), level)
+        hx = np.array(list(heights.values()), float)
+        fh = _poly(force[sel], hx - x0_m) / p_pa[sel]  # (T', D, H)
+        sh = feff_scatter(fh)  # (D, H)
+        for k, (label, h) in enumerate(heights.items()):
+            scatter_at[label] = {"height_m": float(h)} | estimate(sh[:, k])
+    return CampaignBands(x, float(x0_m), S, tests, float(p_bar[ref]), note,
+                         [float(v) for v in p_bar[sel]], scatter, scatter_at, int(D), int(seed))
+
+
+def subsample(n_total: int, n_draws: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices of ``n_draws`` posterior draws (all of them, in order, when there are fewer)."""
+    if n_total <= n_draws:
+        return np.arange(n_total)
+    return np.sort(rng.choice(n_total, size=n_draws, replace=False))
+
+
+def height_grid(recordings, n_grid: int = 181) -> np.ndarray:
+    lo, hi = recordings.height_range_m
+    return np.linspace(lo, hi, n_grid)
+
+
+def campaign_bands(cf, *, n_grid: int = 181, n_draws: int = 2000, seed: int = 0, x_grid=None,
+                   reference_bar: float = REFERENCE_BAR) -> CampaignBands:
+    """Bands of a fitted campaign (:class:`uq._cubic.CampaignFit`, or anything with ``.recordings``
+    and ``.tests`` holding ``pressure_bar``, ``test.height_m`` and ``flat(name)``).
+
+    Subsamples ``n_draws`` draws per test (seeded), evaluates on ``x_grid`` (default: the data's
+    height range, ``n_grid`` points).
+    """
+    rec = cf.recordings
+    rng = np.random.default_rng(seed)
+    x = height_grid(rec, n_grid) if x_grid is None else np.asarray(x_grid, float)
+    draws = [t.flat("force").shape[0] for t in cf.tests]
+    D = min(n_draws, min(draws))
+    F, L, N = [], [], []
+    for t, n in zip(cf.tests, draws, strict=True):
+        idx = subsample(n, D, rng)
+        F.append(t.flat("force")[idx])
+        L.append(t.flat("piston")[idx])
+        N.append(t.flat("noise")[idx])
+    cb = bands_from_coefficients(
+        [t.pressure_bar for t in cf.tests], np.stack(F), np.stack(L),
+        x_grid=x, x0_m=rec.x0_m, piston_area_m2=rec.piston_area_m2,
+        x_max_m=[float(t.test.height_m.max()) for t in cf.tests], noise=np.stack(N),
+        reference_bar=reference_bar, seed=int(rng.integers(2**31)),
+    )
+    cb.seed = int(seed)
+    return cb

@@ -1,0 +1,214 @@
+"""``uq bench``: effective samples per second of the force posterior, project sampler vs plain emcee.
+
+Workload: one 37-point test, the 5 bar test of the virtual stand (``uq._stand.simulate``,
+spring n50, seeded by ``--seed``), or the test at ``--pressure-bar`` of ``--recordings FILE``.
+
+Measure: ESS/s = min over the four force coefficients (a_P, b_P, c_P, d_P) of ArviZ bulk ESS
+(walkers as chains, post burn-in draws), divided by the wall time of the run. Both runs are
+in the same process, after a JIT warm-up run that is not timed.
+
+(a) project: ``uq._cubic.fit_test`` unchanged (least squares, optimistix start, emcee over
+    the three noise parameters with DE moves until 50 autocorrelation times, exact Gaussian
+    draws of the eight coefficients, ArviZ diagnostics); the timed wall time covers all of
+    it, including the piston block it also fits. Repeated with fresh seeds until
+    ``--seconds`` have passed (at least once); ESS of independent runs adds up.
+(b) baseline: plain emcee (stretch move, ``vectorize=False``: one Python/numpy call per
+    walker) over (a_P, b_P, c_P, d_P, log sigma0, log r) in the paper's monomial basis, with
+    the project's force likelihood (sd sqrt(sigma0^2 + (r |Phat|)^2), Phat the least-squares
+    curve) and priors (the scaled-basis N(0, (100 kN)^2) carried to the monomial basis,
+    log sigma0 ~ N(log 10, 2^2), log r ~ N(log 0.005, 1)), 32 walkers started in a small
+    ball around the least-squares solution, run for the same wall time as (a); burn-in
+    5 autocorrelation times (emcee's estimate), as the project's.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import arviz as az
+import emcee
+import numpy as np
+
+from ._errors import InputError
+from ._io import emit_json
+from ._recordings import Test
+from ._reference import FORCE_NAMES
+from ._sampler import Settings
+
+BENCH_PRESSURE_BAR = 5.0
+BASELINE_WALKERS = 32
+
+
+def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = BENCH_PRESSURE_BAR) -> tuple[Test, float, str]:
+    """The workload: (test, x0_m, description)."""
+    if recordings:
+        from ._recordings import read_recordings
+
+        rec = read_recordings(recordings)
+        try:
+            return rec.test_at(pressure_bar), rec.x0_m, f"{pressure_bar:g} bar test of {recordings}"
+        except KeyError:
+            have = ", ".join(f"{p:g}" for p in rec.pressures_bar)
+            raise InputError(f"{recordings}: no test at {pressure_bar:g} bar (option --pressure-bar); it has {have} bar") from None
+    from ._reference import PAPER_X0_M
+    from ._stand import Layout, simulate
+
+    t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
+    test = Test(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
+                np.arange(t["step"].size))
+    return test, PAPER_X0_M, f"{pressure_bar:g} bar test of the virtual stand (n50, seed {seed})"
+
+
+def _ess_force(draws: np.ndarray) -> float:
+    """min over the force coefficients of ArviZ bulk ESS; draws (chains, draws, 4)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ess = [float(az.ess(np.ascontiguousarray(draws[..., i]), method="bulk")) for i in range(draws.shape[-1])]
+    return float(np.nanmin(ess)) if np.all(np.isfinite(ess)) else 0.0
+
+
+# --------------------------------------------------------------------------- (a) project
+
+
+def run_project(test: Test, x0_m: float, *, seed: int, seconds: float, settings: Settings) -> dict:
+    from ._cubic import fit_test
+
+    fit_test(test, x0_m, seed=seed, settings=Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles,
+                                                     max_steps=20, min_steps=20))  # JIT warm-up, not timed
+    runs, total_ess, total_time = 0, 0.0, 0.0
+    rs = np.random.SeedSequence(seed)
+    while runs == 0 or total_time < seconds:
+        s = int(rs.spawn(1)[0].generate_state(1)[0])
+        t0 = time.perf_counter()
+        fit = fit_test(test, x0_m, seed=s, settings=settings)
+        total_time += time.perf_counter() - t0
+        total_ess += min(float(fit.diagnostics["variables"][n]["ess_bulk"]) for n in FORCE_NAMES)
+        runs += 1
+    return {"name": "project: uq._cubic.fit_test (collapsed: emcee DE moves on the noise, exact coefficient draws)",
+            "runs": runs, "wall_s": total_time, "ess_bulk_min": total_ess, "ess_per_s": total_ess / total_time,
+            "n_steps_last": fit.diagnostics["n_steps"], "n_chains": fit.diagnostics["n_chains"]}
+
+
+# --------------------------------------------------------------------------- (b) baseline
+
+
+class PlainForcePosterior:
+    """Log posterior of (a, b, c, d, log sigma0, log r), paper basis, plain numpy, one walker a call."""
+
+    def __init__(self, test: Test, x0_m: float):
+        from ._cubic import BASIS_SCALE_M, FORCE_PRIOR_SD_N, NOISE_PRIOR_MEAN, NOISE_PRIOR_SD
+
+        u = test.height_m - x0_m
+        self.U = np.vander(u, 4, increasing=True)
+        self.y = np.asarray(test.force_N, float)
+        self.lsq, *_ = np.linalg.lstsq(self.U, self.y, rcond=None)
+        self.ref2 = (self.U @ self.lsq) ** 2
+        self.prior_sd = FORCE_PRIOR_SD_N / BASIS_SCALE_M ** np.arange(4)
+        self.noise_mean = NOISE_PRIOR_MEAN[:2]
+        self.noise_sd = NOISE_PRIOR_SD[:2]
+        self.n = self.y.size
+
+    def __call__(self, theta: np.ndarray) -> float:
+        coef, log_s0, log_r = theta[:4], theta[4], theta[5]
+        var = math.exp(2.0 * log_s0) + math.exp(2.0 * log_r) * self.ref2
+        res = self.y - self.U @ coef
+        ll = -0.5 * float(np.sum(res * res / var + np.log(var)))
+        lp = -0.5 * float(np.sum((coef / self.prior_sd) ** 2))
+        lp -= 0.5 * float(np.sum(((np.array([log_s0, log_r]) - self.noise_mean) / self.noise_sd) ** 2))
+        out = ll + lp
+        return out if math.isfinite(out) else -math.inf
+
+    def start(self, n_walkers: int, rng: np.random.Generator) -> np.ndarray:
+        res = self.y - self.U @ self.lsq
+        s2 = float(res @ res) / (self.n - 4)
+        se = np.sqrt(np.diag(s2 * np.linalg.inv(self.U.T @ self.U)))
+        center = np.concatenate([self.lsq, [math.log(math.sqrt(s2) / math.sqrt(2.0)), math.log(0.005)]])
+        spread = np.concatenate([0.1 * se, [0.05, 0.05]])
+        return center + spread * rng.standard_normal((n_walkers, 6))
+
+
+def run_baseline(test: Test, x0_m: float, *, seed: int, seconds: float, n_walkers: int = BASELINE_WALKERS,
+                 chunk: int = 100) -> dict:
+    post = PlainForcePosterior(test, x0_m)
+    rng = np.random.default_rng(seed)
+    sampler = emcee.EnsembleSampler(n_walkers, 6, post, vectorize=False)  # default: stretch move
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
+    state = post.start(n_walkers, rng)
+    t0 = time.perf_counter()
+    state = sampler.run_mcmc(state, chunk, progress=False)
+    while time.perf_counter() - t0 < seconds:
+        state = sampler.run_mcmc(state, chunk, progress=False)
+    wall = time.perf_counter() - t0
+    chain = sampler.get_chain()  # (steps, walkers, 6)
+    n = chain.shape[0]
+    tau = emcee.autocorr.integrated_time(chain[n // 5:], tol=0, quiet=True)
+    tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else float(n)
+    burn = min(max(int(math.ceil(5.0 * tau_max)), 20), n // 2)
+    draws = np.swapaxes(chain[burn:, :, :4], 0, 1)  # (walkers, draws, 4)
+    ess = _ess_force(draws)
+    return {"name": "baseline: plain emcee, stretch move, per-walker numpy log-prob over 6 parameters",
+            "runs": 1, "wall_s": wall, "ess_bulk_min": ess, "ess_per_s": ess / wall, "n_steps": n, "burn_in": burn,
+            "n_walkers": n_walkers, "tau_max": tau_max, "acceptance": float(np.mean(sampler.acceptance_fraction)),
+            "posterior_mean_force": dict(zip(FORCE_NAMES, draws.reshape(-1, 4).mean(0).tolist(), strict=True))}
+
+
+# --------------------------------------------------------------------------- command
+
+
+def bench(*, seconds: float, seed: int, settings: Settings | None = None, recordings: str | None = None,
+          pressure_bar: float = BENCH_PRESSURE_BAR, baseline_walkers: int = BASELINE_WALKERS) -> dict:
+    settings = settings or Settings()
+    test, x0_m, what = bench_test(seed, recordings, pressure_bar)
+    project = run_project(test, x0_m, seed=seed, seconds=seconds, settings=settings)
+    baseline = run_baseline(test, x0_m, seed=seed, seconds=max(seconds, project["wall_s"]), n_walkers=baseline_walkers)
+    ratio = project["ess_per_s"] / baseline["ess_per_s"] if baseline["ess_per_s"] > 0 else math.inf
+    return {
+        "workload": what, "n_points": test.n_points, "seed": seed,
+        "measure": "min over a_P, b_P, c_P, d_P of ArviZ bulk ESS / wall time (s), after JIT warm-up",
+        "project": project, "baseline": baseline, "ratio": ratio,
+    }
+
+
+def summary(r: dict) -> str:
+    p, b = r["project"], r["baseline"]
+    return "\n".join([
+        f"uq bench: {r['workload']}, {r['n_points']} points; force posterior, min bulk ESS of a_P..d_P per second",
+        f"  project  : {p['ess_per_s']:10.1f} ESS/s  ({p['ess_bulk_min']:.0f} ESS in {p['wall_s']:.2f} s, {p['runs']} run(s))",
+        f"  baseline : {b['ess_per_s']:10.1f} ESS/s  ({b['ess_bulk_min']:.0f} ESS in {b['wall_s']:.2f} s, "
+        f"{b['n_steps']} steps x {b['n_walkers']} walkers, tau {b['tau_max']:.0f})",
+        f"  ratio project / baseline: {r['ratio']:.1f}",
+    ])
+
+
+def configure_bench(p) -> None:
+    p.add_argument("--seconds", type=float, default=10.0,
+                   help="minimum timed wall time of each sampler, s (default 10; the project runs whole fits)")
+    p.add_argument("--seed", type=int, default=20201, help="random seed (workload and samplers; default 20201)")
+    p.add_argument("--recordings", metavar="FILE", help="take the test from this recordings CSV instead of the virtual stand")
+    p.add_argument("--pressure-bar", type=float, default=BENCH_PRESSURE_BAR, help="pressure of the test (default 5)")
+    p.add_argument("--walkers", type=int, default=Settings.n_walkers, help="project: emcee walkers per ensemble")
+    p.add_argument("--max-steps", type=int, default=Settings.max_steps, help="project: cap on emcee steps per ensemble")
+    p.add_argument("--baseline-walkers", type=int, default=BASELINE_WALKERS, help="baseline: emcee walkers (>= 12, even)")
+    p.add_argument("--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)")
+
+
+def command_bench(args) -> int:
+    if not (math.isfinite(args.seconds) and args.seconds >= 0):
+        raise InputError(f"option --seconds: expected a non-negative number of seconds, got {args.seconds:g}")
+    if args.baseline_walkers < 12 or args.baseline_walkers % 2:
+        raise InputError("option --baseline-walkers: an even number of at least 12 walkers (2 x 6 parameters) is needed")
+    settings = Settings(n_walkers=args.walkers, max_steps=args.max_steps)
+    settings.validate()
+    r = bench(seconds=args.seconds, seed=args.seed, settings=settings, recordings=args.recordings,
+              pressure_bar=args.pressure_bar, baseline_walkers=args.baseline_walkers)
+    emit_json(r, args.json)
+    text = summary(r)
+    if args.json == "-":
+        import sys
+
+        sys.stderr.write(text + "\n")
+    else:
+        print(text)
+    return 0

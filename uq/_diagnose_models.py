@@ -1,0 +1,258 @@
+"""The models of ``uq diagnose``: the traditional baseline and its augmentations (section 4).
+
+All tests of a campaign are fitted jointly. With t = (x - x0) / H, H = 0.05 m, and the
+effective area F_eff(u) = sum_j a_j t^j (one curve for every pressure, order K by data):
+
+    force   P_ij = p_i F_eff(u_ij)                                   (eq. 1)
+    piston  L_ij = r_i - (1/S) int_{x0}^{x_ij} F_eff dx                (eq. 2, 5)
+
+one piston reference r_i per test. Each mechanism adds columns or rescales columns, so the
+model stays linear in (a, r, mechanism coefficients) given at most two nonlinear
+magnitudes (pressure_dependent_area m_A, hysteresis m_H):
+
+    pressure_dependent_area  force and integral scaled by (1 + m_A p_bar)
+    casing_force             force + E(u), E a cubic in t (magnitude E(x0) = e_0)
+    hysteresis               force x (1 + m_H) on compression, (1 - m_H) on rebound
+    force_offset             force + m
+    thermal_drift            piston + step * m * 1e-6 / S   (m in cm^3 per step)
+
+Noise (the stand's error budget, section 3.2 of the paper): the same pressure-holding
+error dp moves the force by dp F_eff and the piston by V_gas dp / (p_abs S), so force and
+piston residuals are strongly correlated. We fit the decorrelated pair
+z = P - c L (c = F_eff p_abs S / V_gas, a plug-in constant per point; a unit-triangular
+linear map of the data, so likelihoods are unchanged in meaning) and L, each with the
+budget's sd times a learned scale factor k_z, k_L (log k ~ N(0, 2^2)).
+
+Every model shares one jitted function: inactive mechanisms have zero columns (which cancel
+exactly in the collapsed marginal likelihood) and inactive magnitudes are held at zero, so a
+campaign compiles once, whatever the candidate.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import optimistix as optx
+
+from ._jax import jax, jnp
+from ._linear import draw_coefficients, gaussian_loglik, linear_posterior
+from ._recordings import BAR_PA, Recordings
+from ._stand import (
+    CALIPER_SD_M,
+    DISPLACEMENT_SD_M,
+    ELEMENT_VOLUME_AT_XMAX_M3,
+    LOAD_CELL_REL_SD,
+    P_ATM_BAR,
+    RECEIVER_AIR_M3,
+    pressure_sd_bar,
+)
+
+H_M = 0.05
+MECHS = ("pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift")
+K_MAX = 5  # highest power of t in F_eff
+CASING_DEG = 3
+#: Number of parameters each mechanism adds (parsimony order: fewer is simpler).
+N_PARAMS = {"force_offset": 1, "thermal_drift": 1, "hysteresis": 1, "pressure_dependent_area": 1,
+            "casing_force": CASING_DEG + 1}
+SIMPLICITY = ("force_offset", "thermal_drift", "hysteresis", "pressure_dependent_area", "casing_force")
+THETA_NAMES = ("log_k_force", "log_k_piston", "m_area_per_bar", "m_hysteresis")
+THETA_PRIOR_SD = np.array([2.0, 2.0, 0.1, 0.1])
+FEFF_PRIOR_SD = 1.0  # m^2
+REF_PRIOR_SD = 1.0  # m
+CASING_PRIOR_SD = 1.0e4  # N
+OFFSET_PRIOR_SD = 1.0e4  # N
+DRIFT_PRIOR_SD = 100.0  # cm^3 per step
+FLOOR_N = 1.0
+DP_RESIDUAL_SHARE = 0.2  # share of the pressure term left in z if V_gas is off
+
+
+class Data(NamedTuple):
+    """Campaign arrays, one entry per recorded point (n,), plus the one-hot test matrix."""
+
+    p_bar: jnp.ndarray
+    t: jnp.ndarray
+    sgn: jnp.ndarray  # +1 compression, -1 rebound
+    step: jnp.ndarray
+    R: jnp.ndarray  # (n, n_tests)
+    c: jnp.ndarray  # decorrelation constant, N/m
+    force: jnp.ndarray
+    piston: jnp.ndarray
+    sd_z: jnp.ndarray  # budget sd of z, N
+    sd_L: jnp.ndarray  # budget sd of L, m
+    area: jnp.ndarray  # piston area S, m^2 (scalar)
+
+
+def prepare(rec: Recordings) -> tuple[Data, dict]:
+    """Arrays for the models and per-point metadata (numpy) for the residual analysis."""
+    S = rec.piston_area_m2
+    cols = {k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")}
+    for i, test in enumerate(rec.tests):
+        u = test.height_m - rec.x0_m
+        t = u / H_M
+        deg = min(4, test.n_points - 2)
+        V = np.vander(t, deg + 1, increasing=True)
+        cf = np.linalg.lstsq(V, test.force_N, rcond=None)[0]
+        cl = np.linalg.lstsq(V, test.piston_m, rcond=None)[0]
+        dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / H_M
+        P_hat = V @ cf
+        dPdx = dV @ cf[1:]
+        slope = dV @ cl[1:]
+        p_pa = test.pressure_bar * BAR_PA
+        feff = np.abs(P_hat) / p_pa
+        L_hat = V @ cl
+        v_gas = RECEIVER_AIR_M3 + np.maximum(ELEMENT_VOLUME_AT_XMAX_M3 - S * (L_hat - L_hat.min()), 1e-4)
+        p_abs_bar = test.pressure_bar + P_ATM_BAR
+        sdp_bar = pressure_sd_bar(test.pressure_bar)
+        c = feff * p_abs_bar * BAR_PA * S / v_gas
+        sdz = np.sqrt((LOAD_CELL_REL_SD * P_hat) ** 2 + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
+                      + (dPdx * DISPLACEMENT_SD_M) ** 2 + FLOOR_N**2)
+        sdL = np.sqrt((v_gas * sdp_bar / p_abs_bar / S) ** 2 + (slope * DISPLACEMENT_SD_M) ** 2 + CALIPER_SD_M**2)
+        n = test.n_points
+        cols["p"].append(np.full(n, test.pressure_bar))
+        cols["t"].append(t)
+        cols["sgn"].append(np.where(test.compression, 1.0, -1.0))
+        cols["step"].append(test.step.astype(float))
+        cols["ti"].append(np.full(n, i))
+        cols["c"].append(c)
+        cols["F"].append(test.force_N)
+        cols["L"].append(test.piston_m)
+        cols["sdz"].append(sdz)
+        cols["sdL"].append(sdL)
+        cols["x"].append(test.height_m)
+        cols["comp"].append(test.compression)
+    cat = {k: np.concatenate(v) for k, v in cols.items()}
+    R = np.eye(len(rec.tests))[cat["ti"].astype(int)]
+    data = Data(*(jnp.asarray(a, dtype=float) for a in (cat["p"], cat["t"], cat["sgn"], cat["step"], R, cat["c"],
+                                                           cat["F"], cat["L"], cat["sdz"], cat["sdL"])),
+                jnp.asarray(S, dtype=float))
+    meta = {"pressure_bar": cat["p"], "height_m": cat["x"], "compression": cat["comp"].astype(bool),
+            "step": cat["step"].astype(int), "test": cat["ti"].astype(int), "force_N": cat["F"],
+            "piston_m": cat["L"], "area": S}
+    return data, meta
+
+
+def mask_of(names, order: int) -> jnp.ndarray:
+    """Dynamic model switch: 5 mechanism flags, then flags for powers 0..K_MAX of F_eff."""
+    mech = [1.0 if m in names else 0.0 for m in MECHS]
+    powers = [1.0 if j <= order else 0.0 for j in range(K_MAX + 1)]
+    return jnp.asarray(mech + powers)
+
+
+def _design(theta, mask, d: Data):
+    """Design matrices of force (n, k) and piston (n, k) and the prior sds (k,)."""
+    m_area = mask[0] * theta[2]
+    m_hyst = mask[2] * theta[3]
+    g = 1.0 + m_area * d.p_bar
+    hy = 1.0 + m_hyst * d.sgn
+    pw = jnp.arange(K_MAX + 1)
+    on = mask[5:]
+    T = d.t[:, None] ** pw * on
+    Tint = d.t[:, None] ** (pw + 1) / (pw + 1) * on
+    n = d.t.size
+    zeros = jnp.zeros((n, 1))
+    XF_a = (d.p_bar * BAR_PA * g * hy)[:, None] * T
+    XL_a = -(H_M / d.area) * g[:, None] * Tint
+    XF_r = jnp.zeros_like(d.R)
+    XL_r = d.R
+    Tc = d.t[:, None] ** jnp.arange(CASING_DEG + 1)
+    XF_e = mask[1] * hy[:, None] * Tc
+    XL_e = jnp.zeros_like(Tc)
+    XF_o = mask[3] * jnp.ones((n, 1))
+    XL_d = mask[4] * (d.step * 1e-6 / d.area)[:, None]
+    XF = jnp.concatenate([XF_a, XF_r, XF_e, XF_o, zeros], axis=1)
+    XL = jnp.concatenate([XL_a, XL_r, XL_e, zeros, XL_d], axis=1)
+    prior = jnp.concatenate([
+        jnp.full(K_MAX + 1, FEFF_PRIOR_SD), jnp.full(d.R.shape[1], REF_PRIOR_SD),
+        jnp.full(CASING_DEG + 1, CASING_PRIOR_SD), jnp.array([OFFSET_PRIOR_SD, DRIFT_PRIOR_SD])])
+    return XF, XL, prior
+
+
+def _stacked(theta, mask, d: Data):
+    XF, XL, prior = _design(theta, mask, d)
+    Xz = XF - d.c[:, None] * XL
+    X = jnp.concatenate([Xz, XL], axis=0)
+    y = jnp.concatenate([d.force - d.c * d.piston, d.piston])
+    sigma = jnp.concatenate([jnp.exp(theta[0]) * d.sd_z, jnp.exp(theta[1]) * d.sd_L])
+    # Column scaling: exact reparametrisation (the marginal likelihood is invariant), for numerics.
+    s = jnp.sqrt(jnp.mean((X / sigma[:, None]) ** 2, axis=0))
+    s = jax.lax.stop_gradient(jnp.where(s > 0, s, 1.0))
+    return X / s, y, sigma, prior * s, s, XF, XL
+
+
+def _log_post(theta, mask, d: Data):
+    X, y, sigma, prior, *_ = _stacked(theta, mask, d)
+    lp = linear_posterior(X, y, sigma, prior).log_marginal
+    active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2]])])
+    lp = lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
+    return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
+
+
+log_post_batch = jax.jit(jax.vmap(_log_post, in_axes=(0, None, None)))
+
+
+def _neg(theta, args):
+    mask, d = args
+    return -_log_post(theta, mask, d)
+
+
+@jax.jit
+def _map(theta0, mask, d: Data):
+    sol = optx.minimise(_neg, optx.BFGS(rtol=1e-9, atol=1e-9), theta0, args=(mask, d), max_steps=400, throw=False)
+    return sol.value, sol.result
+
+
+_hessian = jax.jit(jax.hessian(lambda th, mask, d: -_log_post(th, mask, d)))
+
+
+def _one_draw(theta, key, mask, d: Data):
+    X, y, sigma, prior, s, XF, XL = _stacked(theta, mask, d)
+    post = linear_posterior(X, y, sigma, prior)
+    beta_s = draw_coefficients(post, jax.random.normal(key, post.mean.shape))
+    ll = gaussian_loglik(y, X @ beta_s, sigma)
+    beta = beta_s / s
+    return ll, XF @ beta, XL @ beta, beta, sigma
+
+
+draws_batch = jax.jit(jax.vmap(_one_draw, in_axes=(0, 0, None, None)))
+
+
+def active_dims(names) -> list[int]:
+    dims = [0, 1]
+    if "pressure_dependent_area" in names:
+        dims.append(2)
+    if "hysteresis" in names:
+        dims.append(3)
+    return dims
+
+
+def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
+    """MAP of the sampled parameters (collapsed), log posterior there, Laplace covariance (active dims)."""
+    mask = mask_of(names, order)
+    best = None
+    for m0 in ([0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.01, 0.01], [0.0, 0.0, -0.01, -0.01]):
+        theta, _ = _map(jnp.asarray(m0), mask, d)
+        theta = np.array(theta)
+        theta[[i for i in (2, 3) if i not in active_dims(names)]] = 0.0
+        lp = float(_log_post(jnp.asarray(theta), mask, d))
+        if np.isfinite(lp) and (best is None or lp > best[1]):
+            best = (theta, lp)
+        if len(active_dims(names)) == 2 and best is not None:
+            break
+    theta, lp = best
+    dims = active_dims(names)
+    Hm = np.asarray(_hessian(jnp.asarray(theta), mask, d))[np.ix_(dims, dims)]
+    try:
+        cov = np.linalg.inv(Hm)
+        np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        cov = np.diag(1.0 / np.maximum(np.abs(np.diag(Hm)), 1e-12))
+    return theta, lp, cov
+
+
+def expand(sub: np.ndarray, names) -> np.ndarray:
+    """Sampled active coordinates (..., len(dims)) -> full theta (..., 4)."""
+    dims = active_dims(names)
+    full = np.zeros(sub.shape[:-1] + (4,))
+    full[..., dims] = sub
+    return full

@@ -1,0 +1,702 @@
+"""Pressure-coupled surface model: one model of force and volume over all tests of a campaign.
+
+Model (u = x - x0, t = u / h with h = 0.05 m, q = (p_u - p_mid) / p_half in -1..1 over the
+tested pressures, p_u in Pa where it multiplies):
+
+    force_ij  = p_i F_eff(u_ij, p_i) + E(u_ij)
+    piston_ij = r_i - (1/S) int_0^u [F_eff(u', p_i) + D(u', p_i)] du'
+
+    F_eff(u, p) = sum_{k<=K, l<=Lp} c_kl t^k q^l   (effective area, grows smoothly with p)
+    E(u)        = sum_{m<=Ke} e_m t^m               (casing force, the same at every pressure)
+    D(u, p)     = sum_{k<=Dk, l<=Dl} d_kl t^k q^l   (volume excess -dV/dx - F_eff; 0 = traditional)
+
+r_i is one piston reference per test (nuisance). Everything is linear in (c, e, d, r) given
+the noise, so the coefficients are integrated out with the collapsed kernel (``_linear``)
+and drawn exactly; emcee samples the five noise parameters only.
+
+Noise (stand's error budget, paper section 3.2): the pressure-holding error dp of one
+reading moves the force by dp F_eff and the piston by V_gas dp / (p_abs S) at once, so each
+reading (force, piston) is bivariate normal with covariance
+
+    [[s0^2 + (r Phat)^2 + b^2,  b c], [b c, c^2 + sL^2]],
+    b = k_p dp_i F_eff_hat,  c = k_p dp_i (V0 - dV_hat) / (p_abs S)
+
+with dp_i the stand's holding sd (0.01 bar, 0.001 bar at 0.1 bar), k_p its multiplier, V0
+the gas volume at the highest height and dV_hat the volume increment. Priors:
+log s0[N] ~ N(log 10, 1.5), log r ~ N(log 0.005, 0.5), log k_p ~ N(0, 0.5),
+log sL[m] ~ N(log 1e-4, 1.5), log V0[m^3] ~ N(log 6.2e-3, 0.5); standardised coefficients
+~ N(0, 1) with physical scales (c, d: 0.1 m^2; e: 10 kN; r: 1 m).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import arviz as az
+import numpy as np
+import optimistix as optx
+
+from ._errors import InputError
+from ._jax import jax, jnp
+from ._linear import LOG_2PI, batched, draw_coefficients, linear_posterior
+from ._recordings import BAR_PA, Recordings
+from ._sampler import Chains, Settings, convergence, run_ensembles, thin
+from ._summary import band, estimate
+
+H_M = 0.05
+P_ATM_BAR = 1.01325
+MAX_DRAWS = 4000
+SCALE_C = 0.1  # m^2
+SCALE_E = 1.0e4  # N
+SCALE_D = 0.1  # m^2
+SCALE_R = 1.0  # m
+NOISE_NAMES = ("log_s0_N", "log_rel_load", "log_k_p", "log_sL_m", "log_V0_m3")
+NOISE_PRIOR_MEAN = np.array([np.log(10.0), np.log(0.005), 0.0, np.log(1e-4), np.log(6.2e-3)])
+NOISE_PRIOR_SD = np.array([1.5, 0.5, 0.5, 1.5, 0.5])
+LEVEL = 0.90
+
+
+@dataclass(frozen=True)
+class Orders:
+    """Polynomial orders: F_eff degree K in t and Lp in q, casing degree Ke, D degrees (Dk, Dl).
+
+    Dk = -1 means D = 0 (the traditional theory for the volume); Ke = -1 means no casing term.
+    """
+
+    K: int = 3
+    Lp: int = 2
+    Ke: int = 2
+    Dk: int = 1
+    Dl: int = 1
+
+    @property
+    def label(self) -> str:
+        d = "none" if self.Dk < 0 else f"{self.Dk}x{self.Dl}"
+        return f"F_eff {self.K}x{self.Lp}, casing {self.Ke}, D {d}"
+
+
+DEFAULT_ORDERS = Orders()
+#: the small candidate set ranked by PSIS-LOO (``select_orders``)
+CANDIDATES = (
+    Orders(3, 1, 2, 1, 1),
+    Orders(3, 2, 2, 1, 1),
+    Orders(3, 3, 2, 1, 1),
+    Orders(3, 2, 2, -1, 0),
+    Orders(3, 2, 3, 2, 1),
+)
+
+
+def pressure_sd_bar(p_bar):
+    """The stand's pressure-holding sd (section 3.2): 0.01 bar, 0.001 bar at 0.1 bar."""
+    return 0.01 * np.minimum(1.0, np.maximum(np.asarray(p_bar, float), 0.1))
+
+
+# ----------------------------------------------------------------------------- design
+
+
+def _tq(t, q, kmax, lmax, integrate=False):
+    t = np.asarray(t, float)[..., None, None]
+    q = np.asarray(q, float)[..., None, None]
+    k = np.arange(kmax + 1)[:, None]
+    lq = np.arange(lmax + 1)[None, :]
+    if integrate:
+        cols = t ** (k + 1) / (k + 1) * q**lq
+    else:
+        cols = t**k * q**lq
+    cols = np.broadcast_to(cols, cols.shape)
+    return cols.reshape(*cols.shape[:-2], -1)
+
+
+def _poly(t, m):
+    t = np.asarray(t, float)[..., None]
+    return t ** np.arange(m + 1)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    x0_m: float
+    area_m2: float
+    p_mid: float
+    p_half: float
+
+    def t(self, x_m):
+        return (np.asarray(x_m, float) - self.x0_m) / H_M
+
+    def q(self, p_bar):
+        return (np.asarray(p_bar, float) - self.p_mid) / self.p_half
+
+
+def _sizes(o: Orders, n_tests: int):
+    nc = (o.K + 1) * (o.Lp + 1)
+    ne = o.Ke + 1
+    nd = 0 if o.Dk < 0 else (o.Dk + 1) * (o.Dl + 1)
+    return nc, ne, nd, n_tests
+
+
+def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
+    """Force and piston design matrices in standardised coefficients, (n, k) each."""
+    t, q = g.t(x_m), g.q(p_bar)
+    p_pa = np.asarray(p_bar, float) * BAR_PA
+    n = t.size
+    nc, ne, nd, nr = _sizes(o, n_tests)
+    Xf = np.zeros((n, nc + ne + nd + nr))
+    Xl = np.zeros_like(Xf)
+    Xf[:, :nc] = p_pa[:, None] * _tq(t, q, o.K, o.Lp) * SCALE_C
+    if ne:
+        Xf[:, nc : nc + ne] = _poly(t, o.Ke) * SCALE_E
+    lever = -H_M / g.area_m2
+    Xl[:, :nc] = lever * _tq(t, q, o.K, o.Lp, integrate=True) * SCALE_C
+    if nd:
+        Xl[:, nc + ne : nc + ne + nd] = lever * _tq(t, q, o.Dk, o.Dl, integrate=True) * SCALE_D
+    Xl[np.arange(n), nc + ne + nd + np.asarray(test_index)] = SCALE_R
+    return Xf, Xl
+
+
+# ----------------------------------------------------------------------------- likelihood
+
+
+def _cov_factors(theta, c):
+    """Per-point whitening of the (force, piston) pair: (L11, L21, L22), each (n,)."""
+    s0, rel, kp, sL, V0 = (jnp.exp(theta[i]) for i in range(5))
+    a2 = s0**2 + (rel * c["phat"]) ** 2
+    b = kp * c["dp_pa"] * c["feff_hat"]
+    cc = kp * c["dp_pa"] * jnp.maximum(V0 - c["dv_hat"], 1e-4) / (c["p_abs_pa"] * c["area"])
+    L11 = jnp.sqrt(a2 + b**2)
+    L21 = b * cc / L11
+    L22 = jnp.sqrt(cc**2 + sL**2 - L21**2)
+    return L11, L21, L22
+
+
+def _whiten(theta, Xf, Xl, F, L, c):
+    L11, L21, L22 = _cov_factors(theta, c)
+    yf = F / L11
+    xf = Xf / L11[:, None]
+    yl = (L - L21 * yf) / L22
+    xl = (Xl - L21[:, None] * xf) / L22[:, None]
+    return jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl]), jnp.sum(jnp.log(L11) + jnp.log(L22))
+
+
+def _log_prior(theta):
+    z = (theta - NOISE_PRIOR_MEAN) / NOISE_PRIOR_SD
+    return -0.5 * jnp.sum(z**2)
+
+
+def _one_log_prob(theta, Xf, Xl, F, L, c):
+    X, y, logdet = _whiten(theta, Xf, Xl, F, L, c)
+    post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
+    lp = _log_prior(theta) + post.log_marginal - logdet
+    return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
+
+
+@jax.jit
+def log_prob(thetas, Xf, Xl, F, L, c):
+    """Log posterior of the noise parameters (coefficients integrated out); (W, 5) -> (W,)."""
+    return jax.vmap(lambda th: _one_log_prob(th, Xf, Xl, F, L, c))(thetas)
+
+
+def _neg(theta, args):
+    return -_one_log_prob(theta, *args)
+
+
+@jax.jit
+def _bfgs(theta0, Xf, Xl, F, L, c):
+    sol = optx.minimise(_neg, optx.BFGS(rtol=1e-8, atol=1e-8), theta0, args=(Xf, Xl, F, L, c),
+                        max_steps=400, throw=False)
+    return sol.value, sol.result
+
+
+@jax.jit
+def _draw(thetas, keys, Xf, Xl, F, L, c):
+    def one(theta, key):
+        X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
+        post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
+        return draw_coefficients(post, jax.random.normal(key, post.mean.shape))
+
+    return jax.vmap(one)(thetas, keys)
+
+
+@jax.jit
+def _pointwise(thetas, betas, Xf, Xl, F, L, c):
+    """Pointwise log-likelihood of each (force, piston) reading, (S, n)."""
+
+    def one(theta, beta):
+        L11, L21, L22 = _cov_factors(theta, c)
+        r1 = (F - Xf @ beta) / L11
+        r2 = (L - Xl @ beta - L21 * r1) / L22
+        return -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI
+
+    return jax.vmap(one)(thetas, betas)
+
+
+# ----------------------------------------------------------------------------- fit
+
+
+@dataclass(eq=False)
+class SurfaceFit:
+    """Posterior of the surface model. ``beta`` (C, D, k) standardised coefficients."""
+
+    recordings: Recordings
+    orders: Orders
+    geometry: Geometry
+    theta: np.ndarray  # (C, D, 5) sampler coordinates (logs)
+    beta: np.ndarray  # (C, D, k)
+    chains: Chains
+    idata: az.InferenceData
+    diagnostics: dict
+    loglik: np.ndarray  # (C, D', n) pointwise, per (force, piston) reading
+    map_theta: np.ndarray
+    seconds: float = 0.0
+    selection: list = field(default_factory=list)
+
+    # ---- ranges
+    @property
+    def pressure_range_bar(self):
+        p = self.recordings.pressures_bar
+        return float(p.min()), float(p.max())
+
+    @property
+    def height_range_m(self):
+        return self.recordings.height_range_m
+
+    def check_range(self, height_m, p_bar, what="") -> None:
+        """Refuse heights/pressures outside the tested ranges (no extrapolation)."""
+        lo, hi = self.height_range_m
+        h = np.atleast_1d(np.asarray(height_m, float))
+        if np.any(h < lo - 1e-9) or np.any(h > hi + 1e-9):
+            bad = h[(h < lo - 1e-9) | (h > hi + 1e-9)][0]
+            raise InputError(f"{what}height {bad * 1e3:g} mm is outside the tested heights "
+                             f"{lo * 1e3:g}..{hi * 1e3:g} mm; the surface model does not extrapolate")
+        plo, phi = self.pressure_range_bar
+        p = np.atleast_1d(np.asarray(p_bar, float))
+        if np.any(p < plo - 1e-9) or np.any(p > phi + 1e-9):
+            bad = p[(p < plo - 1e-9) | (p > phi + 1e-9)][0]
+            raise InputError(f"{what}overpressure {bad:g} bar is outside the tested pressures "
+                             f"{plo:g}..{phi:g} bar; the surface model does not extrapolate")
+
+    # ---- coefficient blocks (physical units, flattened draws)
+    def flat_beta(self, max_draws: int | None = None) -> np.ndarray:
+        b = self.beta.reshape(-1, self.beta.shape[-1])
+        if max_draws and b.shape[0] > max_draws:
+            b = b[:: int(np.ceil(b.shape[0] / max_draws))]
+        return b
+
+    def blocks(self, beta=None):
+        beta = self.flat_beta() if beta is None else beta
+        nc, ne, nd, nr = _sizes(self.orders, len(self.recordings.tests))
+        c = beta[:, :nc] * SCALE_C
+        e = beta[:, nc : nc + ne] * SCALE_E
+        d = beta[:, nc + ne : nc + ne + nd] * SCALE_D
+        r = beta[:, nc + ne + nd :] * SCALE_R
+        return c, e, d, r
+
+    # ---- surfaces at arbitrary points: draws (S, n)
+    def _grid(self, height_m, p_bar, check):
+        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
+        if check:
+            self.check_range(h, p)
+        g = self.geometry
+        return h.shape, g.t(h.ravel()), g.q(p.ravel()), p.ravel()
+
+    def feff_draws(self, height_m, p_bar, *, check=True, beta=None):
+        """F_eff(x, p_u) draws, m^2, shape (S, *broadcast shape)."""
+        shape, t, q, _ = self._grid(height_m, p_bar, check)
+        c = self.blocks(beta)[0]
+        o = self.orders
+        return (c @ _tq(t, q, o.K, o.Lp).T).reshape(-1, *shape)
+
+    def casing_draws(self, height_m, *, check=True, beta=None):
+        shape, t, _, _ = self._grid(height_m, self.pressure_range_bar[0], check)
+        e = self.blocks(beta)[1]
+        return (e @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+
+    def force_draws(self, height_m, p_bar, *, check=True, beta=None):
+        """Force P(x, p_u) = p_u F_eff + E draws (mean curve, no reading noise), N."""
+        p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
+        fe = self.feff_draws(height_m, p_bar, check=check, beta=beta)
+        shape, t, _, _ = self._grid(height_m, p_bar, False)
+        e = self.blocks(beta)[1]
+        E = (e @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+        return p * BAR_PA * fe + E
+
+    def volume_excess_draws(self, height_m, p_bar, *, check=True, beta=None):
+        """D(x, p_u) = -dV/dx - F_eff draws, m^2 (0 in the traditional theory)."""
+        shape, t, q, _ = self._grid(height_m, p_bar, check)
+        d = self.blocks(beta)[2]
+        o = self.orders
+        if o.Dk < 0:
+            return np.zeros((self.blocks(beta)[0].shape[0], *shape))
+        return (d @ _tq(t, q, o.Dk, o.Dl).T).reshape(-1, *shape)
+
+    def spread_draws(self, height_m, p_bar, *, check=True, beta=None):
+        """Traditional characteristic p_u (-dV/dx) minus the experimental force: p_u D - E, N."""
+        p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
+        D = self.volume_excess_draws(height_m, p_bar, check=check, beta=beta)
+        shape, t, _, _ = self._grid(height_m, p_bar, False)
+        e = self.blocks(beta)[1]
+        E = (e @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+        return p * BAR_PA * D - E
+
+    def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
+        """90 % bands of F_eff, force and spread at the given points (refuses extrapolation)."""
+        out = {}
+        for name, fn in (("feff_m2", self.feff_draws), ("force_N", self.force_draws), ("spread_N", self.spread_draws)):
+            m, lo, hi = band(fn(height_m, p_bar), axis=0, level=level)
+            out[name] = {"mean": m, "lower": lo, "upper": hi}
+        return out
+
+    # ---- LOO
+    def loo(self):
+        return az.loo(_loo_idata(self.loglik), pointwise=True)
+
+
+def _loo_idata(ll):
+    return az.from_dict(log_likelihood={"reading": np.asarray(ll)})
+
+
+def _arrays(rec: Recordings):
+    tests = rec.tests
+    x = np.concatenate([t.height_m for t in tests])
+    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in tests])
+    F = np.concatenate([t.force_N for t in tests])
+    L = np.concatenate([t.piston_m for t in tests])
+    idx = np.concatenate([np.full(t.n_points, i) for i, t in enumerate(tests)])
+    return x, p, F, L, idx
+
+
+def geometry_of(rec: Recordings) -> Geometry:
+    p = rec.pressures_bar
+    mid, half = (p.max() + p.min()) / 2, max((p.max() - p.min()) / 2, 1e-3)
+    return Geometry(rec.x0_m, rec.piston_area_m2, float(mid), float(half))
+
+
+def _reference(o, g, x, p, F, L, idx, n_tests):
+    """Weighted least squares start: reference force, F_eff, volume increment per reading."""
+    Xf, Xl = designs(o, g, x, p, idx, n_tests)
+    wf = 1.0 / (0.005 * np.abs(F) + 20.0)
+    wl = np.full_like(L, 1.0 / 1e-3)
+    A = np.concatenate([Xf * wf[:, None], Xl * wl[:, None]])
+    y = np.concatenate([F * wf, L * wl])
+    beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+    phat = np.abs(Xf @ beta)
+    nc = (o.K + 1) * (o.Lp + 1)
+    feff = _tq(g.t(x), g.q(p), o.K, o.Lp) @ (beta[:nc] * SCALE_C)
+    lhat = Xl @ beta
+    dv = np.zeros_like(L)
+    for i in range(n_tests):
+        s = idx == i
+        top = np.argmax(x[s])
+        dv[s] = g.area_m2 * (lhat[s] - lhat[s][top])
+    return beta, phat, np.abs(feff), np.maximum(dv, 0.0), Xf, Xl
+
+
+def _consts(x, p, phat, feff, dv, area):
+    return {
+        "phat": jnp.asarray(phat),
+        "feff_hat": jnp.asarray(feff),
+        "dv_hat": jnp.asarray(dv),
+        "dp_pa": jnp.asarray(pressure_sd_bar(p) * BAR_PA),
+        "p_abs_pa": jnp.asarray((p + P_ATM_BAR) * BAR_PA),
+        "area": jnp.asarray(area),
+    }
+
+
+def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int = 0,
+                settings: Settings = Settings(), max_draws: int = MAX_DRAWS) -> SurfaceFit:
+    """optimistix MAP of the noise, emcee over it, exact coefficient draws, ArviZ diagnostics."""
+    t0 = time.perf_counter()
+    n_tests = len(rec.tests)
+    if n_tests < orders.Lp + 1:
+        raise InputError(f"{rec.path}: {n_tests} tests at different pressures cannot fix an effective area of "
+                         f"degree {orders.Lp} in pressure; the surface model needs at least {orders.Lp + 1}")
+    g = geometry_of(rec)
+    x, p, F, L, idx = _arrays(rec)
+    _, phat, feff, dv, Xf, Xl = _reference(orders, g, x, p, F, L, idx, n_tests)
+    c = _consts(x, p, phat, feff, dv, g.area_m2)
+    args = (jnp.asarray(Xf), jnp.asarray(Xl), jnp.asarray(F), jnp.asarray(L), c)
+    theta0 = jnp.asarray(NOISE_PRIOR_MEAN)
+    theta, result = _bfgs(theta0, *args)
+    theta = np.asarray(theta)
+    if not np.all(np.isfinite(theta)) or not np.isfinite(float(log_prob(jnp.asarray(theta)[None], *args)[0])):
+        theta = np.asarray(theta0)
+    scale = np.full(5, 1.0 / np.sqrt(2.0 * x.size)) / settings.init_scale * 0.5
+
+    def lp(th):
+        return np.asarray(log_prob(jnp.asarray(th), *args))
+
+    chains = thin(run_ensembles(lp, theta, scale, NOISE_NAMES, seed=seed, settings=settings), max_draws)
+    C, D, _ = chains.samples.shape
+    flat = jnp.asarray(chains.samples.reshape(C * D, 5))
+    keys = jax.random.split(jax.random.PRNGKey(seed), C * D)
+    beta = np.asarray(batched(lambda th, k: _draw(th, k, *args), flat, keys)).reshape(C, D, -1)
+    # pointwise log-likelihood for PSIS-LOO on at most ~2000 draws
+    step = max(1, int(np.ceil(C * D / 2000)))
+    th_s, b_s = chains.samples[:, ::step], beta[:, ::step]
+    Cs, Ds = th_s.shape[:2]
+    ll = batched(lambda th, b: _pointwise(th, b, *args), jnp.asarray(th_s.reshape(Cs * Ds, 5)),
+                 jnp.asarray(b_s.reshape(Cs * Ds, -1)), batch=1024).reshape(Cs, Ds, -1)
+    noise = _natural(chains.samples)
+    posterior = {n: noise[..., i] for i, n in enumerate(("s0_N", "rel_load", "k_p", "sL_m", "V0_m3"))}
+    idata = az.from_dict(posterior=posterior, sample_stats={"lp": chains.log_prob},
+                         attrs={"sampler": "emcee on the noise, coefficients drawn exactly", "orders": orders.label})
+    diagnostics = convergence(idata, chains, list(posterior))
+    fit = SurfaceFit(rec, orders, g, chains.samples, beta, chains, idata, diagnostics, ll, theta)
+    fit.seconds = time.perf_counter() - t0
+    return fit
+
+
+def _natural(theta):
+    return np.exp(np.asarray(theta))
+
+
+def select_orders(rec: Recordings, candidates=CANDIDATES, *, seed: int = 0, settings: Settings | None = None):
+    """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows)."""
+    settings = settings or Settings()
+    fits = {o.label: fit_surface(rec, o, seed=seed, settings=settings) for o in candidates}
+    cmp = az.compare({k: _loo_idata(f.loglik) for k, f in fits.items()}, ic="loo")
+    rows = [{"orders": k, "elpd_loo": float(r["elpd_loo"]), "p_loo": float(r["p_loo"]),
+             "elpd_diff": float(r["elpd_diff"]), "dse": float(r["dse"]), "rank": int(r["rank"]),
+             "warning": bool(r["warning"])} for k, r in cmp.iterrows()]
+    best = fits[cmp.index[0]]
+    best.selection = rows
+    return best, rows
+
+
+def compare_with_cubics(fit: SurfaceFit, cubic_fit) -> dict:
+    """PSIS-LOO of the surface model against the per-pressure cubics, per (force, piston) reading."""
+    parts = []
+    for tf in cubic_fit.tests:
+        ll = tf.pointwise_loglik(max_draws=2000)
+        parts.append(ll["force"] + ll["piston"])
+    D = min(p.shape[1] for p in parts)
+    C = min(p.shape[0] for p in parts)
+    cub = np.concatenate([p[:C, :D] for p in parts], axis=-1)
+    loo_s = az.loo(_loo_idata(fit.loglik), pointwise=True)
+    loo_c = az.loo(_loo_idata(cub), pointwise=True)
+    diff = np.asarray(loo_s.loo_i) - np.asarray(loo_c.loo_i)
+    n = diff.size
+    se = float(np.sqrt(n * np.var(diff, ddof=1)))
+    ks = max(float(np.max(loo_s.pareto_k)), 0.0)
+    kc = max(float(np.max(loo_c.pareto_k)), 0.0)
+    better = "surface" if diff.sum() > 0 else "per-pressure cubics"
+    return {
+        "surface": {"elpd_loo": float(loo_s.elpd_loo), "se": float(loo_s.se), "p_loo": float(loo_s.p_loo),
+                    "max_pareto_k": ks, "n_coefficients": int(fit.beta.shape[-1]) },
+        "cubics": {"elpd_loo": float(loo_c.elpd_loo), "se": float(loo_c.se), "p_loo": float(loo_c.p_loo),
+                   "max_pareto_k": kc, "n_coefficients": 8 * len(cubic_fit.tests)},
+        "elpd_diff": float(diff.sum()),
+        "elpd_diff_se": se,
+        "better": better,
+        "unit": "log density per (force, piston) reading, summed over readings",
+    }
+
+
+# ----------------------------------------------------------------------------- summaries
+
+
+def coefficient_summary(fit: SurfaceFit) -> dict:
+    c, e, d, r = fit.blocks()
+    o = fit.orders
+    out = {"F_eff_m2": {}, "casing_N": {}, "volume_excess_m2": {}, "piston_reference_m": {}}
+    for i, (k, lq) in enumerate((k, lq) for k in range(o.K + 1) for lq in range(o.Lp + 1)):
+        out["F_eff_m2"][f"c_{k}{lq}"] = estimate(c[:, i])
+    for m in range(o.Ke + 1):
+        out["casing_N"][f"e_{m}"] = estimate(e[:, m])
+    if o.Dk >= 0:
+        for i, (k, lq) in enumerate((k, lq) for k in range(o.Dk + 1) for lq in range(o.Dl + 1)):
+            out["volume_excess_m2"][f"d_{k}{lq}"] = estimate(d[:, i])
+    for i, t in enumerate(fit.recordings.tests):
+        out["piston_reference_m"][f"{t.pressure_bar:g} bar"] = estimate(r[:, i])
+    return out
+
+
+def noise_summary(fit: SurfaceFit) -> dict:
+    diag = fit.diagnostics["variables"]
+    out = {}
+    for n in ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3"):
+        est = estimate(np.asarray(fit.idata.posterior[n]))
+        est["r_hat"] = diag[n]["r_hat"]
+        est["ess_bulk"] = diag[n]["ess_bulk"]
+        out[n] = est
+    return out
+
+
+def spread_region(fit: SurfaceFit, n_x: int = 46, n_p: int = 41, level: float = LEVEL) -> dict:
+    """Grid of the spread's band over (x, p_u) and where it excludes zero."""
+    lo, hi = fit.height_range_m
+    plo, phi = fit.pressure_range_bar
+    xs = np.linspace(lo, hi, n_x)
+    ps = np.linspace(plo, phi, n_p)
+    X, P = np.meshgrid(xs, ps, indexing="ij")
+    beta = fit.flat_beta(2000)
+    m, lo_b, hi_b = band(fit.spread_draws(X, P, beta=beta), axis=0, level=level)
+    nonzero = (lo_b > 0) | (hi_b < 0)
+    return {"height_m": xs, "pressure_bar": ps, "mean": m, "lower": lo_b, "upper": hi_b, "credibly_nonzero": nonzero}
+
+
+def summary(fit: SurfaceFit, comparison: dict | None = None) -> dict:
+    g = fit.geometry
+    reg = spread_region(fit, 19, 21)
+    plo, phi = fit.pressure_range_bar
+    ref = {}
+    beta = fit.flat_beta(2000)
+    for pb in sorted({plo, (plo + phi) / 2, phi}):
+        ref[f"{pb:g}"] = {
+            "feff_m2": estimate(fit.feff_draws(np.array(g.x0_m), pb, beta=beta)),
+            "force_N": estimate(fit.force_draws(np.array(g.x0_m), pb, beta=beta)),
+            "spread_N": estimate(fit.spread_draws(np.array(g.x0_m), pb, beta=beta)),
+        }
+    return {
+        "x0_m": g.x0_m,
+        "piston_area_m2": g.area_m2,
+        "orders": asdict(fit.orders),
+        "orders_label": fit.orders.label,
+        "pressure_scaling": {"q": "(p_bar - p_mid) / p_half", "p_mid_bar": g.p_mid, "p_half_bar": g.p_half},
+        "basis": "t = (x - x0) / 0.05 m; F_eff = sum c_kl t^k q^l; E = sum e_m t^m; D = sum d_kl t^k q^l",
+        "valid_range": {"height_m": list(fit.height_range_m), "pressure_bar": [plo, phi]},
+        "coefficients": coefficient_summary(fit),
+        "noise": noise_summary(fit),
+        "at_x0": ref,
+        "spread_credibly_nonzero_fraction": float(reg["credibly_nonzero"].mean()),
+        "order_selection": fit.selection,
+        "comparison": comparison,
+        "converged": fit.diagnostics["converged"],
+        "warnings": fit.diagnostics["warnings"],
+        "seconds": fit.seconds,
+    }
+
+
+# ----------------------------------------------------------------------------- figures
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def figure_feff(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
+    """Heat map of the posterior-mean F_eff(x, p_u) with the 90 % band's relative width."""
+    plt = _plt()
+    lo, hi = fit.height_range_m
+    plo, phi = fit.pressure_range_bar
+    xs, ps = np.linspace(lo, hi, n_x), np.linspace(plo, phi, n_p)
+    X, P = np.meshgrid(xs, ps, indexing="ij")
+    m, lo_b, hi_b = band(fit.feff_draws(X, P, beta=fit.flat_beta(2000)), axis=0)
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    im = ax.pcolormesh(xs * 1e3, ps, (m * 1e4).T, shading="auto", cmap="viridis")
+    cs = ax.contour(xs * 1e3, ps, (100 * (hi_b - lo_b) / np.abs(m)).T, colors="w", linewidths=0.8)
+    ax.clabel(cs, fmt="%.2g %%", fontsize=7)
+    fig.colorbar(im, ax=ax, label="F_eff posterior mean, cm^2")
+    ax.set_xlabel("height x, mm")
+    ax.set_ylabel("overpressure p_u, bar")
+    ax.set_title("Effective area surface (white: 90 % band width, % of F_eff)")
+    for t in fit.recordings.tests:
+        ax.axhline(t.pressure_bar, color="k", lw=0.3, alpha=0.4)
+    fig.tight_layout()
+    return fig
+
+
+def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
+    """Heat map of the spread traditional - experimental, the credibly non-zero region outlined."""
+    plt = _plt()
+    reg = spread_region(fit, n_x, n_p)
+    xs, ps = reg["height_m"] * 1e3, reg["pressure_bar"]
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    vmax = float(np.max(np.abs(reg["mean"])))
+    im = ax.pcolormesh(xs, ps, reg["mean"].T, shading="auto", cmap="RdBu_r", vmin=-vmax, vmax=vmax)
+    if reg["credibly_nonzero"].any() and not reg["credibly_nonzero"].all():
+        ax.contour(xs, ps, reg["credibly_nonzero"].T.astype(float), levels=[0.5], colors="k", linewidths=1.5)
+    fig.colorbar(im, ax=ax, label="p_u (-dV/dx) - P, N (posterior mean)")
+    ax.set_xlabel("height x, mm")
+    ax.set_ylabel("overpressure p_u, bar")
+    share = 100 * reg["credibly_nonzero"].mean()
+    ax.set_title(f"Traditional minus measured force; outlined: 90 % band excludes 0 ({share:.0f} % of area)")
+    fig.tight_layout()
+    return fig
+
+
+def figure_overlay(fit: SurfaceFit, pressure_bar: float, ax=None):
+    """One test's force readings with the surface model's 90 % band at that pressure."""
+    plt = _plt()
+    t = fit.recordings.test_at(pressure_bar)
+    lo, hi = fit.height_range_m
+    xs = np.linspace(lo, hi, 120)
+    m, lo_b, hi_b = band(fit.force_draws(xs, pressure_bar, beta=fit.flat_beta(2000)), axis=0)
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    ax.fill_between(xs * 1e3, lo_b, hi_b, alpha=0.35, label="surface model 90 % band")
+    ax.plot(xs * 1e3, m, lw=1)
+    ax.plot(t.height_m * 1e3, t.force_N, "k.", ms=3, label="readings")
+    ax.set_xlabel("height x, mm")
+    ax.set_ylabel("force P, N")
+    ax.set_title(f"{pressure_bar:g} bar")
+    ax.legend(fontsize=7)
+    return fig if fig is not None else ax.figure
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def configure_surface(p) -> None:
+    from ._cmd_common import add_json, add_recordings, add_sampling
+
+    add_recordings(p)
+    add_sampling(p)
+    add_json(p)
+    p.add_argument("--select", action="store_true",
+                   help="rank the candidate polynomial orders by PSIS-LOO and keep the best (slower)")
+    p.add_argument("--no-compare", action="store_true",
+                   help="skip the PSIS-LOO comparison with the per-pressure cubics")
+
+
+def fast_cubic_settings(settings: Settings) -> Settings:
+    """Shorter chains for the per-pressure cubics used only in the LOO comparison."""
+    return Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles, tau_multiple=20.0,
+                    min_steps=300, max_steps=settings.max_steps)
+
+
+def command_surface(args) -> int:
+    from ._cmd_common import load, settings_from
+    from ._cubic import fit_campaign
+    from ._io import emit_json
+
+    t0 = time.perf_counter()
+    rec = load(args)
+    settings = settings_from(args)
+    if args.select:
+        fit, _ = select_orders(rec, seed=args.seed, settings=settings)
+    else:
+        fit = fit_surface(rec, seed=args.seed, settings=settings)
+    comparison = None
+    if not args.no_compare:
+        cub = fit_campaign(rec, seed=args.seed, settings=fast_cubic_settings(settings))
+        comparison = compare_with_cubics(fit, cub)
+    res = summary(fit, comparison)
+    res["seconds_total"] = time.perf_counter() - t0
+    print(f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
+          f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)")
+    for row in fit.selection:
+        print(f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}")
+    for pb, r in res["at_x0"].items():
+        f, s = r["force_N"], r["spread_N"]
+        print(f"  x0, {pb} bar: F_eff {r['feff_m2']['mean'] * 1e4:.2f} cm^2, force {f['mean']:.0f} N "
+              f"[{f['q05']:.0f}, {f['q95']:.0f}], traditional - measured {s['mean']:.0f} N [{s['q05']:.0f}, {s['q95']:.0f}]")
+    nz = res["noise"]
+    print(f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
+          f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm")
+    print(f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range")
+    if comparison:
+        c = comparison
+        print(f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} ({c['surface']['n_coefficients']} coef.), "
+              f"cubics {c['cubics']['elpd_loo']:.1f} ({c['cubics']['n_coefficients']} coef.): "
+              f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f} in favour of the {c['better']}")
+    for w in res["warnings"]:
+        print(f"  warning: {w}")
+    print(f"  {res['seconds_total']:.1f} s")
+    emit_json(res, args.json)
+    return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0

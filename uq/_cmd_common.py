@@ -25,6 +25,7 @@ def add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ensembles", type=int, default=Settings.n_ensembles, help="independent ensembles (>= 2, for R-hat)")
     p.add_argument("--max-steps", type=int, default=Settings.max_steps, help="cap on emcee steps per ensemble")
     p.add_argument("--strict", action="store_true", help="exit status 1 when sampling did not converge")
+    p.add_argument("--jobs", type=int, default=1, help="processes for the per-test fits (results do not depend on it)")
 
 
 def settings_from(args) -> Settings:

@@ -21,6 +21,8 @@ coefficients, reported in the paper's basis (a + b u + c u^2 + d u^3, SI units).
 
 from __future__ import annotations
 
+import concurrent.futures
+import multiprocessing
 import warnings
 from dataclasses import dataclass
 
@@ -291,7 +293,26 @@ def test_seeds(seed: int, n: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
-def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = Settings()) -> CampaignFit:
+def _fit_one(job):
+    test, x0_m, seed, settings = job
+    return fit_test(test, x0_m, seed=seed, settings=settings)
+
+
+def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = Settings(), jobs: int | None = None) -> CampaignFit:
+    """Fit every test of a campaign; tests are independent, so they run in ``jobs`` processes.
+
+    ``jobs`` > 1 uses that many spawned processes (the caller's main module must be import-safe,
+    as the ``uq`` console script is); each test has its own seed derived from ``seed``, so the
+    results do not depend on ``jobs``.
+    """
     seeds = test_seeds(seed, len(recordings.tests))
-    fits = [fit_test(t, recordings.x0_m, seed=s, settings=settings) for t, s in zip(recordings.tests, seeds, strict=True)]
+    work = [(t, recordings.x0_m, s, settings) for t, s in zip(recordings.tests, seeds, strict=True)]
+    jobs = min(jobs or 1, len(work))
+    if jobs <= 1:
+        fits = [_fit_one(w) for w in work]
+    else:
+        # spawn, not fork: a forked JAX runtime can deadlock.
+        ctx = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+            fits = list(pool.map(_fit_one, work))
     return CampaignFit(recordings, fits, seed)

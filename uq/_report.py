@@ -53,7 +53,7 @@ def command_report(args) -> int:
         raise InputError(f"option --draws: at least 10 draws, got {args.draws}")
     rec = load(args)
     t0 = time.perf_counter()
-    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args))
+    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args), jobs=args.jobs)
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
     path = write_report(cf, args.out, bands=cb, comments=read_comments(args.file))

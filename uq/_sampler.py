@@ -98,17 +98,17 @@ def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settin
     ndim = center.size
     rng = np.random.default_rng(seed)
     samplers, states = [], []
-    for e in range(settings.n_ensembles):
+    for _ in range(settings.n_ensembles):
         s = emcee.EnsembleSampler(settings.n_walkers, ndim, log_prob, vectorize=True, moves=_moves())
         s.random_state = np.random.RandomState(rng.integers(2**31)).get_state()
         p0 = center + settings.init_scale * scale * rng.standard_normal((settings.n_walkers, ndim))
         samplers.append(s)
         states.append(p0)
     n_steps = 0
+    next_step = settings.min_steps
     warns: list[str] = []
     while True:
-        step = settings.min_steps if n_steps == 0 else settings.chunk
-        step = min(step, settings.max_steps - n_steps)
+        step = min(next_step, settings.max_steps - n_steps)
         for i, s in enumerate(samplers):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals
@@ -121,6 +121,9 @@ def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settin
         burn = min(max(burn, 20), n_steps // 2)
         if math.isfinite(tau_max) and n_steps - burn >= settings.tau_multiple * tau_max:
             break
+        # Extend straight to the length the current tau asks for (+10 %), at least one chunk/4.
+        needed = (settings.burn_tau + settings.tau_multiple) * (tau_max if math.isfinite(tau_max) else n_steps)
+        next_step = max(int(math.ceil(1.1 * needed)) - n_steps, settings.chunk // 4)
         if n_steps >= settings.max_steps:
             warns.append(
                 f"chain of {n_steps} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation "

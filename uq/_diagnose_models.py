@@ -33,7 +33,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import optimistix as optx
 
 from ._jax import jax, jnp
 from ._linear import draw_coefficients, gaussian_loglik, linear_posterior
@@ -86,6 +85,7 @@ class Data(NamedTuple):
 def prepare(rec: Recordings) -> tuple[Data, dict]:
     """Arrays for the models and per-point metadata (numpy) for the residual analysis."""
     S = rec.piston_area_m2
+    area_check = []
     cols = {k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")}
     for i, test in enumerate(rec.tests):
         u = test.height_m - rec.x0_m
@@ -108,6 +108,10 @@ def prepare(rec: Recordings) -> tuple[Data, dict]:
         sdz = np.sqrt((LOAD_CELL_REL_SD * P_hat) ** 2 + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
                       + (dPdx * DISPLACEMENT_SD_M) ** 2 + FLOOR_N**2)
         sdL = np.sqrt((v_gas * sdp_bar / p_abs_bar / S) ** 2 + (slope * DISPLACEMENT_SD_M) ** 2 + CALIPER_SD_M**2)
+        i0 = np.argmin(np.abs(u))
+        area_check.append({"pressure_bar": test.pressure_bar, "from_force_m2": float(P_hat[i0] / p_pa),
+                           "from_volume_m2": float(-S * slope[i0]),
+                           "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa))})
         n = test.n_points
         cols["p"].append(np.full(n, test.pressure_bar))
         cols["t"].append(t)
@@ -128,7 +132,7 @@ def prepare(rec: Recordings) -> tuple[Data, dict]:
                 jnp.asarray(S, dtype=float))
     meta = {"pressure_bar": cat["p"], "height_m": cat["x"], "compression": cat["comp"].astype(bool),
             "step": cat["step"].astype(int), "test": cat["ti"].astype(int), "force_N": cat["F"],
-            "piston_m": cat["L"], "area": S}
+            "piston_m": cat["L"], "area": S, "area_check": area_check}
     return data, meta
 
 
@@ -188,21 +192,52 @@ def _log_post(theta, mask, d: Data):
     return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
 
-log_post_batch = jax.jit(jax.vmap(_log_post, in_axes=(0, None, None)))
-
-
-def _neg(theta, args):
-    mask, d = args
-    return -_log_post(theta, mask, d)
-
-
+# lax.map, not vmap: XLA CPU can deadlock on batched (vmapped) Cholesky factorisations, as
+# seen here with batches of 1000 under load; a sequential map over small factorisations is
+# only slightly slower and never hangs.
 @jax.jit
-def _map(theta0, mask, d: Data):
-    sol = optx.minimise(_neg, optx.BFGS(rtol=1e-9, atol=1e-9), theta0, args=(mask, d), max_steps=400, throw=False)
-    return sol.value, sol.result
+def log_post_batch(thetas, mask, d: Data):
+    return jax.lax.map(lambda th: _log_post(th, mask, d), thetas)
+PAD = 16  # every batched call is padded to a multiple of this: one compilation per campaign
 
 
-_hessian = jax.jit(jax.hessian(lambda th, mask, d: -_log_post(th, mask, d)))
+def log_post(thetas: np.ndarray, mask, d: Data) -> np.ndarray:
+    """Log posterior of full thetas (m, 4), padded to a fixed batch size."""
+    thetas = np.atleast_2d(np.asarray(thetas, float))
+    m = thetas.shape[0]
+    size = -(-m // PAD) * PAD
+    padded = np.concatenate([thetas, np.repeat(thetas[-1:], size - m, axis=0)])
+    return np.asarray(log_post_batch(jnp.asarray(padded), mask, d))[:m]
+
+
+def _hessian_fd(f_batch, x, h):
+    """Central-difference Hessian of f at x, all stencil points in one batched call."""
+    k = x.size
+    pts = [x.copy()]
+    for i in range(k):
+        for s in (1, -1):
+            p = x.copy()
+            p[i] += s * h[i]
+            pts.append(p)
+    pairs = []
+    for i in range(k):
+        for j in range(i + 1, k):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                p = x.copy()
+                p[i] += si * h[i]
+                p[j] += sj * h[j]
+                pts.append(p)
+            pairs.append((i, j))
+    v = f_batch(np.array(pts))
+    f0 = v[0]
+    Hm = np.zeros((k, k))
+    for i in range(k):
+        Hm[i, i] = (v[1 + 2 * i] - 2 * f0 + v[2 + 2 * i]) / h[i] ** 2
+    base = 1 + 2 * k
+    for n, (i, j) in enumerate(pairs):
+        a, b, c, e = v[base + 4 * n: base + 4 * n + 4]
+        Hm[i, j] = Hm[j, i] = (a - b - c + e) / (4 * h[i] * h[j])
+    return Hm
 
 
 def _one_draw(theta, key, mask, d: Data):
@@ -214,7 +249,9 @@ def _one_draw(theta, key, mask, d: Data):
     return ll, XF @ beta, XL @ beta, beta, sigma
 
 
-draws_batch = jax.jit(jax.vmap(_one_draw, in_axes=(0, 0, None, None)))
+@jax.jit
+def draws_batch(thetas, keys, mask, d: Data):
+    return jax.lax.map(lambda a: _one_draw(a[0], a[1], mask, d), (thetas, keys))
 
 
 def active_dims(names) -> list[int]:
@@ -227,27 +264,48 @@ def active_dims(names) -> list[int]:
 
 
 def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
-    """MAP of the sampled parameters (collapsed), log posterior there, Laplace covariance (active dims)."""
+    """MAP of the sampled parameters (collapsed), log posterior there, Laplace covariance (active dims).
+
+    Quasi-Newton (L-BFGS) on the collapsed log posterior with batched central differences:
+    one jitted function serves every candidate model and the sampler, so a campaign compiles
+    once however many candidates are screened.
+    """
+    from scipy.optimize import minimize
+
     mask = mask_of(names, order)
-    best = None
-    for m0 in ([0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.01, 0.01], [0.0, 0.0, -0.01, -0.01]):
-        theta, _ = _map(jnp.asarray(m0), mask, d)
-        theta = np.array(theta)
-        theta[[i for i in (2, 3) if i not in active_dims(names)]] = 0.0
-        lp = float(_log_post(jnp.asarray(theta), mask, d))
-        if np.isfinite(lp) and (best is None or lp > best[1]):
-            best = (theta, lp)
-        if len(active_dims(names)) == 2 and best is not None:
-            break
-    theta, lp = best
     dims = active_dims(names)
-    Hm = np.asarray(_hessian(jnp.asarray(theta), mask, d))[np.ix_(dims, dims)]
+
+    def f_batch(sub):
+        return -log_post(expand(np.asarray(sub), names), mask, d)
+
+    def fg(sub):
+        k = sub.size
+        pts = np.repeat(sub[None], 1 + 2 * k, axis=0)
+        for i in range(k):
+            pts[1 + 2 * i, i] += 1e-6
+            pts[2 + 2 * i, i] -= 1e-6
+        v = f_batch(pts)
+        if not np.isfinite(v[0]):
+            return 1e300, np.zeros(k)
+        return v[0], (v[1::2] - v[2::2]) / 2e-6
+
+    best = None
+    starts = [np.zeros(len(dims))]
+    if len(dims) > 2:
+        starts += [np.r_[0.0, 0.0, np.full(len(dims) - 2, 0.01)], np.r_[0.0, 0.0, np.full(len(dims) - 2, -0.01)]]
+    for x0 in starts:
+        res = minimize(fg, x0, jac=True, method="L-BFGS-B", options={"maxiter": 300, "gtol": 1e-7})
+        if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
+            best = res
+    sub = best.x
+    h = np.where(np.arange(sub.size) < 2, 1e-3, 1e-5)
+    Hm = _hessian_fd(f_batch, sub, h)
     try:
         cov = np.linalg.inv(Hm)
         np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:
         cov = np.diag(1.0 / np.maximum(np.abs(np.diag(Hm)), 1e-12))
-    return theta, lp, cov
+    return expand(sub, names), -float(best.fun), cov
 
 
 def expand(sub: np.ndarray, names) -> np.ndarray:

@@ -267,3 +267,71 @@ def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTO
         + CALIPER_SD_M**2
     )
     return sd_force, sd_piston
+
+
+class SmoothSurfaceSpring(N50Spring):
+    """An N-50-like spring whose truth lies in the surface model's class (uq._surface).
+
+    F_eff(u, p) = sum_{k<=3, l<=2} c_kl t^k q^l, casing E(u) = sum_{m<=2} e_m t^m and volume
+    excess D(u, p) = sum_{k<=1, l<=1} d_kl t^k q^l (t = u / 0.05 m, q = (p - 5.05) / 4.95),
+    fitted by least squares to Table 1's force and piston slopes at the tested pressures;
+    force p_u F_eff + E, piston L = a_L(p) - (1/S) int_{x0}^{x} (F_eff + D). Smooth in
+    pressure, so the truth between the tested pressures is known exactly.
+    """
+
+    name = "n50-smooth"
+    description = "N-50-like spring of the surface model's own form (smooth in pressure), fitted to Table 1"
+    P_MID, P_HALF, H = 5.05, 4.95, 0.05
+
+    def __init__(self, piston_area_m2: float = PAPER_PISTON_AREA_M2) -> None:
+        super().__init__()
+        self._area = piston_area_m2
+        t1 = table1()
+        u = np.linspace(PAPER_X_MIN_M, PAPER_X_MAX_M, 19) - self.x0_m
+        rows_f, ys_f, rows_d, ys_d = [], [], [], []
+        for p, cf, cl in zip(t1.pressures_bar, t1.force, t1.piston, strict=True):
+            t, q = u / self.H, np.full_like(u, (p - self.P_MID) / self.P_HALF)
+            feff_cols = np.stack([t**k * q**m for k in range(4) for m in range(3)], axis=1)
+            rows_f.append(np.hstack([p * BAR_PA * feff_cols, np.stack([t**m for m in range(3)], axis=1)]))
+            ys_f.append(cubic(cf, u))
+            ys_d.append(-piston_area_m2 * cubic_slope(cl, u))
+            rows_d.append((feff_cols, np.stack([t**k * q**m for k in range(2) for m in range(2)], axis=1)))
+        coef, *_ = np.linalg.lstsq(np.vstack(rows_f), np.concatenate(ys_f), rcond=None)
+        self.c, self.e = coef[:12], coef[12:]
+        A = np.vstack([r[1] for r in rows_d])
+        y = np.concatenate([yd - r[0] @ self.c for yd, r in zip(ys_d, rows_d, strict=True)])
+        self.d, *_ = np.linalg.lstsq(A, y, rcond=None)
+
+    def _tq(self, height_m, p_bar):
+        t = (np.asarray(height_m, float) - self.x0_m) / self.H
+        q = (p_bar - self.P_MID) / self.P_HALF
+        return t, q
+
+    def effective_area_m2(self, height_m, p_bar):
+        self._coef(p_bar)  # range check
+        t, q = self._tq(height_m, p_bar)
+        return sum(self.c[3 * k + m] * t**k * q**m for k in range(4) for m in range(3))
+
+    def casing_N(self, height_m):
+        t = (np.asarray(height_m, float) - self.x0_m) / self.H
+        return sum(self.e[m] * t**m for m in range(3))
+
+    def volume_excess_m2(self, height_m, p_bar):
+        t, q = self._tq(height_m, p_bar)
+        return sum(self.d[2 * k + m] * t**k * q**m for k in range(2) for m in range(2))
+
+    def force_N(self, height_m, p_bar):
+        return p_bar * BAR_PA * self.effective_area_m2(height_m, p_bar) + self.casing_N(height_m)
+
+    def piston_m(self, height_m, p_bar):
+        a_L = float(self._coef(p_bar)[1][0])
+        t, q = self._tq(height_m, p_bar)
+        integ = sum(self.c[3 * k + m] * t ** (k + 1) / (k + 1) * q**m for k in range(4) for m in range(3))
+        integ = integ + sum(self.d[2 * k + m] * t ** (k + 1) / (k + 1) * q**m for k in range(2) for m in range(2))
+        return a_L - self.H * integ / self._area
+
+    def piston_slope(self, height_m, p_bar):
+        return -(self.effective_area_m2(height_m, p_bar) + self.volume_excess_m2(height_m, p_bar)) / self._area
+
+
+SPRINGS["n50-smooth"] = SmoothSurfaceSpring

@@ -31,7 +31,7 @@ import numpy as np
 import optimistix as optx
 
 from ._jax import jax, jnp
-from ._linear import batched, draw_coefficients, gaussian_loglik, linear_posterior, posterior_cov
+from ._linear import draw_linear_numpy, gaussian_loglik, linear_posterior
 from ._recordings import Recordings, Test
 from ._reference import FORCE_NAMES, PISTON_NAMES
 from ._sampler import Chains, Settings, convergence, run_ensembles, thin
@@ -132,23 +132,6 @@ def log_prob(thetas, X, force, piston, ref_force):
         return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
     return jax.vmap(one)(thetas)
-
-
-@jax.jit
-def _draw(thetas, keys, X, force, piston, ref_force):
-    def one(theta, key):
-        pf, pl = _posteriors(theta, X, force, piston, ref_force)
-        kf, kl = jax.random.split(key)
-        return (draw_coefficients(pf, jax.random.normal(kf, pf.mean.shape)),
-                draw_coefficients(pl, jax.random.normal(kl, pl.mean.shape)))
-
-    return jax.vmap(one)(thetas, keys)
-
-
-@jax.jit
-def _mode_cov(theta, X, force, piston, ref_force):
-    pf, pl = _posteriors(theta, X, force, piston, ref_force)
-    return posterior_cov(pf), posterior_cov(pl)
 
 
 @dataclass(eq=False)
@@ -255,12 +238,17 @@ def fit_test(test: Test, x0_m: float, *, seed: int, settings: Settings = Setting
 
     chains = thin(run_ensembles(lp, center, scale, SAMPLER_NAMES, seed=seed, settings=settings), MAX_DRAWS)
     C, D, _ = chains.samples.shape
-    flat = jnp.asarray(chains.samples.reshape(C * D, 3))
-    keys = jax.random.split(jax.random.PRNGKey(seed), C * D)
-    alpha_f, alpha_l = batched(lambda th, k: _draw(th, k, *args), flat, keys)
+    nat = np.asarray(_natural_noise_jit(jnp.asarray(chains.samples.reshape(C * D, 3)), float(np.mean(ref_force))))
+    noise_flat = np.exp(nat)
+    sigma_f = np.sqrt(noise_flat[:, :1] ** 2 + (noise_flat[:, 1:2] * ref_force) ** 2)
+    sigma_l = np.broadcast_to(noise_flat[:, 2:3], sigma_f.shape)
+    Xn = np.asarray(X)
+    rng = np.random.default_rng(seed)
+    alpha_f = draw_linear_numpy(Xn, test.force_N, sigma_f, np.full(4, FORCE_PRIOR_SD_N), rng)
+    alpha_l = draw_linear_numpy(Xn, test.piston_m, sigma_l, np.full(4, PISTON_PRIOR_SD_M), rng)
     force = to_paper_basis(np.asarray(alpha_f)).reshape(C, D, 4)
     piston = to_paper_basis(np.asarray(alpha_l)).reshape(C, D, 4)
-    noise_draws = np.exp(np.asarray(_natural_noise_jit(jnp.asarray(chains.samples), float(np.mean(ref_force)))))
+    noise_draws = noise_flat.reshape(C, D, 3)
     posterior = {n: force[..., i] for i, n in enumerate(FORCE_NAMES)}
     posterior |= {n: piston[..., i] for i, n in enumerate(PISTON_NAMES)}
     posterior |= {n: noise_draws[..., i] for i, n in enumerate(NOISE_NAMES)}

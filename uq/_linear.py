@@ -83,3 +83,22 @@ def batched(fn, *arrays, batch: int = BATCH):
         outs.append(tuple(np.asarray(r)[:m] for r in res))
     joined = tuple(np.concatenate([o[i] for o in outs]) for i in range(len(outs[0])))
     return joined if len(joined) > 1 else joined[0]
+
+
+def draw_linear_numpy(X, y, sigma, prior_sd, rng):
+    """Exact draws of beta for many noise samples at once, in numpy.
+
+    X (n, k), y (n,), sigma (N, n) noise sd per sample and point, prior_sd (k,); returns
+    (N, k), one draw from N(m_s, A_s^-1) per sample s. numpy's batched LAPACK (gufuncs) is
+    used here rather than XLA: XLA's CPU batched Cholesky has been seen to stall under load.
+    """
+    import numpy as np
+
+    X = np.asarray(X)
+    w = 1.0 / np.asarray(sigma) ** 2  # (N, n)
+    A = np.einsum("nk,sn,nl->skl", X, w, X) + np.diag(1.0 / np.asarray(prior_sd) ** 2)
+    rhs = np.einsum("nk,sn->sk", X, w * np.asarray(y))
+    chol = np.linalg.cholesky(A)
+    mean = np.linalg.solve(A, rhs[..., None])[..., 0]
+    z = rng.standard_normal(mean.shape)
+    return mean + np.linalg.solve(np.swapaxes(chol, -1, -2), z[..., None])[..., 0]

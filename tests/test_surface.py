@@ -85,6 +85,16 @@ def test_figures(n50_surface):
         assert fig.axes
 
 
+def test_surface_report_section(n50_surface, tmp_path):
+    from uq._surface import summary
+    from uq._surface_report import write_surface_report
+
+    path = write_surface_report(n50_surface, summary(n50_surface), tmp_path)
+    page = path.read_text()
+    assert page.count("data:image/png;base64,") == 3 and "band excludes zero" in page
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["surface.html", "surface_feff.png", "surface_residuals.png", "surface_spread.png"]
+
+
 def test_compare_with_cubics(n50_surface, n50_fit):
     c = compare_with_cubics(n50_surface, n50_fit)
     assert np.isfinite(c["elpd_diff"]) and c["elpd_diff_se"] > 0

@@ -671,6 +671,7 @@ def configure_surface(p) -> None:
                    help="rank the candidate polynomial orders by PSIS-LOO and keep the best (slower)")
     p.add_argument("--no-compare", action="store_true",
                    help="skip the PSIS-LOO comparison with the per-pressure cubics")
+    p.add_argument("--report", metavar="DIR", help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR")
 
 
 def fast_cubic_settings(settings: Settings) -> Settings:
@@ -716,6 +717,10 @@ def command_surface(args) -> int:
               f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f} in favour of the {c['better']}")
     for w in res["warnings"]:
         print(f"  warning: {w}")
+    if args.report:
+        from ._surface_report import write_surface_report
+
+        print(f"  report: {write_surface_report(fit, res, args.report)}")
     print(f"  {res['seconds_total']:.1f} s")
     emit_json(res, args.json)
     return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0

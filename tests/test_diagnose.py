@@ -113,3 +113,15 @@ def test_cli_json_and_report(tmp_path, capsys):
     assert res["mechanisms"][0]["name"] == "hysteresis"
     assert (tmp_path / "rep" / "diagnose.html").exists()
     assert (tmp_path / "rep" / "diagnose_residuals.png").exists()
+
+
+def test_same_seed_gives_byte_identical_json(tmp_path):
+    from uq._recordings import write_recordings_csv
+    from uq.cli import main
+
+    csv = tmp_path / "r.csv"
+    csv.write_text(write_recordings_csv(simulate("n50-traditional", seed=3, effects={"force_offset": 56.3}, layout=SMALL)))
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    for out in (a, b):
+        assert main(["diagnose", str(csv), "--json", str(out), "--seed", "5", "--max-steps", "400"]) == 0
+    assert a.read_bytes() == b.read_bytes()

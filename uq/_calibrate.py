@@ -85,7 +85,7 @@ class CalibrationResult:
     def summary(self) -> dict:
         n = self.inside90.shape[0]
         out = {"truth": self.truth_kind, "noise_model": self.noise, "replications": n,
-               "converged_fraction": float(self.converged.mean()), "seconds": self.seconds,
+               "converged_fraction": float(self.converged.mean()),
                "acceptance_region_99pct": {"50": _region(n, 0.5), "90": _region(n, 0.9)}, "quantities": {}}
         for j, name in enumerate(self.names):
             hist = np.histogram(self.ranks[:, j], bins=10, range=(0, N_RANKS + 1))[0]
@@ -151,7 +151,7 @@ def markdown(results: list[CalibrationResult], command: str) -> str:
         n = s["replications"]
         r50, r90 = s["acceptance_region_99pct"]["50"], s["acceptance_region_99pct"]["90"]
         lines += [f"## truth = {s['truth']}, noise model = {s['noise_model']} ({n} replications, "
-                  f"{100 * s['converged_fraction']:.0f} % converged, {s['seconds']:.0f} s)", "",
+                  f"{100 * s['converged_fraction']:.0f} % converged, {res.seconds:.0f} s)", "",
                   f"| quantity | covered of {n} at 50 % (region {r50[0]}-{r50[1]}) | at 90 % (region {r90[0]}-{r90[1]}) | SBC p |",
                   "|---|---|---|---|"]
         for name, q in s["quantities"].items():

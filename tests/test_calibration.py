@@ -29,6 +29,8 @@ def test_fast_coverage_on_the_n50_stand():
     res = calibrate(6, truth="n50", seed=2)
     covered = int(res.inside90.sum())
     assert 0.7 * res.inside90.size <= covered, covered
+    pc = res.summary()["predictive_coverage90"]  # fresh readings, low and high forces alike
+    assert 0.75 <= pc["low_force_third"] <= 1.0 and 0.75 <= pc["high_force_third"] <= 1.0, pc
 
 
 def test_calibrate_cli_writes_results(tmp_path):

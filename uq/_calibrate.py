@@ -81,11 +81,17 @@ class CalibrationResult:
     pressures: np.ndarray
     converged: np.ndarray  # (reps,) bool
     seconds: float
+    # n50 truth only: coverage of 90 % predictive intervals of a fresh replicate's readings,
+    # for the lowest and the highest third of the forces of each test, (reps, 2)
+    predictive: np.ndarray | None = None
 
     def summary(self) -> dict:
         n = self.inside90.shape[0]
         out = {"truth": self.truth_kind, "noise_model": self.noise, "replications": n,
                "converged_fraction": float(self.converged.mean()),
+               "predictive_coverage90": None if self.predictive is None else {
+                   "low_force_third": float(self.predictive[:, 0].mean()),
+                   "high_force_third": float(self.predictive[:, 1].mean())},
                "acceptance_region_99pct": {"50": _region(n, 0.5), "90": _region(n, 0.9)}, "quantities": {}}
         for j, name in enumerate(self.names):
             hist = np.histogram(self.ranks[:, j], bins=10, range=(0, N_RANKS + 1))[0]
@@ -119,7 +125,7 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
     settings = settings or Settings(min_steps=300, chunk=150)
     rng = np.random.default_rng(seed)
     names = list(QUANTITIES) + (list(NOISE_NAMES) if truth == "prior" and noise == "budget" else [])
-    in50, in90, ranks, conv, ps = [], [], [], [], []
+    in50, in90, ranks, conv, ps, pred = [], [], [], [], [], []
     t0 = time.perf_counter()
     for r in range(reps):
         p = float(pressures[r % len(pressures)])
@@ -137,8 +143,26 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
         ranks.append(np.sum(thin < true, axis=0))
         conv.append(fit.diagnostics["converged"])
         ps.append(p)
+        if truth == "n50":
+            pred.append(_predictive_coverage(fit, _test_from_stand(int(rng.integers(2**31)), p)[0], rng))
     return CalibrationResult(truth, noise, names, np.array(in50), np.array(in90), np.array(ranks), np.array(ps),
-                             np.array(conv), time.perf_counter() - t0)
+                             np.array(conv), time.perf_counter() - t0, np.array(pred) if pred else None)
+
+
+def _predictive_coverage(fit, fresh: Test, rng, n_draws: int = 2000) -> np.ndarray:
+    """Share of a fresh replicate's force readings inside the 90 % predictive interval,
+    for the lowest and highest third of the forces; (2,)."""
+    f, nz = fit.flat("force"), fit.flat("noise")
+    idx = rng.choice(f.shape[0], size=min(n_draws, f.shape[0]), replace=False)
+    u = fresh.height_m - fit.x0_m
+    mu = f[idx] @ np.vander(u, 4, increasing=True).T  # (draws, n)
+    sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
+    y = mu + sd * rng.standard_normal(mu.shape)
+    lo, hi = np.quantile(y, [0.05, 0.95], axis=0)
+    inside = (lo <= fresh.force_N) & (fresh.force_N <= hi)
+    order = np.argsort(fresh.force_N)
+    third = max(1, u.size // 3)
+    return np.array([inside[order[:third]].mean(), inside[order[-third:]].mean()])
 
 
 def markdown(results: list[CalibrationResult], command: str) -> str:
@@ -151,7 +175,13 @@ def markdown(results: list[CalibrationResult], command: str) -> str:
         n = s["replications"]
         r50, r90 = s["acceptance_region_99pct"]["50"], s["acceptance_region_99pct"]["90"]
         lines += [f"## truth = {s['truth']}, noise model = {s['noise_model']} ({n} replications, "
-                  f"{100 * s['converged_fraction']:.0f} % converged, {res.seconds:.0f} s)", "",
+                  f"{100 * s['converged_fraction']:.0f} % converged, {res.seconds:.0f} s)", ""]
+        if s["predictive_coverage90"]:
+            pc = s["predictive_coverage90"]
+            lines += [f"90 % predictive intervals of a fresh replicate's force readings cover "
+                      f"{100 * pc['low_force_third']:.1f} % of the lowest-force third and "
+                      f"{100 * pc['high_force_third']:.1f} % of the highest-force third of each test.", ""]
+        lines += [
                   f"| quantity | covered of {n} at 50 % (region {r50[0]}-{r50[1]}) | at 90 % (region {r90[0]}-{r90[1]}) | SBC p |",
                   "|---|---|---|---|"]
         for name, q in s["quantities"].items():

@@ -31,6 +31,7 @@ import arviz as az
 import emcee
 import numpy as np
 
+from ._cmd_common import say
 from ._errors import InputError
 from ._io import emit_json
 from ._recordings import Test
@@ -204,11 +205,5 @@ def command_bench(args) -> int:
     r = bench(seconds=args.seconds, seed=args.seed, settings=settings, recordings=args.recordings,
               pressure_bar=args.pressure_bar, baseline_walkers=args.baseline_walkers)
     emit_json(r, args.json)
-    text = summary(r)
-    if args.json == "-":
-        import sys
-
-        sys.stderr.write(text + "\n")
-    else:
-        print(text)
+    say(summary(r), args.json)
     return 0

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from ._cmd_common import say
 from ._errors import InputError
 from ._io import emit_json
 from ._reference import FORCE_NAMES, PISTON_NAMES
@@ -273,11 +274,5 @@ def configure_check(p) -> None:
 def command_check(args) -> int:
     verdict = check_files(args.result, args.against, alpha=args.alpha)
     emit_json(verdict, args.json)
-    text = summary(verdict)
-    if args.json == "-":
-        import sys
-
-        sys.stderr.write(text + "\n")
-    else:
-        print(text)
+    say(summary(verdict), args.json)
     return 0 if verdict["agree"] else 1

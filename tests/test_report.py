@@ -77,3 +77,17 @@ def test_report_cli_bad_input(tmp_path, capsys):
     assert main(["report", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "error" in capsys.readouterr().err
     assert not (tmp_path / "o" / "report.html").exists()
+
+
+def test_report_links_the_surface_page(tmp_path):
+    """`uq report --surface` writes surface.html beside the report and links it."""
+    from uq._recordings import write_recordings_csv
+    from uq._stand import Layout, simulate
+    from uq.cli import main
+
+    csv = tmp_path / "six.csv"
+    csv.write_text(write_recordings_csv(simulate("n50", seed=3, layout=Layout(pressures_bar=(1, 2.5, 4, 5.5, 7, 10)))))
+    out = tmp_path / "rep"
+    assert main(["report", str(csv), "--out", str(out), "--surface", "--draws", "200"]) == 0
+    assert "href='surface.html'" in (out / "report.html").read_text()
+    assert (out / "surface.html").read_text().count("data:image/png;base64,") == 3

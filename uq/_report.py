@@ -42,6 +42,8 @@ def configure_report(p) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="folder for report.html and its PNG figures")
     p.add_argument("--json", metavar="PATH", help="also write the fit's JSON (as uq fit --json, plus the derived bands' summary)")
     p.add_argument("--draws", type=int, default=2000, help="joint posterior draws used for the bands (default 2000)")
+    p.add_argument("--surface", action="store_true",
+                   help="also fit the surface model and write surface.html beside the report (adds about 30 s)")
 
 
 def command_report(args) -> int:
@@ -56,7 +58,14 @@ def command_report(args) -> int:
     cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args), jobs=args.jobs)
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
-    path = write_report(cf, args.out, bands=cb, comments=read_comments(args.file))
+    surface_page = None
+    if args.surface:
+        from ._surface import compare_with_cubics, fit_surface, summary
+        from ._surface_report import write_surface_report
+
+        sf = fit_surface(rec, seed=args.seed, settings=settings_from(args))
+        surface_page = write_surface_report(sf, summary(sf, compare_with_cubics(sf, cf)), args.out).name
+    path = write_report(cf, args.out, bands=cb, comments=read_comments(args.file), surface_page=surface_page)
     t_all = time.perf_counter() - t0
     print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; fit {t_fit:.1f} s, report {t_all - t_fit:.1f} s")
     sc = cb.scatter_at
@@ -399,7 +408,7 @@ def _x0_table(cb: CampaignBands) -> str:
 
 
 def write_report(cf, out_dir, *, bands: CampaignBands | None = None, comments: list[str] | None = None,
-                 n_draws: int = 2000, seed: int = 0) -> Path:
+                 n_draws: int = 2000, seed: int = 0, surface_page: str | None = None) -> Path:
     """Write ``out_dir/report.html`` and its PNG figures (atomically); return the page's path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -437,6 +446,10 @@ def write_report(cf, out_dir, *, bands: CampaignBands | None = None, comments: l
         "and a piston-reading error). Shaded bands are 90 % credible bands of the curve; the lighter grey bands in the per-pressure "
         f"sections are 90 % posterior predictive bands for a new reading. Bands use {cb.n_draws} posterior draws per test "
         f"(seed {cb.seed}); sampler seed {cf.seed}.</p>")
+    if surface_page:
+        parts.append(f"<p class='note'>The pressure-coupled surface model of this campaign (F<sub>eff</sub> and the traditional-minus-measured "
+                     f"spread over height and pressure, each test against the surface's band, PSIS-LOO comparison with these "
+                     f"per-pressure cubics) is on <a href='{html.escape(surface_page)}'>its own page</a>.</p>")
     parts.append("<p>Contents: <a href='#fig'>Figures 2–5</a> · <a href='#scatter'>F_eff scatter</a> · <a href='#t1'>Table 1</a> · "
                  "<a href='#t2'>Table 2</a> · <a href='#diag'>sampler diagnostics</a> · per pressure: "
                  + " ".join(f"<a href='#p{i}'>{t.pressure_bar:g}</a>" for i, t in enumerate(cb.tests)) + " bar</p>")

@@ -611,7 +611,7 @@ def figure_feff(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     fig.colorbar(im, ax=ax, label="F_eff posterior mean, cm^2")
     ax.set_xlabel("height x, mm")
     ax.set_ylabel("overpressure p_u, bar")
-    ax.set_title("Effective area surface (white: 90 % band width, % of F_eff)")
+    ax.set_title("Effective area surface\n(white contours: 90 % band width, % of F_eff)", fontsize=9)
     for t in fit.recordings.tests:
         ax.axhline(t.pressure_bar, color="k", lw=0.3, alpha=0.4)
     fig.tight_layout()
@@ -632,7 +632,7 @@ def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     ax.set_xlabel("height x, mm")
     ax.set_ylabel("overpressure p_u, bar")
     share = 100 * reg["credibly_nonzero"].mean()
-    ax.set_title(f"Traditional minus measured force; outlined: 90 % band excludes 0 ({share:.0f} % of area)")
+    ax.set_title(f"Traditional minus measured force\noutlined: 90 % band excludes 0 ({share:.0f} % of the range)", fontsize=9)
     fig.tight_layout()
     return fig
 

@@ -62,9 +62,10 @@ DISPLACEMENT_SD_M = 0.02e-3
 CALIPER_SD_M = 0.01e-3
 
 
-def pressure_sd_bar(pressure_bar: float) -> float:
-    """Standard deviation of the pressure holding (section 3.2), bar."""
-    return 0.01 * min(1.0, max(pressure_bar, 0.1))
+def pressure_sd_bar(pressure_bar):
+    """Standard deviation of the pressure holding (section 3.2), bar: 0.01 bar from 1 bar up,
+    0.001 bar at 0.1 bar, 0.01 x p_u in between. Scalar or array."""
+    return 0.01 * np.minimum(1.0, np.maximum(np.asarray(pressure_bar, float), 0.1))
 
 
 class N50Spring:

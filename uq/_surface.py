@@ -42,10 +42,10 @@ from ._jax import jax, jnp
 from ._linear import LOG_2PI, batched, draw_coefficients, linear_posterior
 from ._recordings import BAR_PA, Recordings
 from ._sampler import Chains, Settings, convergence, run_ensembles, thin
+from ._stand import P_ATM_BAR, pressure_sd_bar
 from ._summary import band, estimate
 
 H_M = 0.05
-P_ATM_BAR = 1.01325
 MAX_DRAWS = 4000
 SCALE_C = 0.1  # m^2
 SCALE_E = 1.0e4  # N
@@ -88,11 +88,6 @@ CANDIDATES = (
     Orders(3, 4, 3, 2, 2),
     Orders(3, 5, 3, 2, 3),
 )
-
-
-def pressure_sd_bar(p_bar):
-    """The stand's pressure-holding sd (section 3.2): 0.01 bar, 0.001 bar at 0.1 bar."""
-    return 0.01 * np.minimum(1.0, np.maximum(np.asarray(p_bar, float), 0.1))
 
 
 # ----------------------------------------------------------------------------- design

@@ -575,6 +575,9 @@ def summary(fit: SurfaceFit, comparison: dict | None = None) -> dict:
         "order_selection": fit.selection,
         "comparison": comparison,
         "converged": fit.diagnostics["converged"],
+        "convergence": {k: v for k, v in fit.diagnostics.items() if k not in ("variables", "seconds")}
+        | {"r_hat_max": max(np.max(v["r_hat"]) for v in fit.diagnostics["variables"].values()),
+           "ess_bulk_min": min(np.min(v["ess_bulk"]) for v in fit.diagnostics["variables"].values())},
         "warnings": fit.diagnostics["warnings"],
     }
 

@@ -52,9 +52,14 @@ def coverage_run(tmp_path, seeds, settings=FAST, layout=LAYOUT):
         b = fit.bands(np.array(X_CHECK), P_CHECK)["feff_m2"]
         need = pressure_needed(fit, truth.x0_m, load)
         q05, q95 = np.quantile(need, [0.05, 0.95])
+        feff = np.ravel(fit.feff_draws(np.array(X_CHECK), P_CHECK))
+        thin = np.linspace(0, feff.size - 1, 99).astype(int)  # SBC: rank of the truth among 99 draws
+        feff_rank = int(np.sum(feff[thin] < feff_true))
+        need_rank = int(np.sum(np.ravel(need)[np.linspace(0, np.size(need) - 1, 99).astype(int)] < P_CHECK))
         rows.append({"seed": s, "feff_covered": bool(b["lower"] <= feff_true <= b["upper"]),
                      "pressure_covered": bool(q05 <= P_CHECK <= q95),
                      "feff_band": [float(b["lower"]), float(b["upper"])], "pressure_interval": [float(q05), float(q95)],
+                     "feff_rank": feff_rank, "pressure_rank": need_rank,
                      "converged": fit.diagnostics["converged"]})
     return rows, {"feff_true_m2": feff_true, "load_N": load, "x_m": X_CHECK, "p_bar": P_CHECK}
 
@@ -116,7 +121,12 @@ def test_slow_coverage(tmp_path):
     rows, truth = coverage_run(tmp_path, range(1000, 1000 + n), settings=Settings())
     k_f = sum(r["feff_covered"] for r in rows)
     k_p = sum(r["pressure_covered"] for r in rows)
+    from scipy import stats
+
+    hist = {k: np.histogram([r[k] for r in rows], bins=10, range=(0, 100))[0].tolist() for k in ("feff_rank", "pressure_rank")}
+    sbc_p = {k: float(stats.chisquare(h).pvalue) for k, h in hist.items()}
     out = {"replications": n, "level": 0.9, "acceptance": [82, 97], "truth": truth,
+           "sbc_rank_histograms": hist, "sbc_uniformity_p": sbc_p,
            "feff_covered": k_f, "pressure_covered": k_p, "layout": str(LAYOUT), "spring": "n50-smooth", "rows": rows}
     write_text_atomic(ROOT / "reports" / "surface-coverage" / "coverage.json", json.dumps(out, indent=1) + "\n")
     assert 82 <= k_f <= 97

@@ -303,18 +303,20 @@ class SurfaceFit:
         o = self.orders
         return (c @ _tq(t, q, o.K, o.Lp).T).reshape(-1, *shape)
 
+    def _casing(self, shape, t, beta):
+        """E(x) draws on an evaluated grid (shape, t from ``_grid``), N."""
+        return (self.blocks(beta)[1] @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+
     def casing_draws(self, height_m, *, check=True, beta=None):
         shape, t, _, _ = self._grid(height_m, self.pressure_range_bar[0], check)
-        e = self.blocks(beta)[1]
-        return (e @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+        return self._casing(shape, t, beta)
 
     def force_draws(self, height_m, p_bar, *, check=True, beta=None):
         """Force P(x, p_u) = p_u F_eff + E draws (mean curve, no reading noise), N."""
         p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
         fe = self.feff_draws(height_m, p_bar, check=check, beta=beta)
         shape, t, _, _ = self._grid(height_m, p_bar, False)
-        e = self.blocks(beta)[1]
-        E = (e @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+        E = self._casing(shape, t, beta)
         return p * BAR_PA * fe + E
 
     def volume_excess_draws(self, height_m, p_bar, *, check=True, beta=None):
@@ -331,8 +333,7 @@ class SurfaceFit:
         p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
         D = self.volume_excess_draws(height_m, p_bar, check=check, beta=beta)
         shape, t, _, _ = self._grid(height_m, p_bar, False)
-        e = self.blocks(beta)[1]
-        E = (e @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+        E = self._casing(shape, t, beta)
         return p * BAR_PA * D - E
 
     def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:

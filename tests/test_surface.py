@@ -131,3 +131,23 @@ def test_slow_coverage(tmp_path):
     write_text_atomic(ROOT / "reports" / "surface-coverage" / "coverage.json", json.dumps(out, indent=1) + "\n")
     assert 82 <= k_f <= 97
     assert 82 <= k_p <= 97
+
+
+def test_reading_covariance_has_the_gas_law_sign():
+    """A pressure-holding error dp raises the force by dp F_eff and, by Boyle's law, leaves the
+    piston short by V_gas dp / (p_abs S): the model's (force, piston) covariance must be
+    -sd_p^2 F_eff V_gas / (p_abs S), negative, built from first principles here."""
+    import jax.numpy as jnp
+
+    from uq._surface import _cov_factors
+
+    dp, feff, V0, dv, p_abs, S = 1.0e3, 0.025, 6.2e-3, 1.0e-3, 6.0e5, 54.82e-4
+    c = {k: jnp.asarray([v]) for k, v in dict(phat=1.0e4, feff_hat=feff, dv_hat=dv, dp_pa=dp,
+                                               p_abs_pa=p_abs, area=S).items()}
+    theta = jnp.log(jnp.asarray([10.0, 0.005, 1.0, 1.0e-5, V0]))
+    L11, L21, L22 = (float(v[0]) for v in _cov_factors(theta, c))
+    cov_fl = L11 * L21
+    expected = -(dp**2) * feff * (V0 - dv) / (p_abs * S)
+    assert cov_fl == pytest.approx(expected, rel=1e-12)
+    var_l = L21**2 + L22**2
+    assert var_l == pytest.approx((dp * (V0 - dv) / (p_abs * S)) ** 2 + 1.0e-10, rel=1e-12)

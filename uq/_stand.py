@@ -17,8 +17,10 @@ reading reproduces the s_P the budget predicts):
   the recording shows the commanded height x. Force and piston follow the true height.
 * pressure holding: the pressure during a reading is p_u + dp, dp ~ N(0, sd_p) with
   sd_p = 0.001 bar at 0.1 bar and 0.01 bar from 1 bar up (in between: 0.01 x p_u). It moves
-  the force by dp x F_eff(x) and the gas volume by V_gas dp / p_abs (isothermal, eq. 4),
-  which the piston takes up: L gains V_gas dp / (p_abs S).
+  the force by dp x F_eff(x) and shrinks the gas by V_gas dp / p_abs (isothermal, eq. 4).
+  Larger L means more room for the gas, so a reading taken at p + dp finds the piston
+  *short* of its isobaric position: L loses V_gas dp / (p_abs S). Force and piston errors
+  from the pressure holding are therefore anti-correlated.
 * gas volume V_gas = element volume + 2.0 L of air in receiver and branch pipe, with the
   element volume 4.2 L at x_max (assumed: the paper gives neither; the measured volume
   increment of about 2.6 L from 155 to 65 mm bounds the element's volume from below).
@@ -239,7 +241,8 @@ def simulate(
         ref_piston = float(spring.piston_m(np.array(layout.x_max_m), p))
         v_element = ELEMENT_VOLUME_AT_XMAX_M3 - piston_area_m2 * (piston - ref_piston)
         v_gas = RECEIVER_AIR_M3 + v_element
-        piston_read = piston + v_gas * dp_bar / (p + P_ATM_BAR) / piston_area_m2 + e_cal
+        # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_gas dp / p_abs.
+        piston_read = piston - v_gas * dp_bar / (p + P_ATM_BAR) / piston_area_m2 + e_cal
         tests.append(
             dict(pressure_bar=p, height_m=heights, force_N=force_read, piston_m=piston_read,
                  compression=comp, step=steps)

@@ -15,10 +15,11 @@ the noise, so the coefficients are integrated out with the collapsed kernel (``_
 and drawn exactly; emcee samples the five noise parameters only.
 
 Noise (stand's error budget, paper section 3.2): the pressure-holding error dp of one
-reading moves the force by dp F_eff and the piston by V_gas dp / (p_abs S) at once, so each
-reading (force, piston) is bivariate normal with covariance
+reading moves the force by +dp F_eff and the piston by -V_gas dp / (p_abs S) at once (a
+higher pressure compresses the gas, so the piston stands short of its isobaric position),
+so each reading (force, piston) is bivariate normal with covariance
 
-    [[s0^2 + (r Phat)^2 + b^2,  b c], [b c, c^2 + sL^2]],
+    [[s0^2 + (r Phat)^2 + b^2,  -b c], [-b c, c^2 + sL^2]],
     b = k_p dp_i F_eff_hat,  c = k_p dp_i (V0 - dV_hat) / (p_abs S)
 
 with dp_i the stand's holding sd (0.01 bar, 0.001 bar at 0.1 bar), k_p its multiplier, V0
@@ -161,7 +162,7 @@ def _cov_factors(theta, c):
     b = kp * c["dp_pa"] * c["feff_hat"]
     cc = kp * c["dp_pa"] * jnp.maximum(V0 - c["dv_hat"], 1e-4) / (c["p_abs_pa"] * c["area"])
     L11 = jnp.sqrt(a2 + b**2)
-    L21 = b * cc / L11
+    L21 = -b * cc / L11  # pressure error: force up, piston down (anti-correlated)
     L22 = jnp.sqrt(cc**2 + sL**2 - L21**2)
     return L11, L21, L22
 

@@ -117,26 +117,25 @@ def test_bundled_data_regenerates_byte_for_byte(tmp_path):
     assert out.read_text().splitlines()[5:] == bundled.read_text().splitlines()[5:]  # the command line differs in --out only
 
 
-def test_pressure_error_obeys_boyle_force_up_piston_short(monkeypatch):
+def test_pressure_error_obeys_boyle_force_up_piston_short():
     """A reading taken at p + dp: the force rises by dp F_eff, and by Boyle's law
     (p_abs V = const at the reading) the gas occupies less room, so the piston stands *short*
     of its isobaric position. Checked against the gas law, not against the stand's own formula:
     with every other noise term off, (p_abs + dp) (V_gas + S dL) must equal p_abs V_gas."""
-    import uq._stand as stand
+    from uq._stand_description import PAPER_STAND
 
-    for name in ("LOAD_CELL_REL_SD", "DISPLACEMENT_SD_M", "CALIPER_SD_M"):
-        monkeypatch.setattr(stand, name, 0.0)
+    stand = PAPER_STAND.replace(load_cell_rel_sd=0.0, displacement_sd_m=0.0, caliper_sd_m=0.0)
     p = 6.0
     layout = Layout(pressures_bar=(p,))
-    (test,) = simulate("n50", seed=3, layout=layout)
+    (test,) = simulate("n50", seed=3, layout=layout, stand=stand)
     spring = N50Spring()
     x = test["height_m"]
     dp_pa = (test["force_N"] - spring.force_N(x, p)) / spring.effective_area_m2(x, p)
     dL = test["piston_m"] - spring.piston_m(x, p)
     assert np.std(dp_pa) > 0.5 * 0.01e5  # the pressure error is there
     S = 54.82e-4
-    v_gas = stand.RECEIVER_AIR_M3 + stand.ELEMENT_VOLUME_AT_XMAX_M3 - S * (spring.piston_m(x, p) - spring.piston_m(np.array(0.155), p))
-    p_abs = (p + stand.P_ATM_BAR) * 1e5
+    v_gas = stand.gas_volume_at_xmax_m3 - S * (spring.piston_m(x, p) - spring.piston_m(np.array(0.155), p))
+    p_abs = (p + stand.p_atm_bar) * 1e5
     boyle = (p_abs + dp_pa) * (v_gas + S * dL) / (p_abs * v_gas) - 1.0
     assert np.max(np.abs(boyle)) < 1e-4  # second order in dp / p_abs (first order would be ~3e-3)
     assert np.corrcoef(dp_pa, dL)[0, 1] < -0.9  # force and piston errors anti-correlated

@@ -55,19 +55,16 @@ from ._reference import (
     cubic_slope,
     table1,
 )
+from ._stand_description import PAPER_STAND, StandDescription
 
-P_ATM_BAR = 1.01325
-RECEIVER_AIR_M3 = 2.0e-3
-ELEMENT_VOLUME_AT_XMAX_M3 = 4.2e-3
-LOAD_CELL_REL_SD = 0.005
-DISPLACEMENT_SD_M = 0.02e-3
-CALIPER_SD_M = 0.01e-3
-
-
-def pressure_sd_bar(pressure_bar):
-    """Standard deviation of the pressure holding (section 3.2), bar: 0.01 bar from 1 bar up,
-    0.001 bar at 0.1 bar, 0.01 x p_u in between. Scalar or array."""
-    return 0.01 * np.minimum(1.0, np.maximum(np.asarray(pressure_bar, float), 0.1))
+# The paper's stand (section 3.2); a different stand is a StandDescription (``--stand FILE``).
+P_ATM_BAR = PAPER_STAND.p_atm_bar
+RECEIVER_AIR_M3 = PAPER_STAND.receiver_air_m3
+ELEMENT_VOLUME_AT_XMAX_M3 = PAPER_STAND.element_volume_at_xmax_m3
+LOAD_CELL_REL_SD = PAPER_STAND.load_cell_rel_sd
+DISPLACEMENT_SD_M = PAPER_STAND.displacement_sd_m
+CALIPER_SD_M = PAPER_STAND.caliper_sd_m
+pressure_sd_bar = PAPER_STAND.pressure_sd_bar
 
 
 class N50Spring:
@@ -219,8 +216,13 @@ def simulate(
     effects: dict[str, float] | None = None,
     layout: Layout = Layout(),
     piston_area_m2: float = PAPER_PISTON_AREA_M2,
+    stand: StandDescription = PAPER_STAND,
 ) -> list[dict]:
-    """Run the virtual stand; returns one dict of arrays per test (see write_recordings_csv)."""
+    """Run the virtual stand; returns one dict of arrays per test (see write_recordings_csv).
+
+    ``stand`` is the error budget and gas volume of the stand that makes the noise; it need not
+    be the one a model assumes (that is how the tests check models against a different stand).
+    """
     if spring_name not in SPRINGS:
         raise InputError(f"option --spring: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}")
     effects = dict(effects or {})
@@ -231,18 +233,17 @@ def simulate(
     tests = []
     for p in layout.pressures_bar:
         n = heights.size
-        x_true = heights + rng.normal(0.0, DISPLACEMENT_SD_M, n)
-        dp_bar = rng.normal(0.0, pressure_sd_bar(p), n)
-        e_load = rng.normal(0.0, LOAD_CELL_REL_SD, n)
-        e_cal = rng.normal(0.0, CALIPER_SD_M, n)
+        x_true = heights + rng.normal(0.0, stand.displacement_sd_m, n)
+        dp_bar = rng.normal(0.0, stand.pressure_sd_bar(p), n)
+        e_load = rng.normal(0.0, stand.load_cell_rel_sd, n)
+        e_cal = rng.normal(0.0, stand.caliper_sd_m, n)
         force, piston = true_curves(spring, effects, x_true, p, comp, steps, piston_area_m2)
         feff = np.asarray(spring.effective_area_m2(x_true, p)) * (1.0 + effects.get("pressure_dependent_area", 0.0) * p)
         force_read = (force + dp_bar * BAR_PA * feff) * (1.0 + e_load)
         ref_piston = float(spring.piston_m(np.array(layout.x_max_m), p))
-        v_element = ELEMENT_VOLUME_AT_XMAX_M3 - piston_area_m2 * (piston - ref_piston)
-        v_gas = RECEIVER_AIR_M3 + v_element
+        v_gas = stand.gas_volume_at_xmax_m3 - piston_area_m2 * (piston - ref_piston)
         # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_gas dp / p_abs.
-        piston_read = piston - v_gas * dp_bar / (p + P_ATM_BAR) / piston_area_m2 + e_cal
+        piston_read = piston - v_gas * dp_bar / (p + stand.p_atm_bar) / piston_area_m2 + e_cal
         tests.append(
             dict(pressure_bar=p, height_m=heights, force_N=force_read, piston_m=piston_read,
                  compression=comp, step=steps)
@@ -250,7 +251,8 @@ def simulate(
     return tests
 
 
-def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTON_AREA_M2):
+def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTON_AREA_M2,
+             stand: StandDescription = PAPER_STAND):
     """Standard deviations (force N, piston m) the error budget implies at each height.
 
     First-order propagation of the terms in the module docstring; used to check the stand
@@ -260,15 +262,16 @@ def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTO
     f = np.asarray(spring.force_N(height_m, p_bar))
     feff = np.asarray(spring.effective_area_m2(height_m, p_bar))
     dPdx = np.gradient(f, height_m) if height_m.size > 2 else np.zeros_like(f)
-    sdp = pressure_sd_bar(p_bar) * BAR_PA
-    sd_force = np.sqrt((LOAD_CELL_REL_SD * f) ** 2 + (sdp * feff) ** 2 + (dPdx * DISPLACEMENT_SD_M) ** 2)
+    sdp_bar = stand.pressure_sd_bar(p_bar)
+    sd_force = np.sqrt((stand.load_cell_rel_sd * f) ** 2 + (sdp_bar * BAR_PA * feff) ** 2
+                       + (dPdx * stand.displacement_sd_m) ** 2)
     L = np.asarray(spring.piston_m(height_m, p_bar))
-    v_gas = RECEIVER_AIR_M3 + ELEMENT_VOLUME_AT_XMAX_M3 - piston_area_m2 * (L - L.min())
+    v_gas = stand.gas_volume_at_xmax_m3 - piston_area_m2 * (L - L.min())
     slope = np.asarray(spring.piston_slope(height_m, p_bar))
     sd_piston = np.sqrt(
-        (v_gas * pressure_sd_bar(p_bar) / (p_bar + P_ATM_BAR) / piston_area_m2) ** 2
-        + (slope * DISPLACEMENT_SD_M) ** 2
-        + CALIPER_SD_M**2
+        (v_gas * sdp_bar / (p_bar + stand.p_atm_bar) / piston_area_m2) ** 2
+        + (slope * stand.displacement_sd_m) ** 2
+        + stand.caliper_sd_m**2
     )
     return sd_force, sd_piston
 

@@ -4,25 +4,37 @@ The flow, module by module: recordings (``_recordings``) -> virtual stand (``_st
 models and posteriors (``_cubic``, ``_linear``, ``_sampler``) -> results (``_results``) ->
 derived quantities, reports, checks and queries (``_bands``, ``_report``, ``_check``,
 ``_surface``, ``_margin``, ``_diagnose``). The public API is re-exported here.
+
+The re-exports are loaded on first use (PEP 562), so ``import uq`` and the ``uq`` command's
+``--help`` do not import JAX, ArviZ or matplotlib; every module that uses JAX imports
+``uq._jax`` first, which switches on float64 before anything traces.
 """
 
-from . import _jax  # noqa: F401  (float64 before anything traces)
-from ._cubic import CampaignFit as CampaignFit
-from ._cubic import TestFit as TestFit
-from ._cubic import fit_campaign as fit_campaign
-from ._cubic import fit_test as fit_test
-from ._cubic import least_squares as least_squares
-from ._errors import InputError as InputError
-from ._mechanisms import MECHANISMS as MECHANISMS
-from ._recordings import Recordings as Recordings
-from ._recordings import Test as Test
-from ._recordings import read_recordings as read_recordings
-from ._reference import table1 as table1
-from ._reference import table2 as table2
-from ._results import fit_json as fit_json
-from ._sampler import Settings as Settings
-from ._stand import Layout as Layout
-from ._stand import simulate as simulate
-from ._stand import true_curves as true_curves
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
+
+#: public name -> module that defines it
+_API = {
+    "CampaignFit": "_cubic", "TestFit": "_cubic", "fit_campaign": "_cubic", "fit_test": "_cubic",
+    "least_squares": "_cubic", "InputError": "_errors", "MECHANISMS": "_mechanisms",
+    "Recordings": "_recordings", "Test": "_recordings", "read_recordings": "_recordings",
+    "table1": "_reference", "table2": "_reference", "fit_json": "_results", "Settings": "_sampler",
+    "Layout": "_stand", "simulate": "_stand", "true_curves": "_stand",
+}
+
+__all__ = sorted(_API) + ["__version__"]
+
+
+def __getattr__(name: str):
+    if name not in _API:
+        raise AttributeError(f"module 'uq' has no attribute '{name}'")
+    value = getattr(importlib.import_module(f"uq.{_API[name]}"), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_API))

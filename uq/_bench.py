@@ -186,12 +186,14 @@ def summary(r: dict) -> str:
 def configure_bench(p) -> None:
     p.add_argument("--seconds", type=float, default=10.0,
                    help="minimum timed wall time of each sampler, s (default 10; the project runs whole fits)")
-    p.add_argument("--seed", type=int, default=20201, help="random seed (workload and samplers; default 20201)")
+    from ._cmd_common import positive_float, positive_int, seed
+
+    p.add_argument("--seed", type=seed, default=20201, help="random seed (workload and samplers; default 20201)")
     p.add_argument("--recordings", metavar="FILE", help="take the test from this recordings CSV instead of the virtual stand")
-    p.add_argument("--pressure-bar", type=float, default=BENCH_PRESSURE_BAR, help="pressure of the test (default 5)")
-    p.add_argument("--walkers", type=int, default=Settings.n_walkers, help="project: emcee walkers per ensemble")
-    p.add_argument("--max-steps", type=int, default=Settings.max_steps, help="project: cap on emcee steps per ensemble")
-    p.add_argument("--baseline-walkers", type=int, default=BASELINE_WALKERS, help="baseline: emcee walkers (>= 12, even)")
+    p.add_argument("--pressure-bar", type=positive_float, default=BENCH_PRESSURE_BAR, help="pressure of the test (default 5)")
+    p.add_argument("--walkers", type=positive_int, default=Settings.n_walkers, help="project: emcee walkers per ensemble")
+    p.add_argument("--max-steps", type=positive_int, default=Settings.max_steps, help="project: cap on emcee steps per ensemble")
+    p.add_argument("--baseline-walkers", type=positive_int, default=BASELINE_WALKERS, help="baseline: emcee walkers (>= 12, even)")
     p.add_argument("--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)")
 
 

@@ -194,11 +194,14 @@ def markdown(results: list[CalibrationResult], command: str) -> str:
 
 
 def configure_calibrate(p) -> None:
-    p.add_argument("--reps", type=int, default=100, help="replications per setting (default 100)")
-    p.add_argument("--truth", default="prior,n50", help="comma list of truths: prior, n50 (default both)")
-    p.add_argument("--noise", default="budget", help="comma list of force-noise models to fit: budget, constant")
-    p.add_argument("--seed", type=int, default=20201)
-    p.add_argument("--out", metavar="DIR", help="write calibration.json, calibration.md and rank histograms here")
+    from ._cmd_common import choice_list, positive_int, seed
+
+    p.add_argument("--reps", type=positive_int, default=100, help="replications per setting (default 100)")
+    p.add_argument("--truth", type=choice_list("prior", "n50"), default="prior,n50", help="comma list of truths: prior, n50")
+    p.add_argument("--noise", type=choice_list("budget", "constant"), default="budget",
+                   help="comma list of force-noise models to fit: budget, constant")
+    p.add_argument("--seed", type=seed, default=20201, help="random seed")
+    p.add_argument("--out", metavar="DIR", help="the folder to write: calibration.json, calibration.md and rank histograms")
     p.add_argument("--json", metavar="PATH", help="machine-readable result ('-' for stdout)")
 
 

@@ -1,30 +1,43 @@
-"""``uq simulate`` and ``uq fit``."""
+"""``uq simulate`` and ``uq fit`` (and ``uq fit --config FILE``, the fit definitions in fits/)."""
 
 from __future__ import annotations
 
 import sys
+import tomllib
+from pathlib import Path
 
-from ._cmd_common import DEFAULT_SEED, add_json, add_recordings, add_sampling, load, settings_from
+from ._cmd_common import (
+    DEFAULT_PISTON_AREA_CM2,
+    DEFAULT_SEED,
+    add_json,
+    add_recordings,
+    add_sampling,
+    load,
+    positive_float,
+    positive_int,
+    seed,
+    settings_from,
+    walkers,
+)
 from ._errors import InputError
-from ._io import emit_json, write_text_atomic
-from ._mechanisms import parse_effects
-from ._recordings import DEFAULT_PISTON_AREA_CM2, write_recordings_csv
-from ._reference import PAPER_PRESSURES_BAR
-from ._stand import SPRINGS, Layout, simulate
+
+PAPER_PRESSURES = "0.1,1,2,3,4,5,6,7,8,9,10"  # uq._reference.PAPER_PRESSURES_BAR (tested equal)
+SPRING_NAMES = ("n50", "n50-traditional", "n50-smooth")  # uq._stand.SPRINGS (tested equal)
 
 
 def configure_simulate(p) -> None:
-    p.add_argument("--out", required=True, help="recordings CSV to write")
-    p.add_argument("--spring", default="n50", help=f"true element: {', '.join(SPRINGS)} (default n50: Table 1)")
-    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
+    p.add_argument("--out", required=True, metavar="FILE.csv", help="the recordings file (CSV) to write")
+    p.add_argument("--spring", default="n50", choices=SPRING_NAMES,
+                   help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth)")
+    p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",
-                   help="conceal a mechanism of CONTRACT.md section 4 (repeatable)")
-    p.add_argument("--pressures", default=",".join(f"{x:g}" for x in PAPER_PRESSURES_BAR),
-                   help="comma-separated set overpressures, bar (default: 0.1,1,...,10)")
-    p.add_argument("--x-max-mm", type=float, default=155.0, help="start (maximum) height, mm")
-    p.add_argument("--x-min-mm", type=float, default=65.0, help="minimum height, mm")
-    p.add_argument("--step-mm", type=float, default=5.0, help="height step, mm")
-    p.add_argument("--piston-area-cm2", type=float, default=DEFAULT_PISTON_AREA_CM2, help="piston area S, cm^2")
+                   help="conceal a mechanism (docs/formats.md, mechanisms; repeatable)")
+    p.add_argument("--pressures", default=PAPER_PRESSURES, help="comma-separated set overpressures, bar")
+    p.add_argument("--x-max-mm", type=positive_float, default=155.0, help="start (maximum) height, mm")
+    p.add_argument("--x-min-mm", type=positive_float, default=65.0, help="minimum height, mm")
+    p.add_argument("--step-mm", type=positive_float, default=5.0, help="height step, mm")
+    p.add_argument("--piston-area-cm2", type=positive_float, default=DEFAULT_PISTON_AREA_CM2, help="piston area S, cm^2")
+    add_json(p)
 
 
 def _pressures(text: str) -> tuple[float, ...]:
@@ -32,7 +45,7 @@ def _pressures(text: str) -> tuple[float, ...]:
         ps = tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise InputError(f"option --pressures '{text}': expected comma-separated numbers in bar") from None
-    if not ps or any(not p > 0 for p in ps):
+    if not ps or any(not 0 < p < float("inf") for p in ps):
         raise InputError(f"option --pressures '{text}': expected positive overpressures in bar")
     if len(set(ps)) != len(ps):
         raise InputError(f"option --pressures '{text}': a pressure is listed twice")
@@ -40,6 +53,11 @@ def _pressures(text: str) -> tuple[float, ...]:
 
 
 def command_simulate(args) -> int:
+    from ._io import emit_json, write_text_atomic
+    from ._mechanisms import parse_effects
+    from ._recordings import write_recordings_csv
+    from ._stand import SPRINGS, Layout, simulate
+
     effects = parse_effects(args.effect)
     if not 0 < args.x_min_mm < args.x_max_mm:
         raise InputError(f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}")
@@ -60,18 +78,67 @@ def command_simulate(args) -> int:
     n = sum(len(t["height_m"]) for t in tests)
     print(f"wrote {args.out}: {len(tests)} tests, {n} points (spring {args.spring}, seed {args.seed}"
           f"{', effects ' + ', '.join(effects) if effects else ''})")
+    emit_json({"out": str(args.out), "spring": args.spring, "seed": args.seed, "effects": effects,
+               "n_tests": len(tests), "n_points": n, "pressures_bar": [float(t["pressure_bar"]) for t in tests]}, args.json)
     return 0
 
 
 def configure_fit(p) -> None:
-    add_recordings(p)
+    add_recordings(p, file_optional=True)
     add_sampling(p)
     add_json(p)
-    p.add_argument("--out", metavar="DIR", help="folder for the posteriors (NetCDF, one per test) and fit.json")
+    p.add_argument("--out", metavar="DIR", help="the folder to write: posteriors (NetCDF, one per test) and fit.json")
+    p.add_argument("--config", metavar="FILE.toml",
+                   help="fit definition (e.g. fits/n50/fit.toml): recordings, stand constants, sampler; options given on the command line win")
+
+
+#: fit.toml keys -> (option dest, parser of the option); paths are relative to the TOML file.
+CONFIG_KEYS = {
+    "data": {"recordings": ("file", None), "x0_mm": ("x0_mm", positive_float),
+             "piston_area_cm2": ("piston_area_cm2", positive_float)},
+    "sampling": {"seed": ("seed", seed), "walkers": ("walkers", walkers),
+                 "ensembles": ("ensembles", positive_int), "max_steps": ("max_steps", positive_int)},
+}
+DESCRIPTIVE_SECTIONS = ("model", "check")  # documentation for the reader; not options
+
+
+def read_fit_config(path) -> dict:
+    """Option values from a fit definition (``uq fit --config``); every key checked, one line on error."""
+    import argparse
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except OSError as exc:
+        raise InputError(f"option --config {path}: {exc.strerror}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    values = {}
+    for section, table in raw.items():
+        if section in DESCRIPTIVE_SECTIONS:
+            continue
+        if section not in CONFIG_KEYS or not isinstance(table, dict):
+            raise InputError(f"{path}: unknown section [{section}]; expected {', '.join(['data', 'sampling', *DESCRIPTIVE_SECTIONS])}")
+        for key, value in table.items():
+            if key not in CONFIG_KEYS[section]:
+                raise InputError(f"{path}: [{section}] unknown key '{key}'; expected {', '.join(CONFIG_KEYS[section])}")
+            dest, parse = CONFIG_KEYS[section][key]
+            if parse is None:
+                values[dest] = str(path.parent / str(value))
+                continue
+            try:
+                values[dest] = parse(str(value))
+            except argparse.ArgumentTypeError as exc:
+                raise InputError(f"{path}: [{section}] {key}: {exc}") from None
+    return values
 
 
 def command_fit(args) -> int:
+    if args.file is None:
+        raise InputError("give the recordings CSV (uq fit FILE.csv) or a fit definition (uq fit --config FILE.toml)")
     from ._cubic import fit_campaign
+    from ._io import emit_json
     from ._results import fit_json, save_posteriors
 
     rec = load(args)
@@ -89,8 +156,6 @@ def command_fit(args) -> int:
     for w in result["warnings"]:
         print(f"WARNING: {w}", file=sys.stderr)
     if args.out:
-        from pathlib import Path
-
         paths = save_posteriors(cf, args.out)
         emit_json(result, str(Path(args.out) / "fit.json"))
         print(f"posteriors: {len(paths)} NetCDF files and fit.json in {args.out}")

@@ -1,34 +1,131 @@
-"""Options shared by several commands, so they read and validate the same way everywhere."""
+"""Options shared by several commands, so they read and validate the same way everywhere.
+
+This module is imported while the parser is built, so it imports nothing heavy (no numpy,
+JAX, ArviZ): ``uq --help`` stays fast. Option values are checked by the argparse ``type=``
+functions below, so a bad value is a usage error (one line, exit 2) before any data is read
+or any model fitted; output paths are checked by :func:`check_output_path` (the CLI calls it
+for every ``--json``, ``--out`` and ``--report`` before the command starts).
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
+import sys
+import tempfile
+from pathlib import Path
 
 from ._errors import InputError
-from ._recordings import DEFAULT_PISTON_AREA_CM2, DEFAULT_X0_MM, read_recordings
-from ._sampler import Settings
 
 DEFAULT_SEED = 20201  # fixed: a rerun gives the same numbers
+# The paper's stand constants and the sampler's defaults, repeated here so that building the
+# parser does not import numpy/ArviZ; tests/test_cli.py checks they equal the library's.
+DEFAULT_PISTON_AREA_CM2 = 54.82
+DEFAULT_X0_MM = 112.0
+DEFAULT_WALKERS = 16
+DEFAULT_ENSEMBLES = 4  # independent, overdispersed ensembles for R-hat (uq/_sampler.py)
+DEFAULT_MAX_STEPS = 20000
 
 
-def add_recordings(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", help="recordings CSV (CONTRACT.md section 1)")
-    p.add_argument("--piston-area-cm2", type=float, default=DEFAULT_PISTON_AREA_CM2,
-                   help="area S of the hydraulic cylinder's piston cavity, cm^2 (default: the paper's 54.82)")
-    p.add_argument("--x0-mm", type=float, default=DEFAULT_X0_MM,
-                   help="reference height x0 of the polynomial basis, mm (default: the paper's 112)")
+# ----------------------------------------------------------------------------- option types
+
+
+def _number(text: str, kind=float):
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got '{text}'") from None
+    if kind is float and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got '{text}'")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = _number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'")
+    return value
+
+
+def finite_float(text: str) -> float:
+    return _number(text)
+
+
+def positive_int(text: str) -> int:
+    value = _number(text, int)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
+    return value
+
+
+def walkers(text: str) -> int:
+    value = _number(text, int)
+    if value < 4 or value % 2:  # emcee's ensemble moves split the walkers in two halves
+        raise argparse.ArgumentTypeError(f"expected an even number of at least 4 walkers, got '{text}'")
+    return value
+
+
+def seed(text: str) -> int:
+    value = _number(text, int)
+    if not 0 <= value < 2**63:  # numpy's seed sequences take non-negative integers
+        raise argparse.ArgumentTypeError(f"expected an integer seed >= 0, got '{text}'")
+    return value
+
+
+def probability(text: str) -> float:
+    value = _number(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a probability strictly between 0 and 1, got '{text}'")
+    return value
+
+
+def choice_list(*allowed: str):
+    """A comma-separated list of names from ``allowed`` (checked at parse time, before any work)."""
+
+    def parse(text: str) -> str:
+        names = [t.strip() for t in text.split(",") if t.strip()]
+        bad = [n for n in names if n not in allowed]
+        if not names or bad:
+            raise argparse.ArgumentTypeError(
+                f"expected a comma-separated list of {', '.join(allowed)}, got '{text}'")
+        return ",".join(names)
+
+    parse.__name__ = "list"
+    return parse
+
+
+# ----------------------------------------------------------------------------- shared options
+
+
+def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> None:
+    p.add_argument("file", nargs="?" if file_optional else None,
+                   help="recordings CSV (format: docs/formats.md)")
+    p.add_argument("--piston-area-cm2", type=positive_float, default=DEFAULT_PISTON_AREA_CM2,
+                   help="area S of the hydraulic cylinder's piston cavity, cm^2 (the paper's value)")
+    p.add_argument("--x0-mm", type=positive_float, default=DEFAULT_X0_MM,
+                   help="reference height x0 of the polynomial basis, mm (the paper's value)")
 
 
 def add_sampling(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
-    p.add_argument("--walkers", type=int, default=Settings.n_walkers, help="emcee walkers per ensemble")
-    p.add_argument("--ensembles", type=int, default=Settings.n_ensembles, help="independent ensembles (>= 2, for R-hat)")
-    p.add_argument("--max-steps", type=int, default=Settings.max_steps, help="cap on emcee steps per ensemble")
+    p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
+    p.add_argument("--walkers", type=walkers, default=DEFAULT_WALKERS, help="emcee walkers per ensemble (even, >= 4)")
+    p.add_argument("--ensembles", type=positive_int, default=DEFAULT_ENSEMBLES, help="independent ensembles (>= 2, for R-hat)")
+    p.add_argument("--max-steps", type=positive_int, default=DEFAULT_MAX_STEPS, help="cap on emcee steps per ensemble")
     p.add_argument("--strict", action="store_true", help="exit status 1 when sampling did not converge")
-    p.add_argument("--jobs", type=int, default=1, help="processes for the per-test fits (results do not depend on it)")
+    p.add_argument("--jobs", type=positive_int, default=1, help="processes for the per-test fits (results do not depend on it)")
 
 
-def settings_from(args) -> Settings:
+def settings_from(args):
+    from ._sampler import Settings
+
     s = Settings(n_walkers=args.walkers, n_ensembles=args.ensembles, max_steps=args.max_steps)
     s.validate()
     return s
@@ -39,6 +136,8 @@ def add_json(p: argparse.ArgumentParser) -> None:
 
 
 def load(args, min_points: int = 6):
+    from ._recordings import read_recordings
+
     return read_recordings(args.file, piston_area_cm2=args.piston_area_cm2, x0_mm=args.x0_mm, min_points=min_points)
 
 
@@ -50,6 +149,53 @@ def positive(name: str, value: float) -> float:
 
 def say(text: str, json_target: str | None) -> None:
     """Print the human summary; to stderr when the JSON goes to stdout, so both stay readable."""
-    import sys
-
     (sys.stderr if json_target == "-" else sys.stdout).write(text + "\n")
+
+
+# ----------------------------------------------------------------------------- output paths
+
+
+def _probe_writable(folder: Path, option: str, path) -> None:
+    """Create and remove a temporary file in ``folder``: the only sure test (root, /proc, read-only mounts)."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".uq-probe-", dir=folder)
+    except OSError as exc:
+        raise InputError(f"option {option} {path}: cannot write in {folder}: {exc.strerror}") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def check_output_path(path, option: str, kind: str = "file") -> None:
+    """Refuse, before any work, an output the command could not write; writes nothing.
+
+    ``kind`` "file": ``path`` is the file to write ('-' = stdout); it must not be a folder or a
+    symbolic link, and its folder (or the nearest existing ancestor, since missing folders are
+    created) must be a writable folder. An existing device such as /dev/null is written to.
+    ``kind`` "dir": ``path`` is the folder to write into; it must not be an existing file.
+    """
+    if kind == "file" and str(path) == "-":
+        return
+    if not str(path).strip():
+        raise InputError(f"option {option}: empty path")
+    p = Path(path)
+    what = "file" if kind == "file" else "folder"
+    if kind == "file" and p.is_symlink():
+        raise InputError(f"option {option} {path}: is a symbolic link; refusing to replace it (give the real path)")
+    if p.exists():
+        if kind == "dir":
+            if not p.is_dir():
+                raise InputError(f"option {option} {path}: is an existing file; {option} names the folder to write into")
+            _probe_writable(p, option, path)
+        elif p.is_dir():
+            raise InputError(f"option {option} {path}: is a folder; {option} names the {what} to write")
+        elif p.is_file():
+            _probe_writable(p.absolute().parent, option, path)
+        elif not os.access(p, os.W_OK):  # a device or pipe is written to in place
+            raise InputError(f"option {option} {path}: not writable")
+        return
+    ancestor = p.absolute() if kind == "dir" else p.absolute().parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise InputError(f"option {option} {path}: {ancestor} is a file, not a folder")
+    _probe_writable(ancestor, option, path)

@@ -32,6 +32,7 @@ import optimistix as optx
 
 from ._jax import jax, jnp
 from ._linear import draw_linear_numpy, gaussian_loglik, linear_posterior
+from ._progress import progress
 from ._recordings import Recordings, Test
 from ._reference import FORCE_NAMES, PISTON_NAMES
 from ._sampler import Chains, Settings, convergence, run_ensembles, thin
@@ -308,10 +309,10 @@ def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = 
     work = [(t, recordings.x0_m, s, settings) for t, s in zip(recordings.tests, seeds, strict=True)]
     jobs = min(jobs or 1, len(work))
     if jobs <= 1:
-        fits = [_fit_one(w) for w in work]
+        fits = [_fit_one(w) for w in progress(work, desc="fits", unit="test")]
     else:
         # spawn, not fork: a forked JAX runtime can deadlock.
         ctx = multiprocessing.get_context("spawn")
         with concurrent.futures.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            fits = list(pool.map(_fit_one, work))
+            fits = list(progress(pool.map(_fit_one, work), total=len(work), desc="fits", unit="test"))
     return CampaignFit(recordings, fits, seed)

@@ -133,16 +133,16 @@ def margin(fit: SurfaceFit, height_m: float, load_N: float, prob: float = 0.95, 
 
 
 def configure_margin(p) -> None:
-    from ._cmd_common import add_json, add_recordings, add_sampling
+    from ._cmd_common import add_json, add_recordings, add_sampling, positive_float, probability
 
     add_recordings(p)
     add_sampling(p)
     add_json(p)
-    p.add_argument("--height-mm", type=float, required=True, help="height x of the element, mm")
-    p.add_argument("--load-N", type=float, required=True, help="load the element has to carry, N")
-    p.add_argument("--prob", type=float, default=0.95, help="probability of carrying at least the load (default 0.95)")
-    p.add_argument("--pressure-bar", type=float, help="also give the force band at this overpressure")
-    p.add_argument("--tolerance-pct", type=float,
+    p.add_argument("--height-mm", type=positive_float, required=True, help="height x of the element, mm")
+    p.add_argument("--load-N", type=positive_float, required=True, help="load the element has to carry, N")
+    p.add_argument("--prob", type=probability, default=0.95, help="probability of carrying at least the load (default 0.95)")
+    p.add_argument("--pressure-bar", type=positive_float, help="also give the force band at this overpressure")
+    p.add_argument("--tolerance-pct", type=positive_float,
                    help="with --pressure-bar: usable stroke where the force stays within this %% of the load")
 
 
@@ -151,11 +151,17 @@ def command_margin(args) -> int:
     from ._io import emit_json
     from ._surface import fit_surface
 
+    if args.tolerance_pct is not None and args.pressure_bar is None:  # checked before the fit, not after
+        raise InputError("option --tolerance-pct: needs --pressure-bar (the stroke is taken at one pressure)")
     rec = load(args)
     h = args.height_mm * 1e-3
     lo, hi = rec.height_range_m
     if not lo - 1e-9 <= h <= hi + 1e-9:
         raise InputError(f"option --height-mm: {args.height_mm:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm")
+    tested = [t.pressure_bar for t in rec.tests]
+    if args.pressure_bar is not None and not min(tested) - 1e-9 <= args.pressure_bar <= max(tested) + 1e-9:
+        raise InputError(f"option --pressure-bar: overpressure {args.pressure_bar:g} bar is outside the tested pressures "
+                         f"{min(tested):g}..{max(tested):g} bar; the surface model does not extrapolate")
     fit = fit_surface(rec, seed=args.seed, settings=settings_from(args))
     res = margin(fit, h, args.load_N, args.prob, pressure_bar=args.pressure_bar, tolerance_pct=args.tolerance_pct)
     e = res["pressure_bar_needed"]

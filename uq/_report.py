@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ._bands import BAR_PA, CampaignBands, campaign_bands
-from ._cmd_common import add_recordings, add_sampling, load, settings_from
+from ._cmd_common import add_recordings, add_sampling, load, positive_int, settings_from
 from ._io import emit_json, write_bytes_atomic, write_text_atomic
 from ._reference import table1, table2
 
@@ -41,7 +41,7 @@ def configure_report(p) -> None:
     add_sampling(p)
     p.add_argument("--out", required=True, metavar="DIR", help="folder for report.html and its PNG figures")
     p.add_argument("--json", metavar="PATH", help="also write the fit's JSON (as uq fit --json, plus the derived bands' summary)")
-    p.add_argument("--draws", type=int, default=2000, help="joint posterior draws used for the bands (default 2000)")
+    p.add_argument("--draws", type=positive_int, default=2000, help="joint posterior draws used for the bands (default 2000)")
     p.add_argument("--surface", action="store_true",
                    help="also fit the surface model and write surface.html beside the report (adds about 30 s)")
 

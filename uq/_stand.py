@@ -157,6 +157,10 @@ class TraditionalSpring(N50Spring):
 SPRINGS = {"n50": N50Spring, "n50-traditional": TraditionalSpring}
 
 
+MAX_STEPS_PER_BRANCH = 100_000  # 100k readings per branch: far beyond any stand, still a small file
+MAX_TESTS = 1000
+
+
 @dataclass(frozen=True)
 class Layout:
     """How a campaign is stepped: pressures, height range and step (section 3.4 by default)."""
@@ -165,6 +169,23 @@ class Layout:
     x_max_m: float = PAPER_X_MAX_M
     x_min_m: float = PAPER_X_MIN_M
     step_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        # Checked here, not only by the CLI, so no Layout can divide by zero or ask for 1e9 rows.
+        if not (np.isfinite(self.step_m) and self.step_m > 0):
+            raise InputError(f"option --step-mm: expected a positive step in mm, got {self.step_m * 1e3:g}")
+        if not (np.isfinite(self.x_min_m) and np.isfinite(self.x_max_m) and 0 < self.x_min_m < self.x_max_m):
+            raise InputError(
+                f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {self.x_min_m * 1e3:g}, {self.x_max_m * 1e3:g}"
+            )
+        if (self.x_max_m - self.x_min_m) / self.step_m > MAX_STEPS_PER_BRANCH:
+            raise InputError(
+                f"option --step-mm: {self.step_m * 1e3:g} mm cuts {self.x_min_m * 1e3:g}..{self.x_max_m * 1e3:g} mm into more than {MAX_STEPS_PER_BRANCH} steps"
+            )
+        if not self.pressures_bar or len(self.pressures_bar) > MAX_TESTS:
+            raise InputError(f"option --pressures: expected 1 to {MAX_TESTS} overpressures, got {len(self.pressures_bar)}")
+        if not all(np.isfinite(p) and p > 0 for p in self.pressures_bar):
+            raise InputError(f"option --pressures: expected positive overpressures in bar, got {', '.join(f'{p:g}' for p in self.pressures_bar)}")
 
     def heights(self) -> tuple[np.ndarray, np.ndarray]:
         """Commanded heights in recording order and the compression flag, shape (n,)."""

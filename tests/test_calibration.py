@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
+from scipy.stats import binom
 
-from uq._calibrate import _region, calibrate
+from uq._calibrate import CalibrationResult, _region, calibrate, markdown
 from uq.cli import main
 
 
@@ -14,15 +16,54 @@ def test_binomial_region_matches_the_issue():
     assert _region(100, 0.9) == (82, 97)
 
 
+# Every statistical assertion below fails with probability below FALSE_FAILURE when the code is
+# right: binomial acceptance regions (scipy.stats.binom), Bonferroni-split over the quantities.
+FALSE_FAILURE = 1e-3
+
+
+def _accept(n: int, p: float, alpha: float) -> tuple[int, int]:
+    """Counts k with P(X < k) <= alpha/2 and P(X > k) <= alpha/2 excluded, X ~ Binomial(n, p)."""
+    return int(binom.ppf(alpha / 2, n, p)), int(binom.isf(alpha / 2, n, p))
+
+
+def test_acceptance_region_has_the_stated_false_failure_rate():
+    lo, hi = _accept(12, 0.9, FALSE_FAILURE)
+    assert binom.cdf(lo - 1, 12, 0.9) + binom.sf(hi, 12, 0.9) <= FALSE_FAILURE
+
+
 def test_fast_coverage_from_the_prior():
-    """SBC setting: the model is exactly right, so 90 % intervals must cover about 90 %."""
-    res = calibrate(12, truth="prior", seed=1)
+    """SBC setting: the model is exactly right, so for each quantity the number of the 12
+    independent replications whose 50 % / 90 % interval covers the truth is Binomial(12, 0.5 / 0.9);
+    and the sampler converges (rules of uq/_sampler.py) in at least 95 % of fits."""
+    reps = 12
+    res = calibrate(reps, truth="prior", seed=1)
     s = res.summary()
-    covered = sum(q["covered90"] for q in s["quantities"].values())
-    total = 12 * len(s["quantities"])
-    # 132 intervals, nominal 118.8; correlated within a replication, so wide but failing bounds
-    assert 0.78 * total <= covered <= 0.98 * total, covered
-    assert s["converged_fraction"] == 1.0
+    q = s["quantities"]
+    alpha = FALSE_FAILURE / (2 * len(q) + 1)  # Bonferroni over 2 levels x quantities + convergence
+    lo90, hi90 = _accept(reps, 0.9, alpha)
+    lo50, hi50 = _accept(reps, 0.5, alpha)
+    bad = {k: (v["covered50"], v["covered90"]) for k, v in q.items()
+           if not (lo50 <= v["covered50"] <= hi50 and lo90 <= v["covered90"] <= hi90)}
+    assert not bad, (bad, (lo50, hi50), (lo90, hi90))
+    # one-sided: converged ~ Binomial(12, >= 0.95) if the sampler fails at most 5 % of the time
+    n_conv = int(round(s["converged_fraction"] * reps))
+    assert n_conv >= int(binom.ppf(alpha, reps, 0.95)), n_conv
+
+
+def test_sbc_p_values_are_adjusted_for_the_number_of_quantities():
+    """One raw p = 0.007 among 11 quantities (b_L in the 100-replication report) is what chance
+    gives about once in 13 settings: the report must adjust before calling it a failure."""
+    rng = np.random.default_rng(0)
+    n, k = 100, 11
+    ranks = rng.integers(0, 100, size=(n, k))
+    ranks[:, 5] = np.repeat([5, 15, 25, 35, 45, 55, 65, 75, 85, 95], [18, 17, 11, 4, 10, 10, 10, 12, 3, 5])
+    names = [f"q{j}" for j in range(k)]
+    inside = np.ones((n, k), bool)
+    res = CalibrationResult("prior", "budget", names, inside, inside, ranks, np.ones(n), np.ones(n, bool), 1.0)
+    q = res.summary()["quantities"]["q5"]
+    assert q["sbc_uniformity_p"] == pytest.approx(0.007, abs=0.001)
+    assert 0.05 < q["sbc_uniformity_p_holm"] <= 1.0
+    assert "Holm p" in markdown([res], "uq calibrate")
 
 
 def test_fast_coverage_on_the_n50_stand():

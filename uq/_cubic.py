@@ -267,7 +267,9 @@ def _idata(posterior, test, x0_m, chains):
         observed_data={"force_N": test.force_N, "piston_m": test.piston_m},
         constant_data={"height_m": test.height_m, "pressure_bar": np.array(test.pressure_bar), "x0_m": np.array(x0_m)},
         sample_stats={"lp": chains.log_prob},
-        attrs={"n_ensembles": chains.n_ensembles, "sampler": "emcee (DE + DE-snooker moves), coefficients drawn exactly"},
+        attrs={"n_ensembles": chains.n_ensembles, "n_walkers": chains.n_walkers,
+               "draw_order": "each chain is one emcee ensemble; draw = step * n_walkers + walker",
+               "sampler": "emcee (DE + DE-snooker moves), coefficients drawn exactly"},
     )
 
 

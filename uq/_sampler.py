@@ -1,11 +1,37 @@
 """emcee driver and ArviZ diagnostics: the stateful edge around pure log-probabilities.
 
-``run_ensembles`` runs at least two independent emcee ensembles from a start near the
-optimum, extends them in chunks until the chain after burn-in is at least ``tau_multiple``
-integrated autocorrelation times long (emcee's estimator), and returns the post-burn-in
-chains. ``convergence`` computes R-hat, bulk/tail ESS and MCSE with ArviZ and applies the
-project's rules (R-hat <= 1.01, ESS >= 400, acceptance fraction in 0.15..0.6, chain >= 50
-tau), returning warnings a user can act on.
+``run_ensembles`` runs ``n_ensembles`` (default 4) independent emcee ensembles from
+overdispersed starts and extends them in chunks until every convergence rule passes on the
+sampled parameters, or ``max_steps`` is reached (then the warnings name each rule that failed):
+
+* tau:        the chain after burn-in (``burn_tau`` tau) is at least ``tau_multiple`` (50)
+              integrated autocorrelation times long (emcee's estimator, the largest over
+              ensembles and parameters);
+* R-hat:      rank-normalised split R-hat <= 1.01 (ArviZ);
+* ESS:        bulk and tail effective sample size >= 400;
+* acceptance: mean acceptance fraction in 0.15..0.6 (running longer does not change it, so a
+              failure here is reported but does not extend the run).
+
+How the walkers are shown to ArviZ, and why. The walkers of one emcee ensemble are coupled
+(every proposal is built from other walkers), so they are not independent chains; emcee's and
+ArviZ's authors both warn against giving walkers to R-hat/ESS as chains (emcee docs and
+dfm/emcee#279; arviz-devs/arviz#977 and #2156). What they recommend instead is several
+independently started ensembles (Buchner's autoemcee: four) compared with each other:
+
+* Storage: each ensemble is one ArviZ chain and its draws are in time order, the walkers of
+  one step next to each other (emcee's ``get_chain(flat=True)`` order): ``samples`` is
+  (n_ensembles, n_steps * n_walkers, dim). ArviZ's split R-hat therefore compares the first
+  half of the run with the second half (a drift is seen) and the ensembles with each other (a
+  stuck ensemble is seen).
+* ESS: the draw-to-draw autocorrelation of such a chain is not what limits the information
+  (neighbouring draws are different walkers), so ArviZ's ESS of it would count every draw as
+  independent. ESS is computed by ArviZ on the ensemble-mean chains m_c(t) (mean over the
+  walkers of ensemble c at step t), which carry every cross-walker correlation, and converted
+  to draws by the definition ESS = Var(x) / MCSE^2 = ESS_ArviZ(m) * Var(x) / Var(m). With
+  independent walkers this equals emcee's n_steps * n_walkers / tau; with coupled walkers it is
+  smaller, never inflated by the number of walkers. Bulk ESS does this on the rank-normalised
+  draws, tail ESS on the indicators of the 5 % and 95 % quantiles (as ArviZ defines them), and
+  the MCSE of the mean is ArviZ's MCSE of the ensemble-mean chains.
 """
 
 from __future__ import annotations
@@ -18,6 +44,7 @@ from dataclasses import dataclass, field
 import arviz as az
 import emcee
 import numpy as np
+from scipy import stats
 
 RHAT_MAX = 1.01
 ESS_MIN = 400.0
@@ -26,22 +53,28 @@ ACCEPT_RANGE = (0.15, 0.6)
 
 @dataclass
 class Settings:
-    """Sampler settings (all seeded; defaults suit 1-10 sampled parameters)."""
+    """Sampler settings (all seeded; defaults suit 1-10 sampled parameters).
+
+    Walkers start at ``center + init_spread * init_scale * scale * N(0, 1)``: callers pass
+    ``scale`` such that ``init_scale * scale`` is about the posterior width, so the starts are
+    ``init_spread`` (3) posterior widths wide, overdispersed, and drawn afresh per ensemble.
+    """
 
     n_walkers: int = 16
-    n_ensembles: int = 2
+    n_ensembles: int = 4
     tau_multiple: float = 50.0
     burn_tau: float = 5.0
     chunk: int = 200
     min_steps: int = 400
     max_steps: int = 20000
     init_scale: float = 0.05
+    init_spread: float = 3.0
 
     def validate(self) -> None:
         from ._errors import InputError
 
         if self.n_ensembles < 2:
-            raise InputError("option --ensembles: at least 2 independent ensembles are needed for R-hat")
+            raise InputError("option --ensembles: at least 2 independent ensembles are needed for R-hat (4 recommended)")
         if self.n_walkers < 4 or self.n_walkers % 2:
             raise InputError("option --walkers: an even number of at least 4 walkers is needed")
         if self.max_steps < 10:
@@ -50,30 +83,48 @@ class Settings:
 
 @dataclass
 class Chains:
-    """Post-burn-in samples. ``samples`` (n_ensembles * n_walkers, n_draws, n_dim)."""
+    """Post-burn-in samples, one chain per ensemble in time order.
+
+    ``samples`` (n_ensembles, n_steps_kept * n_walkers, dim): draw ``t * n_walkers + w`` is
+    walker w at kept step t. ``log_prob`` (n_ensembles, same draws). ``start`` (n_ensembles,
+    n_walkers, dim) the initial positions.
+    """
 
     names: tuple[str, ...]
     samples: np.ndarray
-    log_prob: np.ndarray  # (chains, draws)
-    acceptance: np.ndarray  # (chains,)
+    log_prob: np.ndarray
+    acceptance: np.ndarray  # (n_ensembles * n_walkers,)
     tau: np.ndarray  # (n_dim,) max over ensembles
     n_steps: int
     burn: int
     n_ensembles: int
     warnings: list[str] = field(default_factory=list)
+    n_walkers: int = 1
+    start: np.ndarray | None = None
+
+    def by_walker(self, arr: np.ndarray) -> np.ndarray:
+        """(n_ensembles, draws, ...) in storage order -> (n_ensembles, steps, n_walkers, ...)."""
+        C, D = arr.shape[:2]
+        return arr.reshape(C, D // self.n_walkers, self.n_walkers, *arr.shape[2:])
 
 
 def thin(chains: Chains, max_total: int) -> Chains:
-    """Keep every k-th draw so that at most about ``max_total`` samples remain.
+    """Keep every k-th step (all walkers) so that at most about ``max_total`` samples remain.
 
-    Draws closer than an autocorrelation time carry little extra information; thinning keeps
-    the exact coefficient draws and derived bands cheap without changing the diagnostics.
+    Steps closer than an autocorrelation time carry little extra information; thinning keeps
+    the exact coefficient draws and derived bands cheap. Whole steps are kept so the storage
+    order (steps x walkers) that the diagnostics rely on survives.
     """
     C, D = chains.samples.shape[:2]
     k = max(1, int(np.ceil(C * D / max_total)))
     if k == 1:
         return chains
-    return dataclasses.replace(chains, samples=chains.samples[:, ::k], log_prob=chains.log_prob[:, ::k])
+
+    def keep(a):
+        w = chains.by_walker(a)[:, ::k]
+        return w.reshape(C, -1, *a.shape[2:])
+
+    return dataclasses.replace(chains, samples=keep(chains.samples), log_prob=keep(chains.log_prob))
 
 
 def _moves():
@@ -82,111 +133,197 @@ def _moves():
 
 
 def _tau(chain: np.ndarray) -> np.ndarray:
-    """Integrated autocorrelation time per dimension; chain (steps, walkers, dim)."""
-    return emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
+    """Integrated autocorrelation time per dimension; chain (steps, walkers, dim).
+
+    A walker that never moved in the window has no autocorrelation function (0/0): NaN, which
+    the tau rule counts as failed.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
+
+
+def _starts(log_prob, center, width, n_walkers: int, rng, tries: int = 20) -> np.ndarray:
+    """Overdispersed starting walkers with finite log-probability (bad draws redrawn).
+
+    After ``tries`` rounds the remaining bad walkers are drawn ever closer to ``center``
+    (halving the spread), which is finite by construction of the callers (an optimum).
+    """
+    p0 = center + width * rng.standard_normal((n_walkers, center.size))
+    shrink = 1.0
+    for i in range(2 * tries):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            bad = ~np.isfinite(np.asarray(log_prob(p0), float))
+        if not bad.any():
+            return p0
+        if i >= tries:
+            shrink *= 0.5
+        p0[bad] = center + shrink * width * rng.standard_normal((int(bad.sum()), center.size))
+    p0[bad] = center + 1e-6 * width * rng.standard_normal((int(bad.sum()), center.size))
+    return p0
 
 
 def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settings = Settings()) -> Chains:
-    """Sample ``log_prob`` (vectorised: (W, D) -> (W,)) with emcee.
+    """Sample ``log_prob`` (vectorised: (W, D) -> (W,)) with emcee until the rules pass.
 
-    Walkers start at ``center + settings.init_scale * scale * N(0, 1)``: ``center`` is the
-    optimiser's solution and ``scale`` a per-dimension step (e.g. posterior sd estimate).
+    ``center`` is the optimiser's solution and ``settings.init_scale * scale`` an estimate of
+    the posterior width per dimension; see the module docstring for the rules and storage.
     """
     settings.validate()
     center = np.asarray(center, float)
-    scale = np.asarray(scale, float)
-    ndim = center.size
+    width = settings.init_spread * settings.init_scale * np.asarray(scale, float)
+    ndim, W = center.size, settings.n_walkers
     rng = np.random.default_rng(seed)
     samplers, states = [], []
     for _ in range(settings.n_ensembles):
-        s = emcee.EnsembleSampler(settings.n_walkers, ndim, log_prob, vectorize=True, moves=_moves())
+        s = emcee.EnsembleSampler(W, ndim, log_prob, vectorize=True, moves=_moves())
         s.random_state = np.random.RandomState(rng.integers(2**31)).get_state()
-        p0 = center + settings.init_scale * scale * rng.standard_normal((settings.n_walkers, ndim))
         samplers.append(s)
-        states.append(p0)
-    n_steps = 0
-    next_step = settings.min_steps
-    warns: list[str] = []
+        states.append(_starts(log_prob, center, width, W, rng))
+    start = np.array(states)
+    n_steps, target = 0, settings.min_steps
     while True:
-        step = min(next_step, settings.max_steps - n_steps)
+        step = max(1, min(target, settings.max_steps) - n_steps)
         for i, s in enumerate(samplers):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals
                 states[i] = s.run_mcmc(states[i], step, progress=False)
         n_steps += step
-        chains = [s.get_chain() for s in samplers]
-        tau = np.max([_tau(c[n_steps // 5 :]) for c in chains], axis=0)
-        tau_max = float(np.nanmax(tau)) if np.all(np.isfinite(tau)) else math.inf
-        burn = int(math.ceil(settings.burn_tau * tau_max)) if math.isfinite(tau_max) else n_steps // 2
-        burn = min(max(burn, 20), n_steps // 2)
-        if math.isfinite(tau_max) and n_steps - burn >= settings.tau_multiple * tau_max:
-            break
-        # Extend straight to the length the current tau asks for (+10 %), at least one chunk/4.
-        needed = (settings.burn_tau + settings.tau_multiple) * (tau_max if math.isfinite(tau_max) else n_steps)
-        next_step = max(int(math.ceil(1.1 * needed)) - n_steps, settings.chunk // 4)
-        if n_steps >= settings.max_steps:
-            warns.append(
-                f"chain of {n_steps} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation "
-                f"times (tau = {tau_max:.1f}): raise --max-steps or use more walkers"
-            )
-            break
-    samples = np.concatenate([np.swapaxes(c[burn:], 0, 1) for c in chains], axis=0)
-    logp = np.concatenate([s.get_log_prob()[burn:].T for s in samplers], axis=0)
+        chains = _collect(samplers, names, settings, n_steps, start)
+        failed, want = _failed_rules(chains, settings)
+        if not failed:
+            return chains
+        if n_steps >= settings.max_steps or want <= n_steps:
+            chains.warnings.extend(failed)
+            return chains
+        target = max(want, n_steps + settings.chunk // 4)
+
+
+def _collect(samplers, names, settings: Settings, n_steps: int, start) -> Chains:
+    """Burn-in from the current tau, the post-burn chains in storage order, and the tau."""
+    raw = [s.get_chain() for s in samplers]  # (steps, W, dim) each
+    # tau from the second half: the overdispersed start's transient would inflate it
+    taus = [_tau(c[n_steps // 2 :]) for c in raw]
+    tau = np.max(taus, axis=0)
+    tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
+    burn = int(math.ceil(settings.burn_tau * tau_max)) if math.isfinite(tau_max) else n_steps // 2
+    burn = min(max(burn, 20), n_steps // 2)
+    C, W = len(samplers), settings.n_walkers
+    samples = np.stack([c[burn:].reshape(-1, c.shape[-1]) for c in raw])
+    logp = np.stack([s.get_log_prob()[burn:].reshape(-1) for s in samplers])
     accept = np.concatenate([s.acceptance_fraction for s in samplers])
-    return Chains(tuple(names), samples, logp, accept, tau, n_steps, burn, settings.n_ensembles, warns)
+    return Chains(tuple(names), samples, logp, accept, tau, n_steps, burn, C, [], W, start)
+
+
+def _failed_rules(chains: Chains, settings: Settings) -> tuple[list[str], int]:
+    """Messages for the rules that fail on the sampled parameters, and the length they ask for."""
+    n, tau = chains.n_steps, float(np.max(chains.tau))
+    need = settings.burn_tau + settings.tau_multiple
+    msgs, want = [], n
+    if not math.isfinite(tau) or n - chains.burn < settings.tau_multiple * tau:
+        msgs.append(f"chain of {n} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation times "
+                    f"(tau = {tau:.1f}): raise --max-steps or use more walkers")
+        want = int(math.ceil(1.1 * need * (tau if math.isfinite(tau) else n)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "more chains than draws" on very short runs: judged below
+        diag = {nm: chain_diagnostics(chains.samples[..., i], chains.n_walkers) for i, nm in enumerate(chains.names)}
+    msgs += _rule_warnings(diag)
+    rh = _worst([d["r_hat"] for d in diag.values()], max)
+    ess = _worst([min(d["ess_bulk"], d["ess_tail"]) for d in diag.values()], min)
+    if not (rh <= RHAT_MAX):
+        want = max(want, int(1.5 * n))
+    if not (ess >= ESS_MIN):
+        # ESS grows in proportion to the post-burn length
+        factor = 1.2 * ESS_MIN / ess if ess > 0 else 2.0
+        want = max(want, chains.burn + int(math.ceil(min(factor, 4.0) * (n - chains.burn))))
+    msgs += _acceptance_warnings(chains.acceptance)
+    return msgs, want
+
+
+def _worst(values, pick):
+    """``pick`` (max or min) of the values, NaN if any is NaN (an undefined statistic fails its rule)."""
+    v = np.asarray(values, float)
+    return float("nan") if np.any(np.isnan(v)) else float(pick(v))
+
+
+def _ess_of_summary(x: np.ndarray, per_step: np.ndarray) -> float:
+    """Draw-scale ESS of the ensemble-mean chains ``per_step`` (C, T) summarising ``x``."""
+    var_m = float(np.var(per_step))
+    if not var_m > 0:
+        return float("nan")
+    ess_m = float(az.ess(np.ascontiguousarray(per_step), method="mean"))
+    return min(ess_m * float(np.var(x)) / var_m, float(x.size))
+
+
+def chain_diagnostics(x: np.ndarray, n_walkers: int) -> dict:
+    """R-hat, bulk/tail ESS and MCSE of the mean of one scalar; x (n_ensembles, steps * walkers).
+
+    ArviZ computes each statistic; see the module docstring for what it is given and why.
+    """
+    x = np.asarray(x, float)
+    C = x.shape[0]
+    xw = x.reshape(C, -1, n_walkers)
+    r_hat = float(az.rhat(np.ascontiguousarray(x)))
+    ranks = stats.rankdata(x, axis=None).reshape(x.shape)
+    z = stats.norm.ppf((ranks - 0.375) / (x.size + 0.25))  # ArviZ's rank normalisation
+    ess_bulk = _ess_of_summary(z, z.reshape(xw.shape).mean(axis=2))
+    tail = []
+    for q in (0.05, 0.95):
+        ind = (x <= np.quantile(x, q)).astype(float)
+        tail.append(_ess_of_summary(ind, ind.reshape(xw.shape).mean(axis=2)))
+    mcse = float(az.mcse(np.ascontiguousarray(xw.mean(axis=2)), method="mean"))
+    return {"r_hat": r_hat, "ess_bulk": ess_bulk, "ess_tail": float(np.min(tail)), "mcse_mean": mcse}
+
+
+def _rule_warnings(diag: dict) -> list[str]:
+    warns = []
+    for n, d in diag.items():
+        r = d["r_hat"]
+        if not (r <= RHAT_MAX):
+            warns.append(f"{n}: R-hat {r:.3f} > {RHAT_MAX}: chains disagree; run longer (--max-steps) or use more walkers")
+        e = min(d["ess_bulk"], d["ess_tail"])
+        if not (e >= ESS_MIN):
+            warns.append(f"{n}: effective sample size {e:.0f} < {ESS_MIN:.0f}: run longer (--max-steps) or use more walkers")
+    return warns
+
+
+def _acceptance_warnings(acc: np.ndarray) -> list[str]:
+    lo, hi = ACCEPT_RANGE
+    if lo <= acc.mean() <= hi:
+        return []
+    return [f"acceptance fraction {acc.mean():.2f} outside {lo}-{hi}: the sampler is stuck or the posterior is "
+            "badly scaled; check the model and start"]
 
 
 def convergence(idata: az.InferenceData, chains: Chains, var_names: list[str] | None = None) -> dict:
-    """ArviZ diagnostics and the project's convergence rules.
+    """ArviZ diagnostics and the project's convergence rules for the stored variables.
 
     Returns a dict with per-variable r_hat, ess_bulk, ess_tail, mcse_mean; the sampler's
-    tau, acceptance fractions, steps and burn-in; ``converged`` and ``warnings``.
+    tau, acceptance fractions, steps and burn-in; ``converged`` and ``warnings`` (the
+    sampler's own failed rules first, then those of the derived variables).
     """
     post = idata.posterior
     names = var_names or list(post.data_vars)
-    # R-hat between the independent ensembles: each ensemble is one chain (its walkers laid
-    # end to end), which ArviZ splits in halves. Walkers of one ensemble are not independent,
-    # so treating them as chains makes R-hat noisy rather than informative.
-    n_ens = chains.n_ensembles
-    rhat = {}
+    per_var, diag = {}, {}
     for n in names:
         arr = np.asarray(post[n])  # (chains, draws, ...)
-        C, D = arr.shape[:2]
-        rhat[n] = az.rhat(np.ascontiguousarray(arr.reshape(n_ens, (C // n_ens) * D, *arr.shape[2:])))
-    # ESS and MCSE over walkers as chains: their autocorrelation is what limits information.
-    ess_b = az.ess(post, var_names=names, method="bulk")
-    ess_t = az.ess(post, var_names=names, method="tail")
-    mcse = az.mcse(post, var_names=names, method="mean")
-    per_var = {}
+        flat = arr.reshape(arr.shape[0], arr.shape[1], -1)
+        ds = [chain_diagnostics(flat[..., j], chains.n_walkers) for j in range(flat.shape[-1])]
+        per_var[n] = {k: (float(ds[0][k]) if len(ds) == 1 else [float(d[k]) for d in ds]) for k in ds[0]}
+        diag[n] = {"r_hat": _worst([d["r_hat"] for d in ds], max),
+                   "ess_bulk": _worst([d["ess_bulk"] for d in ds], min),
+                   "ess_tail": _worst([d["ess_tail"] for d in ds], min)}
     warns = list(chains.warnings)
-    for n in names:
-        r = np.atleast_1d(np.asarray(rhat[n]))
-        eb = np.atleast_1d(np.asarray(ess_b[n]))
-        et = np.atleast_1d(np.asarray(ess_t[n]))
-        per_var[n] = {
-            "r_hat": r.tolist() if r.size > 1 else float(r[0]),
-            "ess_bulk": eb.tolist() if eb.size > 1 else float(eb[0]),
-            "ess_tail": et.tolist() if et.size > 1 else float(et[0]),
-            "mcse_mean": np.atleast_1d(np.asarray(mcse[n])).tolist() if np.asarray(mcse[n]).size > 1 else float(mcse[n]),
-        }
-        if np.any(~np.isfinite(r)) or np.any(r > RHAT_MAX):
-            warns.append(f"{n}: R-hat {np.max(r):.3f} > {RHAT_MAX}: chains disagree; run longer (--max-steps) or use more walkers")
-        if np.any(~np.isfinite(eb)) or np.any(np.minimum(eb, et) < ESS_MIN):
-            warns.append(
-                f"{n}: effective sample size {np.min(np.minimum(eb, et)):.0f} < {ESS_MIN:.0f}: run longer (--max-steps) or use more walkers"
-            )
+    warns += [w for w in _rule_warnings(diag) + _acceptance_warnings(chains.acceptance) if w not in warns]
     acc = chains.acceptance
-    lo, hi = ACCEPT_RANGE
-    if acc.mean() < lo or acc.mean() > hi:
-        warns.append(
-            f"acceptance fraction {acc.mean():.2f} outside {lo}-{hi}: the sampler is stuck or the posterior is badly scaled; check the model and start"
-        )
     return {
         "converged": not warns,
         "warnings": warns,
         "n_steps": chains.n_steps,
         "burn_in": chains.burn,
         "n_chains": int(chains.samples.shape[0]),
+        "n_walkers": int(chains.n_walkers),
         "n_draws": int(chains.samples.shape[1]),
         "tau": {n: float(t) for n, t in zip(chains.names, chains.tau, strict=True)},
         "acceptance_fraction": {"mean": float(acc.mean()), "min": float(acc.min()), "max": float(acc.max())},

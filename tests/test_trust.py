@@ -126,3 +126,31 @@ def read_recordings_from_lines(lines):
         with open(p, "w") as fh:
             fh.write("\n".join(lines) + "\n")
         return read_recordings(p)
+
+
+@settings(max_examples=40, deadline=None)
+@given(sep=st.sampled_from([",", ";", "\t"]), bom=st.booleans(), crlf=st.booleans(), comma=st.booleans(),
+       order=st.permutations(range(6)), extra=st.booleans())
+def test_same_recordings_in_any_spreadsheet_dialect_read_the_same(sep, bom, crlf, comma, order, extra):
+    """BOM, ';' or tab with decimal commas, CRLF, column order, extra columns: the same numbers."""
+    rows = [ln.split(",") for ln in VALID]
+    out = []
+    for i, f in enumerate(rows):
+        cells = [f[k] for k in order] + (["operator" if i == 0 else "anna"] if extra else [])
+        if comma and sep != "," and i > 0:
+            cells = [c.replace(".", ",") for c in cells]
+        out.append(sep.join(cells))
+    data = ("\r\n" if crlf else "\n").join(["# made by a spreadsheet", *out]) + "\n"
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        p = os.path.join(d, "r.csv")
+        with open(p, "wb") as fh:
+            fh.write((b"\xef\xbb\xbf" if bom else b"") + data.encode())
+        rec = read_recordings(p)
+    ref = read_recordings_from_lines(VALID)
+    assert rec.extra_columns == (("operator",) if extra else ())
+    for a, b in zip(rec.tests, ref.tests, strict=True):
+        assert a.pressure_bar == b.pressure_bar and np.array_equal(a.rows, b.rows + 1)
+        for k in ("height_m", "force_N", "piston_m", "compression", "step"):
+            assert np.array_equal(getattr(a, k), getattr(b, k)), k

@@ -236,7 +236,7 @@ def configure_calibrate(p) -> None:
 def command_calibrate(args) -> int:
     import sys
 
-    from ._io import emit_json, write_figure_atomic, write_text_atomic
+    from ._io import emit_json, remove_stale, write_figure_atomic, write_text_atomic
 
     results = []
     for truth in [t.strip() for t in args.truth.split(",") if t.strip()]:
@@ -273,6 +273,8 @@ def command_calibrate(args) -> int:
             fig.tight_layout()
             write_figure_atomic(fig, out / f"sbc_{res.truth_kind}_{res.noise}.png", dpi=80)
             plt.close(fig)
+        # rank histograms of settings an earlier run had and this one has not would pass for current
+        remove_stale(out, ("sbc_*.png",), keep={f"sbc_{r.truth_kind}_{r.noise}.png" for r in results})
         print(f"wrote {out}/calibration.json, calibration.md and rank histograms")
     emit_json(result, args.json)
     return 0

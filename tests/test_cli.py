@@ -280,6 +280,7 @@ def small(tmp_path_factory):
     means = [{"pressure_bar": t["pressure_bar"], **{b: {k: v["mean"] for k, v in t[b].items()} for b in ("force", "piston")}}
              for t in json.loads(fit.read_text())["tests"]]
     (d / "points.json").write_text(json.dumps({"source": "the fit's own means", "tests": means}))
+    (d / "batch.csv").write_text("name,file,tasks,walkers,ensembles,max_steps\nsmall,r.csv,fit,8,2,60\n")
     return d, csv, fit
 
 
@@ -295,6 +296,7 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         "margin": ["margin", csv, "--height-mm", 110, "--load-N", 8000, "--max-steps", "300"],
         "diagnose": ["diagnose", csv, "--max-mechanisms", "0", *quick],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
+        "batch": ["batch", d / "batch.csv", "--out", d / "batch"],
     }
 
 

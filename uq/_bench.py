@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from pathlib import Path
 
 import arviz as az
 import emcee
@@ -155,6 +156,174 @@ def run_baseline(test: Test, x0_m: float, *, seed: int, seconds: float, n_walker
             "posterior_mean_force": dict(zip(FORCE_NAMES, draws.reshape(-1, 4).mean(0).tolist(), strict=True))}
 
 
+# --------------------------------------------------------------------------- memory and scale
+
+MB = 1024.0  # ru_maxrss is in KiB on Linux
+SCALING_FACTORS = (1, 4, 16)
+SCALING_BASE_STEP_MM = 5.0  # the paper's step: 37 points per test; 1.25 and 0.3125 mm give 4x and 16x
+# Run in a child: the uq command, then its own peak RSS and that of its reaped children (Dask workers).
+_CHILD = ("import json, resource, sys\n"
+          "from uq.cli import main\n"
+          "rc = main(sys.argv[2:])\n"
+          "ru = lambda who: resource.getrusage(who).ru_maxrss / 1024.0\n"
+          "open(sys.argv[1], 'w').write(json.dumps({'rc': rc, 'self_mb': ru(resource.RUSAGE_SELF), "
+          "'children_mb': ru(resource.RUSAGE_CHILDREN)}))\n"
+          "sys.exit(rc)\n")
+
+
+def run_child(argv: list[str]) -> dict:
+    """``uq ARGV`` in a fresh interpreter (cold: imports and JIT included): wall time and peak RSS.
+
+    ``peak_rss_mb`` is the command's own process, ``children_peak_rss_mb`` the largest of the
+    processes it started and reaped (the Dask workers of ``uq batch``; 0 without any)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    fd, out = tempfile.mkstemp(suffix=".json")
+    os.close(fd)
+    try:
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", _CHILD, out, *map(str, argv), "--quiet"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        wall = time.perf_counter() - t0
+        r = json.loads(open(out).read() or "{}")
+    finally:
+        os.unlink(out)
+    if proc.returncode not in (0, 1) or not r:
+        raise RuntimeError(f"uq {argv[0]} failed in the bench (exit {proc.returncode}): {proc.stderr.strip()[-300:]}")
+    return {"command": "uq " + " ".join(map(str, argv)), "exit": proc.returncode, "wall_s": wall,
+            "peak_rss_mb": r["self_mb"], "children_peak_rss_mb": r["children_mb"]}
+
+
+class PeakRSS:
+    """Peak resident memory of this process while the block runs (psutil, sampled every 10 ms)."""
+
+    def __enter__(self):
+        import threading
+
+        import psutil
+
+        self._proc = psutil.Process()
+        self.before_mb = self.peak_mb = self._proc.memory_info().rss / MB**2
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+        return self
+
+    def _watch(self):
+        while not self._stop.wait(0.01):
+            self.peak_mb = max(self.peak_mb, self._proc.memory_info().rss / MB**2)
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.peak_mb = max(self.peak_mb, self._proc.memory_info().rss / MB**2)
+
+    @property
+    def added_mb(self) -> float:
+        return self.peak_mb - self.before_mb
+
+
+def _scaled_campaign(folder, factor: int, seed: int, pressures: tuple[float, ...]):
+    from ._recordings import read_recordings, write_recordings_csv
+    from ._stand import Layout, simulate
+
+    step = SCALING_BASE_STEP_MM / factor
+    tests = simulate("n50", seed=seed, layout=Layout(pressures, step_m=step * 1e-3))
+    path = Path(folder) / f"x{factor}.csv"
+    path.write_text(write_recordings_csv(tests, f"bench --scaling: step {step:g} mm"))
+    return read_recordings(path), step
+
+
+def scaling(*, seed: int, settings: Settings, pressures: tuple[float, ...] = (2.0, 5.0),
+            factors=SCALING_FACTORS) -> dict:
+    """``fit_campaign`` at 1x, 4x, 16x the points per test, one process; ratios against 1x.
+
+    Each size is fitted once untimed with a 20-step chain first (JAX compiles per array shape),
+    then timed. The adaptive chain length differs between runs, so the time per sampler step is
+    given beside the wall time; memory is the peak RSS the fit added over the RSS before it."""
+    import tempfile
+
+    from ._cubic import fit_campaign
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="uq-bench-scaling-") as tmp:
+        for f in factors:
+            rec, step = _scaled_campaign(tmp, f, seed, pressures)
+            fit_campaign(rec, seed=seed, settings=Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles,
+                                                           max_steps=20, min_steps=20), jobs=1)
+            with PeakRSS() as mem:
+                t0 = time.perf_counter()
+                cf = fit_campaign(rec, seed=seed, settings=settings, jobs=1)
+                wall = time.perf_counter() - t0
+            steps = sum(int(t.diagnostics["n_steps"]) for t in cf.tests)
+            rows.append({"factor": f, "step_mm": step, "points_per_test": rec.n_points / len(rec.tests),
+                         "n_points": rec.n_points, "wall_s": wall, "sampler_steps": steps, "ms_per_step": 1e3 * wall / steps,
+                         "peak_rss_mb": mem.peak_mb, "added_rss_mb": mem.added_mb})
+    one = rows[0]
+    for r in rows:
+        r["points_ratio"] = r["n_points"] / one["n_points"]
+        r["time_ratio"] = r["wall_s"] / one["wall_s"]
+        r["per_step_time_ratio"] = r["ms_per_step"] / one["ms_per_step"]
+        r["peak_rss_ratio"] = r["peak_rss_mb"] / one["peak_rss_mb"]
+        r["added_rss_ratio"] = r["added_rss_mb"] / one["added_rss_mb"] if one["added_rss_mb"] > 0 else math.nan
+    return {"workload": f"uq fit of a simulated n50 campaign at {', '.join(f'{p:g}' for p in pressures)} bar, "
+                        f"steps {', '.join(format(r['step_mm'], 'g') for r in rows)} mm, seed {seed}",
+            "measure": "wall time after a JIT warm-up of the same shape; peak RSS of this process during the fit "
+                       "(psutil, 10 ms) and the part the fit added", "runs": rows}
+
+
+def report_memory(seed: int) -> dict:
+    """``uq report`` on the paper's campaign (virtual stand, as data/n50) in a fresh process: time and peak RSS."""
+    import tempfile
+
+    from ._recordings import write_recordings_csv
+    from ._stand import simulate
+
+    with tempfile.TemporaryDirectory(prefix="uq-bench-report-") as tmp:
+        csv = Path(tmp) / "n50.csv"
+        csv.write_text(write_recordings_csv(simulate("n50", seed=seed), "bench: the paper's campaign"))
+        return run_child(["report", csv, "--out", Path(tmp) / "report", "--seed", seed]) | {
+            "workload": f"uq report of the paper's campaign from the virtual stand (11 tests, seed {seed}), cold process"}
+
+
+def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
+    """``uq batch`` of ``n`` simulated campaigns (fit) on a LocalCluster against ``--serial``, both cold processes."""
+    import json
+    import tempfile
+
+    from ._batch import bench_catalogue
+
+    with tempfile.TemporaryDirectory(prefix="uq-bench-batch-") as tmp:
+        cat = bench_catalogue(tmp, n, seed=seed)
+        serial = run_child(["batch", cat, "--out", Path(tmp) / "serial", "--serial"])
+        dask = run_child(["batch", cat, "--out", Path(tmp) / "dask", "--workers", workers])
+        means = [[_means(json.loads((Path(tmp) / run / f"c{i:02d}" / "fit" / "fit.json").read_text())["tests"])
+                  for i in range(n)] for run in ("serial", "dask")]
+    # observed not bit-identical (probably the workers' single-threaded XLA rounding sums differently,
+    # after which the chains part ways), so the two runs are compared to Monte Carlo error
+    diff = max(abs(a - b) / sd for ms, md in zip(*means, strict=True) for (a, sd), (b, _) in zip(ms, md, strict=True))
+    return {"workload": f"{n} simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, seeds {seed}..{seed + n - 1}",
+            "cores": _cores(), "workers": workers, "serial": serial, "dask": dask,
+            "speedup": serial["wall_s"] / dask["wall_s"], "max_mean_difference_in_sd": diff,
+            "note": f"end-to-end wall time of each command in a fresh process (imports, JIT, cluster start included); "
+                    f"the ideal speed-up is below {workers} on {workers} cores"}
+
+
+def _means(tests: list[dict]) -> list[tuple[float, float]]:
+    """(mean, sd) of every coefficient of every test of a fit.json."""
+    return [(v["mean"], v["sd"]) for t in tests for block in ("force", "piston") for v in t[block].values()]
+
+
+def _cores() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 # --------------------------------------------------------------------------- command
 
 
@@ -195,9 +364,58 @@ def configure_bench(p) -> None:
     p.add_argument("--max-steps", type=positive_int, default=Settings.max_steps, help="project: cap on emcee steps per ensemble")
     p.add_argument("--baseline-walkers", type=positive_int, default=BASELINE_WALKERS, help="baseline: emcee walkers (>= 12, even)")
     p.add_argument("--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)")
+    p.add_argument("--scaling", action="store_true",
+                   help="instead: uq fit at 1x, 4x, 16x the points per test (time and peak-RSS ratios) and the peak RSS of "
+                        "uq report, written to BENCH_DIR/scaling.json")
+    p.add_argument("--batch", type=positive_int, metavar="N",
+                   help="instead: uq batch of N simulated campaigns on a LocalCluster against one process, written to "
+                        "BENCH_DIR/batch.json (speed-up, peak RSS)")
+    p.add_argument("--bench-dir", default="reports/bench", metavar="BENCH_DIR",
+                   help="folder for scaling.json and batch.json")
+
+
+def command_scale(args) -> int:
+    """``uq bench --scaling`` and/or ``--batch N``: memory and scale, each result in its own JSON file."""
+    import os
+
+    settings = Settings(n_walkers=args.walkers, max_steps=args.max_steps)
+    settings.validate()
+    results = {}
+    if args.scaling:
+        results["scaling"] = scaling(seed=args.seed, settings=settings) | {"report": report_memory(args.seed)}
+    if args.batch:
+        results["batch"] = batch_speedup(args.batch, seed=args.seed)
+    for name, r in results.items():
+        r = {"load_average_1min": os.getloadavg()[0], "cores": _cores()} | r
+        emit_json(r, str(Path(args.bench_dir) / f"{name}.json"))
+        say(scale_summary(name, r) + f"\n  written to {Path(args.bench_dir) / f'{name}.json'}", args.json)
+    emit_json(results, args.json)
+    return 0
+
+
+def scale_summary(name: str, r: dict) -> str:
+    if name == "batch":
+        s, d = r["serial"], r["dask"]
+        return "\n".join([
+            f"uq bench --batch: {r['workload']}; {r['cores']} cores, load average {r['load_average_1min']:.1f}",
+            f"  one process : {s['wall_s']:7.1f} s, peak RSS {s['peak_rss_mb']:.0f} MB",
+            f"  Dask        : {d['wall_s']:7.1f} s, peak RSS driver {d['peak_rss_mb']:.0f} MB, largest worker "
+            f"{d['children_peak_rss_mb']:.0f} MB ({r['workers']} workers)",
+            f"  speed-up {r['speedup']:.2f}x; posterior means of the two runs differ by at most "
+            f"{r['max_mean_difference_in_sd']:.2f} posterior sd"])
+    lines = [f"uq bench --scaling: {r['workload']}; load average {r['load_average_1min']:.1f}"]
+    for x in r["runs"]:
+        lines.append(f"  {x['factor']:>3}x ({x['n_points']:>5} points): {x['wall_s']:6.1f} s (x{x['time_ratio']:.2f}), "
+                     f"{x['ms_per_step']:.2f} ms/step (x{x['per_step_time_ratio']:.2f}), peak RSS {x['peak_rss_mb']:.0f} MB, "
+                     f"added {x['added_rss_mb']:.0f} MB (x{x['added_rss_ratio']:.2f})")
+    rep = r["report"]
+    lines.append(f"  uq report (paper's campaign, cold process): {rep['wall_s']:.1f} s, peak RSS {rep['peak_rss_mb']:.0f} MB")
+    return "\n".join(lines)
 
 
 def command_bench(args) -> int:
+    if getattr(args, "scaling", False) or getattr(args, "batch", None):
+        return command_scale(args)
     if not (math.isfinite(args.seconds) and args.seconds >= 0):
         raise InputError(f"option --seconds: expected a non-negative number of seconds, got {args.seconds:g}")
     if args.baseline_walkers < 12 or args.baseline_walkers % 2:

@@ -43,6 +43,7 @@ COMMANDS = [
     ("margin", "uq._margin", "design-margin queries on the surface model"),
     ("diagnose", "uq._diagnose", "locate the mismatch with the traditional model, name and model the missing physics"),
     ("calibrate", "uq._calibrate", "coverage of the credible intervals on simulated campaigns with known truth"),
+    ("batch", "uq._batch", "a catalogue of campaigns (fit, report, surface, diagnose) on Dask: summary table, reruns skip finished ones"),
 ]
 
 #: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"

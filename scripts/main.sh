@@ -7,4 +7,3 @@ csv="${1:-data/n50/recordings.csv}"
 out="${2:-reports/n50}"
 bash scripts/install.sh
 .venv/bin/uq report "$csv" --out "$out"
-echo "report: $out/report.html"

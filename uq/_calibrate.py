@@ -35,6 +35,7 @@ from ._cubic import (
     to_paper_basis,
 )
 from ._errors import InputError
+from ._progress import progress
 from ._recordings import Test
 from ._reference import FORCE_NAMES, PISTON_NAMES, table1
 from ._sampler import Settings
@@ -151,7 +152,7 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
     names = list(QUANTITIES) + (list(NOISE_NAMES) if truth == "prior" and noise == "budget" else [])
     in50, in90, ranks, conv, ps, pred = [], [], [], [], [], []
     t0 = time.perf_counter()
-    for r in range(reps):
+    for r in progress(range(reps), desc=f"calibrate {truth}, {noise}", unit="rep"):
         p = float(pressures[r % len(pressures)])
         if truth == "prior":
             test, coef, noise_truth = _test_from_model(rng, p, 0.112)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -114,3 +118,133 @@ def test_bands_are_seeded(n50_fit):
     b = campaign_bands(n50_fit, n_draws=200, n_grid=21, seed=3)
     np.testing.assert_array_equal(a.tests[4].force_pred.hi, b.tests[4].force_pred.hi)
     assert a.scatter_at["x0"] == b.scatter_at["x0"]
+
+
+# --------------------------------------------------------------------------- pointwise vs simultaneous
+#
+# Binomial tolerances: each count below is allowed a two-sided region that a correct band
+# leaves with probability < 1e-3 (the test's own false-failure rate), from scipy.stats.binom.
+
+TABLE1_POINTS = Path(__file__).resolve().parents[1] / "fits" / "n50" / "table1_points.json"
+
+
+def _region(n: int, q: float, level: float = 1e-3) -> tuple[int, int]:
+    """[lo, hi] with P(X < lo) + P(X > hi) < level for X ~ Binomial(n, q)."""
+    from scipy.stats import binom
+
+    lo, hi = int(binom.ppf(level / 2, n, q)), int(binom.isf(level / 2, n, q))
+    while binom.cdf(lo - 1, n, q) + binom.sf(hi, n, q) >= level:
+        lo, hi = lo - 1, hi + 1
+    return lo, hi
+
+
+def _gaussian_draws(pressures, n, rng):
+    """Coefficient draws about Table 1 with the covariance of the paper's own estimator."""
+    doc = {t["pressure_bar"]: t for t in json.loads(TABLE1_POINTS.read_text())["tests"]}
+    t = table1()
+    F, L = [], []
+    for p in pressures:
+        k = t.index(p)
+        F.append(rng.multivariate_normal(t.force[k], doc[p]["covariance"]["force"], n))
+        L.append(rng.multivariate_normal(t.piston[k], doc[p]["covariance"]["piston"], n))
+    return np.stack(F), np.stack(L)
+
+
+def _curves(force, piston, p_bar, u):
+    """F_eff and spread (own volume curve) of coefficient draws (D, 4) on u (G,): (D, G) each."""
+    P = force[:, :1] + u * (force[:, 1:2] + u * (force[:, 2:3] + u * force[:, 3:4]))
+    dLdx = piston[:, 1:2] + u * (2 * piston[:, 2:3] + 3 * u * piston[:, 3:4])
+    return P / (p_bar * 1e5), p_bar * 1e5 * (-PAPER_PISTON_AREA_M2 * dLdx) - P
+
+
+def test_simultaneous_band_holds_whole_draw_curves_and_pointwise_does_not():
+    """(a) On 2000 draws: >= 90 % of the whole curves inside the simultaneous band (by
+    construction), far fewer inside the pointwise band; on 2000 fresh draws of the same
+    posterior the simultaneous share is 0.90 +/- 0.04. Its sd is sqrt(2 x 0.09 / 2000) = 0.0095
+    (binomial sd of the fresh share, doubled in variance because the band's critical value is
+    itself a quantile of 2000 draws), so 0.04 is 4.2 sd: P(outside) = 3e-5 per comparison,
+    2e-4 for the six."""
+    rng = np.random.default_rng(11)
+    pressures = (1.0, 5.0, 10.0)
+    F, L = _gaussian_draws(pressures, 2000, rng)
+    cb = bands_from_coefficients(pressures, F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2)
+    F2, L2 = _gaussian_draws(pressures, 2000, rng)
+    u = X_GRID - PAPER_X0_M
+    for k, tb in enumerate(cb.tests):
+        for name, curves, fresh in zip(("feff", "spread_own"), _curves(F[k], L[k], tb.pressure_bar, u),
+                                       _curves(F2[k], L2[k], tb.pressure_bar, u), strict=True):
+            sim, pw = tb.simultaneous[name], getattr(tb, name)
+            assert sim.contains_curve(curves).mean() >= 0.9
+            assert np.all(pw.contains(curves), axis=1).mean() < 0.8  # pointwise: a band per height, not per curve
+            assert abs(sim.contains_curve(fresh).mean() - 0.9) <= 0.04, (tb.pressure_bar, name)
+            assert 1.8 < sim.critical < 3.5 and np.all(sim.lo <= pw.lo + 1e-12) and np.all(sim.hi >= pw.hi - 1e-12)
+
+
+def _plugin_draws(test, x0_m, n, rng):
+    """Closed-form posterior of the coefficients at the noise mode (the sampler's exact
+    conditional draws without the noise parameters' spread): (n, 4) force and piston draws."""
+    from uq._cubic import BASIS_SCALE_M, _cubic_eval, _posteriors, _start, basis, least_squares
+    from uq._jax import jnp
+    from uq._linear import posterior_cov
+
+    u = test.height_m - x0_m
+    lsq_f, lsq_l = least_squares(u, test.force_N), least_squares(u, test.piston_m)
+    ref = np.abs(_cubic_eval(lsq_f, u))
+    X = basis(u)
+    args = (X, jnp.asarray(test.force_N), jnp.asarray(test.piston_m), jnp.asarray(ref))
+    theta = jnp.asarray(_start(X, test.force_N, test.piston_m, ref, lsq_f, lsq_l, u))
+    D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))
+    return [rng.multivariate_normal(D @ np.asarray(post.mean), D @ np.asarray(posterior_cov(post)) @ D, n)
+            for post in _posteriors(theta, *args)]
+
+
+def _truth_coverage(seeds, pressure_bar: float = 5.0, n_draws: int = 1000):
+    """Per seed: does the known truth's whole F_eff / spread curve lie inside the simultaneous
+    band (and inside the pointwise band)? Returns counts (sim_feff, sim_spread, pw_feff)."""
+    from uq._stand import Layout, N50Spring, simulate
+
+    spring, x = N50Spring(), X_GRID
+    truth_feff = spring.force_N(x, pressure_bar) / (pressure_bar * 1e5)
+    truth_spread = pressure_bar * 1e5 * (-PAPER_PISTON_AREA_M2 * spring.piston_slope(x, pressure_bar)) - spring.force_N(x, pressure_bar)
+    counts = np.zeros(3, int)
+    for seed in seeds:
+        sim = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
+        test = SimpleNamespace(height_m=sim["height_m"], force_N=sim["force_N"], piston_m=sim["piston_m"])
+        F, L = _plugin_draws(test, PAPER_X0_M, n_draws, np.random.default_rng(seed))
+        tb = bands_from_coefficients((pressure_bar,), F[None], L[None], x_grid=x, x0_m=PAPER_X0_M,
+                                     piston_area_m2=PAPER_PISTON_AREA_M2).tests[0]
+        counts += [tb.simultaneous["feff"].contains_curve(truth_feff), tb.simultaneous["spread_own"].contains_curve(truth_spread),
+                   np.all(tb.feff.contains(truth_feff))]
+    return counts
+
+
+def test_simultaneous_band_covers_the_known_truth_as_claimed():
+    """(b) 60 simulated 5-bar tests: the truth's whole F_eff and spread curves lie inside the
+    simultaneous 90 % band in at least 45 of them (P(X < 45) < 1e-3 at 90 %; no upper limit
+    at n = 60); the pointwise band holds the whole F_eff curve much less often (below 45)."""
+    n = 60
+    lo, hi = _region(n, 0.9)
+    assert (lo, hi) == (45, 60)
+    sim_feff, sim_spread, pw_feff = _truth_coverage(range(300, 300 + n))
+    assert lo <= sim_feff <= hi and lo <= sim_spread <= hi, (sim_feff, sim_spread)
+    assert pw_feff < lo, pw_feff
+
+
+@pytest.mark.slow
+def test_simultaneous_band_coverage_400_replications():
+    n = 400
+    lo, hi = _region(n, 0.9)
+    sim_feff, sim_spread, pw_feff = _truth_coverage(range(1000, 1000 + n), pressure_bar=8.0)
+    assert lo <= sim_feff <= hi and lo <= sim_spread <= hi and pw_feff < lo, (sim_feff, sim_spread, pw_feff, lo, hi)
+
+
+def test_curve_bands_in_the_json_summary(paper_bands):
+    rng = np.random.default_rng(2)
+    F, L = _gaussian_draws((5.0,), 500, rng)
+    cb = bands_from_coefficients((5.0,), F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2)
+    cv = cb.summary()["curve_bands"]
+    assert len(cv["height_m"]) == 19 and cv["height_m"][0] == pytest.approx(0.065) and cv["level"] == 0.9
+    assert "pointwise" in cv["pointwise"] and "whole curve" in cv["simultaneous"]
+    row = cv["tests"][0]["feff_m2"]
+    assert np.all(np.asarray(row["simultaneous_lo"]) < np.asarray(row["pointwise_q05"]))
+    assert "pointwise" in cb.summary()["intervals"]

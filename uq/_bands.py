@@ -17,6 +17,16 @@ a common height grid x (m), u = x - x0:
 Across tests: the paper's scatter of F_eff among the tests from 1 to 10 bar (all tests with
 p_u >= 1 bar): half the range over the mean, at each height and for each joint draw.
 
+Pointwise and simultaneous. Every band above is *pointwise*: at each height separately it holds
+the curve's value with 90 % posterior probability, so the whole curve leaves it somewhere far
+more often than 10 % of the time. For F_eff(x) and the spread (traditional minus experimental,
+N and %) there is also a *simultaneous* band (:class:`SimultaneousBand`), which holds the
+whole curve over the grid with the stated posterior probability: per draw i the largest
+standardized deviation M_i = max_x |f_i(x) - mean(x)| / sd(x), c = the 90 % quantile of M,
+band mean(x) +/- c sd(x) (the max-t band; c is about 1.6 for a pointwise 90 % band and 2-3 for
+the curve as a whole). tests/test_bands.py checks both promises: on posterior draws, and by
+coverage of a known truth in simulation.
+
 Tests are fitted independently, so a "joint draw" pairs the i-th subsampled draw of every test.
 Everything is seeded. The core, :func:`bands_from_coefficients`, takes coefficient arrays, so
 the same code runs on Table 1 itself (one "draw" per test) or on a posterior.
@@ -56,6 +66,40 @@ class Band:
         return (self.lo <= v) & (v <= self.hi)
 
 
+@dataclass(frozen=True)
+class SimultaneousBand(Band):
+    """mean +/- critical sd: contains a whole draw curve (every grid height at once) for a
+    ``level`` share of the draws it was built from. ``critical`` is the level-quantile of the
+    draws' largest standardized deviation over the grid."""
+
+    critical: float = 0.0
+    level: float = LEVEL
+
+    @classmethod
+    def of(cls, draws: np.ndarray, level: float = LEVEL) -> SimultaneousBand:
+        """draws (D, G) -> the max-t band; heights where any draw is not finite are left out (nan)."""
+        d = np.asarray(draws, float)
+        ok = np.all(np.isfinite(d), axis=0)
+        m = np.where(ok, np.mean(np.where(ok, d, 0.0), axis=0), np.nan)
+        sd = np.where(ok, np.std(np.where(ok, d, 0.0), axis=0), np.nan)
+        dev = np.abs(d[:, ok] - m[ok])
+        # sd = 0 where every draw agrees (dV at x_max): no deviation there, nothing to scale.
+        z = np.divide(dev, sd[ok], out=np.zeros_like(dev), where=sd[ok] > 0)
+        crit = float(np.quantile(z.max(axis=1), level)) if z.size else 0.0
+        return cls(m, m - crit * sd, m + crit * sd, crit, level)
+
+    def contains_curve(self, curves) -> np.ndarray:
+        """curves (..., G) -> (...): True where the whole curve is inside (nan heights skipped)."""
+        v = np.asarray(curves, float)
+        ok = np.isfinite(self.mean)
+        return np.all(((self.lo <= v) & (v <= self.hi))[..., ok], axis=-1)
+
+
+#: Quantities that also get a simultaneous band, and their JSON names.
+SIMULTANEOUS = {"feff": "feff_m2", "spread_own": "spread_own_N", "spread_ref": "spread_ref_N",
+                "spread_own_pct": "spread_own_pct", "spread_ref_pct": "spread_ref_pct"}
+
+
 @dataclass(eq=False)
 class TestBands:
     """Bands of one test on the campaign grid ``x_m`` (SI: N, m, m^3, m^2, %)."""
@@ -76,6 +120,7 @@ class TestBands:
     spread_ref: Band  # trad_ref - P, N
     spread_ref_pct: Band  # 100 (trad_ref - P) / P, %
     at_x0: dict = field(default_factory=dict)  # name -> {"mean","sd","q05","q95"} at x0
+    simultaneous: dict = field(default_factory=dict)  # name in SIMULTANEOUS -> SimultaneousBand
 
     @property
     def pressure_Pa(self) -> float:
@@ -115,6 +160,31 @@ class CampaignBands:
                 "at": self.scatter_at,
             },
             "tests_at_x0": [{"pressure_bar": t.pressure_bar} | t.at_x0 for t in self.tests],
+            "intervals": "q05/q95 in tests_at_x0 and feff_scatter_pct are pointwise 90 % intervals (one height at a time)",
+            "curve_bands": self.curve_bands(),
+        }
+
+    def curve_bands(self, n_heights: int = 19) -> dict:
+        """Pointwise and simultaneous 90 % bands of F_eff and the spread on ``n_heights`` heights."""
+        idx = np.unique(np.linspace(0, self.x_m.size - 1, n_heights).round().astype(int))
+        tests = []
+        for t in self.tests:
+            row = {"pressure_bar": t.pressure_bar}
+            for name, key in SIMULTANEOUS.items():
+                pw, sim = getattr(t, name), t.simultaneous[name]
+                row[key] = {"mean": pw.mean[idx], "pointwise_q05": pw.lo[idx], "pointwise_q95": pw.hi[idx],
+                            "simultaneous_lo": sim.lo[idx], "simultaneous_hi": sim.hi[idx],
+                            "simultaneous_critical_sd": sim.critical}
+            tests.append(row)
+        return {
+            "height_m": self.x_m[idx],
+            "level": self.tests[0].simultaneous["feff"].level if self.tests else LEVEL,
+            "pointwise": "pointwise_q05/q95: at each height separately, the curve's value lies inside with 90 % "
+                         "posterior probability; the whole curve leaves such a band much more often",
+            "simultaneous": f"simultaneous_lo/hi = mean +/- c sd over all {self.x_m.size} grid heights, c the 90 % "
+                            "quantile of the draws' largest |f(x) - mean(x)| / sd(x): the whole curve lies inside "
+                            "with 90 % posterior probability (values here at a subset of the heights)",
+            "tests": tests,
         }
 
 
@@ -241,7 +311,8 @@ def bands_from_coefficients(
             "spread_own_pct": estimate(100.0 * (tr_own0 - a_P) / a_P),
             "spread_ref_pct": estimate(100.0 * (tr_ref0 - a_P) / a_P),
         }
-        tests.append(TestBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, **B))
+        sim = {name: SimultaneousBand.of(quantities[name][t], level) for name in SIMULTANEOUS}
+        tests.append(TestBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B))
 
     sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
     heights = {"x0": x0_m, "x_max": float(x.max()), "x_min": float(x.min()), "75 mm": EXTRA_HEIGHT_M}

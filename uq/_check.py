@@ -306,7 +306,7 @@ def summary(verdict: dict) -> str:
             f"> threshold {b['threshold']:.2f} (d^2 {b['mahalanobis2']:.1f} > {b['threshold2']:.1f}, p = {b['p_value']:.2g})")
         for n, c in b["coefficients"].items():
             flag = "  <- outside" if not c["q05"] <= c["point"] <= c["q95"] else ""
-            own = f" +/- {_fmt(c['point_sd'])}" if b["point_covariance"] else " (exact)"
+            own = f" +/- {c['point_sd']:.3g}" if b["point_covariance"] else " (exact)"
             lines.append(
                 f"    {n}: point {_fmt(c['point'])}{own}, posterior {_fmt(c['mean'])} "
                 f"[90% {_fmt(c['q05'])}, {_fmt(c['q95'])}], {c['z']:+.1f} sd{flag}")

@@ -139,6 +139,12 @@ def _fill(ax, x, b, scale, color, alpha=0.25, label=None, line=True, ls="-"):
         ax.plot(x, b.mean * scale, color=color, lw=1.2, ls=ls, label=label)
 
 
+def _simultaneous(ax, x, b, scale, color):
+    """Dashed bounds of a simultaneous band (the whole curve inside with the band's probability)."""
+    for edge in (b.lo, b.hi):
+        ax.plot(x, edge * scale, color=color, lw=0.8, ls="--")
+
+
 def _mark_x0(ax, x0_mm):
     ax.axvline(x0_mm, color="0.6", lw=0.6, ls=":")
 
@@ -151,7 +157,7 @@ def fig_force(cf, cb: CampaignBands) -> bytes:
         _fill(ax, x, tb.force, 1e-3, c, label=f"{tb.pressure_bar:g} bar")
         ax.plot(tf.test.height_m * MM, tf.test.force_N * 1e-3, ".", color=c, ms=3)
     _mark_x0(ax, cb.x0_m * MM)
-    ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="Fig. 2: force characteristics (eq. 8), 90 % bands")
+    ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="Fig. 2: force characteristics (eq. 8), pointwise 90 % bands")
     ax.legend(fontsize=7, ncol=2, title="p_u", title_fontsize=7)
     ax.grid(alpha=0.3)
     return _png(fig)
@@ -177,7 +183,7 @@ def fig_volume(cf, cb: CampaignBands) -> bytes:
         ax.plot(tf.test.height_m * MM, _dV_points(tf, tb, cb.piston_area_m2) * 1e3, ".", color=c, ms=3)
     _mark_x0(ax, cb.x0_m * MM)
     ax.set(xlabel="height x (mm)", ylabel="volume increment ΔV (dm³ = litre)",
-           title="Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10), 90 % bands")
+           title="Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10), pointwise 90 % bands")
     ax.legend(fontsize=7, ncol=2, title="p_u", title_fontsize=7)
     ax.grid(alpha=0.3)
     return _png(fig)
@@ -191,10 +197,12 @@ def fig_feff(cf, cb: CampaignBands) -> bytes:
         if tb.pressure_bar not in cb.scatter_pressures_bar:
             continue
         _fill(ax, x, tb.feff, 1e4, c, label=f"{tb.pressure_bar:g} bar")
+        _simultaneous(ax, x, tb.simultaneous["feff"], 1e4, c)
         ax.plot(tf.test.height_m * MM, tf.test.force_N / (tb.pressure_bar * BAR_PA) * 1e4, ".", color=c, ms=3)
     _mark_x0(ax, cb.x0_m * MM)
     ax.set(xlabel="height x (mm)", ylabel="effective area F_eff = P / p_u (cm²)",
-           title="Fig. 4: effective area from the force, tests with p_u ≥ 1 bar, 90 % bands")
+           title="Fig. 4: effective area from the force, tests with p_u ≥ 1 bar,\n"
+                 "pointwise 90 % bands (shaded), simultaneous 90 % bands (dashed)")
     ax.legend(fontsize=7, ncol=2, title="p_u", title_fontsize=7)
     ax.grid(alpha=0.3)
     return _png(fig)
@@ -213,11 +221,12 @@ def fig_traditional(cf, cb: CampaignBands) -> bytes:
                     yerr=[(tb.trad_ref.mean - tb.trad_ref.lo)[::step] * 1e-3, (tb.trad_ref.hi - tb.trad_ref.mean)[::step] * 1e-3],
                     fmt="o", color=c, ms=3, lw=0.8)
         _fill(ax2, x, tb.spread_ref_pct, 1.0, c, label=f"{tb.pressure_bar:g} bar")
+        _simultaneous(ax2, x, tb.simultaneous["spread_ref_pct"], 1.0, c)
     ax.set(xlabel="height x (mm)", ylabel="force (kN)",
            title=f"Fig. 5: measured (lines) vs traditional (points), {cb.reference_bar:g}-bar volume curve")
     ax2.axhline(0, color="k", lw=0.6)
     ax2.set(xlabel="height x (mm)", ylabel="(traditional − measured) / measured (%)",
-            title="spread of the traditional force, 90 % bands")
+            title="spread of the traditional force: pointwise (shaded) and simultaneous (dashed) 90 % bands")
     for a in (ax, ax2):
         _mark_x0(a, cb.x0_m * MM)
         a.grid(alpha=0.3)
@@ -230,7 +239,7 @@ def fig_scatter(cb: CampaignBands) -> bytes:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     x = cb.x_m * MM
-    _fill(ax, x, cb.scatter, 1.0, "tab:purple", label="posterior mean and 90 % band")
+    _fill(ax, x, cb.scatter, 1.0, "tab:purple", label="posterior mean and pointwise 90 % band")
     for label, v in cb.scatter_at.items():
         ax.errorbar([v["height_m"] * MM], [v["mean"]], yerr=[[v["mean"] - v["q05"]], [v["q95"] - v["mean"]]],
                     fmt="o", color="tab:purple", ms=4)
@@ -265,9 +274,9 @@ def fig_test(tf, tb, cb: CampaignBands) -> bytes:
 
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)
-    _fill(ax, x, tb.force, 1e-3, "tab:green", alpha=0.5, label="mean curve, 90 % band")
+    _fill(ax, x, tb.force, 1e-3, "tab:green", alpha=0.5, label="mean curve, pointwise 90 % band")
     points(ax, t.force_N * 1e-3)
-    ax.plot([], [], color="0.5", alpha=0.4, lw=6, label="90 % predictive band")
+    ax.plot([], [], color="0.5", alpha=0.4, lw=6, label="pointwise 90 % predictive band")
     ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="force (eq. 8)")
     ax.legend(fontsize=7)
 
@@ -446,8 +455,10 @@ def write_report(cf, out_dir, *, bands: CampaignBands | None = None, comments: l
         f"heights {lo * MM:g}–{hi * MM:g} mm; reference height x0 = {rec.x0_m * MM:g} mm (dotted vertical line in the plots), "
         f"piston area S = {rec.piston_area_m2 * 1e4:g} cm². Each test is fitted on its own: force P(x) and piston coordinate L(x) "
         "are cubics in u = x − x0 (eqs. 8, 9) with Bayesian noise models (load-cell error proportional to the force plus a floor, "
-        "and a piston-reading error). Shaded bands are 90 % credible bands of the curve; the lighter grey bands in the per-pressure "
-        f"sections are 90 % posterior predictive bands for a new reading. Bands use {cb.n_draws} posterior draws per test "
+        "and a piston-reading error). Shaded bands are pointwise 90 % credible bands of the curve (at each height separately); "
+        "the dashed lines in Figures 4 and 5 bound simultaneous 90 % bands, which hold the whole curve with 90 % posterior "
+        "probability (mean ± c sd, c the 90 % quantile of the draws' largest standardized deviation over height); the lighter "
+        f"grey bands in the per-pressure sections are pointwise 90 % posterior predictive bands for a new reading. Bands use {cb.n_draws} posterior draws per test "
         f"(seed {cb.seed}); sampler seed {cf.seed}.</p>")
     if surface_page:
         parts.append(f"<p class='note'>The pressure-coupled surface model of this campaign (F<sub>eff</sub> and the traditional-minus-measured "
@@ -475,7 +486,7 @@ def write_report(cf, out_dir, *, bands: CampaignBands | None = None, comments: l
     parts.append(fig("fig4_feff.png", fig_feff(cf, cb), "Figure 4: effective area vs height"))
     parts.append(f"<p>Figure 5: the traditional theory also says F_eff = −dΔV/dx = −S dL/dx, so the force would be "
                  f"p_u (−S dL/dx). Here the volume curve is {html.escape(cb.reference_note)}. Left: measured force "
-                 "(lines with bands) and the traditional force (points with 90 % intervals); right: their relative difference.</p>")
+                 "(lines with bands) and the traditional force (points with pointwise 90 % intervals); right: their relative difference.</p>")
     parts.append(fig("fig5_traditional.png", fig_traditional(cf, cb), "Figure 5: traditional vs measured force"))
     parts.append("<p>Values at x0 (posterior mean, [90 % interval]); “own volume” uses each test's own piston curve, so any "
                  "difference there is not due to pressure dependence of the volume curve.</p>")
@@ -493,7 +504,7 @@ def write_report(cf, out_dir, *, bands: CampaignBands | None = None, comments: l
                      f"x0, 26.3 % at x_max and 8.51 % “at x_min”; Table 1 itself gives 8.41 %, 26.3 %, 9.74 % at 65 mm and 8.51 % at "
                      f"75 mm, so the paper's “x_min” value is the one at 75 mm. The table reports what these data give at each "
                      f"height.</p>")
-        parts.append(f"<table><tr><th class='l'>where</th><th>height (mm)</th><th>scatter (%)</th><th>90 % interval (%)</th>"
+        parts.append(f"<table><tr><th class='l'>where</th><th>height (mm)</th><th>scatter (%)</th><th>pointwise 90 % interval (%)</th>"
                      f"<th>paper (%)</th></tr>{rows}</table>")
         parts.append(fig("fig_feff_scatter.png", fig_scatter(cb), "F_eff scatter vs height"))
     else:

@@ -4,11 +4,13 @@ campaign, the summary files, and a rerun that skips the finished campaigns."""
 from __future__ import annotations
 
 import csv
+import io
 import json
+import sys
 
 import pytest
 
-from uq import _batch
+from uq import _batch, _progress
 from uq.cli import main
 
 FAST = ["--walkers", "8", "--ensembles", "2"]
@@ -104,3 +106,26 @@ def test_local_cluster_run_failed_campaign_summary_and_rerun_skip(campaigns, tmp
     rows = _rows(out)
     assert [r["status"] for r in rows] == ["skipped", "failed", "skipped"]
     assert (out / "one" / "fit" / "fit.json").stat().st_mtime_ns == before  # not rewritten
+
+    # all finished: no cluster is started, and on a terminal the progress bar is drawn
+    cat2 = _csv(campaigns, "name,file,tasks,seed,walkers,ensembles,max_steps\none,c1.csv,fit,3,8,2,60\n", "cat2.csv")
+    tty = _Terminal()
+    sys_stderr, sys.stderr = sys.stderr, tty
+    try:
+        assert main(["batch", cat2, "--out", str(out)]) == 0
+    finally:
+        sys.stderr = sys_stderr
+        _progress.set_enabled(False)
+    assert "batch" in tty.getvalue() and "task" in tty.getvalue()
+    assert "0 done, 1 skipped, 0 failed" in capsys.readouterr().out
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_serial_and_scheduler_exclude_each_other(campaigns, tmp_path, capsys):
+    cat = _csv(campaigns, "file,tasks\nc1.csv,fit\n", "cat3.csv")
+    assert main(["batch", cat, "--out", str(tmp_path / "o"), "--serial", "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "--serial and --scheduler" in capsys.readouterr().err

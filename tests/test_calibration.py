@@ -79,7 +79,9 @@ def test_calibrate_cli_writes_results(tmp_path):
     res = json.loads((tmp_path / "calibration.json").read_text())
     assert [s["noise_model"] for s in res["settings"]] == ["budget", "constant"]
     assert (tmp_path / "calibration.md").exists() and (tmp_path / "sbc_n50_budget.png").exists()
-    assert main(["calibrate", "--reps", "1", "--truth", "bogus"]) == 2
+    with pytest.raises(SystemExit) as exc:  # a bad option value is a usage error: exit 2
+        main(["calibrate", "--reps", "1", "--truth", "bogus"])
+    assert exc.value.code == 2
 
 
 @pytest.mark.slow

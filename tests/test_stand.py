@@ -86,7 +86,8 @@ def test_effects_follow_the_contract():
 
 def test_effect_option_parsing():
     assert parse_effects(["hysteresis=0.01", "force_offset=56.3"]) == {"hysteresis": 0.01, "force_offset": 56.3}
-    assert set(MECHANISMS) == {"pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift"}
+    # the contract's five keep their names; more may be added
+    assert {"pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift"} <= set(MECHANISMS)
     for bad in (["hysteresis"], ["magic=1"], ["hysteresis=x"], ["hysteresis=1,2"], ["force_offset=1", "force_offset=2"]):
         with pytest.raises(InputError):
             parse_effects(bad)

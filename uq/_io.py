@@ -123,6 +123,43 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
     return path
 
 
+def write_file_atomic(path: str | os.PathLike, write) -> Path:
+    """Atomically write a file that a library writes by name (``write(tmp_path)``, e.g. NetCDF).
+
+    The same promises as :func:`write_bytes_atomic`: the temporary file is created beside the
+    target (mode 0666 less the umask, or the replaced file's mode), fsynced and renamed over
+    it; a symbolic link or a folder is refused; a device or pipe gets the finished bytes.
+    """
+    path = Path(path)
+    in_place, mode = _target_mode(path)
+    if in_place:
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="uq-write-") as folder:
+            tmp = Path(folder) / path.name
+            write(tmp)
+            return write_bytes_atomic(path, tmp.read_bytes())
+    _make_parent(path)
+    fd, tmp = _open_tmp_beside(path)
+    os.close(fd)
+    try:
+        write(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            if mode is not None:
+                os.fchmod(fd, mode)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    _fsync_folder(path.parent)
+    return path
+
+
 def remove_stale(folder: str | os.PathLike, patterns: tuple[str, ...], keep) -> list[Path]:
     """Remove files of ``folder`` matching ``patterns`` whose names are not in ``keep``.
 

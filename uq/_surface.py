@@ -923,6 +923,8 @@ def configure_surface(p) -> None:
     p.add_argument("--no-compare", action="store_true",
                    help="skip the PSIS-LOO comparison with the per-pressure cubics")
     p.add_argument("--report", metavar="DIR", help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR")
+    p.add_argument("--out", metavar="DIR",
+                   help="write DIR/surface.nc: the surface posterior as a saved answer for uq margin --fit (docs/formats.md)")
     add_stand(p)
 
 
@@ -988,6 +990,11 @@ def command_surface(args) -> int:
         from ._surface_report import write_surface_report
 
         print(f"  report: {write_surface_report(fit, res, args.report)}")
+    if args.out:
+        from ._margin import save_surface_answer
+
+        print(f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
+              "(uq margin --fit answers from it)")
     print(f"  {seconds_total:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(res, args.json)
     return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0

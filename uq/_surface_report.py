@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ._html import CSS, _img, _plt, _png
 from ._io import write_bytes_atomic, write_text_atomic
-from ._report import CSS, _img, _png
 from ._summary import band
-from ._surface import SurfaceFit, _plt, comparison_words, figure_pressure_area, figure_spread
+from ._surface import SurfaceFit, comparison_words, figure_pressure_area, figure_spread
 
 
 def figure_residual_overlay(fit: SurfaceFit):

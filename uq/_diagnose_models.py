@@ -7,21 +7,25 @@ effective area F_eff(u) = sum_j a_j t^j (one curve for every pressure, order K b
     piston  L_ij = r_i - (1/S) int_{x0}^{x_ij} F_eff dx                (eq. 2, 5)
 
 one piston reference r_i per test. Each mechanism adds columns or rescales columns, so the
-model stays linear in (a, r, mechanism coefficients) given at most two nonlinear
-magnitudes (pressure_dependent_area m_A, hysteresis m_H):
+model stays linear in (a, r, mechanism coefficients) given at most three nonlinear
+magnitudes (pressure_dependent_area m_A, hysteresis m_H, volume_excess m_V):
 
     pressure_dependent_area  force and integral scaled by (1 + m_A p_bar)
     casing_force             force + E(u), E a cubic in t (magnitude E(x0) = e_0)
     hysteresis               force x (1 + m_H) on compression, (1 - m_H) on rebound
     force_offset             force + m
     thermal_drift            piston + step * m * 1e-6 / S   (m in cm^3 per step)
+    volume_excess            integral scaled by (1 + m_V): dV/dx = F_eff (1 + m_V), force unchanged
 
 Noise (the stand's error budget, section 3.2 of the paper): the same pressure-holding
-error dp moves the force by dp F_eff and the piston by V_gas dp / (p_abs S), so force and
-piston residuals are strongly correlated. We fit the decorrelated pair
-z = P - c L (c = F_eff p_abs S / V_gas, a plug-in constant per point; a unit-triangular
-linear map of the data, so likelihoods are unchanged in meaning) and L, each with the
-budget's sd times a learned scale factor k_z, k_L (log k ~ N(0, 2^2)).
+error dp raises the force by dp F_eff and leaves the piston *short* by V_gas dp / (p_abs S)
+(Boyle: at p + dp the gas needs less room), so force and piston residuals are strongly
+anti-correlated. We fit the decorrelated pair z = P + c L (c = F_eff p_abs S / V_gas, a
+plug-in constant per point, so c dL = -dp F_eff cancels the force's dp F_eff; a
+unit-triangular linear map of the data, so likelihoods are unchanged in meaning) and L, each
+with the budget's sd times a learned scale factor k_z, k_L (log k ~ N(0, 2^2)). The budget
+(load cell, pressure holding, displacement, calipers, gas volumes) is a StandDescription,
+the paper's stand by default.
 
 Every model shares one jitted function: inactive mechanisms have zero columns (which cancel
 exactly in the collapsed marginal likelihood) and inactive magnitudes are held at zero, so a
@@ -37,26 +41,23 @@ import numpy as np
 from ._jax import jax, jnp
 from ._linear import draw_coefficients, gaussian_loglik, linear_posterior
 from ._recordings import BAR_PA, Recordings
-from ._stand import (
-    CALIPER_SD_M,
-    DISPLACEMENT_SD_M,
-    ELEMENT_VOLUME_AT_XMAX_M3,
-    LOAD_CELL_REL_SD,
-    P_ATM_BAR,
-    RECEIVER_AIR_M3,
-    pressure_sd_bar,
-)
+from ._stand_description import PAPER_STAND, StandDescription
 
 H_M = 0.05
-MECHS = ("pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift")
+MECHS = ("pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift", "volume_excess")
+N_MECH = len(MECHS)
 K_MAX = 5  # highest power of t in F_eff
 CASING_DEG = 3
 #: Number of parameters each mechanism adds (parsimony order: fewer is simpler).
 N_PARAMS = {"force_offset": 1, "thermal_drift": 1, "hysteresis": 1, "pressure_dependent_area": 1,
-            "casing_force": CASING_DEG + 1}
-SIMPLICITY = ("force_offset", "thermal_drift", "hysteresis", "pressure_dependent_area", "casing_force")
-THETA_NAMES = ("log_k_force", "log_k_piston", "m_area_per_bar", "m_hysteresis")
-THETA_PRIOR_SD = np.array([2.0, 2.0, 0.1, 0.1])
+            "volume_excess": 1, "casing_force": CASING_DEG + 1}
+SIMPLICITY = ("force_offset", "thermal_drift", "hysteresis", "volume_excess", "pressure_dependent_area", "casing_force")
+THETA_NAMES = ("log_k_force", "log_k_piston", "m_area_per_bar", "m_hysteresis", "m_volume_excess")
+#: Prior sds of the sampled parameters; volume_excess is a fraction of F_eff (0.12 on Table 1).
+THETA_PRIOR_SD = np.array([2.0, 2.0, 0.1, 0.1, 0.3])
+N_THETA = len(THETA_NAMES)
+#: theta index of each nonlinear magnitude.
+NONLINEAR = {"pressure_dependent_area": 2, "hysteresis": 3, "volume_excess": 4}
 FEFF_PRIOR_SD = 1.0  # m^2
 REF_PRIOR_SD = 1.0  # m
 CASING_PRIOR_SD = 1.0e4  # N
@@ -80,10 +81,23 @@ class Data(NamedTuple):
     sd_z: jnp.ndarray  # budget sd of z, N
     sd_L: jnp.ndarray  # budget sd of L, m
     area: jnp.ndarray  # piston area S, m^2 (scalar)
+    #: (2n,) 1 = row informs the fit, 0 = held out (K-fold); stacked as (z rows, L rows).
+    fit_w: jnp.ndarray
 
 
-def prepare(rec: Recordings) -> tuple[Data, dict]:
-    """Arrays for the models and per-point metadata (numpy) for the residual analysis."""
+def hold_out(d: Data, held: np.ndarray) -> Data:
+    """``d`` with rows held out of the fit: ``held`` bool, (n,) recorded points (their z and L
+    rows both) or (2n,) single rows of the stacked (z, L) likelihood."""
+    held = np.asarray(held, bool)
+    if held.size == np.asarray(d.force).size:
+        held = np.concatenate([held, held])
+    return d._replace(fit_w=jnp.asarray(np.where(held, 0.0, 1.0)))
+
+
+def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Data, dict]:
+    """Arrays for the models and per-point metadata (numpy) for the residual analysis.
+
+    Noise formulas from ``stand`` (its error budget and gas volumes)."""
     S = rec.piston_area_m2
     area_check = []
     cols = {k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")}
@@ -101,13 +115,15 @@ def prepare(rec: Recordings) -> tuple[Data, dict]:
         p_pa = test.pressure_bar * BAR_PA
         feff = np.abs(P_hat) / p_pa
         L_hat = V @ cl
-        v_gas = RECEIVER_AIR_M3 + np.maximum(ELEMENT_VOLUME_AT_XMAX_M3 - S * (L_hat - L_hat.min()), 1e-4)
-        p_abs_bar = test.pressure_bar + P_ATM_BAR
-        sdp_bar = pressure_sd_bar(test.pressure_bar)
+        # The piston is lowest at x_max, where the element holds element_volume_at_xmax_m3.
+        v_gas = stand.receiver_air_m3 + np.maximum(stand.element_volume_at_xmax_m3 - S * (L_hat - L_hat.min()), 1e-4)
+        p_abs_bar = test.pressure_bar + stand.p_atm_bar
+        sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
         c = feff * p_abs_bar * BAR_PA * S / v_gas
-        sdz = np.sqrt((LOAD_CELL_REL_SD * P_hat) ** 2 + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
-                      + (dPdx * DISPLACEMENT_SD_M) ** 2 + FLOOR_N**2)
-        sdL = np.sqrt((v_gas * sdp_bar / p_abs_bar / S) ** 2 + (slope * DISPLACEMENT_SD_M) ** 2 + CALIPER_SD_M**2)
+        sdz = np.sqrt((stand.load_cell_rel_sd * P_hat) ** 2 + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
+                      + (dPdx * stand.displacement_sd_m) ** 2 + FLOOR_N**2)
+        sdL = np.sqrt((v_gas * sdp_bar / p_abs_bar / S) ** 2 + (slope * stand.displacement_sd_m) ** 2
+                      + stand.caliper_sd_m**2)
         i0 = np.argmin(np.abs(u))
         area_check.append({"pressure_bar": test.pressure_bar, "from_force_m2": float(P_hat[i0] / p_pa),
                            "from_volume_m2": float(-S * slope[i0]),
@@ -129,7 +145,7 @@ def prepare(rec: Recordings) -> tuple[Data, dict]:
     R = np.eye(len(rec.tests))[cat["ti"].astype(int)]
     data = Data(*(jnp.asarray(a, dtype=float) for a in (cat["p"], cat["t"], cat["sgn"], cat["step"], R, cat["c"],
                                                            cat["F"], cat["L"], cat["sdz"], cat["sdL"])),
-                jnp.asarray(S, dtype=float))
+                jnp.asarray(S, dtype=float), jnp.ones(2 * cat["F"].size))
     meta = {"pressure_bar": cat["p"], "height_m": cat["x"], "compression": cat["comp"].astype(bool),
             "step": cat["step"].astype(int), "test": cat["ti"].astype(int), "force_N": cat["F"],
             "piston_m": cat["L"], "area": S, "area_check": area_check}
@@ -137,7 +153,7 @@ def prepare(rec: Recordings) -> tuple[Data, dict]:
 
 
 def mask_of(names, order: int) -> jnp.ndarray:
-    """Dynamic model switch: 5 mechanism flags, then flags for powers 0..K_MAX of F_eff."""
+    """Dynamic model switch: N_MECH mechanism flags (order of MECHS), then flags for powers 0..K_MAX of F_eff."""
     mech = [1.0 if m in names else 0.0 for m in MECHS]
     powers = [1.0 if j <= order else 0.0 for j in range(K_MAX + 1)]
     return jnp.asarray(mech + powers)
@@ -147,16 +163,17 @@ def _design(theta, mask, d: Data):
     """Design matrices of force (n, k) and piston (n, k) and the prior sds (k,)."""
     m_area = mask[0] * theta[2]
     m_hyst = mask[2] * theta[3]
+    m_vol = mask[5] * theta[4]
     g = 1.0 + m_area * d.p_bar
     hy = 1.0 + m_hyst * d.sgn
     pw = jnp.arange(K_MAX + 1)
-    on = mask[5:]
+    on = mask[N_MECH:]
     T = d.t[:, None] ** pw * on
     Tint = d.t[:, None] ** (pw + 1) / (pw + 1) * on
     n = d.t.size
     zeros = jnp.zeros((n, 1))
     XF_a = (d.p_bar * BAR_PA * g * hy)[:, None] * T
-    XL_a = -(H_M / d.area) * g[:, None] * Tint
+    XL_a = -(H_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint
     XF_r = jnp.zeros_like(d.R)
     XL_r = d.R
     Tc = d.t[:, None] ** jnp.arange(CASING_DEG + 1)
@@ -174,20 +191,26 @@ def _design(theta, mask, d: Data):
 
 def _stacked(theta, mask, d: Data):
     XF, XL, prior = _design(theta, mask, d)
-    Xz = XF - d.c[:, None] * XL
+    # z = P + c L: the pressure-holding error moves P by +dp F_eff and c L by -dp F_eff.
+    Xz = XF + d.c[:, None] * XL
     X = jnp.concatenate([Xz, XL], axis=0)
-    y = jnp.concatenate([d.force - d.c * d.piston, d.piston])
+    y = jnp.concatenate([d.force + d.c * d.piston, d.piston])
     sigma = jnp.concatenate([jnp.exp(theta[0]) * d.sd_z, jnp.exp(theta[1]) * d.sd_L])
+    # Held-out rows (fit_w = 0) get an enormous sd: they drop out of the coefficient posterior
+    # (their log sigma terms are removed in _log_post), so the MAP is that of the training rows.
+    sigma_fit = sigma * jnp.where(d.fit_w > 0, 1.0, 1e100)
     # Column scaling: exact reparametrisation (the marginal likelihood is invariant), for numerics.
-    s = jnp.sqrt(jnp.mean((X / sigma[:, None]) ** 2, axis=0))
+    s = jnp.sqrt(jnp.mean((X / sigma_fit[:, None]) ** 2, axis=0))
     s = jax.lax.stop_gradient(jnp.where(s > 0, s, 1.0))
-    return X / s, y, sigma, prior * s, s, XF, XL
+    return X / s, y, sigma_fit, prior * s, s, XF, XL, sigma
 
 
 def _log_post(theta, mask, d: Data):
     X, y, sigma, prior, *_ = _stacked(theta, mask, d)
     lp = linear_posterior(X, y, sigma, prior).log_marginal
-    active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2]])])
+    # Held-out rows' -log sigma terms depend on the noise scales: take them back out.
+    lp = lp + jnp.sum((1.0 - d.fit_w) * jnp.log(sigma))
+    active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2], mask[5]])])
     lp = lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
     return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
@@ -202,7 +225,7 @@ PAD = 16  # every batched call is padded to a multiple of this: one compilation 
 
 
 def log_post(thetas: np.ndarray, mask, d: Data) -> np.ndarray:
-    """Log posterior of full thetas (m, 4), padded to a fixed batch size."""
+    """Log posterior of full thetas (m, N_THETA), padded to a fixed batch size."""
     thetas = np.atleast_2d(np.asarray(thetas, float))
     m = thetas.shape[0]
     size = -(-m // PAD) * PAD
@@ -241,10 +264,10 @@ def _hessian_fd(f_batch, x, h):
 
 
 def _one_draw(theta, key, mask, d: Data):
-    X, y, sigma, prior, s, XF, XL = _stacked(theta, mask, d)
-    post = linear_posterior(X, y, sigma, prior)
+    X, y, sigma_fit, prior, s, XF, XL, sigma = _stacked(theta, mask, d)
+    post = linear_posterior(X, y, sigma_fit, prior)
     beta_s = draw_coefficients(post, jax.random.normal(key, post.mean.shape))
-    ll = gaussian_loglik(y, X @ beta_s, sigma)
+    ll = gaussian_loglik(y, X @ beta_s, sigma)  # every row, held out or not, at its own noise
     beta = beta_s / s
     return ll, XF @ beta, XL @ beta, beta, sigma
 
@@ -255,12 +278,7 @@ def draws_batch(thetas, keys, mask, d: Data):
 
 
 def active_dims(names) -> list[int]:
-    dims = [0, 1]
-    if "pressure_dependent_area" in names:
-        dims.append(2)
-    if "hysteresis" in names:
-        dims.append(3)
-    return dims
+    return [0, 1, *sorted(NONLINEAR[m] for m in names if m in NONLINEAR)]
 
 
 def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
@@ -309,8 +327,8 @@ def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
 
 
 def expand(sub: np.ndarray, names) -> np.ndarray:
-    """Sampled active coordinates (..., len(dims)) -> full theta (..., 4)."""
+    """Sampled active coordinates (..., len(dims)) -> full theta (..., N_THETA)."""
     dims = active_dims(names)
-    full = np.zeros(sub.shape[:-1] + (4,))
+    full = np.zeros(sub.shape[:-1] + (N_THETA,))
     full[..., dims] = sub
     return full

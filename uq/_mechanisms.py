@@ -72,6 +72,18 @@ MECHANISMS: dict[str, Mechanism] = {
             "the gas temperature drifts during the test, so the piston has to make room for "
             "thermal expansion (or contraction) on top of the element's volume change",
         ),
+        Mechanism(
+            "volume_excess",
+            "the casing is not an inextensible membrane: part of the pressure load is carried by the "
+            "casing's meridional tension (its middle surface lies outside the effective-area circle), so "
+            "the volume the element sweeps per unit height exceeds the force-derived effective area",
+            "dV/dx becomes F_eff(x)(1 + m) at every pressure: the piston moves by "
+            "dL = -(1 + m) F_eff(x) dx / S; force unchanged",
+            "1",
+            "the volume-derived effective area (-S dL/dx) exceeds the force-derived one (P/p_u) by the same "
+            "fraction at every pressure: the casing's own membrane tension carries part of the pressure load, "
+            "so eq. 1 and eq. 2 of the traditional theory do not give the same curve (the paper's main finding)",
+        ),
     )
 }
 
@@ -104,4 +116,6 @@ def parse_effects(specs: list[str] | None, option: str = "--effect") -> dict[str
         out[name] = v
     if "hysteresis" in out and not -0.5 < out["hysteresis"] < 0.5:
         raise InputError(f"option {option} hysteresis={out['hysteresis']:g}: expected |m| < 0.5 (a fraction, not per cent)")
+    if "volume_excess" in out and not -0.5 < out["volume_excess"] < 1.0:
+        raise InputError(f"option {option} volume_excess={out['volume_excess']:g}: expected -0.5 < m < 1 (a fraction, not per cent)")
     return out

@@ -207,7 +207,8 @@ def true_curves(spring, effects: dict[str, float], height_m, p_bar: float, compr
 
     Mechanism definitions as CONTRACT.md section 4, applied in the order
     pressure_dependent_area, casing_force, hysteresis, force_offset (force) and
-    pressure_dependent_area, thermal_drift (piston).
+    pressure_dependent_area, volume_excess, thermal_drift (piston). volume_excess scales the
+    piston's travel from its position at x0 by (1 + m): dV/dx = (1 + m) F_eff.
     """
     height_m = np.asarray(height_m, float)
     x0 = spring.x0_m
@@ -225,6 +226,9 @@ def true_curves(spring, effects: dict[str, float], height_m, p_bar: float, compr
         force = force * np.where(compression, 1.0 + m, 1.0 - m)
     if "force_offset" in effects:
         force = force + effects["force_offset"]
+    if "volume_excess" in effects:
+        ref = float(spring.piston_m(np.array(x0), p_bar))
+        piston = ref + (piston - ref) * (1.0 + effects["volume_excess"])
     if "thermal_drift" in effects:
         piston = piston + np.asarray(step) * effects["thermal_drift"] * 1e-6 / piston_area_m2
     return force, piston

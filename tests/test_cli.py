@@ -84,6 +84,8 @@ def _bad_usage_rows(tmp: Path):
         (["report", N50, "--out", afile], ["--out", "existing file"]),
         (["report", N50, "--out", tmp / "r", "--draws", 0], ["--draws"]),
         (["surface", N50, "--report", afile], ["--report"]),
+        (["surface", N50, "--walkers", 8], ["--walkers", "10"]),  # 5 noise parameters: emcee needs >= 10
+        (["margin", N50, "--height-mm", 112, "--load-N", 13000, "--walkers", 8], ["--walkers", "10"]),
         (["diagnose", N50, "--report", afile], ["--report"]),
         (["diagnose", N50, "--json", tmp], ["--json"]),
         (["calibrate", "--truth", "prior,bogus"], ["--truth", "bogus"]),
@@ -100,7 +102,7 @@ def _bad_usage_rows(tmp: Path):
     ]
 
 
-N_BAD_USAGE = 33
+N_BAD_USAGE = 35
 
 
 def test_bad_usage_table_size(tmp_path):
@@ -433,3 +435,47 @@ def test_set_up_scripts_install_from_the_lock_and_ci_runs_the_test_command():
     ci = (ROOT / ".ci" / "run").read_text()
     assert "set -euo pipefail" in ci and "bash scripts/test.sh" in ci
     assert "bash scripts/test.sh" in (ROOT / "README.md").read_text()
+
+
+def test_simulate_with_another_stand(tmp_path):
+    """`uq simulate --stand` makes the noise of the stand described, and the file says so."""
+    import numpy as np
+
+    from uq._recordings import read_recordings
+
+    stand = tmp_path / "noisy.toml"
+    stand.write_text("load_cell_rel_sd = 0.02\n")
+    scatter = {}
+    for name, extra in (("paper", []), ("noisy", ["--stand", stand])):
+        out = tmp_path / f"{name}.csv"
+        assert run(["simulate", "--out", out, "--pressures", "8", "--seed", 5, *extra]) == 0
+        (t,) = read_recordings(str(out)).tests
+        res = t.force_N - np.polyval(np.polyfit(t.height_m, t.force_N, 3), t.height_m)
+        scatter[name] = float(np.std(res))
+    assert "load_cell_rel_sd = 0.02" in (tmp_path / "noisy.csv").read_text().split("pressure_bar")[0]
+    # 2 % against 0.5 % of about 22 kN: the load-cell term dominates, so the scatter is several times larger
+    assert scatter["noisy"] > 3 * scatter["paper"]
+    bad = tmp_path / "bad.toml"
+    bad.write_text("load_cell_rel = 0.02\n")
+    assert run(["simulate", "--out", tmp_path / "x.csv", "--stand", bad]) == 2
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_sampling_runs_show_a_step_bar(monkeypatch, restore_progress):
+    """Single sampling runs (surface, diagnose) count emcee steps; per-test fits (desc=None) stay silent."""
+    import numpy as np
+
+    from uq._sampler import Settings, run_ensembles
+
+    def lp(th):
+        return -0.5 * np.sum(np.asarray(th) ** 2, axis=1)
+
+    settings = Settings(n_walkers=8, n_ensembles=2, max_steps=60, min_steps=40, chunk=20)
+    tty = FakeTerminal()
+    monkeypatch.setattr(sys, "stderr", tty)
+    _progress.set_enabled(True)
+    run_ensembles(lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings, desc="surface sampling")
+    assert "surface sampling" in tty.getvalue() and "step" in tty.getvalue()
+    before = tty.getvalue()
+    run_ensembles(lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings)
+    assert tty.getvalue() == before

@@ -37,6 +37,9 @@ def configure_simulate(p) -> None:
     p.add_argument("--x-min-mm", type=positive_float, default=65.0, help="minimum height, mm")
     p.add_argument("--step-mm", type=positive_float, default=5.0, help="height step, mm")
     p.add_argument("--piston-area-cm2", type=positive_float, default=DEFAULT_PISTON_AREA_CM2, help="piston area S, cm^2")
+    p.add_argument("--stand", metavar="FILE.toml",
+                   help="the stand that makes the noise: error budget and gas volumes (TOML, keys of "
+                        "uq._stand_description.StandDescription; default the paper's stand, section 3.2)")
     add_json(p)
 
 
@@ -57,20 +60,26 @@ def command_simulate(args) -> int:
     from ._mechanisms import parse_effects
     from ._recordings import write_recordings_csv
     from ._stand import SPRINGS, Layout, simulate
+    from ._stand_description import PAPER_STAND, read_stand
 
+    stand = read_stand(args.stand) if args.stand else PAPER_STAND
     effects = parse_effects(args.effect)
     if not 0 < args.x_min_mm < args.x_max_mm:
         raise InputError(f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}")
     layout = Layout(_pressures(args.pressures), args.x_max_mm * 1e-3, args.x_min_mm * 1e-3, args.step_mm * 1e-3)
-    tests = simulate(args.spring, seed=args.seed, effects=effects, layout=layout, piston_area_m2=args.piston_area_cm2 * 1e-4)
+    tests = simulate(args.spring, seed=args.seed, effects=effects, layout=layout, piston_area_m2=args.piston_area_cm2 * 1e-4,
+                     stand=stand)
     eff = " ".join(f"--effect {k}={v:g}" for k, v in effects.items())
     cmd = (f"uq simulate --out {args.out} --spring {args.spring} --seed {args.seed} --pressures {args.pressures} "
            f"--x-max-mm {args.x_max_mm:g} --x-min-mm {args.x_min_mm:g} --step-mm {args.step_mm:g} "
-           f"--piston-area-cm2 {args.piston_area_cm2:g} {eff}").strip()
+           f"--piston-area-cm2 {args.piston_area_cm2:g} {eff}{' --stand ' + str(args.stand) if args.stand else ''}").strip()
+    differs = {f: getattr(stand, f) for f in stand.__dataclass_fields__ if getattr(stand, f) != getattr(PAPER_STAND, f)}
+    noise = ("noise from its error budget (section 3.2)" if not differs else
+             "noise from its error budget (section 3.2) except " + ", ".join(f"{k} = {v:g}" for k, v in differs.items()))
     comment = (
         "RECONSTRUCTED recordings from the virtual test stand of airspring-uq, not measured data.\n"
         f"Spring: {SPRINGS[args.spring].description}.\n"
-        "Procedure of the paper's section 3.4, noise from its error budget (section 3.2).\n"
+        f"Procedure of the paper's section 3.4, {noise}.\n"
         f"Concealed effects: {', '.join(f'{k}={v:g}' for k, v in effects.items()) or 'none'}.\n"
         f"Regenerate: {cmd}"
     )

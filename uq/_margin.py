@@ -688,7 +688,12 @@ def command_margin(args) -> int:
         source, rec = args.fit, None
     else:
         args.model = args.model or "auto"
-        stand = stand_from(args)  # a bad --stand file is refused before the recordings are read
+        stand = stand_from(args)  # a bad --stand file or --walkers is refused before the recordings are read
+        if args.model in ("auto", "surface"):
+            from ._cmd_common import settings_from
+            from ._surface import NOISE_NAMES
+
+            settings_from(args).require_walkers(len(NOISE_NAMES))
         rec = load(args)
         tested = [t.pressure_bar for t in rec.tests]
         for q in queries:

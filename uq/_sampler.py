@@ -80,6 +80,14 @@ class Settings:
         if self.max_steps < 10:
             raise InputError("option --max-steps: at least 10 steps")
 
+    def require_walkers(self, ndim: int) -> None:
+        """emcee's red-blue moves need at least two walkers per sampled dimension."""
+        from ._errors import InputError
+
+        if self.n_walkers < 2 * ndim:
+            raise InputError(f"option --walkers: {self.n_walkers} walkers are fewer than twice the {ndim} sampled "
+                             f"parameters of this model; use at least {2 * ndim}")
+
 
 @dataclass
 class Chains:
@@ -164,14 +172,24 @@ def _starts(log_prob, center, width, n_walkers: int, rng, tries: int = 20) -> np
     return p0
 
 
-def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settings = Settings()) -> Chains:
+def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settings = Settings(),
+                  desc: str | None = None) -> Chains:
     """Sample ``log_prob`` (vectorised: (W, D) -> (W,)) with emcee until the rules pass.
 
     ``center`` is the optimiser's solution and ``settings.init_scale * scale`` an estimate of
     the posterior width per dimension; see the module docstring for the rules and storage.
+    ``desc``: show a progress bar of the steps (uq._progress; on a terminal only) under this name.
     """
+    from ._progress import _Silent, progress
+
+    with progress(total=settings.max_steps, desc=desc, unit="step") if desc else _Silent(None) as bar:
+        return _run_ensembles(log_prob, center, scale, names, seed, settings, bar)
+
+
+def _run_ensembles(log_prob, center, scale, names, seed: int, settings: Settings, bar) -> Chains:
     settings.validate()
     center = np.asarray(center, float)
+    settings.require_walkers(center.size)
     width = settings.init_spread * settings.init_scale * np.asarray(scale, float)
     ndim, W = center.size, settings.n_walkers
     rng = np.random.default_rng(seed)
@@ -190,8 +208,10 @@ def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settin
                 warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals
                 states[i] = s.run_mcmc(states[i], step, progress=False)
         n_steps += step
+        bar.update(step)
         chains = _collect(samplers, names, settings, n_steps, start)
         failed, want = _failed_rules(chains, settings)
+        bar.set_postfix_str(f"{len(failed)} rule(s) not yet met" if failed else "converged")
         if not failed:
             return chains
         if n_steps >= settings.max_steps or want <= n_steps:

@@ -499,7 +499,8 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     def lp(th):
         return np.asarray(log_prob(jnp.asarray(th), *args))
 
-    chains = thin(run_ensembles(lp, theta, scale, NOISE_NAMES, seed=seed, settings=settings), max_draws)
+    chains = thin(run_ensembles(lp, theta, scale, NOISE_NAMES, seed=seed, settings=settings,
+                                 desc="surface sampling"), max_draws)
     C, D, _ = chains.samples.shape
     flat = jnp.asarray(chains.samples.reshape(C * D, 5))
     keys = jax.random.split(jax.random.PRNGKey(seed), C * D)
@@ -952,9 +953,10 @@ def command_surface(args) -> int:
     from ._io import emit_json
 
     t0 = time.perf_counter()
-    stand = stand_from(args)  # a bad --stand file is refused before the recordings are read
-    rec = load(args)
+    stand = stand_from(args)  # a bad --stand file or --walkers is refused before the recordings are read
     settings = settings_from(args)
+    settings.require_walkers(len(NOISE_NAMES))
+    rec = load(args)
     if args.select:
         fit, _ = select_orders(rec, seed=args.seed, settings=settings, stand=stand)
     else:

@@ -26,3 +26,11 @@ def n50_fit(n50_recordings):
     from uq._cubic import fit_campaign
 
     return fit_campaign(n50_recordings, seed=DEFAULT_SEED)
+
+
+@pytest.fixture(scope="session")
+def n50_surface(n50_recordings):
+    """The surface model fitted once to the bundled campaign (the default orders and settings)."""
+    from uq._surface import fit_surface
+
+    return fit_surface(n50_recordings, seed=20201)

@@ -10,12 +10,6 @@ import pytest
 
 from uq._errors import InputError
 from uq._margin import CubicInterpolation, choose_model, margin, pressure_needed
-from uq._surface import fit_surface
-
-
-@pytest.fixture(scope="module")
-def n50_surface(n50_recordings):
-    return fit_surface(n50_recordings, seed=20201)
 
 
 def test_table1_force_at_x0_and_5_bar(n50_surface):

@@ -49,11 +49,6 @@ def binomial_acceptance(n: int, level: float, alpha: float, n_tails: int) -> tup
     return lo, hi
 
 
-@pytest.fixture(scope="module")
-def n50_surface(n50_recordings):
-    return fit_surface(n50_recordings, seed=20201)
-
-
 def _campaign(tmp_path, seed, layout, spring="n50-smooth", stand=PAPER_STAND):
     path = tmp_path / f"{spring}-{seed}.csv"
     path.write_text(write_recordings_csv(simulate(spring, seed=seed, layout=layout, stand=stand)))

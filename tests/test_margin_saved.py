@@ -294,3 +294,21 @@ def test_exactly_one_source_exit_2(surface_saved, campaign, tmp_path, capsys, no
         for w in words:
             assert w in line, (argv, line)
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_stroke_runs_match_the_walk_they_replace():
+    """``_run_around`` (vectorised) gives each draw's run through the query height as the per-draw walk did."""
+    from uq._margin import _run_around
+
+    rng = np.random.default_rng(5)
+    for n, j in ((1, 0), (9, 0), (9, 8), (9, 4), (361, 170)):
+        ok = rng.random((300, n)) < rng.uniform(0.5, 0.99, (300, 1))
+        a, b = _run_around(ok, j)
+        for s in np.flatnonzero(ok[:, j]):
+            lo = j
+            while lo > 0 and ok[s, lo - 1]:
+                lo -= 1
+            hi = j
+            while hi < n - 1 and ok[s, hi + 1]:
+                hi += 1
+            assert (a[s], b[s]) == (lo, hi)

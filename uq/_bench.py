@@ -324,6 +324,98 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None, n_queries: int = 100) -> dict:
+    """``uq margin``: one full query (fit + choice + answer) against the same query from the saved file.
+
+    All in this process, in the order a user meets them: the full query first (JAX compilation
+    included, as in a fresh ``uq margin`` run), then the answer saved with ``--save-fit``'s
+    writer, then the same query answered from the file (load + answer), then ``n_queries``
+    queries from one load of the file (heights and pressures spread over the tested ranges,
+    each with a force band and a usable stroke, as the reference query). A cold ``uq margin
+    --fit`` in a fresh interpreter (imports included) is timed as well."""
+    import argparse
+    import tempfile
+
+    from ._io import dumps_json
+    from ._margin import _fit_and_choose, load_answer, margin, save_answer
+    from ._recordings import read_recordings, write_recordings_csv
+    from ._stand import simulate
+    from ._stand_description import PAPER_STAND
+
+    with tempfile.TemporaryDirectory(prefix="uq-bench-margin-") as tmp:
+        if recordings is None:
+            csv = Path(tmp) / "n50.csv"
+            csv.write_text(write_recordings_csv(simulate("n50", seed=seed), "bench --margin: the paper's campaign"))
+            what = f"the paper's campaign from the virtual stand (11 tests, seed {seed}), as data/n50"
+        else:
+            csv, what = Path(recordings), f"{recordings}"
+        args = argparse.Namespace(model="auto", seed=seed, walkers=settings.n_walkers, ensembles=settings.n_ensembles,
+                                  max_steps=settings.max_steps)
+        t0 = time.perf_counter()
+        rec = read_recordings(csv)
+        ans, info, diagnostics = _fit_and_choose(args, rec, PAPER_STAND)
+        t_fit = time.perf_counter() - t0
+        plo, phi = ans.pressure_range_bar
+        if recordings is None:
+            h, load, pb = 0.112, 13020.0, 5.0  # the README's query
+        else:
+            h, pb = rec.x0_m, (plo + phi) / 2
+            load = float(ans.force_draws(h, pb).mean())
+        query = {"height_m": h, "load_N": load, "prob": 0.95, "pressure_bar": pb, "tolerance_pct": 10.0}
+
+        def ask(a, i, q=query):
+            return margin(a, q["height_m"], q["load_N"], q["prob"], pressure_bar=q["pressure_bar"],
+                          tolerance_pct=q["tolerance_pct"], model_info=i)
+
+        t0 = time.perf_counter()
+        full = ask(ans, info)
+        t_answer = time.perf_counter() - t0
+        path = Path(tmp) / "fit.nc"
+        t0 = time.perf_counter()
+        save_answer(path, ans, info, recordings=rec, seed=seed, written_by="uq bench --margin", settings=settings,
+                    stand=PAPER_STAND, diagnostics=diagnostics)
+        t_save = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        ans2, info2, _ = load_answer(path)
+        t_load = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        again = ask(ans2, info2)
+        t_again = time.perf_counter() - t0
+
+        rng = np.random.default_rng(seed)
+        lo, hi = ans2.height_range_m
+        queries = []
+        for _ in range(n_queries):
+            x = float(rng.uniform(lo + 0.15 * (hi - lo), hi - 0.15 * (hi - lo)))
+            p = float(rng.uniform(plo + 0.15 * (phi - plo), phi - 0.15 * (phi - plo)))
+            queries.append({"height_m": x, "pressure_bar": p, "prob": 0.95, "tolerance_pct": 10.0,
+                            "load_N": float(ans2.force_draws(x, p).mean())})
+        t0 = time.perf_counter()
+        many_ans, many_info, _ = load_answer(path)
+        for q in queries:
+            ask(many_ans, many_info, q)
+        t_many = time.perf_counter() - t0
+        cold = run_child(["margin", "--fit", path, "--height-mm", h * 1e3, "--load-N", load, "--pressure-bar", pb,
+                          "--tolerance-pct", 10])
+        size = path.stat().st_size
+    full_s, saved_s = t_fit + t_answer, t_load + t_again
+    return {
+        "workload": f"uq margin on {what}: {load:g} N at {h * 1e3:g} mm, force band at {pb:g} bar, stroke within 10 %",
+        "answered_by": info["name"], "settings": {"walkers": settings.n_walkers, "ensembles": settings.n_ensembles,
+                                                  "max_steps": settings.max_steps},
+        "full_query": {"wall_s": full_s, "fit_and_choice_s": t_fit, "answer_s": t_answer,
+                       "note": "read, fit both models, PSIS-LOO comparison, answer; JAX compilation included"},
+        "save_s": t_save, "saved_file_bytes": size,
+        "from_saved_file": {"wall_s": saved_s, "load_s": t_load, "answer_s": t_again},
+        "identical_answer": dumps_json(full) == dumps_json(again),
+        "ratio_full_to_saved": full_s / saved_s,
+        "queries_from_saved_file": {"n": n_queries, "wall_s": t_many, "per_query_s": t_many / n_queries,
+                                    "note": "one load of the file, then each query with a force band and a usable stroke"},
+        "cold_cli_from_saved_file": cold,
+        "measure": "wall time in this process (perf_counter) unless named cold: a fresh interpreter, imports included",
+    }
+
+
 # --------------------------------------------------------------------------- command
 
 
@@ -370,8 +462,12 @@ def configure_bench(p) -> None:
     p.add_argument("--batch", type=positive_int, metavar="N",
                    help="instead: uq batch of N simulated campaigns on a LocalCluster against one process, written to "
                         "BENCH_DIR/batch.json (speed-up, peak RSS)")
+    p.add_argument("--margin", action="store_true",
+                   help="instead: one full uq margin query (fit + answer) against the same query and 100 queries from "
+                        "a saved fit (--fit), written to BENCH_DIR/margin.json; the campaign is --recordings or the "
+                        "paper's from the virtual stand")
     p.add_argument("--bench-dir", default="reports/bench", metavar="BENCH_DIR",
-                   help="folder for scaling.json and batch.json")
+                   help="folder for scaling.json, batch.json and margin.json")
 
 
 def command_scale(args) -> int:
@@ -385,6 +481,10 @@ def command_scale(args) -> int:
         results["scaling"] = scaling(seed=args.seed, settings=settings) | {"report": report_memory(args.seed)}
     if args.batch:
         results["batch"] = batch_speedup(args.batch, seed=args.seed)
+    if args.margin:
+        if settings.n_walkers < 10:
+            raise InputError("option --walkers: the surface model samples five noise parameters; use at least 10 walkers")
+        results["margin"] = margin_speed(seed=args.seed, settings=settings, recordings=args.recordings)
     for name, r in results.items():
         r = {"load_average_1min": os.getloadavg()[0], "cores": _cores()} | r
         emit_json(r, str(Path(args.bench_dir) / f"{name}.json"))
@@ -394,6 +494,16 @@ def command_scale(args) -> int:
 
 
 def scale_summary(name: str, r: dict) -> str:
+    if name == "margin":
+        f, s, m, c = r["full_query"], r["from_saved_file"], r["queries_from_saved_file"], r["cold_cli_from_saved_file"]
+        return "\n".join([
+            f"uq bench --margin: {r['workload']}; {r['cores']} cores, load average {r['load_average_1min']:.1f}",
+            f"  full query (fit + answer) : {f['wall_s']:8.2f} s (answered by the {r['answered_by']})",
+            f"  from the saved file       : {s['wall_s']:8.3f} s (load {s['load_s']:.3f} s, answer {s['answer_s']:.3f} s); "
+            f"identical answer: {r['identical_answer']}",
+            f"  ratio {r['ratio_full_to_saved']:.0f}x; {m['n']} queries from the saved file {m['wall_s']:.2f} s "
+            f"({m['per_query_s']:.3f} s a query)",
+            f"  cold uq margin --fit (fresh interpreter, imports included): {c['wall_s']:.1f} s"])
     if name == "batch":
         s, d = r["serial"], r["dask"]
         return "\n".join([
@@ -414,7 +524,7 @@ def scale_summary(name: str, r: dict) -> str:
 
 
 def command_bench(args) -> int:
-    if getattr(args, "scaling", False) or getattr(args, "batch", None):
+    if getattr(args, "scaling", False) or getattr(args, "batch", None) or getattr(args, "margin", False):
         return command_scale(args)
     if not (math.isfinite(args.seconds) and args.seconds >= 0):
         raise InputError(f"option --seconds: expected a non-negative number of seconds, got {args.seconds:g}")

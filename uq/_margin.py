@@ -234,6 +234,15 @@ def _finite_estimate(d):
     return estimate(d)
 
 
+def _run_around(ok: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """First and last index of each row's run of True through column ``j`` (rows (S, n); meaningful where ok[:, j])."""
+    n = ok.shape[1]
+    left, right = ~ok[:, :j][:, ::-1], ~ok[:, j + 1 :]  # left: column j-1 first
+    a = np.where(left.any(axis=1), j - np.argmax(left, axis=1), 0) if j > 0 else np.zeros(ok.shape[0], int)
+    b = np.where(right.any(axis=1), j + np.argmax(right, axis=1), n - 1) if j < n - 1 else np.full(ok.shape[0], n - 1)
+    return a, b
+
+
 def usable_stroke(model, height_m: float, pressure_bar: float, target_N: float, tolerance_pct: float,
                   prob: float, *, n_x: int = 361) -> dict:
     """Height range around ``height_m`` over which the force at ``pressure_bar`` stays within tolerance."""
@@ -243,17 +252,8 @@ def usable_stroke(model, height_m: float, pressure_bar: float, target_N: float, 
     P = model.force_draws(xs, pressure_bar)  # (S, n_x)
     ok = np.abs(P - target_N) <= tolerance_pct / 100.0 * abs(target_N)
     j = int(np.argmin(np.abs(xs - height_m)))
-    lengths, los, his = np.zeros(P.shape[0]), np.full(P.shape[0], np.nan), np.full(P.shape[0], np.nan)
-    for s in range(P.shape[0]):
-        if not ok[s, j]:
-            continue
-        a = j
-        while a > 0 and ok[s, a - 1]:
-            a -= 1
-        b = j
-        while b < n_x - 1 and ok[s, b + 1]:
-            b += 1
-        los[s], his[s], lengths[s] = xs[a], xs[b], xs[b] - xs[a]
+    a_s, b_s = _run_around(ok, j)
+    lengths = np.where(ok[:, j], xs[b_s] - xs[a_s], 0.0)
     p_in = ok.mean(axis=0)
     a = b = j
     if p_in[j] >= prob:

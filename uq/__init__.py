@@ -1,13 +1,60 @@
 """airspring-uq: Bayesian uncertainty quantification of air-spring test-stand recordings.
 
-The flow, module by module: recordings (``_recordings``) -> virtual stand (``_stand``) ->
-models and posteriors (``_cubic``, ``_linear``, ``_sampler``) -> results (``_results``) ->
-derived quantities, reports, checks and queries (``_bands``, ``_report``, ``_check``,
-``_surface``, ``_margin``, ``_diagnose``). The public API is re-exported here.
+Python API
+----------
+Every ``uq`` command is a function here, and no step needs a file in between::
 
-The re-exports are loaded on first use (PEP 562), so ``import uq`` and the ``uq`` command's
-``--help`` do not import JAX, ArviZ or matplotlib; every module that uses JAX imports
-``uq._jax`` first, which switches on float64 before anything traces.
+    import uq
+    rec = uq.simulate("n50", seed=1)          # Recordings, as `uq simulate` + reading the CSV
+    # rec = uq.read_recordings("recordings.csv")            the same, from a file
+    fit = uq.fit_campaign(rec, seed=1)        # per-pressure Bayesian cubics       (uq fit)
+    uq.write_report(fit, "out/")              # out/report.html and its figures     (uq report)
+    bands = uq.campaign_bands(fit)            # Figures 2-5 with 90 % credible bands
+    verdict = uq.check(uq.fit_json(fit), points)  # posterior vs stored estimates   (uq check)
+    surface = uq.fit_surface(rec, seed=1)     # one model over height and pressure  (uq surface)
+    answer = uq.margin(surface, 0.112, 20e3)  # pressure that carries 20 kN at 112 mm (uq margin)
+    found = uq.diagnose(rec, seed=1)          # the physics the traditional theory misses (uq diagnose)
+
+The module flow: recordings (``_recordings``) -> virtual stand (``_stand``) -> models and
+posteriors (``_cubic``, ``_linear``, ``_sampler``, ``_surface``, ``_diagnose``) -> results
+(``_results``) -> derived quantities, checks and queries (``_bands``, ``_check``, ``_margin``) ->
+reports (``_report``, ``_surface_report``) -> command line (``cli``, ``_cmd_*``). A module imports
+only from its own layer or below (tests/test_layers.py).
+
+Float64. uq's models need JAX in double precision (the cubics' coefficients span ten orders of
+magnitude in one solve), and JAX's switch for it, ``jax_enable_x64``, holds for the whole
+process: the first use of a model (any name below that loads JAX: ``fit_campaign``,
+``fit_surface``, ``diagnose``, ...) calls :func:`enable_x64`, after which all JAX code in the
+process computes in float64 by default. ``import uq`` itself loads no JAX, NumPy, ArviZ or
+matplotlib: the names below are loaded on first use (PEP 562). Call ``uq.enable_x64()`` to make
+the switch explicit, or to restore it after other code turned it off.
+
+The examples below use small settings (few pressures, short chains); drop ``layout=``,
+``settings=`` and ``max_draws=`` for the paper's procedure and converged chains.
+
+>>> import uq
+>>> small = uq.Layout(pressures_bar=(1.0, 4.0, 8.0), step_m=0.01)
+>>> rec = uq.simulate("n50", seed=3, layout=small)
+>>> quick = uq.Settings(max_steps=200)
+
+Surface model and a margin query (``orders`` kept small for three tests):
+
+>>> surface = uq.fit_surface(rec, uq.Orders(3, 2, 2, 1, 1), seed=3, settings=quick, max_draws=400)
+>>> answer = uq.margin(surface, height_m=0.112, load_N=15e3, prob=0.95)
+>>> 4.0 < answer["pressure_bar_for_prob"] < 8.0, answer["model"]["name"]
+(True, 'surface')
+>>> draws = uq.SurfaceAnswer(surface).force_draws(0.112, 5.0)   # posterior draws of the force, N
+>>> draws.ndim, bool(10e3 < draws.mean() < 16e3)
+(1, True)
+
+Mechanism search against the traditional theory (``sample_final=False``: screening only):
+
+>>> found = uq.diagnose(rec, seed=3, settings=quick, sample_final=False)
+>>> found["mismatch_detected"]
+True
+
+Compiling the surface model and the mechanism search takes about a minute each on a laptop
+(the first call only); tests/test_api.py runs these examples under ``-m slow``.
 """
 
 from __future__ import annotations
@@ -16,13 +63,19 @@ import importlib
 
 __version__ = "0.1.0"
 
-#: public name -> module that defines it
+#: public name -> module that defines it, or (module, name there)
 _API = {
     "CampaignFit": "_cubic", "TestFit": "_cubic", "fit_campaign": "_cubic", "fit_test": "_cubic",
     "least_squares": "_cubic", "InputError": "_errors", "MECHANISMS": "_mechanisms",
     "Recordings": "_recordings", "Test": "_recordings", "read_recordings": "_recordings",
     "table1": "_reference", "table2": "_reference", "fit_json": "_results", "Settings": "_sampler",
-    "Layout": "_stand", "simulate": "_stand", "true_curves": "_stand",
+    "Layout": "_stand", "simulate": ("_stand", "simulate_recordings"), "true_curves": "_stand",
+    "enable_x64": "_jax", "write_report": "_report", "campaign_bands": "_bands", "CampaignBands": "_bands",
+    "fit_surface": "_surface", "SurfaceFit": "_surface", "Orders": "_surface",
+    "margin": "_margin", "SurfaceAnswer": "_margin",
+    "diagnose": "_diagnose", "check": ("_check", "check_documents"),
+    "StandDescription": "_stand_description", "PAPER_STAND": "_stand_description",
+    "read_stand": "_stand_description",
 }
 
 __all__ = sorted(_API) + ["__version__"]
@@ -31,7 +84,8 @@ __all__ = sorted(_API) + ["__version__"]
 def __getattr__(name: str):
     if name not in _API:
         raise AttributeError(f"module 'uq' has no attribute '{name}'")
-    value = getattr(importlib.import_module(f"uq.{_API[name]}"), name)
+    module, attr = _API[name] if isinstance(_API[name], tuple) else (_API[name], name)
+    value = getattr(importlib.import_module(f"uq.{module}"), attr)
     globals()[name] = value  # later look-ups skip this function
     return value
 

@@ -349,6 +349,15 @@ def campaign_bands(cf, *, n_grid: int = 181, n_draws: int = 2000, seed: int = 0,
 
     Subsamples ``n_draws`` draws per test (seeded), evaluates on ``x_grid`` (default: the data's
     height range, ``n_grid`` points).
+
+    >>> import uq
+    >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
+    >>> bands = uq.campaign_bands(uq.fit_campaign(rec, seed=1, settings=uq.Settings(max_steps=200)), n_draws=200)
+    >>> feff = bands.at(5.0).feff     # F_eff = P / p_u (m^2): pointwise 90 % band on the height grid
+    >>> feff.mean.shape, bool((feff.lo <= feff.mean).all() and (feff.mean <= feff.hi).all())
+    ((181,), True)
+    >>> sorted(bands.scatter_at)      # scatter of F_eff across the tests with p_u >= 1 bar, %
+    ['75 mm', 'x0', 'x_max', 'x_min']
     """
     rec = cf.recordings
     rng = np.random.default_rng(seed)

@@ -283,6 +283,31 @@ def lsq_covariance(u_m, sd) -> np.ndarray:
     return D @ cov @ D
 
 
+def check_documents(result: dict, points: dict, *, alpha: float = DEFAULT_ALPHA, result_name: str = "RESULT",
+                    points_name: str = "POINTS") -> dict:
+    """``uq check`` on documents in memory: the verdict of the module docstring's rule, as a dict.
+
+    ``result``: :func:`uq.fit_json` of a fit (or that JSON read back); ``points``: point estimates
+    in the POINTS format (docs/check.md; e.g. ``json.load`` of fits/n50/table1_points.json). The
+    verdict is what ``uq check --json`` writes: ``agree``, ``n_disagree``, ``threshold2`` and one
+    entry per test and block in ``blocks``. ``result_name``/``points_name`` name them in messages.
+
+    >>> import uq
+    >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
+    >>> result = uq.fit_json(uq.fit_campaign(rec, seed=1, settings=uq.Settings(max_steps=200)))
+    >>> means = {"tests": [{"pressure_bar": t["pressure_bar"],
+    ...                     **{b: {n: e["mean"] for n, e in t[b].items()} for b in ("force", "piston")}}
+    ...                    for t in result["tests"]]}
+    >>> verdict = uq.check(result, means)  # the posterior means agree with their own posterior
+    >>> verdict["agree"], verdict["n_blocks"]
+    (True, 4)
+    """
+    from ._io import _plain  # the values a JSON file of the same documents would hold
+
+    return check(read_result(_plain(result), result_name), read_points(_plain(points), points_name), alpha=alpha,
+                 result_path=result_name, points_path=points_name)
+
+
 def check_files(result_path: str, points_path: str, alpha: float = DEFAULT_ALPHA) -> dict:
     result = read_result(load_json(result_path, "RESULT"), str(result_path))
     points = read_points(load_json(points_path, "POINTS"), str(points_path))

@@ -305,7 +305,16 @@ def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = 
 
     ``jobs`` > 1 uses that many spawned processes (the caller's main module must be import-safe,
     as the ``uq`` console script is); each test has its own seed derived from ``seed``, so the
-    results do not depend on ``jobs``.
+    results do not depend on ``jobs``. ``uq fit`` is this plus :func:`uq.fit_json`.
+
+    >>> import uq
+    >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
+    >>> fit = uq.fit_campaign(rec, seed=1, settings=uq.Settings(max_steps=200))
+    >>> [t.pressure_bar for t in fit.tests], fit.at(5.0).flat("force").shape[1]
+    ([1.0, 5.0], 4)
+    >>> a_P = fit.at(5.0).flat("force")[:, 0]   # posterior draws of a_P, the force at x0 (N)
+    >>> bool(12e3 < a_P.mean() < 14e3)
+    True
     """
     seeds = test_seeds(seed, len(recordings.tests))
     work = [(t, recordings.x0_m, s, settings) for t, s in zip(recordings.tests, seeds, strict=True)]

@@ -68,6 +68,8 @@ class Recordings:
     x0_m: float = DEFAULT_X0_MM * 1e-3
     piston_area_m2: float = DEFAULT_PISTON_AREA_CM2 * 1e-4
     extra_columns: tuple[str, ...] = field(default=())
+    #: the file's leading ``#`` lines, without the ``#`` (what made the recordings, if it says)
+    comments: tuple[str, ...] = field(default=())
 
     @property
     def pressures_bar(self) -> np.ndarray:
@@ -240,7 +242,23 @@ def read_recordings(
     """
     check_stand_options(piston_area_cm2, x0_mm)
     path = str(path)
-    lines = _decode(path).splitlines()
+    return recordings_from_text(_decode(path), path, piston_area_cm2=piston_area_cm2, x0_mm=x0_mm,
+                                min_points=min_points)
+
+
+def recordings_from_text(
+    text: str,
+    name: str = "<text>",
+    *,
+    piston_area_cm2: float = DEFAULT_PISTON_AREA_CM2,
+    x0_mm: float = DEFAULT_X0_MM,
+    min_points: int = 6,
+) -> Recordings:
+    """:func:`read_recordings` on CSV text already in memory; ``name`` stands for the file in
+    messages and becomes ``Recordings.path``."""
+    check_stand_options(piston_area_cm2, x0_mm)
+    path = str(name)
+    lines = text.splitlines()
     numbered = [
         (i + 1, line) for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")
     ]
@@ -283,7 +301,21 @@ def read_recordings(
         x0_m=x0_mm * 1e-3,
         piston_area_m2=piston_area_cm2 * 1e-4,
         extra_columns=extra,
+        comments=tuple(leading_comments(lines)),
     )
+
+
+def leading_comments(lines) -> list[str]:
+    """The ``#`` lines before the first other non-blank line, without the ``#``."""
+    out = []
+    for line in lines:
+        s = line.strip()
+        if not s:
+            continue
+        if not s.startswith("#"):
+            break
+        out.append(s.lstrip("#").strip())
+    return out
 
 
 def _header_index(path: str, header_row: int, header: list[str], sep: str) -> dict[str, int]:

@@ -48,6 +48,13 @@ class Table1:
 
 @cache
 def table1() -> Table1:
+    """The paper's Table 1 in SI units (module docstring): the cubics of force and piston per pressure.
+
+    >>> import uq
+    >>> t = uq.table1()
+    >>> t.pressures_bar.size, float(t.force[t.index(5.0)][0])   # 11 tests; a_P at 5 bar, N
+    (11, 13020.0)
+    """
     rows = _rows("table1_regression_coefficients.csv")
     p = np.array([float(r["pressure_bar"]) for r in rows])
     force = np.array(

@@ -8,9 +8,7 @@ write is atomic (``uq._io``).
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 import sys
 import time
 from pathlib import Path
@@ -19,10 +17,11 @@ import numpy as np
 
 from ._bands import BAR_PA, CampaignBands, campaign_bands
 from ._cmd_common import add_recordings, add_sampling, load, positive_int, settings_from
+from ._html import CSS, _img, _plt, _png
 from ._io import emit_json, remove_stale, write_bytes_atomic, write_text_atomic
+from ._recordings import leading_comments
 from ._reference import table1, table2
 
-DPI = 90
 #: Names of the files write_report and the surface page write (uq._io.remove_stale prunes the rest).
 REPORT_FIGURES = ("fig2_*.png", "fig3_*.png", "fig4_*.png", "fig5_*.png", "fig_*.png", "test_*bar.png")
 SURFACE_OUTPUTS = ("surface_*.png", "surface.html")
@@ -34,6 +33,7 @@ TABLE1_COLUMNS = [
     ("a_L", "m", 1.0), ("b_L", "–", 1.0), ("c_L", "1/m", 1.0), ("d_L", "1/m²", 1.0),
 ]
 PAPER_SCATTER_PCT = {"x0": 8.41, "x_max": 26.3, "x_min": 8.51}
+MIN_DRAWS = 10  # fewer posterior draws give no 90 % band worth drawing
 
 
 # ----------------------------------------------------------------------------- CLI
@@ -54,21 +54,16 @@ def command_report(args) -> int:
     from ._errors import InputError
     from ._results import fit_json
 
-    if args.draws < 10:
-        raise InputError(f"option --draws: at least 10 draws, got {args.draws}")
+    if args.draws < MIN_DRAWS:
+        raise InputError(f"option --draws: at least {MIN_DRAWS} draws, got {args.draws}")
     rec = load(args)
     t0 = time.perf_counter()
-    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args), jobs=args.jobs)
+    settings = settings_from(args)
+    cf = fit_campaign(rec, seed=args.seed, settings=settings, jobs=args.jobs)
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
-    surface_page = None
-    if args.surface:
-        from ._surface import compare_with_cubics, fit_surface, summary
-        from ._surface_report import write_surface_report
-
-        sf = fit_surface(rec, seed=args.seed, settings=settings_from(args))
-        surface_page = write_surface_report(sf, summary(sf, compare_with_cubics(sf, cf)), args.out).name
-    path = write_report(cf, args.out, bands=cb, comments=read_comments(args.file), surface_page=surface_page)
+    path = write_report(cf, args.out, bands=cb, seed=args.seed, comments=read_comments(args.file),
+                        surface=args.surface, settings=settings)
     t_all = time.perf_counter() - t0
     print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; fit {t_fit:.1f} s, report {t_all - t_fit:.1f} s")
     sc = cb.scatter_at
@@ -94,28 +89,11 @@ def command_report(args) -> int:
 
 def read_comments(path) -> list[str]:
     """The leading ``#`` lines of a recordings file, without the ``#``."""
-    out = []
     with open(path, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            s = line.strip()
-            if not s:
-                continue
-            if not s.startswith("#"):
-                break
-            out.append(s.lstrip("#").strip())
-    return out
+        return leading_comments(fh)
 
 
 # ----------------------------------------------------------------------------- figures
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _colors(pressures):
@@ -124,13 +102,6 @@ def _colors(pressures):
     p = np.asarray(pressures, float)
     span = max(p.max() - p.min(), 1e-9)
     return [cmap(0.9 * (v - p.min()) / span) for v in p]
-
-
-def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
-    _plt().close(fig)
-    return buf.getvalue()
 
 
 def _fill(ax, x, b, scale, color, alpha=0.25, label=None, line=True, ls="-"):
@@ -324,19 +295,6 @@ def fig_test(tf, tb, cb: CampaignBands) -> bytes:
 
 # ----------------------------------------------------------------------------- HTML
 
-CSS = """
-body{font-family:system-ui,Segoe UI,Helvetica,Arial,sans-serif;max-width:1250px;margin:1.5em auto;padding:0 1em;color:#222;line-height:1.45}
-h1{font-size:1.6em}h2{border-bottom:2px solid #ccc;padding-bottom:.2em;margin-top:2em}
-table{border-collapse:collapse;font-size:.85em;margin:.6em 0}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right;vertical-align:top}
-th{background:#f2f2f2}td.l,th.l{text-align:left}.out{background:#fde2e2}.warn{color:#c00}.ok{color:#080}
-.note{background:#fff7d6;border-left:4px solid #e6b800;padding:.5em 1em}.small{font-size:.8em;color:#555}
-img{max-width:100%;border:1px solid #eee}pre{background:#f6f6f6;padding:.5em;font-size:.8em;white-space:pre-wrap}
-"""
-
-
-def _img(name: str, png: bytes, alt: str) -> str:
-    return f'<p><img src="data:image/png;base64,{base64.b64encode(png).decode()}" alt="{html.escape(alt)}" title="{html.escape(name)}"></p>'
-
 
 def _fmt(v: float) -> str:
     if v == 0 or not np.isfinite(v):
@@ -419,18 +377,50 @@ def _x0_table(cb: CampaignBands) -> str:
             f"<th>traditional, {cb.reference_bar:g}-bar volume (N)</th><th>spread (%)</th></tr>{''.join(rows)}</table>")
 
 
-def write_report(cf, out_dir, *, bands: CampaignBands | None = None, comments: list[str] | None = None,
-                 n_draws: int = 2000, seed: int = 0, surface_page: str | None = None) -> Path:
-    """Write ``out_dir/report.html`` and its PNG figures (atomically); return the page's path."""
+def write_report(cf, out_dir, *, draws: int = 2000, seed: int | None = None, surface: bool = False,
+                 settings=None, bands: CampaignBands | None = None, comments: list[str] | None = None,
+                 surface_page: str | None = None) -> Path:
+    """Write ``out_dir/report.html`` and its PNG figures, as ``uq report`` does; return the page's path.
+
+    ``cf`` is a :func:`uq.fit_campaign` result. The bands use ``draws`` joint posterior draws,
+    subsampled with ``seed`` (default: the fit's seed, as ``uq report --seed N`` does). With
+    ``surface=True`` the surface model is fitted too (``uq.fit_surface`` with ``settings``, default
+    ``uq.Settings()``; needs 6 or more tests) and ``surface.html`` is written beside the page, as
+    ``uq report --surface`` does. ``bands`` (from :func:`uq.campaign_bands`) replaces ``draws``/``seed``;
+    ``comments`` replaces the recordings' leading ``#`` lines (from ``cf.recordings.comments``, or
+    read from its file). Every file is written atomically; PNGs an earlier report left behind are
+    removed.
+
+    >>> import tempfile, uq
+    >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
+    >>> fit = uq.fit_campaign(rec, seed=1, settings=uq.Settings(max_steps=200))
+    >>> page = uq.write_report(fit, tempfile.mkdtemp(), draws=200)
+    >>> page.name, "Reconstructed data" in page.read_text(encoding="utf-8")
+    ('report.html', True)
+    """
+    from ._errors import InputError
+
+    if draws < MIN_DRAWS:
+        raise InputError(f"write_report: at least {MIN_DRAWS} draws, got {draws}")
+    seed = cf.seed if seed is None else seed
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    cb = bands if bands is not None else campaign_bands(cf, n_draws=n_draws, seed=seed)
     rec = cf.recordings
+    if surface:
+        from ._sampler import Settings
+        from ._surface import compare_with_cubics, fit_surface, summary
+        from ._surface_report import write_surface_report
+
+        sf = fit_surface(rec, seed=seed, settings=Settings() if settings is None else settings)
+        surface_page = write_surface_report(sf, summary(sf, compare_with_cubics(sf, cf)), out).name
+    out.mkdir(parents=True, exist_ok=True)
+    cb = bands if bands is not None else campaign_bands(cf, n_draws=draws, seed=seed)
     if comments is None:
-        try:
-            comments = read_comments(rec.path)
-        except OSError:
-            comments = []
+        comments = list(getattr(rec, "comments", ()))
+        if not comments:
+            try:
+                comments = read_comments(rec.path)
+            except OSError:
+                comments = []
     reconstructed = any("RECONSTRUCTED" in c.upper() for c in comments)
     figures: dict[str, bytes] = {}
 

@@ -51,6 +51,9 @@ def test_json(fit: TestFit) -> dict:
 
 
 def fit_json(cf: CampaignFit) -> dict:
+    """What ``uq fit --json`` writes for a fit (docs/formats.md): per test the coefficients' and
+    noise's posterior summaries, the coefficient blocks' covariance, least squares and diagnostics.
+    Values are NumPy; ``uq._io.dumps_json`` gives the file's text. See :func:`uq.check` for a use."""
     rec = cf.recordings
     tests = [test_json(t) for t in cf.tests]
     warnings = [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in t.diagnostics["warnings"]]

@@ -44,7 +44,13 @@ from scipy.interpolate import PchipInterpolator
 
 from ._errors import InputError
 from ._mechanisms import casing_shape
-from ._recordings import BAR_PA
+from ._recordings import (
+    BAR_PA,
+    DEFAULT_PISTON_AREA_CM2,
+    Recordings,
+    recordings_from_text,
+    write_recordings_csv,
+)
 from ._reference import (
     PAPER_PISTON_AREA_M2,
     PAPER_PRESSURES_BAR,
@@ -274,6 +280,55 @@ def simulate(
                  compression=comp, step=steps)
         )
     return tests
+
+
+def simulate_recordings(
+    spring: str = "n50",
+    *,
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    layout: Layout = Layout(),
+    stand: StandDescription = PAPER_STAND,
+    piston_area_cm2: float = DEFAULT_PISTON_AREA_CM2,
+) -> Recordings:
+    """A simulated campaign as :class:`uq.Recordings`, in memory: ``uq simulate`` and reading its CSV.
+
+    The readings are those ``uq simulate`` writes (the same :func:`simulate`, the same rounding:
+    heights and piston to 0.001 mm, force to 0.01 N) and pass the same checks as a file read by
+    :func:`uq.read_recordings`; no file is written. ``spring``: ``"n50"`` (Table 1),
+    ``"n50-traditional"`` or ``"n50-smooth"``; ``effects``: concealed mechanisms by name
+    (``uq.MECHANISMS``), e.g. ``{"hysteresis": 0.02}``; ``layout``: pressures and heights
+    (:class:`uq.Layout`); ``stand``: the error budget that makes the noise (:class:`uq.StandDescription`).
+    The recordings' comments say they are reconstructed, so a report says so too.
+
+    >>> import uq
+    >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
+    >>> [t.pressure_bar for t in rec.tests], rec.n_points
+    ([1.0, 5.0], 38)
+    >>> rec.comments[0]
+    'RECONSTRUCTED recordings from the virtual test stand of airspring-uq, not measured data.'
+    """
+    effects = dict(effects or {})
+    tests = simulate(spring, seed=seed, effects=effects, layout=layout, piston_area_m2=piston_area_cm2 * 1e-4,
+                     stand=stand)
+    call = (f"uq.simulate({spring!r}, seed={seed}, effects={effects!r}, layout={layout!r}, "
+            f"piston_area_cm2={piston_area_cm2:g}{'' if stand == PAPER_STAND else ', stand=...'})")
+    text = write_recordings_csv(tests, simulation_comment(spring, effects, stand, call))
+    return recordings_from_text(text, f"simulated {spring} (seed {seed})", piston_area_cm2=piston_area_cm2)
+
+
+def simulation_comment(spring: str, effects: dict[str, float], stand: StandDescription, regenerate: str) -> str:
+    """The comment lines of simulated recordings: what made them, and how to make them again."""
+    differs = {f: getattr(stand, f) for f in stand.__dataclass_fields__ if getattr(stand, f) != getattr(PAPER_STAND, f)}
+    noise = ("noise from its error budget (section 3.2)" if not differs else
+             "noise from its error budget (section 3.2) except " + ", ".join(f"{k} = {v:g}" for k, v in differs.items()))
+    return (
+        "RECONSTRUCTED recordings from the virtual test stand of airspring-uq, not measured data.\n"
+        f"Spring: {SPRINGS[spring].description}.\n"
+        f"Procedure of the paper's section 3.4, {noise}.\n"
+        f"Concealed effects: {', '.join(f'{k}={v:g}' for k, v in effects.items()) or 'none'}.\n"
+        f"Regenerate: {regenerate}"
+    )
 
 
 def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTON_AREA_M2,

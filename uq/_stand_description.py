@@ -41,6 +41,15 @@ class StandDescription:
     receiver_air_m3             air outside the element: receiver, pipes, cylinder (assumed 2 L)
     element_volume_at_xmax_m3   element's own air volume at the highest height (assumed 4.2 L)
     p_atm_bar                   atmospheric pressure
+
+    ``PAPER_STAND`` is the default; :meth:`replace` or :func:`read_stand` give another stand, which
+    ``uq.simulate(..., stand=)`` makes noise with and ``uq.fit_surface``/``uq.diagnose`` model:
+
+    >>> import uq
+    >>> uq.PAPER_STAND.load_cell_rel_sd, uq.PAPER_STAND.gas_volume_at_xmax_m3
+    (0.005, 0.0062)
+    >>> float(uq.PAPER_STAND.replace(pressure_holding_bar=0.02).pressure_sd_bar(5.0))
+    0.02
     """
 
     load_cell_rel_sd: float = 0.005
@@ -74,7 +83,18 @@ _ALLOW_ZERO = {"load_cell_rel_sd", "pressure_holding_bar", "pressure_holding_flo
 
 
 def read_stand(path: str | Path) -> StandDescription:
-    """A stand description from a TOML file; fields not given keep the paper's values."""
+    """A stand description from a TOML file; fields not given keep the paper's values.
+
+    >>> import pathlib, tempfile, uq
+    >>> f = pathlib.Path(tempfile.mkdtemp()) / "my_stand.toml"
+    >>> _ = f.write_text("load_cell_rel_sd = 0.003\\nreceiver_air_m3 = 0.0035\\n")
+    >>> stand = uq.read_stand(f)
+    >>> stand.load_cell_rel_sd, stand.pressure_holding_bar, stand == uq.PAPER_STAND
+    (0.003, 0.01, False)
+    >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01), stand=stand)
+    >>> rec.comments[2]
+    "Procedure of the paper's section 3.4, noise from its error budget (section 3.2) except load_cell_rel_sd = 0.003, receiver_air_m3 = 0.0035."
+    """
     path = Path(path)
     try:
         with path.open("rb") as f:

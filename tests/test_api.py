@@ -1,0 +1,93 @@
+"""The public Python API (uq/__init__.py): the notebook one-liner, and every docstring example.
+
+The examples use small settings (two or three pressures at 10 mm steps, 400 sampler steps), so the
+default run stays short; those that compile the surface model or run the mechanism search (about a
+minute each on first use) run under ``-m slow``.
+"""
+
+from __future__ import annotations
+
+import doctest
+import subprocess
+import sys
+
+import pytest
+
+import uq
+
+SMALL = dict(layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
+QUICK = uq.Settings(max_steps=200)
+
+
+def _run_examples(obj, name: str) -> None:
+    finder = doctest.DocTestFinder(recurse=False)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    tests = finder.find(obj, name, globs={})
+    assert sum(len(t.examples) for t in tests) > 0, f"{name} has no examples"
+    for t in tests:
+        runner.run(t)
+    result = runner.summarize(verbose=False)
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed (output above)"
+
+
+def test_notebook_one_liner(tmp_path):
+    """uq.write_report(uq.fit_campaign(uq.simulate("n50")), "out/"), small."""
+    page = uq.write_report(uq.fit_campaign(uq.simulate("n50", **SMALL), settings=QUICK), tmp_path / "out", draws=100)
+    assert page == tmp_path / "out" / "report.html"
+    text = page.read_text(encoding="utf-8")
+    assert "Reconstructed data" in text and "simulated n50 (seed 0)" in text
+    assert sorted(p.name for p in page.parent.glob("*.png")) == [
+        "fig2_force.png", "fig3_volume.png", "fig4_feff.png", "fig5_traditional.png", "fig_feff_scatter.png",
+        "test_1bar.png", "test_5bar.png"]
+
+
+def test_simulate_equals_the_cli_csv_read_back(tmp_path):
+    """uq.simulate gives the readings `uq simulate` writes and read_recordings reads, bit for bit."""
+    from uq.cli import main
+
+    csv = tmp_path / "r.csv"
+    assert main(["simulate", "--out", str(csv), "--pressures", "1,5", "--step-mm", "10", "--seed", "4", "--quiet"]) == 0
+    from_file = uq.read_recordings(csv)
+    in_memory = uq.simulate("n50", seed=4, **SMALL)
+    assert (in_memory.x0_m, in_memory.piston_area_m2) == (from_file.x0_m, from_file.piston_area_m2)
+    for a, b in zip(in_memory.tests, from_file.tests, strict=True):
+        assert a.pressure_bar == b.pressure_bar
+        for field in ("height_m", "force_N", "piston_m", "compression", "step"):
+            assert (getattr(a, field) == getattr(b, field)).all(), field
+    assert in_memory.comments[:2] == from_file.comments[:2]  # the lines that say what made them
+    assert from_file.comments == tuple(uq._report.read_comments(csv))
+
+
+def test_write_report_refuses_too_few_draws(tmp_path):
+    with pytest.raises(uq.InputError, match="at least 10 draws"):
+        uq.write_report(object(), tmp_path, draws=5)
+
+
+@pytest.mark.parametrize("name", ["simulate", "fit_campaign", "write_report", "campaign_bands", "check",
+                                  "enable_x64", "read_stand", "StandDescription", "table1"])
+def test_docstring_examples(name):
+    _run_examples(getattr(uq, name), name)
+
+
+@pytest.mark.slow
+def test_package_examples_surface_margin_diagnose():
+    """uq/__init__.py's examples: fit_surface, margin, SurfaceAnswer, diagnose (minutes: JIT and screening)."""
+    _run_examples(uq, "uq")
+
+
+def test_public_names_resolve_and_are_documented():
+    for name in uq.__all__:
+        obj = getattr(uq, name)
+        if callable(obj) and name not in ("InputError",):
+            assert (obj.__doc__ or "").strip(), f"uq.{name} has no docstring"
+    assert uq.simulate is uq._stand.simulate_recordings and uq.check is uq._check.check_documents
+
+
+def test_import_uq_loads_no_jax_and_leaves_x64_alone():
+    code = ("import sys, uq; assert 'jax' not in sys.modules and 'numpy' not in sys.modules, sorted(sys.modules); "
+            "uq.Layout; import jax; assert not jax.config.read('jax_enable_x64'); "
+            "uq.fit_campaign; assert jax.config.read('jax_enable_x64'); "
+            "uq.enable_x64(); uq.enable_x64(); assert jax.config.read('jax_enable_x64')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout == "" and "Warning" not in out.stderr

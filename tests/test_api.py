@@ -43,6 +43,7 @@ def test_notebook_one_liner(tmp_path):
 
 def test_simulate_equals_the_cli_csv_read_back(tmp_path):
     """uq.simulate gives the readings `uq simulate` writes and read_recordings reads, bit for bit."""
+    from uq._report import read_comments
     from uq.cli import main
 
     csv = tmp_path / "r.csv"
@@ -55,7 +56,7 @@ def test_simulate_equals_the_cli_csv_read_back(tmp_path):
         for field in ("height_m", "force_N", "piston_m", "compression", "step"):
             assert (getattr(a, field) == getattr(b, field)).all(), field
     assert in_memory.comments[:2] == from_file.comments[:2]  # the lines that say what made them
-    assert from_file.comments == tuple(uq._report.read_comments(csv))
+    assert from_file.comments == tuple(read_comments(csv))
 
 
 def test_write_report_refuses_too_few_draws(tmp_path):

@@ -769,7 +769,7 @@ def _print_table(source, ans, info, queries, results) -> None:
             c = r["usable_stroke"]["stroke_credible"]
             stroke = f"{c['from_m'] * 1e3:.1f}..{c['to_m'] * 1e3:.1f}" if c else "none"
         print(f"  {q['row']:>4}  {q['height_mm']:9g}  {q['load_N']:8g}  {q['prob']:4g}  "
-              f"{e['mean']:6.3f} ({e['q05']:.3f}..{e['q95']:.3f})  {r['pressure_bar_for_prob']:10.3f}  {force:<25}  {stroke}")
+              f"{e['mean']:6.3f} ({e['q05']:.3f}..{e['q95']:.3f})  {r['pressure_bar_for_prob']:10.3f}  {force:<25}  {stroke}".rstrip())
 
 
 def _fit_and_choose(args, rec, stand):

@@ -200,7 +200,7 @@ def main(argv=None) -> int:
     todo = [c for c in cases(args.seeds) if key(c) not in done]
     if not args.only_summary and todo:
         # Clean controls and visible effects first, so a cut-short run still says something.
-        todo.sort(key=lambda c: (c["seed"] % 500, {"clean": 0, "visible": 1, "pair": 2, "near-limit": 3}[c["level"]]))
+        todo.sort(key=lambda c: ((c["seed"] - 1000) % 250, {"clean": 0, "visible": 1, "pair": 2, "near-limit": 3}[c["level"]]))
         ctx = mp.get_context("spawn")
         with ctx.Pool(args.jobs, maxtasksperchild=None) as pool:
             for r in pool.imap_unordered(run_case, todo):

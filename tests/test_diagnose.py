@@ -245,3 +245,17 @@ def test_n50_no_stand_in_offset_and_force_fit_not_worse(n50_recordings):
         assert {"max", "n_over_0.7"} <= set(res[key]["pareto_k"])
     if not res["final"]["noise_check"]["passes"]:
         assert res["provisional"] and res["final"]["left"]
+
+
+def test_nested_mechanisms_the_larger_goes_first():
+    """A casing force (4 parameters) can stand in for a constant offset (1): when both cost little
+    to leave out, the casing force is removed first, whichever is cheaper by a few nats."""
+    from uq._diagnose import GAIN_MIN, _to_remove
+
+    table = {"force_offset": {"delta_elpd": 0.4}, "casing_force": {"delta_elpd": 1.5},
+             "hysteresis": {"delta_elpd": 30.0}}
+    assert _to_remove(["force_offset", "casing_force", "hysteresis"], table) == "casing_force"
+    table["casing_force"]["delta_elpd"] = 0.4 + GAIN_MIN + 1.0  # clearly costlier: the cheapest goes
+    assert _to_remove(["force_offset", "casing_force"], table) == "force_offset"
+    table = {"hysteresis": {"delta_elpd": 2.0}, "thermal_drift": {"delta_elpd": 1.0}}
+    assert _to_remove(["hysteresis", "thermal_drift"], table) == "thermal_drift"  # equal size: cheapest

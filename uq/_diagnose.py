@@ -16,8 +16,9 @@ Pipeline (models in ``_diagnose_models``):
    stalled and took a force_offset as a stand-in). At each step every mechanism's worth is
    the ELPD lost by leaving it out; one stays only if that loss exceeds 4 nats and z =
    loss / SE exceeds the Bonferroni-adjusted threshold over the mechanisms tested (4 SE for
-   one, about 4.4 for six). The cheapest is removed (on a tie the one with more parameters:
-   a shaped casing force goes before a constant offset) until every remaining one stays.
+   one, about 4.4 for six). The cheapest is removed (of those within 4 nats of the cheapest, the
+   one with most parameters: a shaped casing force goes before a constant offset it can stand
+   in for) until every remaining one stays.
    Mechanisms are reported as provisional while the final model's noise scales exceed the
    stand's error budget by more than 2x (its own noise-scale check).
 4. The final model's sampled parameters are drawn with emcee (short chains; R-hat, ESS),
@@ -356,6 +357,17 @@ def _elimination_step(current: Fit, fits: dict, order: int, d, rng, kfold: KFold
     return {"from": list(current.names), "z_required": z_req, "candidates": table, "removed": None}
 
 
+def _to_remove(removable: list[str], table: dict) -> str:
+    """Which failing mechanism goes next: of those whose removal costs at most GAIN_MIN nats more
+    than the cheapest, the one with the most parameters (then the cheapest). Mechanisms that can
+    stand in for each other (a shaped casing force contains a constant offset) both cost little
+    to leave out while the other is present; the larger goes first, so the simpler explanation
+    stays when it suffices."""
+    cheapest = min(table[m]["delta_elpd"] for m in removable)
+    near = [m for m in removable if table[m]["delta_elpd"] <= cheapest + GAIN_MIN]
+    return max(near, key=lambda m: (M.N_PARAMS[m], -table[m]["delta_elpd"]))
+
+
 def _select(base: Fit, order: int, d, rng, kfold: KFold, gain_se: float, max_mechanisms: int):
     """Backward elimination from the model with every mechanism (module docstring, step 3).
 
@@ -373,8 +385,7 @@ def _select(base: Fit, order: int, d, rng, kfold: KFold, gain_se: float, max_mec
         removable = [m for m in current.names if not table[m]["passes"] or len(current.names) > max_mechanisms]
         if not removable:
             break
-        # the cheapest to leave out; on a tie the one with more parameters (parsimony)
-        drop = min(removable, key=lambda m: (table[m]["delta_elpd"], -M.N_PARAMS[m]))
+        drop = _to_remove(removable, table)
         step["removed"] = drop
         current = fits[tuple(n for n in current.names if n != drop)]
     chosen = [(m, steps[-1]["candidates"][m]) for m in current.names] if current.names else []
@@ -462,8 +473,8 @@ def diagnose(rec, *, seed: int = 0, settings: Settings | None = None, max_mechan
                      f"only if leaving it out loses more than {GAIN_MIN:g} nats of ELPD and z = loss / SE exceeds "
                      f"z_required, the Bonferroni-adjusted one-sided threshold (a single mechanism would need "
                      f"{gain_se:g} SE; the tail probability is shared over the mechanisms tested at the step); at "
-                     "each step the one whose absence costs least is removed (on a tie the one with more "
-                     f"parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {K_BAD:g}; otherwise "
+                     f"each step the one whose absence costs least is removed (of those within {GAIN_MIN:g} nats of "
+                     f"it, the one with most parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {K_BAD:g}; otherwise "
                      f"the terms with k > {K_BAD:g} are refitted exactly (leave that row out), or, with more than "
                      f"{MAX_RELOO} of them in a model, both models are scored by exact {N_FOLDS}-fold "
                      "cross-validation. Mechanisms are 'provisional' while the final model "

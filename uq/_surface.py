@@ -925,7 +925,7 @@ def configure_surface(p) -> None:
                    help="skip the PSIS-LOO comparison with the per-pressure cubics")
     p.add_argument("--report", metavar="DIR", help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR")
     p.add_argument("--out", metavar="DIR",
-                   help="write DIR/surface.nc: the surface posterior as a saved answer for uq margin --fit (docs/formats.md)")
+                   help="the folder to write: surface.nc, the surface posterior as a saved answer for uq margin --fit (docs/formats.md)")
     add_stand(p)
 
 

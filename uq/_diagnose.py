@@ -403,14 +403,29 @@ def noise_check(w: dict) -> dict:
             "failing": [q for q, bad in fails.items() if bad]}
 
 
+def _plain(v):
+    """numpy scalars (and lists of them) as plain Python numbers, for JSON."""
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def _where_text(label: str, v) -> str:
+    if label == "pressure_bar":
+        return f"{float(v):g} bar"
+    if label == "height_mm":
+        return f"{float(v[0]):g}-{float(v[1]):g} mm" if isinstance(v, list | tuple) else f"{float(v):g} mm"
+    return str(v)
+
+
 def _left(w: dict, top: int = 6) -> list[dict]:
     """Where a model's remaining misfit sits: the groups with the largest mean residual, by quantity."""
     out = []
     for q, unit in (("force", "N"), ("volume", "cm^3")):
         groups = []
         for key, lab in (("by_pressure", "pressure_bar"), ("by_height", "height_mm"), ("by_branch", "branch")):
-            groups += [{"quantity": q, "group": key[3:], "at": g[lab], "mean_residual": g["mean"], "rms": g["rms"],
-                        "unit": unit} for g in w[q][key] if g["flagged"]]
+            groups += [{"quantity": q, "group": key[3:], "at": _plain(g[lab]), "where": _where_text(lab, g[lab]),
+                        "mean_residual": g["mean"], "rms": g["rms"], "unit": unit} for g in w[q][key] if g["flagged"]]
         groups.sort(key=lambda g: -abs(g["mean_residual"]))
         out += groups[:top]
     return out
@@ -549,7 +564,7 @@ def summary_text(res: dict) -> str:
         lines.append("the mechanisms above are PROVISIONAL: the final model does not explain the recordings to "
                      "within the stand's noise, so a missing mechanism may be standing in for another; the remaining "
                      "misfit sits at:")
-        lines += [f"  - {g['quantity']} by {g['group']} {g['at']}: mean residual {g['mean_residual']:.3g} {g['unit']}, "
+        lines += [f"  - {g['quantity']} by {g['group']} {g['where']}: mean residual {g['mean_residual']:.3g} {g['unit']}, "
                   f"rms {g['rms']:.3g} {g['unit']}" for g in f["left"]]
     ratios = [a["volume_over_force"] for a in res["where"]["area_force_vs_volume_at_x0"]]
     if max(abs(r - 1.0) for r in ratios) > 0.05:

@@ -275,8 +275,9 @@ def usable_stroke(model, height_m: float, pressure_bar: float, target_N: float, 
     }
 
 
-COVERAGE_NOTE = ("surface coverage proven by simulation for truths inside the default orders' class "
-                 "(reports/surface-coverage/coverage.json, tests/test_surface.py::test_slow_coverage)")
+COVERAGE_NOTE = ("the fallback when the data do not decide; its coverage for truths inside the default orders' class "
+                 "is checked by tests/test_surface.py::test_fast_coverage (10 replications); the committed "
+                 "100-replication report predates the pressure-error sign fix (README, known gap)")
 
 
 def choose_model(fit: SurfaceFit | None, cubic_fit=None, comparison: dict | None = None, forced: str = "auto"):

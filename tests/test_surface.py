@@ -216,6 +216,7 @@ def test_integrated_loo_equals_refitting_without_the_reading():
     assert got[i] == pytest.approx(want, rel=1e-9)
 
 
+@pytest.mark.slow  # about 2 min on 2 idle cores: the statistical suites run under -m slow
 def test_fast_coverage(tmp_path):
     """10 replications of the default model on n50-smooth (its truth nested in the default class);
     each of the three coverage counts is accepted in its binomial region (false failure < 1e-3 overall)."""

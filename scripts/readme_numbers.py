@@ -175,15 +175,22 @@ def diagnose_proof_summary(rel: str):
         det = d.get("detection", {})
         named = sum(v.get("named", 0) for v in det.values())
         runs = sum(v.get("runs", 0) for v in det.values())
-        cov = sum(v.get("covered", 0) for v in det.values())
+        cov = d.get("coverage_90_overall", {})
         missed = [k for k, v in det.items() if v.get("named", 0) < v.get("runs", 0)]
         wrong = sum(n for true, row in d["confusion"].items() for name, n in row.items()
                     if name not in (true, "nothing named"))
+        pairs = d.get("pairs", {})
+        extra = d.get("spurious_extra_mechanism_in_single_runs", {})
         lines = [f"From `{rel}` ({d['n_runs']} campaigns):", "",
                  f"- clean campaigns: mismatch detected in {fa['mismatch_detected']} of {fa['runs']}, "
-                 f"a mechanism named in {fa['mechanism_named']}",
-                 f"- wrong mechanisms named (single-mechanism and clean runs): {wrong}",
-                 f"- concealed mechanisms found: {named} of {runs} runs; truth inside the 90 % interval for {cov} of {named}",
+                 f"a mechanism named in {fa['mechanism_named']} ({fa.get('other_stand_runs', 0)} of the clean "
+                 f"campaigns came from a stand noisier than the model assumes)",
+                 f"- wrong mechanisms named (single-mechanism and clean runs): {wrong}; an extra mechanism "
+                 f"beside the true one: {extra.get('with_extra', 0)} of {extra.get('runs', 0)} single-mechanism runs",
+                 f"- concealed single mechanisms found: {named} of {runs} runs; pairs with both named exactly: "
+                 f"{pairs.get('both_named_exactly', 0)} of {pairs.get('runs', 0)}",
+                 f"- named true mechanisms with the truth inside the 90 % interval: {cov.get('true_in_90', 0)} of "
+                 f"{cov.get('named_true', 0)}",
                  f"- not always found: {', '.join(missed) or 'none'}"]
         return "\n".join(lines) + "\n"
 

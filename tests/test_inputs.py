@@ -258,26 +258,18 @@ def test_device_is_written_to_not_replaced(monkeypatch):
 
 
 def test_pipe_is_written_to_not_replaced(tmp_path):
-    import threading
-
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
-    got = []
-
-    def read():
-        with open(fifo, "rb") as fh:
-            got.append(fh.read())
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
+    # The reading end is opened first, without blocking, so the writer's open cannot wait for a
+    # partner (a reader thread could hang the suite if it was scheduled late); the text fits
+    # in the pipe's buffer, so the write returns before anything is read.
+    rd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
     try:
         write_text_atomic(fifo, "through the pipe")
+        got = os.read(rd, 1024)
     finally:
-        if reader.is_alive():  # the writer replaced the pipe instead: unblock the reader
-            with open(fifo, "wb"):
-                pass
-        reader.join(5)
-    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and got == [b"through the pipe"]
+        os.close(rd)
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and got == b"through the pipe"
 
 
 @pytest.mark.parametrize("where, expect", [

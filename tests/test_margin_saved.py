@@ -15,23 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uq.cli import main
-
 QUICK = ["--ensembles", "2", "--max-steps", "200", "--quiet"]
 QUERY = ["--height-mm", "110", "--load-N", "8000", "--pressure-bar", "5", "--tolerance-pct", "5"]
 
 
-def run(argv) -> int:
-    try:
-        return main([str(a) for a in argv])
-    except SystemExit as exc:
-        return exc.code
-
-
-def one_line(text: str) -> str:
-    lines = [ln for ln in text.splitlines() if ln.strip()]
-    assert len(lines) == 1, text
-    return lines[0]
+from test_cli import one_line, run  # noqa: E402  (the CLI helpers live once, in tests/test_cli.py)
 
 
 def assert_same(a, b, path="result"):

@@ -71,7 +71,7 @@ def key(case: dict) -> str:
 
 def run_case(case: dict) -> dict:
     from uq._diagnose import diagnose, public
-    from uq._recordings import Recordings, Test
+    from uq._recordings import PressureTest, Recordings
     from uq._sampler import Settings
     from uq._stand import Layout, simulate
     from uq._stand_description import PAPER_STAND
@@ -79,7 +79,7 @@ def run_case(case: dict) -> dict:
     stand = PAPER_STAND.replace(**case.get("stand", {}))
     tests = simulate("n50-traditional", seed=case["seed"], effects=case["effects"], layout=Layout(**LAYOUTS[case["layout"]]),
                      stand=stand)
-    rec = Recordings("proof", tuple(Test(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"],
+    rec = Recordings("proof", tuple(PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"],
                                          t["step"], np.arange(t["step"].size)) for t in tests))
     t0 = time.time()
     res = public(diagnose(rec, seed=case["seed"], settings=Settings(min_steps=300, chunk=200, tau_multiple=30.0)))

@@ -183,9 +183,10 @@ def test_simultaneous_band_holds_whole_draw_curves_and_pointwise_does_not():
 def _plugin_draws(test, x0_m, n, rng):
     """Closed-form posterior of the coefficients at the noise mode (the sampler's exact
     conditional draws without the noise parameters' spread): (n, 4) force and piston draws."""
-    from uq._cubic import BASIS_SCALE_M, _cubic_eval, _posteriors, _start, basis, least_squares
+    from uq._cubic import _cubic_eval, _posteriors, _start, basis, least_squares
     from uq._jax import jnp
     from uq._linear import posterior_cov
+    from uq._physics import BASIS_SCALE_M
 
     u = test.height_m - x0_m
     lsq_f, lsq_l = least_squares(u, test.force_N), least_squares(u, test.piston_m)

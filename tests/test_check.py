@@ -276,12 +276,12 @@ def test_threshold_is_bonferroni_chi2():
 
 
 def _simulated(seed: int, pressures=(1.0, 5.0, 10.0)):
-    from uq._recordings import Recordings, Test
+    from uq._recordings import PressureTest, Recordings
     from uq._stand import Layout, simulate
 
     tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=pressures))
     return Recordings(f"simulated seed {seed}", tuple(
-        Test(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
+        PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
              np.arange(t["step"].size)) for t in tests))
 
 
@@ -312,9 +312,10 @@ def test_correct_fits_pass_on_seeded_simulations(tmp_path):
 
 def _plugin_result(rec) -> dict:
     """Closed-form shortcut: the Gaussian coefficient posterior at the noise parameters' mode."""
-    from uq._cubic import BASIS_SCALE_M, _cubic_eval, _posteriors, _start, basis, least_squares
+    from uq._cubic import _cubic_eval, _posteriors, _start, basis, least_squares
     from uq._jax import jnp
     from uq._linear import posterior_cov
+    from uq._physics import BASIS_SCALE_M
 
     tests = []
     D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))

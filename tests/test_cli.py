@@ -72,7 +72,6 @@ def _bad_usage_rows(tmp: Path):
         (["margin", N50, "--height-mm", "nan", "--load-N", 13000], ["--height-mm"]),
         (["fit", N50, "--seed", -1], ["--seed"]),
         (["fit", N50, "--walkers", 3], ["--walkers"]),
-        (["fit", N50, "--jobs", 0], ["--jobs"]),
         (["fit", N50, "--max-steps", "1e3"], ["--max-steps", "integer"]),
         (["fit", N50, "--x0-mm", "inf"], ["--x0-mm"]),
         (["fit", N50, "--json", tmp], ["--json", "folder"]),

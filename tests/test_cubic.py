@@ -23,9 +23,9 @@ FAST = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)
 def _test(pressure=5.0, seed=1, spring="n50", layout=None):
     layout = layout or Layout(pressures_bar=(pressure,))
     t = simulate(spring, seed=seed, layout=layout)[0]
-    from uq._recordings import Test
+    from uq._recordings import PressureTest
 
-    return Test(pressure, t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"], np.arange(t["step"].size) + 2)
+    return PressureTest(pressure, t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"], np.arange(t["step"].size) + 2)
 
 
 def test_levenberg_marquardt_equals_polyfit():

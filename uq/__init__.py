@@ -65,9 +65,9 @@ __version__ = "0.1.0"
 
 #: public name -> module that defines it, or (module, name there)
 _API = {
-    "CampaignFit": "_cubic", "TestFit": "_cubic", "fit_campaign": "_cubic", "fit_test": "_cubic",
+    "CampaignFit": "_cubic", "PressureFit": "_cubic", "fit_campaign": "_cubic", "fit_test": "_cubic",
     "least_squares": "_cubic", "InputError": "_errors", "MECHANISMS": "_mechanisms",
-    "Recordings": "_recordings", "Test": "_recordings", "read_recordings": "_recordings",
+    "Recordings": "_recordings", "PressureTest": "_recordings", "read_recordings": "_recordings",
     "table1": "_reference", "table2": "_reference", "fit_json": "_results", "Settings": "_sampler",
     "Layout": "_stand", "simulate": ("_stand", "simulate_recordings"), "true_curves": "_stand",
     "enable_x64": "_jax", "write_report": "_report", "campaign_bands": "_bands", "CampaignBands": "_bands",

@@ -34,15 +34,16 @@ the same code runs on Table 1 itself (one "draw" per test) or on a posterior.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._physics import BAR_PA, force_noise_var
 from ._summary import band
 from ._summary import estimate as _estimate
 
 LEVEL = 0.90
-BAR_PA = 1.0e5
 REFERENCE_BAR = 5.0  # the paper's Figure 5 uses the 5-bar volume curve
 SCATTER_MIN_BAR = 1.0  # the paper's Figure 4 / scatter: tests from 1 to 10 bar
 EXTRA_HEIGHT_M = 0.075  # Table 1 gives the paper's "8.51 % at x_min" at 75 mm
@@ -100,8 +101,8 @@ SIMULTANEOUS = {"feff": "feff_m2", "spread_own": "spread_own_N", "spread_ref": "
                 "spread_own_pct": "spread_own_pct", "spread_ref_pct": "spread_ref_pct"}
 
 
-@dataclass(eq=False)
-class TestBands:
+@dataclass(eq=False, frozen=True)
+class PressureBands:
     """Bands of one test on the campaign grid ``x_m`` (SI: N, m, m^3, m^2, %)."""
 
     pressure_bar: float
@@ -127,12 +128,12 @@ class TestBands:
         return self.pressure_bar * BAR_PA
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, frozen=True)
 class CampaignBands:
     x_m: np.ndarray  # (G,) height grid
     x0_m: float
     piston_area_m2: float
-    tests: list[TestBands]
+    tests: list[PressureBands]
     reference_bar: float  # pressure of the test whose volume curve gives the traditional force
     reference_note: str  # how the reference test was chosen
     scatter_pressures_bar: list[float]  # tests entering the F_eff scatter
@@ -141,7 +142,7 @@ class CampaignBands:
     n_draws: int
     seed: int
 
-    def at(self, pressure_bar: float) -> TestBands:
+    def at(self, pressure_bar: float) -> PressureBands:
         for t in self.tests:
             if abs(t.pressure_bar - pressure_bar) < 1e-9:
                 return t
@@ -237,6 +238,7 @@ def bands_from_coefficients(
     piston_area_m2: float,
     x_max_m=None,
     noise=None,
+    noise_ref_force=None,
     reference_bar: float = REFERENCE_BAR,
     scatter_min_bar: float = SCATTER_MIN_BAR,
     extra_heights: dict | None = None,
@@ -248,7 +250,8 @@ def bands_from_coefficients(
     pressures_bar (T,); force, piston (T, D, 4) paper-basis coefficients (SI, u in m), draw i
     of every test forming joint draw i (D = 1 for point values such as Table 1); noise
     (T, D, 3) = sigma0_N, rel_force, sigma_L_m or None (predictive bands then equal the mean
-    bands); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
+    bands); noise_ref_force (T, G): the force level F_ref of the relative noise term on the grid,
+    as the fit used it (its least-squares curve; default: each draw's own |force|); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
     label -> height (m) where the scatter is also reported (defaults: x0, x_max, x_min of the
     grid and 75 mm).
     """
@@ -276,7 +279,8 @@ def bands_from_coefficients(
     trad_ref = p_pa * feff_vol[ref][None]
     if noise is not None:
         nz = np.asarray(noise, float)
-        sd_f = np.sqrt(nz[..., 0:1] ** 2 + (nz[..., 1:2] * np.abs(P)) ** 2)
+        f_ref = np.abs(P) if noise_ref_force is None else np.asarray(noise_ref_force, float)[:, None, :]
+        sd_f = np.sqrt(force_noise_var(nz[..., 0:1], nz[..., 1:2], f_ref))
         P_pred = P + sd_f * rng.standard_normal(P.shape)
         L_pred = L + nz[..., 2:3] * rng.standard_normal(L.shape)
     else:
@@ -312,7 +316,7 @@ def bands_from_coefficients(
             "spread_ref_pct": estimate(100.0 * (tr_ref0 - a_P) / a_P),
         }
         sim = {name: SimultaneousBand.of(quantities[name][t], level) for name in SIMULTANEOUS}
-        tests.append(TestBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B))
+        tests.append(PressureBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B))
 
     sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
     heights = {"x0": x0_m, "x_max": float(x.max()), "x_min": float(x.min()), "75 mm": EXTRA_HEIGHT_M}
@@ -374,7 +378,16 @@ def campaign_bands(cf, *, n_grid: int = 181, n_draws: int = 2000, seed: int = 0,
         [t.pressure_bar for t in cf.tests], np.stack(F), np.stack(L),
         x_grid=x, x0_m=rec.x0_m, piston_area_m2=rec.piston_area_m2,
         x_max_m=[float(t.test.height_m.max()) for t in cf.tests], noise=np.stack(N),
+        noise_ref_force=_noise_reference(cf.tests, x - rec.x0_m),
         reference_bar=reference_bar, seed=int(rng.integers(2**31)),
     )
-    cb.seed = int(seed)
-    return cb
+    return dataclasses.replace(cb, seed=int(seed))
+
+
+def _noise_reference(tests, u) -> np.ndarray | None:
+    """The fits' force level of the relative noise term on the grid: |least-squares cubic| (T, G),
+    as ``uq._cubic.fit_test`` sets it at the data; None when the fits do not carry it."""
+    if not all(hasattr(t, "lsq_force") for t in tests):
+        return None
+    return np.stack([np.abs(np.polynomial.polynomial.polyval(u, t.lsq_force)) for t in tests])
+

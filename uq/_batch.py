@@ -288,7 +288,7 @@ def _task_fit(job: dict, out: Path) -> dict:
     from ._results import fit_json, save_posteriors
 
     rec = _recordings(job)
-    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), jobs=1)
+    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
     save_posteriors(cf, out)
     emit_json(fit_json(cf), str(out / "fit.json"))
     return {"converged": cf.converged, "output": "fit.json",
@@ -303,7 +303,7 @@ def _task_report(job: dict, out: Path) -> dict:
     from ._results import fit_json
 
     rec = _recordings(job)
-    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), jobs=1)
+    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
     cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
     page = write_report(cf, out, bands=cb)
     emit_json(fit_json(cf) | {"bands": cb.summary(), "report": page.name}, str(out / "fit.json"))

@@ -35,7 +35,7 @@ import numpy as np
 from ._cmd_common import say
 from ._errors import InputError
 from ._io import emit_json
-from ._recordings import Test
+from ._recordings import PressureTest
 from ._reference import FORCE_NAMES
 from ._sampler import Settings
 
@@ -43,7 +43,7 @@ BENCH_PRESSURE_BAR = 5.0
 BASELINE_WALKERS = 32
 
 
-def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = BENCH_PRESSURE_BAR) -> tuple[Test, float, str]:
+def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = BENCH_PRESSURE_BAR) -> tuple[PressureTest, float, str]:
     """The workload: (test, x0_m, description)."""
     if recordings:
         from ._recordings import read_recordings
@@ -58,7 +58,7 @@ def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = B
     from ._stand import Layout, simulate
 
     t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
-    test = Test(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
+    test = PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
                 np.arange(t["step"].size))
     return test, PAPER_X0_M, f"{pressure_bar:g} bar test of the virtual stand (n50, seed {seed})"
 
@@ -74,7 +74,7 @@ def _ess_force(draws: np.ndarray) -> float:
 # --------------------------------------------------------------------------- (a) project
 
 
-def run_project(test: Test, x0_m: float, *, seed: int, seconds: float, settings: Settings) -> dict:
+def run_project(test: PressureTest, x0_m: float, *, seed: int, seconds: float, settings: Settings) -> dict:
     from ._cubic import fit_test
 
     fit_test(test, x0_m, seed=seed, settings=Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles,
@@ -99,8 +99,9 @@ def run_project(test: Test, x0_m: float, *, seed: int, seconds: float, settings:
 class PlainForcePosterior:
     """Log posterior of (a, b, c, d, log sigma0, log r), paper basis, plain numpy, one walker a call."""
 
-    def __init__(self, test: Test, x0_m: float):
-        from ._cubic import BASIS_SCALE_M, FORCE_PRIOR_SD_N, NOISE_PRIOR_MEAN, NOISE_PRIOR_SD
+    def __init__(self, test: PressureTest, x0_m: float):
+        from ._cubic import FORCE_PRIOR_SD_N, NOISE_PRIOR_MEAN, NOISE_PRIOR_SD
+        from ._physics import BASIS_SCALE_M
 
         u = test.height_m - x0_m
         self.U = np.vander(u, 4, increasing=True)
@@ -131,7 +132,7 @@ class PlainForcePosterior:
         return center + spread * rng.standard_normal((n_walkers, 6))
 
 
-def run_baseline(test: Test, x0_m: float, *, seed: int, seconds: float, n_walkers: int = BASELINE_WALKERS,
+def run_baseline(test: PressureTest, x0_m: float, *, seed: int, seconds: float, n_walkers: int = BASELINE_WALKERS,
                  chunk: int = 100) -> dict:
     post = PlainForcePosterior(test, x0_m)
     rng = np.random.default_rng(seed)
@@ -254,10 +255,10 @@ def scaling(*, seed: int, settings: Settings, pressures: tuple[float, ...] = (2.
         for f in factors:
             rec, step = _scaled_campaign(tmp, f, seed, pressures)
             fit_campaign(rec, seed=seed, settings=Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles,
-                                                           max_steps=20, min_steps=20), jobs=1)
+                                                           max_steps=20, min_steps=20))
             with PeakRSS() as mem:
                 t0 = time.perf_counter()
-                cf = fit_campaign(rec, seed=seed, settings=settings, jobs=1)
+                cf = fit_campaign(rec, seed=seed, settings=settings)
                 wall = time.perf_counter() - t0
             steps = sum(int(t.diagnostics["n_steps"]) for t in cf.tests)
             rows.append({"factor": f, "step_mm": step, "points_per_test": rec.n_points / len(rec.tests),

@@ -35,8 +35,9 @@ from ._cubic import (
     to_paper_basis,
 )
 from ._errors import InputError
+from ._physics import force_noise_var
 from ._progress import progress
-from ._recordings import Test
+from ._recordings import PressureTest
 from ._reference import FORCE_NAMES, PISTON_NAMES, table1
 from ._sampler import Settings
 from ._stand import Layout, simulate
@@ -45,7 +46,7 @@ QUANTITIES = FORCE_NAMES + PISTON_NAMES
 N_RANKS = 99  # draws per replication for SBC ranks -> ranks 0..99, 10 bins of 10
 
 
-def _test_from_model(rng, pressure_bar: float, x0_m: float) -> tuple[Test, np.ndarray, np.ndarray]:
+def _test_from_model(rng, pressure_bar: float, x0_m: float) -> tuple[PressureTest, np.ndarray, np.ndarray]:
     """A test drawn from the per-pressure model's priors; returns (test, truth (8,), noise (3,))."""
     heights, comp = Layout(pressures_bar=(pressure_bar,)).heights()
     u = heights - x0_m
@@ -55,19 +56,19 @@ def _test_from_model(rng, pressure_bar: float, x0_m: float) -> tuple[Test, np.nd
     log_noise = rng.normal(NOISE_PRIOR_MEAN, NOISE_PRIOR_SD)
     s0, rel, sL = np.exp(log_noise)
     mu_f, mu_l = X @ alpha_f, X @ alpha_l
-    force = mu_f + np.sqrt(s0**2 + (rel * mu_f) ** 2) * rng.standard_normal(u.size)
+    force = mu_f + np.sqrt(force_noise_var(s0, rel, mu_f)) * rng.standard_normal(u.size)
     piston = mu_l + sL * rng.standard_normal(u.size)
     truth = np.concatenate([to_paper_basis(alpha_f), to_paper_basis(alpha_l)])
     steps = np.arange(u.size)
-    return Test(pressure_bar, heights, force, piston, comp, steps, steps + 2), truth, np.array([s0, rel, sL])
+    return PressureTest(pressure_bar, heights, force, piston, comp, steps, steps + 2), truth, np.array([s0, rel, sL])
 
 
-def _test_from_stand(seed: int, pressure_bar: float) -> tuple[Test, np.ndarray]:
+def _test_from_stand(seed: int, pressure_bar: float) -> tuple[PressureTest, np.ndarray]:
     t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
     t1 = table1()
     i = t1.index(pressure_bar)
     steps = t["step"]
-    test = Test(pressure_bar, t["height_m"], t["force_N"], t["piston_m"], t["compression"], steps, steps + 2)
+    test = PressureTest(pressure_bar, t["height_m"], t["force_N"], t["piston_m"], t["compression"], steps, steps + 2)
     return test, np.concatenate([t1.force[i], t1.piston[i]])
 
 
@@ -174,7 +175,7 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
                              np.array(conv), time.perf_counter() - t0, np.array(pred) if pred else None)
 
 
-def _predictive_coverage(fit, fresh: Test, rng, n_draws: int = 2000) -> np.ndarray:
+def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> np.ndarray:
     """Share of a fresh replicate's force readings inside the 90 % predictive interval,
     for the lowest and highest third of the forces; (2,)."""
     f, nz = fit.flat("force"), fit.flat("noise")

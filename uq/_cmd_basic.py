@@ -151,7 +151,7 @@ def command_fit(args) -> int:
     from ._results import fit_json, save_posteriors
 
     rec = load(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args), jobs=args.jobs)
+    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args))
     result = fit_json(cf)
     print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {rec.x0_m * 1e3:g} mm")
     print(f"{'p_u bar':>8} {'a_P N':>10} {'90% interval':>23} {'b_L':>8} {'s_P N':>8} {'eps_P %':>8}  R-hat  ESS")

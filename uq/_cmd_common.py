@@ -68,8 +68,8 @@ def positive_int(text: str) -> int:
 
 def walkers(text: str) -> int:
     value = _number(text, int)
-    if value < 4 or value % 2:  # emcee's ensemble moves split the walkers in two halves
-        raise argparse.ArgumentTypeError(f"expected an even number of at least 4 walkers, got '{text}'")
+    if value < 4 or value % 4:  # emcee's snooker move splits each ensemble in four sub-ensembles
+        raise argparse.ArgumentTypeError(f"expected a multiple of 4 walkers, at least 4, got '{text}'")
     return value
 
 
@@ -116,11 +116,10 @@ def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> N
 
 def add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
-    p.add_argument("--walkers", type=walkers, default=DEFAULT_WALKERS, help="emcee walkers per ensemble (even, >= 4)")
+    p.add_argument("--walkers", type=walkers, default=DEFAULT_WALKERS, help="emcee walkers per ensemble (a multiple of 4)")
     p.add_argument("--ensembles", type=positive_int, default=DEFAULT_ENSEMBLES, help="independent ensembles (>= 2, for R-hat)")
     p.add_argument("--max-steps", type=positive_int, default=DEFAULT_MAX_STEPS, help="cap on emcee steps per ensemble")
     p.add_argument("--strict", action="store_true", help="exit status 1 when sampling did not converge")
-    p.add_argument("--jobs", type=positive_int, default=1, help="processes for the per-test fits (results do not depend on it)")
 
 
 def settings_from(args):

@@ -21,8 +21,6 @@ coefficients, reported in the paper's basis (a + b u + c u^2 + d u^3, SI units).
 
 from __future__ import annotations
 
-import concurrent.futures
-import multiprocessing
 import warnings
 from dataclasses import dataclass
 
@@ -32,12 +30,11 @@ import optimistix as optx
 
 from ._jax import jax, jnp
 from ._linear import draw_linear_numpy, gaussian_loglik, linear_posterior
-from ._progress import progress
-from ._recordings import Recordings, Test
+from ._physics import BASIS_SCALE_M, force_noise_var, to_paper_basis
+from ._recordings import PressureTest, Recordings
 from ._reference import FORCE_NAMES, PISTON_NAMES
-from ._sampler import Chains, Settings, convergence, run_ensembles, thin
+from ._sampler import Chains, Settings, convergence, run_many, thin
 
-BASIS_SCALE_M = 0.05
 MAX_DRAWS = 8000  # retained posterior samples per test after thinning
 FORCE_PRIOR_SD_N = 1.0e5
 PISTON_PRIOR_SD_M = 1.0
@@ -51,12 +48,6 @@ def basis(u_m, scale: float = BASIS_SCALE_M, degree: int = 3):
     """Design matrix [1, t, t^2, t^3], t = u/scale; (n, degree+1)."""
     t = jnp.asarray(u_m) / scale
     return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
-
-
-def to_paper_basis(alpha, scale: float = BASIS_SCALE_M):
-    """Scaled-basis coefficients (..., 4) -> paper basis (a, b, c, d) against u in m."""
-    alpha = np.asarray(alpha)
-    return alpha / scale ** np.arange(alpha.shape[-1])
 
 
 def _scaled_residuals(alpha, args):
@@ -106,7 +97,7 @@ _natural_noise_jit = jax.jit(natural_noise)
 def _noise(theta, ref_force):
     nat = natural_noise(theta, jnp.mean(ref_force))
     sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), jnp.exp(nat[2])
-    sigma_f = jnp.sqrt(sigma0**2 + (rel * ref_force) ** 2)
+    sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, ref_force))
     return sigma_f, sigma_L, nat
 
 
@@ -135,11 +126,11 @@ def log_prob(thetas, X, force, piston, ref_force):
     return jax.vmap(one)(thetas)
 
 
-@dataclass(eq=False)
-class TestFit:
+@dataclass(eq=False, frozen=True)
+class PressureFit:
     """Posterior of one test. Draw arrays are (chains, draws, ...) in the paper's basis, SI."""
 
-    test: Test
+    test: PressureTest
     x0_m: float
     lsq_force: np.ndarray  # (4,)
     lsq_piston: np.ndarray  # (4,)
@@ -176,7 +167,7 @@ class TestFit:
         u = self.test.height_m - self.x0_m
         mu_f = np.einsum("cdk,nk->cdn", f, np.vander(u, 4, increasing=True))
         mu_l = np.einsum("cdk,nk->cdn", l, np.vander(u, 4, increasing=True))
-        sf = np.sqrt(nz[..., 0:1] ** 2 + (nz[..., 1:2] * self.ref_force()) ** 2)
+        sf = np.sqrt(force_noise_var(nz[..., 0:1], nz[..., 1:2], self.ref_force()))
         ll_f = gaussian_loglik(self.test.force_N, mu_f, sf)
         ll_l = gaussian_loglik(self.test.piston_m, mu_l, nz[..., 2:3])
         return {"force": np.asarray(ll_f), "piston": np.asarray(ll_l)}
@@ -212,7 +203,8 @@ def _bfgs(theta0, X, force, piston, ref_force):
     return sol.value, sol.result
 
 
-def fit_test(test: Test, x0_m: float, *, seed: int, settings: Settings = Settings(), noise: str = "budget") -> TestFit:
+def fit_test(test: PressureTest, x0_m: float, *, seed: int, settings: Settings = Settings(),
+             noise: str = "budget") -> PressureFit:
     """Least squares, then the emcee posterior with exact coefficient draws, then diagnostics.
 
     ``noise="budget"`` (default): force sd grows with the force (load cell) over a floor.
@@ -220,6 +212,23 @@ def fit_test(test: Test, x0_m: float, *, seed: int, settings: Settings = Setting
     for the calibration suite's misspecification study (the total is still sampled; its split
     into floor and relative parts is then unidentified and follows the prior).
     """
+    return fit_tests([test], x0_m, seed=seed, settings=settings, noise=noise)[0]
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """What the sampler needs of one test: data, least squares, noise reference, start."""
+
+    test: PressureTest
+    X: np.ndarray  # (n, 4) scaled basis
+    lsq_f: np.ndarray
+    lsq_l: np.ndarray
+    ref_force: np.ndarray  # (n,)
+    center: np.ndarray  # (3,) optimistix start
+    scale: np.ndarray  # (3,) posterior width estimate / settings.init_scale
+
+
+def _prepare(test: PressureTest, x0_m: float, settings: Settings, noise: str) -> _Prepared:
     if noise not in ("budget", "constant"):
         raise ValueError(f"noise must be 'budget' or 'constant', got {noise!r}")
     u = test.height_m - x0_m
@@ -228,25 +237,65 @@ def fit_test(test: Test, x0_m: float, *, seed: int, settings: Settings = Setting
     ref_force = np.abs(_cubic_eval(lsq_f, u))
     if noise == "constant":
         ref_force = np.full_like(ref_force, ref_force.mean())
-    X = basis(u)
-    args = (X, jnp.asarray(test.force_N), jnp.asarray(test.piston_m), jnp.asarray(ref_force))
-    center = _start(X, test.force_N, test.piston_m, ref_force, lsq_f, lsq_l, u)
+    X = np.asarray(basis(u))
+    center = _start(jnp.asarray(X), test.force_N, test.piston_m, ref_force, lsq_f, lsq_l, u)
     # Start spread: about the posterior width of a log-scale from n points.
     scale = np.full(3, 1.0 / np.sqrt(2.0 * test.n_points)) / settings.init_scale * 0.5
+    return _Prepared(test, X, lsq_f, lsq_l, ref_force, center, scale)
+
+
+_log_prob_tests = jax.jit(jax.vmap(log_prob))  # (K, W, 3) thetas of K tests of equal length -> (K, W)
+
+
+def _campaign_log_prob(preps: list[_Prepared]):
+    """One log-probability over all tests, (K, W, 3) -> (K, W): one jitted, vmapped call per
+    test length (all tests of a campaign usually have one), so it compiles once per length."""
+    by_len: dict[int, list[int]] = {}
+    for i, pr in enumerate(preps):
+        by_len.setdefault(pr.test.n_points, []).append(i)
+    groups = []
+    for idx in by_len.values():
+        args = tuple(jnp.asarray(np.stack(a)) for a in zip(*[
+            (preps[i].X, preps[i].test.force_N, preps[i].test.piston_m, preps[i].ref_force) for i in idx], strict=True))
+        groups.append((np.array(idx), args))
 
     def lp(thetas):
-        return np.asarray(log_prob(thetas, *args))
+        thetas = np.asarray(thetas, float)
+        if len(groups) == 1:
+            return np.asarray(_log_prob_tests(jnp.asarray(thetas), *groups[0][1]))
+        out = np.empty(thetas.shape[:2])
+        for idx, args in groups:
+            out[idx] = np.asarray(_log_prob_tests(jnp.asarray(thetas[idx]), *args))
+        return out
 
-    chains = thin(run_ensembles(lp, center, scale, SAMPLER_NAMES, seed=seed, settings=settings), MAX_DRAWS)
+    return lp
+
+
+def fit_tests(tests, x0_m: float, *, seed: int, settings: Settings = Settings(), noise: str = "budget",
+              desc: str | None = None) -> list[PressureFit]:
+    """Fit several tests at once: one emcee sampler runs every test's ensembles in lockstep
+    (``uq._sampler.run_many``), each test with its own independent ensembles, burn-in and
+    convergence verdict; the run lasts until every test passes every rule. The exact
+    coefficient draws of test i use the i-th seed derived from ``seed`` (:func:`test_seeds`).
+    """
+    preps = [_prepare(t, x0_m, settings, noise) for t in tests]
+    runs = run_many(_campaign_log_prob(preps), np.stack([p.center for p in preps]),
+                    np.stack([p.scale for p in preps]), SAMPLER_NAMES, seed=seed, settings=settings, desc=desc)
+    return [_posterior(pr, thin(ch, MAX_DRAWS), x0_m, s)
+            for pr, ch, s in zip(preps, runs, test_seeds(seed, len(preps)), strict=True)]
+
+
+def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> PressureFit:
+    """Exact coefficient draws for every retained noise sample, ArviZ data and diagnostics."""
+    test, ref_force = pr.test, pr.ref_force
     C, D, _ = chains.samples.shape
     nat = np.asarray(_natural_noise_jit(jnp.asarray(chains.samples.reshape(C * D, 3)), float(np.mean(ref_force))))
     noise_flat = np.exp(nat)
-    sigma_f = np.sqrt(noise_flat[:, :1] ** 2 + (noise_flat[:, 1:2] * ref_force) ** 2)
+    sigma_f = np.sqrt(force_noise_var(noise_flat[:, :1], noise_flat[:, 1:2], ref_force))
     sigma_l = np.broadcast_to(noise_flat[:, 2:3], sigma_f.shape)
-    Xn = np.asarray(X)
     rng = np.random.default_rng(seed)
-    alpha_f = draw_linear_numpy(Xn, test.force_N, sigma_f, np.full(4, FORCE_PRIOR_SD_N), rng)
-    alpha_l = draw_linear_numpy(Xn, test.piston_m, sigma_l, np.full(4, PISTON_PRIOR_SD_M), rng)
+    alpha_f = draw_linear_numpy(pr.X, test.force_N, sigma_f, np.full(4, FORCE_PRIOR_SD_N), rng)
+    alpha_l = draw_linear_numpy(pr.X, test.piston_m, sigma_l, np.full(4, PISTON_PRIOR_SD_M), rng)
     force = to_paper_basis(np.asarray(alpha_f)).reshape(C, D, 4)
     piston = to_paper_basis(np.asarray(alpha_l)).reshape(C, D, 4)
     noise_draws = noise_flat.reshape(C, D, 3)
@@ -258,7 +307,8 @@ def fit_test(test: Test, x0_m: float, *, seed: int, settings: Settings = Setting
         warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
         idata = _idata(posterior, test, x0_m, chains)
         diagnostics = convergence(idata, chains, list(posterior))
-    return TestFit(test, x0_m, lsq_f, lsq_l, force, piston, noise_draws, chains, idata, diagnostics, ref_force)
+    return PressureFit(test, x0_m, pr.lsq_f, pr.lsq_l, force, piston, noise_draws, chains, idata, diagnostics,
+                       ref_force)
 
 
 def _idata(posterior, test, x0_m, chains):
@@ -273,17 +323,17 @@ def _idata(posterior, test, x0_m, chains):
     )
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, frozen=True)
 class CampaignFit:
     recordings: Recordings
-    tests: list[TestFit]
+    tests: list[PressureFit]
     seed: int
 
     @property
     def converged(self) -> bool:
         return all(t.diagnostics["converged"] for t in self.tests)
 
-    def at(self, pressure_bar: float) -> TestFit:
+    def at(self, pressure_bar: float) -> PressureFit:
         for t in self.tests:
             if abs(t.pressure_bar - pressure_bar) < 1e-9:
                 return t
@@ -295,17 +345,10 @@ def test_seeds(seed: int, n: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
-def _fit_one(job):
-    test, x0_m, seed, settings = job
-    return fit_test(test, x0_m, seed=seed, settings=settings)
-
-
-def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = Settings(), jobs: int | None = None) -> CampaignFit:
-    """Fit every test of a campaign; tests are independent, so they run in ``jobs`` processes.
-
-    ``jobs`` > 1 uses that many spawned processes (the caller's main module must be import-safe,
-    as the ``uq`` console script is); each test has its own seed derived from ``seed``, so the
-    results do not depend on ``jobs``. ``uq fit`` is this plus :func:`uq.fit_json`.
+def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = Settings()) -> CampaignFit:
+    """Fit every test of a campaign: one emcee run samples all tests in lockstep, each with its
+    own ensembles and convergence checks (:func:`fit_tests`). ``uq fit`` is this plus
+    :func:`uq.fit_json`.
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -316,14 +359,5 @@ def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = 
     >>> bool(12e3 < a_P.mean() < 14e3)
     True
     """
-    seeds = test_seeds(seed, len(recordings.tests))
-    work = [(t, recordings.x0_m, s, settings) for t, s in zip(recordings.tests, seeds, strict=True)]
-    jobs = min(jobs or 1, len(work))
-    if jobs <= 1:
-        fits = [_fit_one(w) for w in progress(work, desc="fits", unit="test")]
-    else:
-        # spawn, not fork: a forked JAX runtime can deadlock.
-        ctx = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            fits = list(progress(pool.map(_fit_one, work), total=len(work), desc="fits", unit="test"))
+    fits = fit_tests(recordings.tests, recordings.x0_m, seed=seed, settings=settings, desc="sampling all tests")
     return CampaignFit(recordings, fits, seed)

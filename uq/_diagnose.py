@@ -652,8 +652,6 @@ def command_diagnose(args) -> int:
         raise InputError(f"option --gain-se: expected a positive number, got {args.gain_se:g}")
     if not 0 <= args.max_mechanisms <= len(M.MECHS):
         raise InputError(f"option --max-mechanisms: expected 0..{len(M.MECHS)}, got {args.max_mechanisms}")
-    if args.walkers < 4 or args.walkers % 2:
-        raise InputError("option --walkers: an even number of at least 4 walkers is needed")
     settings = Settings(n_walkers=args.walkers, n_ensembles=args.ensembles, max_steps=args.max_steps,
                         min_steps=min(300, args.max_steps), chunk=200)
     settings.validate()

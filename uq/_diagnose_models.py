@@ -40,10 +40,10 @@ import numpy as np
 
 from ._jax import jax, jnp
 from ._linear import draw_coefficients, gaussian_loglik, linear_posterior
-from ._recordings import BAR_PA, Recordings
+from ._physics import BAR_PA, BASIS_SCALE_M
+from ._recordings import Recordings
 from ._stand_description import PAPER_STAND, StandDescription
 
-H_M = 0.05
 MECHS = ("pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift", "volume_excess")
 N_MECH = len(MECHS)
 K_MAX = 5  # highest power of t in F_eff
@@ -103,12 +103,12 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
     cols = {k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")}
     for i, test in enumerate(rec.tests):
         u = test.height_m - rec.x0_m
-        t = u / H_M
+        t = u / BASIS_SCALE_M
         deg = min(4, test.n_points - 2)
         V = np.vander(t, deg + 1, increasing=True)
         cf = np.linalg.lstsq(V, test.force_N, rcond=None)[0]
         cl = np.linalg.lstsq(V, test.piston_m, rcond=None)[0]
-        dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / H_M
+        dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / BASIS_SCALE_M
         P_hat = V @ cf
         dPdx = dV @ cf[1:]
         slope = dV @ cl[1:]
@@ -173,7 +173,7 @@ def _design(theta, mask, d: Data):
     n = d.t.size
     zeros = jnp.zeros((n, 1))
     XF_a = (d.p_bar * BAR_PA * g * hy)[:, None] * T
-    XL_a = -(H_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint
+    XL_a = -(BASIS_SCALE_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint
     XF_r = jnp.zeros_like(d.R)
     XL_r = d.R
     Tc = d.t[:, None] ** jnp.arange(CASING_DEG + 1)

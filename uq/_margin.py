@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InputError
-from ._recordings import BAR_PA
+from ._physics import BAR_PA
 from ._summary import band, estimate
 from ._surface import SurfaceFit
 

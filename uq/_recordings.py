@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InputError, where
+from ._physics import BAR_PA
 
 REQUIRED_COLUMNS = ("pressure_bar", "height_mm", "force_N", "piston_mm", "branch", "step")
 BRANCHES = ("compression", "rebound")
-BAR_PA = 1.0e5
 
 #: Default stand constants (the paper's): piston area S = 54.82 cm^2, basis height x0 = 112 mm.
 DEFAULT_PISTON_AREA_CM2 = 54.82
@@ -32,7 +32,7 @@ DEFAULT_X0_MM = 112.0
 
 
 @dataclass(frozen=True, eq=False)
-class Test:
+class PressureTest:
     """One isobaric test: all rows recorded at one set overpressure, in recording order.
 
     Arrays have shape (n,) and are sorted by ``step``.
@@ -64,7 +64,7 @@ class Recordings:
     """A campaign: its tests sorted by pressure, and the stand constants (SI)."""
 
     path: str
-    tests: tuple[Test, ...]
+    tests: tuple[PressureTest, ...]
     x0_m: float = DEFAULT_X0_MM * 1e-3
     piston_area_m2: float = DEFAULT_PISTON_AREA_CM2 * 1e-4
     extra_columns: tuple[str, ...] = field(default=())
@@ -79,7 +79,7 @@ class Recordings:
     def n_points(self) -> int:
         return sum(t.n_points for t in self.tests)
 
-    def test_at(self, pressure_bar: float) -> Test:
+    def test_at(self, pressure_bar: float) -> PressureTest:
         for t in self.tests:
             if abs(t.pressure_bar - pressure_bar) < 1e-9:
                 return t
@@ -379,7 +379,7 @@ def _parse_row(path, row, fields, header, idx, sep, decimal_comma) -> tuple[floa
     return p, (row, x, f, L, br == "compression", st)
 
 
-def _make_test(path: str, p: float, rows: list[tuple], min_points: int) -> Test:
+def _make_test(path: str, p: float, rows: list[tuple], min_points: int) -> PressureTest:
     label = f"{p:g} bar test"
     if len({round(r[1], 6) for r in rows}) == 1:
         raise InputError(
@@ -418,7 +418,7 @@ def _make_test(path: str, p: float, rows: list[tuple], min_points: int) -> Test:
             f"{where(path, rows[0][0])}: the {label} has {len(ordered)} points at {np.unique(np.round(height, 9)).size} heights; the model needs at least {min_points} points at 4 or more heights"
         )
     _check_branch_order(path, label, height, comp, row_ids)
-    return Test(
+    return PressureTest(
         pressure_bar=float(p),
         height_m=height,
         force_N=np.array([r[2] for r in ordered], dtype=float),
@@ -465,7 +465,7 @@ def _odd_one(h: np.ndarray, k: int) -> int:
     return k if misfit(k) > misfit(k + 1) else k + 1
 
 
-def _check_x0(tests: list[Test], x0_mm: float) -> None:
+def _check_x0(tests: list[PressureTest], x0_mm: float) -> None:
     lo = min(float(t.height_m.min()) for t in tests) * 1e3
     hi = max(float(t.height_m.max()) for t in tests) * 1e3
     if not lo - 1e-9 <= x0_mm <= hi + 1e-9:
@@ -475,7 +475,7 @@ def _check_x0(tests: list[Test], x0_mm: float) -> None:
         )
 
 
-def _volume_slope(t: Test) -> float:
+def _volume_slope(t: PressureTest) -> float:
     """Median |dL/dx| over consecutive readings of one branch (robust to a stray reading)."""
     same = t.compression[1:] == t.compression[:-1]
     dx, dL = np.diff(t.height_m)[same], np.diff(t.piston_m)[same]
@@ -483,7 +483,7 @@ def _volume_slope(t: Test) -> float:
     return float(np.median(np.abs(dL[ok] / dx[ok]))) if ok.any() else float("nan")
 
 
-def _check_units(path: str, tests: list[Test], piston_area_m2: float) -> None:
+def _check_units(path: str, tests: list[PressureTest], piston_area_m2: float) -> None:
     """Unit slips seen through the effective area (eqs. 1, 5) of the highest-pressure test.
 
     Force over overpressure and piston travel times S are both the effective area; each must be
@@ -527,7 +527,7 @@ def _robust_cubic(x: np.ndarray, y: np.ndarray, iterations: int = 40) -> np.ndar
     return A @ beta
 
 
-def _check_outliers(path: str, t: Test) -> None:
+def _check_outliers(path: str, t: PressureTest) -> None:
     """A gross outlier (a slipped decimal point, a stray key) in force or piston is an error.
 
     Per branch, against a least-absolute-deviation cubic in height: a reading that sits more than

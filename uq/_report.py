@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ._bands import BAR_PA, CampaignBands, campaign_bands
+from ._bands import CampaignBands, campaign_bands
 from ._cmd_common import add_recordings, add_sampling, load, positive_int, settings_from
 from ._html import CSS, _img, _plt, _png
 from ._io import emit_json, remove_stale, write_bytes_atomic, write_text_atomic
+from ._physics import BAR_PA
 from ._recordings import leading_comments
 from ._reference import table1, table2
 
@@ -59,7 +60,7 @@ def command_report(args) -> int:
     rec = load(args)
     t0 = time.perf_counter()
     settings = settings_from(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings, jobs=args.jobs)
+    cf = fit_campaign(rec, seed=args.seed, settings=settings)
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
     path = write_report(cf, args.out, bands=cb, seed=args.seed, comments=read_comments(args.file),

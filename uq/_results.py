@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._cubic import NOISE_NAMES, CampaignFit, TestFit
+from ._cubic import NOISE_NAMES, CampaignFit, PressureFit
 from ._reference import FORCE_NAMES, PISTON_NAMES
 from ._summary import estimate
 
@@ -28,7 +28,7 @@ def _coef_block(draws: np.ndarray, names, diag: dict) -> dict:
     return out
 
 
-def test_json(fit: TestFit) -> dict:
+def test_json(fit: PressureFit) -> dict:
     d = fit.diagnostics
     s_P, eps_P = fit.deviation_measures()
     f, p = fit.flat("force"), fit.flat("piston")

@@ -39,7 +39,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import arviz as az
 import emcee
@@ -51,7 +51,7 @@ ESS_MIN = 400.0
 ACCEPT_RANGE = (0.15, 0.6)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Settings:
     """Sampler settings (all seeded; defaults suit 1-10 sampled parameters).
 
@@ -75,8 +75,9 @@ class Settings:
 
         if self.n_ensembles < 2:
             raise InputError("option --ensembles: at least 2 independent ensembles are needed for R-hat (4 recommended)")
-        if self.n_walkers < 4 or self.n_walkers % 2:
-            raise InputError("option --walkers: an even number of at least 4 walkers is needed")
+        if self.n_walkers < 4 or self.n_walkers % 4:
+            raise InputError("option --walkers: a multiple of 4 walkers, at least 4, is needed (emcee's snooker "
+                             "move splits each ensemble in four)")
         if self.max_steps < 10:
             raise InputError("option --max-steps: at least 10 steps")
 
@@ -85,11 +86,12 @@ class Settings:
         from ._errors import InputError
 
         if self.n_walkers < 2 * ndim:
+            need = 4 * math.ceil(2 * ndim / 4)
             raise InputError(f"option --walkers: {self.n_walkers} walkers are fewer than twice the {ndim} sampled "
-                             f"parameters of this model; use at least {2 * ndim}")
+                             f"parameters of this model; use at least {need}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Chains:
     """Post-burn-in samples, one chain per ensemble in time order.
 
@@ -106,7 +108,7 @@ class Chains:
     n_steps: int
     burn: int
     n_ensembles: int
-    warnings: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
     n_walkers: int = 1
     start: np.ndarray | None = None
 
@@ -135,9 +137,75 @@ def thin(chains: Chains, max_total: int) -> Chains:
     return dataclasses.replace(chains, samples=keep(chains.samples), log_prob=keep(chains.log_prob))
 
 
-def _moves():
+class _Grouped:
+    """Mixin for emcee's red-blue moves: propose within each group of walkers only.
+
+    One emcee sampler holds every ensemble of every problem: walker ``j`` belongs to group
+    ``j // group_size``. With the split fixed (walker j in sub-ensemble j % nsplits, the
+    original Goodman-Weare scheme), each sub-ensemble holds ``group_size / nsplits`` walkers of
+    every group, in group order, so the rows of emcee's sample and complement sets are cut
+    into groups (``_groups``) and each walker's proposal uses its own group's complement only.
+    The groups are therefore independent ensembles; emcee's ``propose`` (the split, the
+    per-walker accept step, the update) is unchanged, and the log-probability of all groups
+    is one vectorised call per sub-ensemble. The proposals are emcee's, vectorised over the
+    groups (with one group, ``_GroupedDE`` draws exactly emcee's DEMove proposal; tested).
+    """
+
+    def __init__(self, group_size: int, **kwargs):
+        self.group_size = int(group_size)
+        super().__init__(randomize_split=False, **kwargs)
+
+    def _groups(self, s, c):
+        """(G, per, D) views of the walkers to move and of each complement set."""
+        per = self.group_size // self.nsplits
+        G = s.shape[0] // per
+        return s.reshape(G, per, -1), [cj.reshape(G, per, -1) for cj in c]
+
+
+class _GroupedDE(_Grouped, emcee.moves.DEMove):
+    """emcee's DEMove (Nelson et al. 2013) with the difference vector from the walker's group."""
+
+    def get_proposal(self, s, c, random):
+        sg, cg = self._groups(s, c)
+        cg = np.concatenate(cg, axis=1)  # (G, nc, D)
+        G, ns, _ = sg.shape
+        pairs = _nondiagonal_pairs(cg.shape[1])
+        pick = pairs[random.choice(pairs.shape[0], size=G * ns, replace=True)].reshape(G, ns, 2)
+        rows = np.arange(G)[:, None]
+        diffs = cg[rows, pick[..., 1]] - cg[rows, pick[..., 0]]  # (G, ns, D)
+        gamma = self.g0 * (1 + self.sigma * random.randn(G * ns, 1))
+        return s + gamma * diffs.reshape(G * ns, -1), np.zeros(G * ns, dtype=np.float64)
+
+
+class _GroupedSnooker(_Grouped, emcee.moves.DESnookerMove):
+    """emcee's DESnookerMove (ter Braak & Vrugt 2008) with z, z1, z2 from the walker's group."""
+
+    def get_proposal(self, s, c, random):
+        sg, cg = self._groups(s, c)
+        G, ns, ndim = sg.shape
+        rows = np.arange(G)[:, None]
+        # one walker from each of the three complement sets, in random order
+        w = np.stack([cj[rows, random.randint(cj.shape[1], size=(G, ns))] for cj in cg], axis=2)  # (G, ns, 3, D)
+        order = np.argsort(random.rand(G, ns, 3), axis=2)
+        w = np.take_along_axis(w, order[..., None], axis=2)
+        z, z1, z2 = w[:, :, 0], w[:, :, 1], w[:, :, 2]
+        delta = sg - z
+        norm = np.linalg.norm(delta, axis=-1, keepdims=True)
+        u = delta / np.sqrt(norm)
+        q = sg + u * self.gammas * (np.sum(u * z1, -1, keepdims=True) - np.sum(u * z2, -1, keepdims=True))
+        metropolis = np.log(np.linalg.norm(q - z, axis=-1)) - np.log(norm[..., 0])
+        return q.reshape(G * ns, ndim), (0.5 * (ndim - 1.0) * metropolis).reshape(-1)
+
+
+def _nondiagonal_pairs(n: int) -> np.ndarray:
+    """Ordered pairs (i, j), i != j, of n walkers, in emcee's DEMove order."""
+    rows, cols = np.tril_indices(n, -1)
+    return np.column_stack([np.concatenate([rows, cols]), np.concatenate([cols, rows])])
+
+
+def _moves(group_size: int):
     # Differential-evolution moves mix better than the stretch move in few dimensions.
-    return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    return [(_GroupedDE(group_size), 0.8), (_GroupedSnooker(group_size), 0.2)]
 
 
 def _tau(chain: np.ndarray) -> np.ndarray:
@@ -151,13 +219,19 @@ def _tau(chain: np.ndarray) -> np.ndarray:
         return emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
 
 
-def _starts(log_prob, center, width, n_walkers: int, rng, tries: int = 20) -> np.ndarray:
+def _starts(log_prob, centers, widths, n_walkers: int, rng, tries: int = 20) -> np.ndarray:
     """Overdispersed starting walkers with finite log-probability (bad draws redrawn).
 
-    After ``tries`` rounds the remaining bad walkers are drawn ever closer to ``center``
-    (halving the spread), which is finite by construction of the callers (an optimum).
+    ``log_prob`` maps (K, m, D) -> (K, m); centers, widths (K, D); returns (K, n_walkers, D).
+    After ``tries`` rounds the remaining bad walkers are drawn ever closer to their problem's
+    center (halving the spread), which is finite by construction of the callers (an optimum).
     """
-    p0 = center + width * rng.standard_normal((n_walkers, center.size))
+    K, D = centers.shape
+
+    def draw(shrink, shape):
+        return centers[:, None, :] + shrink * widths[:, None, :] * rng.standard_normal(shape)
+
+    p0 = draw(1.0, (K, n_walkers, D))
     shrink = 1.0
     for i in range(2 * tries):
         with warnings.catch_warnings():
@@ -167,9 +241,8 @@ def _starts(log_prob, center, width, n_walkers: int, rng, tries: int = 20) -> np
             return p0
         if i >= tries:
             shrink *= 0.5
-        p0[bad] = center + shrink * width * rng.standard_normal((int(bad.sum()), center.size))
-    p0[bad] = center + 1e-6 * width * rng.standard_normal((int(bad.sum()), center.size))
-    return p0
+        p0 = np.where(bad[..., None], draw(shrink, p0.shape), p0)
+    return np.where(bad[..., None], draw(1e-6, p0.shape), p0)
 
 
 def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settings = Settings(),
@@ -180,60 +253,84 @@ def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settin
     the posterior width per dimension; see the module docstring for the rules and storage.
     ``desc``: show a progress bar of the steps (uq._progress; on a terminal only) under this name.
     """
+
+    def many(thetas):  # (1, m, D) -> (1, m)
+        return np.asarray(log_prob(thetas[0]))[None]
+
+    return run_many(many, np.asarray(center, float)[None], np.asarray(scale, float)[None], names,
+                    seed=seed, settings=settings, desc=desc)[0]
+
+
+def run_many(log_prob, centers, scales, names, *, seed: int, settings: Settings = Settings(),
+             desc: str | None = None) -> list[Chains]:
+    """Sample K problems of the same dimension D at once: one emcee sampler, one call per move.
+
+    ``log_prob`` maps (K, m, D) -> (K, m): row k of the walkers is evaluated under problem k
+    (e.g. one jitted, vmapped log-probability over all tests of a campaign). centers, scales
+    (K, D). Every problem gets ``settings.n_ensembles`` independent ensembles of
+    ``settings.n_walkers`` walkers (see ``_Grouped``), and the run is extended until every
+    problem passes every rule, or ``max_steps``. Returns one :class:`Chains` per problem, with
+    its own burn-in, tau and warnings.
+    """
     from ._progress import _Silent, progress
 
     with progress(total=settings.max_steps, desc=desc, unit="step") if desc else _Silent(None) as bar:
-        return _run_ensembles(log_prob, center, scale, names, seed, settings, bar)
+        return _run_many(log_prob, centers, scales, names, seed, settings, bar)
 
 
-def _run_ensembles(log_prob, center, scale, names, seed: int, settings: Settings, bar) -> Chains:
+def _run_many(log_prob, centers, scales, names, seed: int, settings: Settings, bar) -> list[Chains]:
     settings.validate()
-    center = np.asarray(center, float)
-    settings.require_walkers(center.size)
-    width = settings.init_spread * settings.init_scale * np.asarray(scale, float)
-    ndim, W = center.size, settings.n_walkers
+    centers = np.atleast_2d(np.asarray(centers, float))
+    K, ndim = centers.shape
+    settings.require_walkers(ndim)
+    widths = settings.init_spread * settings.init_scale * np.broadcast_to(np.asarray(scales, float), centers.shape)
+    E, W = settings.n_ensembles, settings.n_walkers
     rng = np.random.default_rng(seed)
-    samplers, states = [], []
-    for _ in range(settings.n_ensembles):
-        s = emcee.EnsembleSampler(W, ndim, log_prob, vectorize=True, moves=_moves())
-        s.random_state = np.random.RandomState(rng.integers(2**31)).get_state()
-        samplers.append(s)
-        states.append(_starts(log_prob, center, width, W, rng))
-    start = np.array(states)
+    # Walker order: problem, ensemble, walker; each ensemble's start is drawn afresh.
+    start = np.stack([_starts(log_prob, centers, widths, W, rng) for _ in range(E)], axis=1)  # (K, E, W, D)
+
+    def flat_log_prob(q):  # emcee's (rows, D), rows in walker order -> (rows,)
+        return np.asarray(log_prob(q.reshape(K, -1, ndim)), float).reshape(-1)
+
+    sampler = emcee.EnsembleSampler(K * E * W, ndim, flat_log_prob, vectorize=True, moves=_moves(W))
+    sampler.random_state = np.random.RandomState(rng.integers(2**31)).get_state()
+    state = start.reshape(-1, ndim)
     n_steps, target = 0, settings.min_steps
     while True:
         step = max(1, min(target, settings.max_steps) - n_steps)
-        for i, s in enumerate(samplers):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals
-                states[i] = s.run_mcmc(states[i], step, progress=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals
+            state = sampler.run_mcmc(state, step, progress=False)
         n_steps += step
         bar.update(step)
-        chains = _collect(samplers, names, settings, n_steps, start)
-        failed, want = _failed_rules(chains, settings)
-        bar.set_postfix_str(f"{len(failed)} rule(s) not yet met" if failed else "converged")
-        if not failed:
+        chains = [_collect(sampler, k, names, settings, n_steps, start[k]) for k in range(K)]
+        verdicts = [_failed_rules(c, settings) for c in chains]
+        n_failed = sum(bool(f) for f, _ in verdicts)
+        bar.set_postfix_str(f"{n_failed} problem(s) not yet converged" if n_failed else "converged")
+        if not n_failed:
             return chains
+        want = max(w for f, w in verdicts if f)
         if n_steps >= settings.max_steps or want <= n_steps:
-            chains.warnings.extend(failed)
-            return chains
+            return [dataclasses.replace(c, warnings=tuple(f)) for c, (f, _) in zip(chains, verdicts, strict=True)]
         target = max(want, n_steps + settings.chunk // 4)
 
 
-def _collect(samplers, names, settings: Settings, n_steps: int, start) -> Chains:
-    """Burn-in from the current tau, the post-burn chains in storage order, and the tau."""
-    raw = [s.get_chain() for s in samplers]  # (steps, W, dim) each
+def _collect(sampler, k: int, names, settings: Settings, n_steps: int, start) -> Chains:
+    """Problem k's burn-in from its current tau, its post-burn chains in storage order, its tau."""
+    E, W = settings.n_ensembles, settings.n_walkers
+    cols = slice(k * E * W, (k + 1) * E * W)
+    chain = sampler.get_chain()[:, cols]  # (steps, E * W, dim)
+    logp = sampler.get_log_prob()[:, cols]
+    raw = [chain[:, e * W : (e + 1) * W] for e in range(E)]
     # tau from the second half: the overdispersed start's transient would inflate it
-    taus = [_tau(c[n_steps // 2 :]) for c in raw]
-    tau = np.max(taus, axis=0)
+    tau = np.max([_tau(c[n_steps // 2 :]) for c in raw], axis=0)
     tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
     burn = int(math.ceil(settings.burn_tau * tau_max)) if math.isfinite(tau_max) else n_steps // 2
     burn = min(max(burn, 20), n_steps // 2)
-    C, W = len(samplers), settings.n_walkers
     samples = np.stack([c[burn:].reshape(-1, c.shape[-1]) for c in raw])
-    logp = np.stack([s.get_log_prob()[burn:].reshape(-1) for s in samplers])
-    accept = np.concatenate([s.acceptance_fraction for s in samplers])
-    return Chains(tuple(names), samples, logp, accept, tau, n_steps, burn, C, [], W, start)
+    lp = np.stack([logp[burn:, e * W : (e + 1) * W].reshape(-1) for e in range(E)])
+    accept = sampler.acceptance_fraction[cols]
+    return Chains(tuple(names), samples, lp, accept, tau, n_steps, burn, E, (), W, start)
 
 
 def _failed_rules(chains: Chains, settings: Settings) -> tuple[list[str], int]:

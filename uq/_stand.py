@@ -44,8 +44,8 @@ from scipy.interpolate import PchipInterpolator
 
 from ._errors import InputError
 from ._mechanisms import casing_shape
+from ._physics import BAR_PA, BASIS_SCALE_M
 from ._recordings import (
-    BAR_PA,
     DEFAULT_PISTON_AREA_CM2,
     Recordings,
     recordings_from_text,
@@ -368,7 +368,7 @@ class SmoothSurfaceSpring(N50Spring):
 
     name = "n50-smooth"
     description = "N-50-like spring of the surface model's own form (smooth in pressure), fitted to Table 1"
-    P_MID, P_HALF, H = 5.05, 4.95, 0.05
+    P_MID, P_HALF, H = 5.05, 4.95, BASIS_SCALE_M
 
     def __init__(self, piston_area_m2: float = PAPER_PISTON_AREA_M2) -> None:
         super().__init__()

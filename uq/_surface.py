@@ -49,12 +49,12 @@ import optimistix as optx
 from ._errors import InputError
 from ._jax import jax, jnp
 from ._linear import LOG_2PI, batched, draw_coefficients, linear_posterior
-from ._recordings import BAR_PA, Recordings
+from ._physics import BAR_PA, BASIS_SCALE_M, force_noise_var
+from ._recordings import Recordings
 from ._sampler import Chains, Settings, convergence, run_ensembles, thin
 from ._stand_description import PAPER_STAND, StandDescription
 from ._summary import band, estimate
 
-H_M = 0.05
 MAX_DRAWS = 4000
 SCALE_C = 0.1  # m^2
 SCALE_E = 1.0e4  # N
@@ -137,7 +137,7 @@ class Geometry:
     p_half: float
 
     def t(self, x_m):
-        return (np.asarray(x_m, float) - self.x0_m) / H_M
+        return (np.asarray(x_m, float) - self.x0_m) / BASIS_SCALE_M
 
     def q(self, p_bar):
         return (np.asarray(p_bar, float) - self.p_mid) / self.p_half
@@ -161,7 +161,7 @@ def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
     Xf[:, :nc] = p_pa[:, None] * _tq(t, q, o.K, o.Lp) * SCALE_C
     if ne:
         Xf[:, nc : nc + ne] = _poly(t, o.Ke) * SCALE_E
-    lever = -H_M / g.area_m2
+    lever = -BASIS_SCALE_M / g.area_m2
     Xl[:, :nc] = lever * _tq(t, q, o.K, o.Lp, integrate=True) * SCALE_C
     if nd:
         Xl[:, nc + ne : nc + ne + nd] = lever * _tq(t, q, o.Dk, o.Dl, integrate=True) * SCALE_D
@@ -175,7 +175,7 @@ def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
 def _cov_factors(theta, c):
     """Per-point whitening of the (force, piston) pair: (L11, L21, L22), each (n,)."""
     s0, rel, kp, sL, V0 = (jnp.exp(theta[i]) for i in range(5))
-    a2 = s0**2 + (rel * c["phat"]) ** 2
+    a2 = force_noise_var(s0, rel, c["phat"])
     b = kp * c["dp_pa"] * c["feff_hat"]
     cc = kp * c["dp_pa"] * jnp.maximum(V0 - c["dv_hat"], 1e-4) / (c["p_abs_pa"] * c["area"])
     L11 = jnp.sqrt(a2 + b**2)

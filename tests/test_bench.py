@@ -20,6 +20,10 @@ def test_bench_tiny_run_writes_both_rates(tmp_path, capsys):
         assert block["ess_bulk_min"] > 0 and block["ess_per_s"] > 0
     assert r["ratio"] > 0
     assert r["ratio"] == r["project"]["ess_per_s"] / r["baseline"]["ess_per_s"]
+    names = ("a_P", "b_P", "c_P", "d_P", "sigma0_N", "rel_force")
+    assert tuple(r["ratio_each"]) == names and r["ratio_min_all"] == min(r["ratio_each"].values())
+    for n in names:
+        assert r["ratio_each"][n] == r["project"]["ess_per_s_each"][n] / r["baseline"]["ess_per_s_each"][n]
     text = capsys.readouterr().out
     assert "project" in text and "baseline" in text and "ratio project / baseline" in text
 

@@ -63,7 +63,7 @@ def _fit_and_save(d: Path, csv: Path, model: str, walkers: int):
 
 @pytest.fixture(scope="module")
 def surface_saved(campaign):
-    return _fit_and_save(*campaign, "surface", 10)  # 5 sampled noise parameters: >= 10 walkers
+    return _fit_and_save(*campaign, "surface", 12)  # 5 sampled noise parameters: >= 10 walkers, a multiple of 4
 
 
 @pytest.fixture(scope="module")

@@ -38,6 +38,18 @@ def test_report_on_n50_fixture(n50_fit, tmp_path):
         assert f"test_{p:g}bar.png" in page
 
 
+def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path):
+    """write_report's worker processes (the default on a multi-core machine) change nothing:
+    every PNG and the page are byte for byte those of jobs=1."""
+    cb = campaign_bands(n50_fit, n_draws=200, seed=0)
+    write_report(n50_fit, tmp_path / "one", bands=cb, jobs=1)
+    write_report(n50_fit, tmp_path / "two", bands=cb, jobs=2)
+    names = sorted(p.name for p in (tmp_path / "one").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "two").iterdir()) and len(names) == 6 + len(n50_fit.tests)
+    for n in names:
+        assert (tmp_path / "one" / n).read_bytes() == (tmp_path / "two" / n).read_bytes(), n
+
+
 def test_comments_are_read_only_from_the_top(tmp_path):
     f = tmp_path / "r.csv"
     f.write_text("# RECONSTRUCTED by the stand\n#  second\npressure_bar,height_mm\n# not a header comment\n")

@@ -9,9 +9,11 @@ write is atomic (``uq._io``).
 from __future__ import annotations
 
 import html
+import os
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -227,12 +229,15 @@ def fig_scatter(cb: CampaignBands) -> bytes:
     return _png(fig)
 
 
-def fig_test(tf, tb, cb: CampaignBands) -> bytes:
-    """Six panels for one test: force, residuals, piston, F_eff, traditional vs measured, spread."""
+def fig_test(t, force_mean, x0_m: float, tb, cb: CampaignBands) -> bytes:
+    """Six panels for one test: force, residuals, piston, F_eff, traditional vs measured, spread.
+
+    ``t`` the test's recordings (PressureTest), ``force_mean`` the posterior-mean force
+    coefficients (paper basis): plain data, so that the figure can be drawn in another process.
+    """
     plt = _plt()
     fig, axs = plt.subplots(2, 3, figsize=(14, 7.6))
     x = cb.x_m * MM
-    t = tf.test
     h = t.height_m * MM
     comp = t.compression
     p_pa = tb.pressure_bar * BAR_PA
@@ -253,7 +258,7 @@ def fig_test(tf, tb, cb: CampaignBands) -> bytes:
     ax.legend(fontsize=7)
 
     ax = axs[0, 1]
-    fit_pts = _cubic_at(tf.flat("force").mean(0), t.height_m - tf.x0_m)
+    fit_pts = _cubic_at(force_mean, t.height_m - x0_m)
     ax.fill_between(x, tb.force_pred.lo - tb.force.mean, tb.force_pred.hi - tb.force.mean, color="0.5", alpha=0.2, lw=0)
     ax.fill_between(x, tb.force.lo - tb.force.mean, tb.force.hi - tb.force.mean, color="tab:green", alpha=0.5, lw=0)
     points(ax, t.force_N - fit_pts)
@@ -292,6 +297,39 @@ def fig_test(tf, tb, cb: CampaignBands) -> bytes:
     fig.suptitle(f"test at p_u = {tb.pressure_bar:g} bar", fontsize=11)
     fig.subplots_adjust(left=0.06, right=0.99, bottom=0.07, top=0.92, wspace=0.25, hspace=0.3)
     return _png(fig)
+
+
+class _TestFigures:
+    """The per-test figures (the slow part of a report: about 1 s each), drawn by ``jobs``
+    spawned worker processes while the page and the campaign figures are made in this one.
+    Workers get plain data (recordings, mean coefficients, bands) and import only matplotlib and
+    this module, not JAX; the PNG bytes are the same as drawn here (tested)."""
+
+    MIN_TESTS = 4  # below this, starting workers costs more than it saves
+
+    def __init__(self, cf, cb: CampaignBands, jobs: int):
+        grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
+        self._work = [(tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid)
+                      for tf, tb in zip(cf.tests, cb.tests, strict=True)]
+        self._pool, self._futures = None, []
+        if jobs > 1 and len(self._work) >= self.MIN_TESTS:
+            import concurrent.futures
+            import multiprocessing
+
+            # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
+            self._pool = concurrent.futures.ProcessPoolExecutor(
+                max_workers=min(jobs, len(self._work)), mp_context=multiprocessing.get_context("spawn"))
+            self._futures = [self._pool.submit(fig_test, *w) for w in self._work]
+
+    def result(self, i: int) -> bytes:
+        return self._futures[i].result() if self._pool else fig_test(*self._work[i])
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self._pool:
+            self._pool.shutdown(cancel_futures=True)
 
 
 # ----------------------------------------------------------------------------- HTML
@@ -380,7 +418,7 @@ def _x0_table(cb: CampaignBands) -> str:
 
 def write_report(cf, out_dir, *, draws: int = 2000, seed: int | None = None, surface: bool = False,
                  settings=None, bands: CampaignBands | None = None, comments: list[str] | None = None,
-                 surface_page: str | None = None) -> Path:
+                 surface_page: str | None = None, jobs: int | None = None) -> Path:
     """Write ``out_dir/report.html`` and its PNG figures, as ``uq report`` does; return the page's path.
 
     ``cf`` is a :func:`uq.fit_campaign` result. The bands use ``draws`` joint posterior draws,
@@ -390,7 +428,8 @@ def write_report(cf, out_dir, *, draws: int = 2000, seed: int | None = None, sur
     ``uq report --surface`` does. ``bands`` (from :func:`uq.campaign_bands`) replaces ``draws``/``seed``;
     ``comments`` replaces the recordings' leading ``#`` lines (from ``cf.recordings.comments``, or
     read from its file). Every file is written atomically; PNGs an earlier report left behind are
-    removed.
+    removed. The per-test figures are drawn by ``jobs`` worker processes (default: one per CPU;
+    ``jobs=1`` draws them here), with the same bytes either way.
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -415,6 +454,17 @@ def write_report(cf, out_dir, *, draws: int = 2000, seed: int | None = None, sur
         surface_page = write_surface_report(sf, summary(sf, compare_with_cubics(sf, cf)), out).name
     out.mkdir(parents=True, exist_ok=True)
     cb = bands if bands is not None else campaign_bands(cf, n_draws=draws, seed=seed)
+    with _TestFigures(cf, cb, (os.cpu_count() or 1) if jobs is None else jobs) as test_pngs:
+        page, names = _write_page(cf, cb, out, test_pngs, comments, surface_page)
+    # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
+    stale = REPORT_FIGURES + (() if surface_page else SURFACE_OUTPUTS)
+    remove_stale(out, stale, keep=names | {page.name})
+    return page
+
+
+def _write_page(cf, cb: CampaignBands, out: Path, test_pngs: _TestFigures, comments, surface_page) -> tuple[Path, set]:
+    """report.html and its figures in ``out``; returns the page and the figures' file names."""
+    rec = cf.recordings
     if comments is None:
         comments = list(getattr(rec, "comments", ()))
         if not comments:
@@ -535,11 +585,7 @@ def write_report(cf, out_dir, *, draws: int = 2000, seed: int | None = None, sur
             f"σ_L = {1e3 * np.mean(tf.flat('noise')[:, 2]):.3f} mm (posterior means).</p>")
         if tf.diagnostics["warnings"]:
             parts.append("".join(f"<p class='warn'>{html.escape(w)}</p>" for w in tf.diagnostics["warnings"]))
-        parts.append(fig(f"test_{tf.pressure_bar:g}bar.png", fig_test(tf, tb, cb), f"{tf.pressure_bar:g} bar"))
+        parts.append(fig(f"test_{tf.pressure_bar:g}bar.png", test_pngs.result(i), f"{tf.pressure_bar:g} bar"))
     parts.append(f"<p class='small'>Generated by <code>uq report</code> (airspring-uq). Figures are embedded; the same PNG files "
                  f"({len(figures)}) are in this folder.</p></body></html>")
-    page = write_text_atomic(out / "report.html", "\n".join(parts))
-    # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
-    stale = REPORT_FIGURES + (() if surface_page else SURFACE_OUTPUTS)
-    remove_stale(out, stale, keep=set(figures) | {page.name})
-    return page
+    return write_text_atomic(out / "report.html", "\n".join(parts)), set(figures)

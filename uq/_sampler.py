@@ -2,7 +2,11 @@
 
 ``run_ensembles`` runs ``n_ensembles`` (default 4) independent emcee ensembles from
 overdispersed starts and extends them in chunks until every convergence rule passes on the
-sampled parameters, or ``max_steps`` is reached (then the warnings name each rule that failed):
+sampled parameters, or ``max_steps`` is reached (then the warnings name each rule that failed).
+``run_many`` does the same for K problems at once (the tests of a campaign). All ensembles of
+all problems are walker groups of one emcee sampler whose moves never mix groups (``_Grouped``),
+so each move costs one vectorised log-probability call for everything, not one per ensemble.
+The rules, per problem:
 
 * tau:        the chain after burn-in (``burn_tau`` tau) is at least ``tau_multiple`` (50)
               integrated autocorrelation times long (emcee's estimator, the largest over
@@ -304,13 +308,14 @@ def _run_many(log_prob, centers, scales, names, seed: int, settings: Settings, b
         n_steps += step
         bar.update(step)
         chains = [_collect(sampler, k, names, settings, n_steps, start[k]) for k in range(K)]
-        verdicts = [_failed_rules(c, settings) for c in chains]
+        verdicts = [_failed_rules(c, settings, full=False) for c in chains]
         n_failed = sum(bool(f) for f, _ in verdicts)
         bar.set_postfix_str(f"{n_failed} problem(s) not yet converged" if n_failed else "converged")
         if not n_failed:
             return chains
         want = max(w for f, w in verdicts if f)
         if n_steps >= settings.max_steps or want <= n_steps:
+            verdicts = [_failed_rules(c, settings) for c in chains]
             return [dataclasses.replace(c, warnings=tuple(f)) for c, (f, _) in zip(chains, verdicts, strict=True)]
         target = max(want, n_steps + settings.chunk // 4)
 
@@ -333,8 +338,12 @@ def _collect(sampler, k: int, names, settings: Settings, n_steps: int, start) ->
     return Chains(tuple(names), samples, lp, accept, tau, n_steps, burn, E, (), W, start)
 
 
-def _failed_rules(chains: Chains, settings: Settings) -> tuple[list[str], int]:
-    """Messages for the rules that fail on the sampled parameters, and the length they ask for."""
+def _failed_rules(chains: Chains, settings: Settings, full: bool = True) -> tuple[list[str], int]:
+    """Messages for the rules that fail on the sampled parameters, and the length they ask for.
+
+    ``full=False``: when the (cheap) tau rule already fails, stop there; R-hat and ESS on a chain
+    that short would fail too and only cost time. Final verdicts are always full.
+    """
     n, tau = chains.n_steps, float(np.max(chains.tau))
     need = settings.burn_tau + settings.tau_multiple
     msgs, want = [], n
@@ -342,6 +351,8 @@ def _failed_rules(chains: Chains, settings: Settings) -> tuple[list[str], int]:
         msgs.append(f"chain of {n} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation times "
                     f"(tau = {tau:.1f}): raise --max-steps or use more walkers")
         want = int(math.ceil(1.1 * need * (tau if math.isfinite(tau) else n)))
+        if not full:
+            return msgs, want
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "more chains than draws" on very short runs: judged below
         diag = {nm: chain_diagnostics(chains.samples[..., i], chains.n_walkers) for i, nm in enumerate(chains.names)}

@@ -133,7 +133,7 @@ def test_uq_surface_out_writes_a_saved_answer(campaign, surface_saved, monkeypat
     import uq._surface
 
     monkeypatch.setattr(uq._surface, "fit_surface", lambda *a, **k: surface_saved[2])
-    assert run(["surface", campaign[1], "--no-compare", "--walkers", 10, *QUICK, "--out", tmp_path / "s"]) == 0
+    assert run(["surface", campaign[1], "--no-compare", "--walkers", 12, *QUICK, "--out", tmp_path / "s"]) == 0
     assert "saved fit" in capsys.readouterr().out
     out = tmp_path / "m.json"
     assert run(["margin", "--fit", tmp_path / "s" / "surface.nc", *QUERY, "--json", out, "--quiet"]) == 0

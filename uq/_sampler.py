@@ -384,6 +384,15 @@ def _ess_of_summary(x: np.ndarray, per_step: np.ndarray) -> float:
     return min(ess_m * float(np.var(x)) / var_m, float(x.size))
 
 
+def bulk_ess(x: np.ndarray, n_walkers: int) -> float:
+    """Bulk ESS of one scalar, x (n_ensembles, steps * walkers) in storage order (one ensemble
+    is enough): ArviZ's rank normalisation, then the ensemble-mean chains (module docstring)."""
+    x = np.asarray(x, float)
+    ranks = stats.rankdata(x, axis=None).reshape(x.shape)
+    z = stats.norm.ppf((ranks - 0.375) / (x.size + 0.25))  # ArviZ's rank normalisation
+    return _ess_of_summary(z, z.reshape(x.shape[0], -1, n_walkers).mean(axis=2))
+
+
 def chain_diagnostics(x: np.ndarray, n_walkers: int) -> dict:
     """R-hat, bulk/tail ESS and MCSE of the mean of one scalar; x (n_ensembles, steps * walkers).
 
@@ -393,9 +402,7 @@ def chain_diagnostics(x: np.ndarray, n_walkers: int) -> dict:
     C = x.shape[0]
     xw = x.reshape(C, -1, n_walkers)
     r_hat = float(az.rhat(np.ascontiguousarray(x)))
-    ranks = stats.rankdata(x, axis=None).reshape(x.shape)
-    z = stats.norm.ppf((ranks - 0.375) / (x.size + 0.25))  # ArviZ's rank normalisation
-    ess_bulk = _ess_of_summary(z, z.reshape(xw.shape).mean(axis=2))
+    ess_bulk = bulk_ess(x, n_walkers)
     tail = []
     for q in (0.05, 0.95):
         ind = (x <= np.quantile(x, q)).astype(float)

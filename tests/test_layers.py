@@ -38,21 +38,11 @@ def is_library(name: str) -> bool:
 #: Library modules that still define their command (``configure_NAME``/``command_NAME`` for
 #: uq/cli.py) and so import the command line's helpers or a report: (module, imported) -> reason.
 #: Each goes when its command moves to a ``_cmd_NAME`` module.
-KNOWN_ARGPARSE = {
-    ("_check", "_cmd_common"): "configure_check/command_check live in _check (option types, say())",
-    ("_diagnose", "_cmd_common"): "configure_diagnose/command_diagnose live in _diagnose (shared options, load())",
-    ("_margin", "_cmd_common"): "configure_margin/command_margin live in _margin (shared options, load())",
-    ("_surface", "_cmd_common"): "configure_surface/command_surface live in _surface (shared options, load())",
-    ("_surface", "_surface_report"): "command_surface --report writes surface.html",
-}
+KNOWN_ARGPARSE: dict = {}
 
 #: Imports that close a cycle, allowed for now: (module, imported) -> reason. The cycle check
 #: runs on the graph without them.
-KNOWN_CYCLE_EDGES = {
-    ("_surface", "_surface_report"): "command_surface --report; _surface_report draws the surface's figures",
-    ("_surface", "_margin"): "command_surface --out saves the margin answer (_margin.save_surface_answer); "
-                             "_margin answers from a SurfaceFit",
-}
+KNOWN_CYCLE_EDGES: dict = {}
 
 
 def _module_names() -> set[str]:

@@ -347,8 +347,9 @@ def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None
     import argparse
     import tempfile
 
+    from ._cmd_margin import _fit_and_choose
     from ._io import dumps_json
-    from ._margin import _fit_and_choose, load_answer, margin, save_answer
+    from ._margin import load_answer, margin, save_answer
     from ._recordings import read_recordings, write_recordings_csv
     from ._stand import simulate
     from ._stand_description import PAPER_STAND

@@ -47,9 +47,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from ._cmd_common import say
 from ._errors import InputError
-from ._io import emit_json
 from ._reference import FORCE_NAMES, PISTON_NAMES
 
 BLOCKS = {"force": FORCE_NAMES, "piston": PISTON_NAMES}
@@ -345,21 +343,3 @@ def summary(verdict: dict) -> str:
     tail = f"{state}; largest d^2 {worst['mahalanobis2']:.2f} ({worst['pressure_bar']:g} bar {worst['block']})"
     note = f"point-estimate uncertainty: {verdict['point_uncertainty']}"
     return "\n".join([head, note, *lines, tail])
-
-
-def configure_check(p) -> None:
-    p.add_argument("result", metavar="RESULT.json", help="output of `uq fit --json` (with posterior covariances)")
-    p.add_argument("--against", required=True, metavar="POINTS.json",
-                   help="point estimates to check (CONTRACT.md section 3, e.g. fits/n50/table1_points.json)")
-    from ._cmd_common import probability
-
-    p.add_argument("--alpha", type=probability, default=DEFAULT_ALPHA,
-                   help=f"false-failure rate of the whole check, Bonferroni over blocks (default {DEFAULT_ALPHA:g})")
-    p.add_argument("--json", metavar="PATH", help="write the machine-readable verdict to PATH ('-' for stdout)")
-
-
-def command_check(args) -> int:
-    verdict = check_files(args.result, args.against, alpha=args.alpha)
-    emit_json(verdict, args.json)
-    say(summary(verdict), args.json)
-    return 0 if verdict["agree"] else 1

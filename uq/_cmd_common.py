@@ -198,3 +198,21 @@ def check_output_path(path, option: str, kind: str = "file") -> None:
     if not ancestor.is_dir():
         raise InputError(f"option {option} {path}: {ancestor} is a file, not a folder")
     _probe_writable(ancestor, option, path)
+
+
+def add_stand(p: argparse.ArgumentParser) -> None:
+    """``--stand FILE.toml``: the stand the recordings were taken on (one option for every command)."""
+    p.add_argument("--stand", metavar="FILE.toml",
+                   help="the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
+                        "p_atm (TOML, keys of uq._stand_description.StandDescription; default the paper's stand)")
+
+
+def stand_from(args):
+    """The StandDescription of ``--stand`` (the paper's stand without it); a bad file is InputError."""
+    from ._stand_description import PAPER_STAND, StandDescription, read_stand
+
+    stand = getattr(args, "stand", None)
+    if isinstance(stand, StandDescription):
+        return stand
+    return read_stand(stand) if stand else PAPER_STAND
+

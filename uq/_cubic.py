@@ -29,7 +29,7 @@ import numpy as np
 import optimistix as optx
 
 from ._jax import jax, jnp
-from ._linear import draw_linear_numpy, gaussian_loglik, linear_posterior
+from ._linear import draw_one, gaussian_loglik, linear_posterior, map_rows
 from ._physics import BASIS_SCALE_M, force_noise_var, to_paper_basis
 from ._recordings import PressureTest, Recordings
 from ._reference import FORCE_NAMES, PISTON_NAMES
@@ -285,6 +285,15 @@ def fit_tests(tests, x0_m: float, *, seed: int, settings: Settings = Settings(),
             for pr, ch, s in zip(preps, runs, test_seeds(seed, len(preps)), strict=True)]
 
 
+def _posterior_given(sigma, X, y, prior_sd):
+    return linear_posterior(X, y, sigma, prior_sd)
+
+
+def _draw(sigma, key, X, y, prior_sd):
+    """One exact draw of a cubic's coefficients given the noise sd at each point (mapped by map_rows)."""
+    return draw_one(sigma, key, _posterior_given, X, y, prior_sd)
+
+
 def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> PressureFit:
     """Exact coefficient draws for every retained noise sample, ArviZ data and diagnostics."""
     test, ref_force = pr.test, pr.ref_force
@@ -292,10 +301,12 @@ def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> Pressur
     nat = np.asarray(_natural_noise_jit(jnp.asarray(chains.samples.reshape(C * D, 3)), float(np.mean(ref_force))))
     noise_flat = np.exp(nat)
     sigma_f = np.sqrt(force_noise_var(noise_flat[:, :1], noise_flat[:, 1:2], ref_force))
-    sigma_l = np.broadcast_to(noise_flat[:, 2:3], sigma_f.shape)
-    rng = np.random.default_rng(seed)
-    alpha_f = draw_linear_numpy(pr.X, test.force_N, sigma_f, np.full(4, FORCE_PRIOR_SD_N), rng)
-    alpha_l = draw_linear_numpy(pr.X, test.piston_m, sigma_l, np.full(4, PISTON_PRIOR_SD_M), rng)
+    sigma_l = np.ascontiguousarray(np.broadcast_to(noise_flat[:, 2:3], sigma_f.shape))
+    key_f, key_l = jax.random.split(jax.random.PRNGKey(seed))
+    alpha_f = map_rows(_draw, (jnp.asarray(sigma_f), jax.random.split(key_f, C * D)),
+                       (jnp.asarray(pr.X), jnp.asarray(test.force_N), jnp.full(4, FORCE_PRIOR_SD_N)))
+    alpha_l = map_rows(_draw, (jnp.asarray(sigma_l), jax.random.split(key_l, C * D)),
+                       (jnp.asarray(pr.X), jnp.asarray(test.piston_m), jnp.full(4, PISTON_PRIOR_SD_M)))
     force = to_paper_basis(np.asarray(alpha_f)).reshape(C, D, 4)
     piston = to_paper_basis(np.asarray(alpha_l)).reshape(C, D, 4)
     noise_draws = noise_flat.reshape(C, D, 3)

@@ -29,10 +29,8 @@ Pipeline (models in ``_diagnose_models``):
 
 from __future__ import annotations
 
-import argparse
 import html
 import math
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -40,15 +38,13 @@ from pathlib import Path
 import numpy as np
 
 from . import _diagnose_models as M
-from ._cmd_common import add_json, add_recordings, add_sampling, load
-from ._errors import InputError
-from ._io import emit_json, write_figure_atomic, write_text_atomic
+from ._io import write_figure_atomic, write_text_atomic
 from ._jax import jax, jnp
-from ._linear import batched
+from ._linear import map_rows
 from ._mechanisms import MECHANISMS
 from ._progress import _Silent, progress
 from ._sampler import Settings, chain_diagnostics, run_ensembles, thin
-from ._stand_description import PAPER_STAND, StandDescription, read_stand
+from ._stand_description import PAPER_STAND, StandDescription
 from ._summary import estimate
 
 N_DRAWS = 1000  # Laplace draws per candidate for PSIS-LOO
@@ -87,10 +83,8 @@ class Fit:
         keys = jax.random.split(jax.random.PRNGKey(int(rng.integers(2**31))), self.theta.shape[0])
         mask = self.mask
 
-        def fn(th, k):  # calls the module-level jitted function: no recompilation per model
-            return M.draws_batch(th, k, mask, d)
-
-        ll, muF, muL, beta, sigma = batched(fn, jnp.asarray(self.theta), keys, batch=N_DRAWS)
+        ll, muF, muL, beta, sigma = (np.asarray(a) for a in
+                                     map_rows(M.draw_row, (jnp.asarray(self.theta), keys), (mask, d)))
         ok = np.all(np.isfinite(ll), axis=1)
         self.ll, self.muF, self.muL, self.beta, self.sigma = ll[ok], muF[ok], muL[ok], beta[ok], sigma[ok]
         self.theta = self.theta[ok]
@@ -629,42 +623,3 @@ final: force rms {res['final']['rms_N']:.1f} N, ELPD-LOO {res['final']['elpd_loo
 
 def public(res: dict) -> dict:
     return {k: v for k, v in res.items() if not k.startswith("_")}
-
-
-# ----------------------------------------------------------------------------- CLI
-
-def configure_diagnose(p: argparse.ArgumentParser) -> None:
-    add_recordings(p)
-    add_sampling(p)
-    add_json(p)
-    p.add_argument("--report", metavar="DIR", help="write the HTML section and residual plots to DIR")
-    p.add_argument("--gain-se", type=float, default=GAIN_SE,
-                   help=f"ELPD gain, in standard errors, a mechanism must exceed (default {GAIN_SE:g})")
-    p.add_argument("--max-mechanisms", type=int, default=len(M.MECHS),
-                   help=f"stop after this many mechanisms (default {len(M.MECHS)})")
-    if not any(a.dest == "stand" for a in p._actions):  # a shared --stand may come from _cmd_common
-        p.add_argument("--stand", metavar="FILE.toml",
-                       help="the stand's error budget and gas volumes (default: the paper's stand, section 3.2)")
-
-
-def command_diagnose(args) -> int:
-    if not (math.isfinite(args.gain_se) and args.gain_se > 0):
-        raise InputError(f"option --gain-se: expected a positive number, got {args.gain_se:g}")
-    if not 0 <= args.max_mechanisms <= len(M.MECHS):
-        raise InputError(f"option --max-mechanisms: expected 0..{len(M.MECHS)}, got {args.max_mechanisms}")
-    settings = Settings(n_walkers=args.walkers, n_ensembles=args.ensembles, max_steps=args.max_steps,
-                        min_steps=min(300, args.max_steps), chunk=200)
-    settings.validate()
-    rec = load(args)
-    stand = args.stand if isinstance(args.stand, StandDescription) else (
-        read_stand(args.stand) if args.stand else PAPER_STAND)
-    res = diagnose(rec, seed=args.seed, settings=settings, max_mechanisms=args.max_mechanisms, gain_se=args.gain_se,
-                   stand=stand)
-    if args.json != "-":
-        sys.stdout.write(summary_text(res))
-        print(f"time: {res['_timing_s']['total']:.1f} s (screening {res['_timing_s']['screening']:.1f} s)")
-    emit_json(public(res), args.json)
-    if args.report:
-        write_report(res, args.report)
-    warn = (res["sampling"] or {}).get("warnings") or []
-    return 1 if (args.strict and warn) else 0

@@ -221,6 +221,8 @@ def _log_post(theta, mask, d: Data):
 @jax.jit
 def log_post_batch(thetas, mask, d: Data):
     return jax.lax.map(lambda th: _log_post(th, mask, d), thetas)
+
+
 PAD = 16  # every batched call is padded to a multiple of this: one compilation per campaign
 
 
@@ -263,7 +265,8 @@ def _hessian_fd(f_batch, x, h):
     return Hm
 
 
-def _one_draw(theta, key, mask, d: Data):
+def draw_row(theta, key, mask, d: Data):
+    """One exact coefficient draw given theta, with what the engine keeps of it (mapped by map_rows)."""
     X, y, sigma_fit, prior, s, XF, XL, sigma = _stacked(theta, mask, d)
     post = linear_posterior(X, y, sigma_fit, prior)
     beta_s = draw_coefficients(post, jax.random.normal(key, post.mean.shape))
@@ -271,10 +274,6 @@ def _one_draw(theta, key, mask, d: Data):
     beta = beta_s / s
     return ll, XF @ beta, XL @ beta, beta, sigma
 
-
-@jax.jit
-def draws_batch(thetas, keys, mask, d: Data):
-    return jax.lax.map(lambda a: _one_draw(a[0], a[1], mask, d), (thetas, keys))
 
 
 def active_dims(names) -> list[int]:

@@ -15,6 +15,7 @@ All functions are pure and jittable; shapes in the docstrings.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 from ._jax import jax, jnp
@@ -60,45 +61,22 @@ def gaussian_loglik(y, mu, sigma):
     return -0.5 * (((y - mu) / sigma) ** 2 + 2.0 * jnp.log(sigma) + LOG_2PI)
 
 
-BATCH = 4096  # XLA CPU hangs on vmapped batches of >= 16k small Cholesky factorisations
+DRAW_BATCH = 64  # rows per vmapped block inside the map: bounded memory, one compiled program
 
 
-def batched(fn, *arrays, batch: int = BATCH):
-    """Apply a jitted, vmapped ``fn`` over the leading axis in fixed-size padded batches.
-
-    Fixed batches compile once and sidestep the XLA CPU hang on very large batches of small
-    linear-algebra calls. Returns numpy arrays (a tuple if ``fn`` returns a tuple).
-    """
-    import numpy as np
-
-    n = arrays[0].shape[0]
-    outs = []
-    for start in range(0, n, batch):
-        chunk = [a[start : start + batch] for a in arrays]
-        m = chunk[0].shape[0]
-        if m < batch:
-            chunk = [jnp.concatenate([c, jnp.repeat(c[-1:], batch - m, axis=0)]) for c in chunk]
-        res = fn(*chunk)
-        res = res if isinstance(res, tuple) else (res,)
-        outs.append(tuple(np.asarray(r)[:m] for r in res))
-    joined = tuple(np.concatenate([o[i] for o in outs]) for i in range(len(outs[0])))
-    return joined if len(joined) > 1 else joined[0]
+def draw_one(theta, key, posterior_of, *args):
+    """One exact draw of the coefficients given sampled parameters ``theta``:
+    ``posterior_of(theta, *args)`` builds the model's :class:`LinearPosterior` (its whitened
+    design, data and prior given theta) and the draw is ``m + A^{-1/2} z``, z ~ N(0, I) from ``key``."""
+    post = posterior_of(theta, *args)
+    return draw_coefficients(post, jax.random.normal(key, post.mean.shape))
 
 
-def draw_linear_numpy(X, y, sigma, prior_sd, rng):
-    """Exact draws of beta for many noise samples at once, in numpy.
-
-    X (n, k), y (n,), sigma (N, n) noise sd per sample and point, prior_sd (k,); returns
-    (N, k), one draw from N(m_s, A_s^-1) per sample s. numpy's batched LAPACK (gufuncs) is
-    used here rather than XLA: XLA's CPU batched Cholesky has been seen to stall under load.
-    """
-    import numpy as np
-
-    X = np.asarray(X)
-    w = 1.0 / np.asarray(sigma) ** 2  # (N, n)
-    A = np.einsum("nk,sn,nl->skl", X, w, X) + np.diag(1.0 / np.asarray(prior_sd) ** 2)
-    rhs = np.einsum("nk,sn->sk", X, w * np.asarray(y))
-    chol = np.linalg.cholesky(A)
-    mean = np.linalg.solve(A, rhs[..., None])[..., 0]
-    z = rng.standard_normal(mean.shape)
-    return mean + np.linalg.solve(np.swapaxes(chol, -1, -2), z[..., None])[..., 0]
+@functools.partial(jax.jit, static_argnames=("fn", "batch_size"))
+def map_rows(fn, rows, args=(), batch_size: int = DRAW_BATCH):
+    """``fn(*row, *args)`` for every row of the arrays in ``rows`` (a tuple, leading axis N), as one
+    jitted ``jax.lax.map`` over vmapped blocks of ``batch_size`` rows: one compiled program per
+    shape, memory bounded by the block, no Python loop. The one way every model maps its exact
+    coefficient draws (``draw_one``) and its pointwise log-likelihoods over posterior samples.
+    ``fn`` must be a module-level function (it is a static argument)."""
+    return jax.lax.map(lambda r: fn(*r, *args), rows, batch_size=batch_size)

@@ -48,7 +48,7 @@ import optimistix as optx
 
 from ._errors import InputError
 from ._jax import jax, jnp
-from ._linear import LOG_2PI, batched, draw_coefficients, linear_posterior
+from ._linear import LOG_2PI, draw_one, linear_posterior, map_rows
 from ._physics import BAR_PA, BASIS_SCALE_M, force_noise_var
 from ._recordings import Recordings
 from ._sampler import Chains, Settings, convergence, run_ensembles, thin
@@ -73,7 +73,6 @@ def noise_prior_mean(stand: StandDescription = PAPER_STAND) -> np.ndarray:
 NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 NOISE_PRIOR_SD = np.array([1.5, 0.5, 0.5, 1.5, 0.5])
 LEVEL = 0.90
-DRAW_BATCH = 64  # small batches: larger vmapped batches of whitened (2n, k) solves have hung XLA CPU
 
 
 @dataclass(frozen=True)
@@ -222,27 +221,23 @@ def _bfgs(theta0, Xf, Xl, F, L, c):
     return sol.value, sol.result
 
 
-@jax.jit
-def _draw(thetas, keys, Xf, Xl, F, L, c):
-    def one(theta, key):
-        X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
-        post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
-        return draw_coefficients(post, jax.random.normal(key, post.mean.shape))
-
-    return jax.vmap(one)(thetas, keys)
+def _posterior_given(theta, Xf, Xl, F, L, c):
+    """The coefficients' Gaussian posterior given the noise theta (whitened: unit noise, unit prior)."""
+    X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
+    return linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
 
 
-@jax.jit
-def _pointwise(thetas, betas, Xf, Xl, F, L, c):
-    """Pointwise log-likelihood of each (force, piston) reading, (S, n)."""
+def _draw(theta, key, Xf, Xl, F, L, c):
+    """One exact coefficient draw given the noise theta (mapped over samples by ``map_rows``)."""
+    return draw_one(theta, key, _posterior_given, Xf, Xl, F, L, c)
 
-    def one(theta, beta):
-        L11, L21, L22 = _cov_factors(theta, c)
-        r1 = (F - Xf @ beta) / L11
-        r2 = (L - Xl @ beta - L21 * r1) / L22
-        return -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI
 
-    return jax.vmap(one)(thetas, betas)
+def _pointwise(theta, beta, Xf, Xl, F, L, c):
+    """Pointwise log-likelihood of each (force, piston) reading at one draw, (n,)."""
+    L11, L21, L22 = _cov_factors(theta, c)
+    r1 = (F - Xf @ beta) / L11
+    r2 = (L - Xl @ beta - L21 * r1) / L22
+    return -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI
 
 
 def _block_loo(X, y, n, chol, mean):
@@ -262,7 +257,6 @@ def _block_loo(X, y, n, chol, mean):
     return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI
 
 
-@jax.jit
 def _pointwise_loo(theta, Xf, Xl, F, L, c):
     """log p(force_i, piston_i | noise, all other readings), coefficients integrated out, (n,).
 
@@ -271,13 +265,10 @@ def _pointwise_loo(theta, Xf, Xl, F, L, c):
     moves; the coefficients' leave-one-out is exact. Same ELPD, far smaller Pareto k.
     """
 
-    def one(th):
-        X, y, _ = _whiten(th, Xf, Xl, F, L, c)
-        post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
-        L11, _, L22 = _cov_factors(th, c)
-        return _block_loo(X, y, F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
-
-    return jax.vmap(one)(theta)
+    X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
+    post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
+    L11, _, L22 = _cov_factors(theta, c)
+    return _block_loo(X, y, F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
 
 
 # ----------------------------------------------------------------------------- fit
@@ -504,15 +495,14 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     C, D, _ = chains.samples.shape
     flat = jnp.asarray(chains.samples.reshape(C * D, 5))
     keys = jax.random.split(jax.random.PRNGKey(seed), C * D)
-    beta = np.asarray(batched(lambda th, k: _draw(th, k, *args), flat, keys, batch=DRAW_BATCH)).reshape(C, D, -1)
+    beta = np.asarray(map_rows(_draw, (flat, keys), args)).reshape(C, D, -1)
     # pointwise log-likelihood for PSIS-LOO on at most ~2000 draws
     step = max(1, int(np.ceil(C * D / 2000)))
     th_s, b_s = chains.samples[:, ::step], beta[:, ::step]
     Cs, Ds = th_s.shape[:2]
-    ll = batched(lambda th, b: _pointwise(th, b, *args), jnp.asarray(th_s.reshape(Cs * Ds, 5)),
-                 jnp.asarray(b_s.reshape(Cs * Ds, -1)), batch=DRAW_BATCH).reshape(Cs, Ds, -1)
-    ll_loo = batched(lambda th: _pointwise_loo(th, *args), jnp.asarray(th_s.reshape(Cs * Ds, 5)),
-                     batch=DRAW_BATCH).reshape(Cs, Ds, -1)
+    th_rows = jnp.asarray(th_s.reshape(Cs * Ds, 5))
+    ll = np.asarray(map_rows(_pointwise, (th_rows, jnp.asarray(b_s.reshape(Cs * Ds, -1))), args)).reshape(Cs, Ds, -1)
+    ll_loo = np.asarray(map_rows(_pointwise_loo, (th_rows,), args)).reshape(Cs, Ds, -1)
     noise = _natural(chains.samples)
     posterior = {n: noise[..., i] for i, n in enumerate(("s0_N", "rel_load", "k_p", "sL_m", "V0_m3"))}
     idata = az.from_dict(posterior=posterior, sample_stats={"lp": chains.log_prob},
@@ -911,92 +901,3 @@ def comparison_words(c: dict) -> str:
     if c["better"] in ("refused", "indistinguishable"):
         return f"{c['better']}: {c['reason']}"
     return f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f} in favour of the {c['better']}"
-
-
-def configure_surface(p) -> None:
-    from ._cmd_common import add_json, add_recordings, add_sampling
-
-    add_recordings(p)
-    add_sampling(p)
-    add_json(p)
-    p.add_argument("--select", action="store_true",
-                   help="rank the candidate polynomial orders by PSIS-LOO and keep the best (slower)")
-    p.add_argument("--no-compare", action="store_true",
-                   help="skip the PSIS-LOO comparison with the per-pressure cubics")
-    p.add_argument("--report", metavar="DIR", help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR")
-    p.add_argument("--out", metavar="DIR",
-                   help="the folder to write: surface.nc, the surface posterior as a saved answer for uq margin --fit (docs/formats.md)")
-    add_stand(p)
-
-
-def add_stand(p) -> None:
-    p.add_argument("--stand", metavar="FILE.toml",
-                   help="the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
-                        "p_atm (TOML, keys of uq._stand_description.StandDescription; default the paper's stand)")
-
-
-def stand_from(args) -> StandDescription:
-    from ._stand_description import read_stand
-
-    return read_stand(args.stand) if getattr(args, "stand", None) else PAPER_STAND
-
-
-def fast_cubic_settings(settings: Settings) -> Settings:
-    """Shorter chains for the per-pressure cubics used only in the LOO comparison."""
-    return Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles, tau_multiple=20.0,
-                    min_steps=300, max_steps=settings.max_steps)
-
-
-def command_surface(args) -> int:
-    from ._cmd_common import load, settings_from
-    from ._cubic import fit_campaign
-    from ._io import emit_json
-
-    t0 = time.perf_counter()
-    stand = stand_from(args)  # a bad --stand file or --walkers is refused before the recordings are read
-    settings = settings_from(args)
-    settings.require_walkers(len(NOISE_NAMES))
-    rec = load(args)
-    if args.select:
-        fit, _ = select_orders(rec, seed=args.seed, settings=settings, stand=stand)
-    else:
-        fit = fit_surface(rec, seed=args.seed, settings=settings, stand=stand)
-    comparison = None
-    if not args.no_compare:
-        cub = fit_campaign(rec, seed=args.seed, settings=fast_cubic_settings(settings))
-        comparison = compare_with_cubics(fit, cub, seed=args.seed, settings=fast_cubic_settings(settings))
-    res = summary(fit, comparison)
-    seconds_total = time.perf_counter() - t0  # printed, not in the JSON: reruns give identical bytes
-    print(f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
-          f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)")
-    for row in fit.selection:
-        print(f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}")
-    for pb, r in res["at_x0"].items():
-        f, s = r["force_N"], r["spread_N"]
-        print(f"  x0, {pb} bar: F_p {r['pressure_area_m2']['mean'] * 1e4:.2f} cm^2, F_eff = P/p_u {r['feff_m2']['mean'] * 1e4:.2f} cm^2, "
-              f"force {f['mean']:.0f} N "
-              f"[{f['q05']:.0f}, {f['q95']:.0f}], traditional - measured {s['mean']:.0f} N [{s['q05']:.0f}, {s['q95']:.0f}]")
-    nz = res["noise"]
-    print(f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
-          f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm")
-    print(f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range")
-    if comparison:
-        c = comparison
-        print(f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} ({c['surface']['n_coefficients']} coef., "
-              f"max Pareto k {c['surface']['max_pareto_k']:.2f}), cubics {c['cubics']['elpd_loo']:.1f} "
-              f"({c['cubics']['n_coefficients']} coef., max Pareto k {c['cubics']['max_pareto_k']:.2f}): "
-              f"{comparison_words(c)}")
-    for w in res["warnings"]:
-        print(f"  warning: {w}")
-    if args.report:
-        from ._surface_report import write_surface_report
-
-        print(f"  report: {write_surface_report(fit, res, args.report)}")
-    if args.out:
-        from ._margin import save_surface_answer
-
-        print(f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
-              "(uq margin --fit answers from it)")
-    print(f"  {seconds_total:.1f} s (fit {fit.seconds:.1f} s)")
-    emit_json(res, args.json)
-    return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0

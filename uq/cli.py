@@ -36,12 +36,12 @@ from ._errors import InputError
 COMMANDS = [
     ("simulate", "uq._cmd_basic", "virtual test stand: write recordings following the paper's procedure and error budget"),
     ("fit", "uq._cmd_basic", "per-pressure Bayesian cubic fits of force and piston coordinate (eqs. 8, 9)"),
-    ("report", "uq._report", "posterior report: one self-contained HTML page (+ PNG figures) per campaign"),
-    ("check", "uq._check", "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)"),
+    ("report", "uq._cmd_report", "posterior report: one self-contained HTML page (+ PNG figures) per campaign"),
+    ("check", "uq._cmd_check", "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)"),
     ("bench", "uq._bench", "effective samples per second of the project's sampler against a plain emcee baseline"),
-    ("surface", "uq._surface", "pressure-coupled surface model over all tests at once"),
-    ("margin", "uq._margin", "design-margin queries on the surface model"),
-    ("diagnose", "uq._diagnose", "locate the mismatch with the traditional model, name and model the missing physics"),
+    ("surface", "uq._cmd_surface", "pressure-coupled surface model over all tests at once"),
+    ("margin", "uq._cmd_margin", "design-margin queries on the surface model"),
+    ("diagnose", "uq._cmd_diagnose", "locate the mismatch with the traditional model, name and model the missing physics"),
     ("calibrate", "uq._calibrate", "coverage of the credible intervals on simulated campaigns with known truth"),
     ("batch", "uq._batch", "a catalogue of campaigns (fit, report, surface, diagnose) on Dask: summary table, reruns skip finished ones"),
 ]

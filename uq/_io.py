@@ -105,15 +105,25 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
         with fh:
             fh.write(data)
         return path
-    _make_parent(path)
-    fd, tmp = _open_tmp_beside(path)
-    try:
+
+    def fill(fd, tmp):
         with os.fdopen(fd, "wb") as fh:
             if mode is not None:
                 os.fchmod(fh.fileno(), mode)
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
+
+    return _replace_atomically(path, fill)
+
+
+def _replace_atomically(path: Path, fill) -> Path:
+    """A temporary file beside ``path`` (``fill(fd, tmp)`` writes, fsyncs and closes it), renamed
+    over ``path``, the folder fsynced; on any failure the temporary file is removed."""
+    _make_parent(path)
+    fd, tmp = _open_tmp_beside(path)
+    try:
+        fill(fd, tmp)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -139,10 +149,9 @@ def write_file_atomic(path: str | os.PathLike, write) -> Path:
             tmp = Path(folder) / path.name
             write(tmp)
             return write_bytes_atomic(path, tmp.read_bytes())
-    _make_parent(path)
-    fd, tmp = _open_tmp_beside(path)
-    os.close(fd)
-    try:
+
+    def fill(fd, tmp):
+        os.close(fd)
         write(tmp)
         fd = os.open(tmp, os.O_RDONLY)
         try:
@@ -151,13 +160,8 @@ def write_file_atomic(path: str | os.PathLike, write) -> Path:
             os.fsync(fd)
         finally:
             os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    _fsync_folder(path.parent)
-    return path
+
+    return _replace_atomically(path, fill)
 
 
 def remove_stale(folder: str | os.PathLike, patterns: tuple[str, ...], keep) -> list[Path]:

@@ -39,7 +39,7 @@ import numpy as np
 from ._errors import InputError
 from ._physics import BAR_PA
 from ._summary import band, estimate
-from ._surface import SurfaceFit
+from ._surface import SurfaceFit, refuse_extrapolation
 
 N_P_GRID = 801
 N_CUBIC_DRAWS = 2000
@@ -58,18 +58,7 @@ class _Ranges:
         self.height_range_m = tuple(float(v) for v in height_range_m)
 
     def check_range(self, height_m, p_bar, what="") -> None:
-        lo, hi = self.height_range_m
-        h = np.atleast_1d(np.asarray(height_m, float))
-        if np.any(h < lo - 1e-9) or np.any(h > hi + 1e-9):
-            bad = h[(h < lo - 1e-9) | (h > hi + 1e-9)][0]
-            raise InputError(f"{what}height {bad * 1e3:g} mm is outside the tested heights "
-                             f"{lo * 1e3:g}..{hi * 1e3:g} mm; the model does not extrapolate")
-        plo, phi = self.pressure_range_bar
-        p = np.atleast_1d(np.asarray(p_bar, float))
-        if np.any(p < plo - 1e-9) or np.any(p > phi + 1e-9):
-            bad = p[(p < plo - 1e-9) | (p > phi + 1e-9)][0]
-            raise InputError(f"{what}overpressure {bad:g} bar is outside the tested pressures "
-                             f"{plo:g}..{phi:g} bar; the model does not extrapolate")
+        refuse_extrapolation(height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the model")
 
 
 def _flat_draws(beta, max_draws):

@@ -274,6 +274,19 @@ def _pointwise_loo(theta, Xf, Xl, F, L, c):
 # ----------------------------------------------------------------------------- fit
 
 
+def refuse_extrapolation(height_m, p_bar, height_range_m, pressure_range_bar, what: str, model: str) -> None:
+    """InputError naming the first height or overpressure outside the tested ranges: models of the
+    stand's recordings answer only where it measured."""
+    for values, (lo, hi), scale, unit, name, tested in (
+            (height_m, height_range_m, 1e3, "mm", "height", "heights"),
+            (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures")):
+        v = np.atleast_1d(np.asarray(values, float))
+        out = (v < lo - 1e-9) | (v > hi + 1e-9)
+        if np.any(out):
+            raise InputError(f"{what}{name} {v[out][0] * scale:g} {unit} is outside the tested {tested} "
+                             f"{lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate")
+
+
 @dataclass(eq=False)
 class SurfaceFit:
     """Posterior of the surface model. ``beta`` (C, D, k) standardised coefficients."""
@@ -305,18 +318,7 @@ class SurfaceFit:
 
     def check_range(self, height_m, p_bar, what="") -> None:
         """Refuse heights/pressures outside the tested ranges (no extrapolation)."""
-        lo, hi = self.height_range_m
-        h = np.atleast_1d(np.asarray(height_m, float))
-        if np.any(h < lo - 1e-9) or np.any(h > hi + 1e-9):
-            bad = h[(h < lo - 1e-9) | (h > hi + 1e-9)][0]
-            raise InputError(f"{what}height {bad * 1e3:g} mm is outside the tested heights "
-                             f"{lo * 1e3:g}..{hi * 1e3:g} mm; the surface model does not extrapolate")
-        plo, phi = self.pressure_range_bar
-        p = np.atleast_1d(np.asarray(p_bar, float))
-        if np.any(p < plo - 1e-9) or np.any(p > phi + 1e-9):
-            bad = p[(p < plo - 1e-9) | (p > phi + 1e-9)][0]
-            raise InputError(f"{what}overpressure {bad:g} bar is outside the tested pressures "
-                             f"{plo:g}..{phi:g} bar; the surface model does not extrapolate")
+        refuse_extrapolation(height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the surface model")
 
     # ---- coefficient blocks (physical units, flattened draws)
     def flat_beta(self, max_draws: int | None = None) -> np.ndarray:

@@ -39,8 +39,9 @@ e: 10 kN; r: 1 m).
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import arviz as az
 import numpy as np
@@ -287,7 +288,7 @@ def refuse_extrapolation(height_m, p_bar, height_range_m, pressure_range_bar, wh
                              f"{lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate")
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, frozen=True)
 class SurfaceFit:
     """Posterior of the surface model. ``beta`` (C, D, k) standardised coefficients."""
 
@@ -302,7 +303,7 @@ class SurfaceFit:
     loglik: np.ndarray  # (C, D', n) pointwise, per (force, piston) reading
     map_theta: np.ndarray
     seconds: float = 0.0
-    selection: list = field(default_factory=list)
+    selection: tuple = ()
     stand: StandDescription = PAPER_STAND
     loglik_loo: np.ndarray | None = None  # (C, D', n) log p(reading_i | noise, other readings)
 
@@ -512,10 +513,8 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     t_diag = time.perf_counter()
     diagnostics = convergence(idata, chains, list(posterior))
     diagnostics["seconds"] = time.perf_counter() - t_diag
-    fit = SurfaceFit(rec, orders, g, chains.samples, beta, chains, idata, diagnostics, ll, theta, stand=stand,
-                     loglik_loo=ll_loo)
-    fit.seconds = time.perf_counter() - t0
-    return fit
+    return SurfaceFit(rec, orders, g, chains.samples, beta, chains, idata, diagnostics, ll, theta,
+                      seconds=time.perf_counter() - t0, stand=stand, loglik_loo=ll_loo)
 
 
 def _natural(theta):
@@ -535,9 +534,7 @@ def select_orders(rec: Recordings, candidates=CANDIDATES, *, seed: int = 0, sett
     rows = [{"orders": k, "elpd_loo": float(r["elpd_loo"]), "p_loo": float(r["p_loo"]),
              "elpd_diff": float(r["elpd_diff"]), "dse": float(r["dse"]), "rank": int(r["rank"]),
              "warning": bool(r["warning"])} for k, r in cmp.iterrows()]
-    best = fits[cmp.index[0]]
-    best.selection = rows
-    return best, rows
+    return dataclasses.replace(fits[cmp.index[0]], selection=tuple(rows)), rows
 
 
 #: a PSIS-LOO difference is called only beyond this many SEs of the difference (and ELPD_MIN)
@@ -811,7 +808,7 @@ def summary(fit: SurfaceFit, comparison: dict | None = None) -> dict:
         "noise": noise_summary(fit),
         "at_x0": ref,
         "spread_credibly_nonzero_fraction": float(reg["credibly_nonzero"].mean()),
-        "order_selection": fit.selection,
+        "order_selection": list(fit.selection),
         "comparison": comparison,
         "converged": fit.diagnostics["converged"],
         "convergence": {k: v for k, v in fit.diagnostics.items() if k not in ("variables", "seconds")}

@@ -54,7 +54,7 @@ def test_collapsed_posterior_is_the_closed_form():
 
 
 def test_exact_draw_kernel_matches_the_closed_form():
-    """uq._linear.map_rows + draw_one (the one kernel every model draws its coefficients with):
+    """uq._linear.map_rows + draw_exact (the one kernel every model draws its coefficients with):
     20000 draws, given per-draw noise sd, have the closed-form posterior mean and covariance
     (to Monte Carlo error), for two different noise levels in one call, across block edges."""
     import jax

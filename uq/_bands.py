@@ -378,16 +378,16 @@ def campaign_bands(cf, *, n_grid: int = 181, n_draws: int = 2000, seed: int = 0,
         [t.pressure_bar for t in cf.tests], np.stack(F), np.stack(L),
         x_grid=x, x0_m=rec.x0_m, piston_area_m2=rec.piston_area_m2,
         x_max_m=[float(t.test.height_m.max()) for t in cf.tests], noise=np.stack(N),
-        noise_ref_force=_noise_reference(cf.tests, x - rec.x0_m),
+        noise_ref_force=_noise_reference(cf.tests, x),
         reference_bar=reference_bar, seed=int(rng.integers(2**31)),
     )
     return dataclasses.replace(cb, seed=int(seed))
 
 
-def _noise_reference(tests, u) -> np.ndarray | None:
-    """The fits' force level of the relative noise term on the grid: |least-squares cubic| (T, G),
-    as ``uq._cubic.fit_test`` sets it at the data; None when the fits do not carry it."""
-    if not all(hasattr(t, "lsq_force") for t in tests):
+def _noise_reference(tests, x) -> np.ndarray | None:
+    """The fits' force level of the relative noise term on the grid x, (T, G), by each fit's own
+    rule (``PressureFit.ref_force_at``); None for fits that do not carry one."""
+    if not all(hasattr(t, "ref_force_at") for t in tests):
         return None
-    return np.stack([np.abs(np.polynomial.polynomial.polyval(u, t.lsq_force)) for t in tests])
+    return np.stack([t.ref_force_at(x) for t in tests])
 

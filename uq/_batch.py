@@ -273,9 +273,9 @@ def _settings(job: dict):
 
 
 def _stand(job: dict):
-    from ._stand_description import PAPER_STAND, read_stand
+    from ._stand_description import stand_or_paper
 
-    return read_stand(job["options"]["stand"]) if "stand" in job["options"] else PAPER_STAND
+    return stand_or_paper(job["options"].get("stand"))
 
 
 def _seed(job: dict) -> int:

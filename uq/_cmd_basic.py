@@ -12,11 +12,13 @@ from ._cmd_common import (
     add_json,
     add_recordings,
     add_sampling,
+    add_stand,
     load,
     positive_float,
     positive_int,
     seed,
     settings_from,
+    stand_from,
     walkers,
 )
 from ._errors import InputError
@@ -37,9 +39,8 @@ def configure_simulate(p) -> None:
     p.add_argument("--x-min-mm", type=positive_float, default=65.0, help="minimum height, mm")
     p.add_argument("--step-mm", type=positive_float, default=5.0, help="height step, mm")
     p.add_argument("--piston-area-cm2", type=positive_float, default=DEFAULT_PISTON_AREA_CM2, help="piston area S, cm^2")
-    p.add_argument("--stand", metavar="FILE.toml",
-                   help="the stand that makes the noise: error budget and gas volumes (TOML, keys of "
-                        "uq._stand_description.StandDescription; default the paper's stand, section 3.2)")
+    add_stand(p, help="the stand that makes the noise: error budget and gas volumes (TOML, keys of "
+                      "uq._stand_description.StandDescription; default the paper's stand, section 3.2)")
     add_json(p)
 
 
@@ -60,9 +61,9 @@ def command_simulate(args) -> int:
     from ._mechanisms import parse_effects
     from ._recordings import write_recordings_csv
     from ._stand import SPRINGS, Layout, simulate
-    from ._stand_description import PAPER_STAND, read_stand
+    from ._stand_description import PAPER_STAND
 
-    stand = read_stand(args.stand) if args.stand else PAPER_STAND
+    stand = stand_from(args)
     effects = parse_effects(args.effect)
     if not 0 < args.x_min_mm < args.x_max_mm:
         raise InputError(f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}")

@@ -200,19 +200,18 @@ def check_output_path(path, option: str, kind: str = "file") -> None:
     _probe_writable(ancestor, option, path)
 
 
-def add_stand(p: argparse.ArgumentParser) -> None:
-    """``--stand FILE.toml``: the stand the recordings were taken on (one option for every command)."""
-    p.add_argument("--stand", metavar="FILE.toml",
-                   help="the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
-                        "p_atm (TOML, keys of uq._stand_description.StandDescription; default the paper's stand)")
+STAND_HELP = ("the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
+              "p_atm (TOML, keys of uq._stand_description.StandDescription; default the paper's stand)")
+
+
+def add_stand(p: argparse.ArgumentParser, help: str = STAND_HELP) -> None:
+    """``--stand FILE.toml`` (one option for every command)."""
+    p.add_argument("--stand", metavar="FILE.toml", help=help)
 
 
 def stand_from(args):
     """The StandDescription of ``--stand`` (the paper's stand without it); a bad file is InputError."""
-    from ._stand_description import PAPER_STAND, StandDescription, read_stand
+    from ._stand_description import stand_or_paper
 
-    stand = getattr(args, "stand", None)
-    if isinstance(stand, StandDescription):
-        return stand
-    return read_stand(stand) if stand else PAPER_STAND
+    return stand_or_paper(getattr(args, "stand", None))
 

@@ -29,7 +29,7 @@ import numpy as np
 import optimistix as optx
 
 from ._jax import jax, jnp
-from ._linear import draw_one, gaussian_loglik, linear_posterior, map_rows
+from ._linear import draw_exact, gaussian_loglik, linear_posterior, map_rows
 from ._physics import BASIS_SCALE_M, force_noise_var, to_paper_basis
 from ._recordings import PressureTest, Recordings
 from ._reference import FORCE_NAMES, PISTON_NAMES
@@ -141,6 +141,7 @@ class PressureFit:
     idata: az.InferenceData
     diagnostics: dict
     ref_force_N: np.ndarray  # (n,) force level of the relative noise term at each point
+    noise_model: str = "budget"  # "budget" or "constant" (fit_test's noise)
 
     @property
     def pressure_bar(self) -> float:
@@ -152,6 +153,14 @@ class PressureFit:
 
     def ref_force(self) -> np.ndarray:
         return self.ref_force_N
+
+    def ref_force_at(self, height_m) -> np.ndarray:
+        """The force level of the relative noise term at any heights, by the rule the fit used at
+        the data (``_noise_reference``): the report's predictive bands use it on their grid."""
+        u = np.asarray(height_m, float) - self.x0_m
+        if self.noise_model == "constant":
+            return np.full(u.shape, float(np.mean(self.ref_force_N)))
+        return _noise_reference(self.lsq_force, u, self.noise_model)
 
     def deviation_measures(self) -> tuple[float, float]:
         """The paper's s_P (N) and eps_P (%) of the posterior-mean curve (section 5)."""
@@ -226,6 +235,14 @@ class _Prepared:
     ref_force: np.ndarray  # (n,)
     center: np.ndarray  # (3,) optimistix start
     scale: np.ndarray  # (3,) posterior width estimate / settings.init_scale
+    noise: str  # "budget" or "constant"
+
+
+def _noise_reference(lsq_force, u, noise: str) -> np.ndarray:
+    """Force level of the relative noise term at u: the least-squares curve's |P| ("budget"), or
+    its mean over these points ("constant")."""
+    ref = np.abs(_cubic_eval(lsq_force, u))
+    return np.full_like(ref, ref.mean()) if noise == "constant" else ref
 
 
 def _prepare(test: PressureTest, x0_m: float, settings: Settings, noise: str) -> _Prepared:
@@ -234,14 +251,12 @@ def _prepare(test: PressureTest, x0_m: float, settings: Settings, noise: str) ->
     u = test.height_m - x0_m
     lsq_f = least_squares(u, test.force_N)
     lsq_l = least_squares(u, test.piston_m)
-    ref_force = np.abs(_cubic_eval(lsq_f, u))
-    if noise == "constant":
-        ref_force = np.full_like(ref_force, ref_force.mean())
+    ref_force = _noise_reference(lsq_f, u, noise)
     X = np.asarray(basis(u))
     center = _start(jnp.asarray(X), test.force_N, test.piston_m, ref_force, lsq_f, lsq_l, u)
     # Start spread: about the posterior width of a log-scale from n points.
     scale = np.full(3, 1.0 / np.sqrt(2.0 * test.n_points)) / settings.init_scale * 0.5
-    return _Prepared(test, X, lsq_f, lsq_l, ref_force, center, scale)
+    return _Prepared(test, X, lsq_f, lsq_l, ref_force, center, scale, noise)
 
 
 _log_prob_tests = jax.jit(jax.vmap(log_prob))  # (K, W, 3) thetas of K tests of equal length -> (K, W)
@@ -261,8 +276,6 @@ def _campaign_log_prob(preps: list[_Prepared]):
 
     def lp(thetas):
         thetas = np.asarray(thetas, float)
-        if len(groups) == 1:
-            return np.asarray(_log_prob_tests(jnp.asarray(thetas), *groups[0][1]))
         out = np.empty(thetas.shape[:2])
         for idx, args in groups:
             out[idx] = np.asarray(_log_prob_tests(jnp.asarray(thetas[idx]), *args))
@@ -285,13 +298,9 @@ def fit_tests(tests, x0_m: float, *, seed: int, settings: Settings = Settings(),
             for pr, ch, s in zip(preps, runs, test_seeds(seed, len(preps)), strict=True)]
 
 
-def _posterior_given(sigma, X, y, prior_sd):
-    return linear_posterior(X, y, sigma, prior_sd)
-
-
 def _draw(sigma, key, X, y, prior_sd):
     """One exact draw of a cubic's coefficients given the noise sd at each point (mapped by map_rows)."""
-    return draw_one(sigma, key, _posterior_given, X, y, prior_sd)
+    return draw_exact(linear_posterior(X, y, sigma, prior_sd), key)
 
 
 def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> PressureFit:
@@ -319,7 +328,7 @@ def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> Pressur
         idata = _idata(posterior, test, x0_m, chains)
         diagnostics = convergence(idata, chains, list(posterior))
     return PressureFit(test, x0_m, pr.lsq_f, pr.lsq_l, force, piston, noise_draws, chains, idata, diagnostics,
-                       ref_force)
+                       ref_force, pr.noise)
 
 
 def _idata(posterior, test, x0_m, chains):

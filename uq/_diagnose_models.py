@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jax import jax, jnp
-from ._linear import draw_coefficients, gaussian_loglik, linear_posterior
+from ._linear import draw_exact, gaussian_loglik, linear_posterior
 from ._physics import BAR_PA, BASIS_SCALE_M
 from ._recordings import Recordings
 from ._stand_description import PAPER_STAND, StandDescription
@@ -269,7 +269,7 @@ def draw_row(theta, key, mask, d: Data):
     """One exact coefficient draw given theta, with what the engine keeps of it (mapped by map_rows)."""
     X, y, sigma_fit, prior, s, XF, XL, sigma = _stacked(theta, mask, d)
     post = linear_posterior(X, y, sigma_fit, prior)
-    beta_s = draw_coefficients(post, jax.random.normal(key, post.mean.shape))
+    beta_s = draw_exact(post, key)
     ll = gaussian_loglik(y, X @ beta_s, sigma)  # every row, held out or not, at its own noise
     beta = beta_s / s
     return ll, XF @ beta, XL @ beta, beta, sigma

@@ -64,11 +64,10 @@ def gaussian_loglik(y, mu, sigma):
 DRAW_BATCH = 64  # rows per vmapped block inside the map: bounded memory, one compiled program
 
 
-def draw_one(theta, key, posterior_of, *args):
-    """One exact draw of the coefficients given sampled parameters ``theta``:
-    ``posterior_of(theta, *args)`` builds the model's :class:`LinearPosterior` (its whitened
-    design, data and prior given theta) and the draw is ``m + A^{-1/2} z``, z ~ N(0, I) from ``key``."""
-    post = posterior_of(theta, *args)
+def draw_exact(post: LinearPosterior, key):
+    """One exact draw of the coefficients from ``post`` (a model's posterior given its sampled
+    parameters): ``m + A^{-1/2} z``, z ~ N(0, I) from the JAX ``key``. Every model draws with it,
+    mapped over posterior samples by ``map_rows``."""
     return draw_coefficients(post, jax.random.normal(key, post.mean.shape))
 
 
@@ -77,6 +76,6 @@ def map_rows(fn, rows, args=(), batch_size: int = DRAW_BATCH):
     """``fn(*row, *args)`` for every row of the arrays in ``rows`` (a tuple, leading axis N), as one
     jitted ``jax.lax.map`` over vmapped blocks of ``batch_size`` rows: one compiled program per
     shape, memory bounded by the block, no Python loop. The one way every model maps its exact
-    coefficient draws (``draw_one``) and its pointwise log-likelihoods over posterior samples.
+    coefficient draws (``draw_exact``) and its pointwise log-likelihoods over posterior samples.
     ``fn`` must be a module-level function (it is a static argument)."""
     return jax.lax.map(lambda r: fn(*r, *args), rows, batch_size=batch_size)

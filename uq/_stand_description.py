@@ -82,6 +82,11 @@ _ALLOW_ZERO = {"load_cell_rel_sd", "pressure_holding_bar", "pressure_holding_flo
                "displacement_sd_m", "caliper_sd_m", "receiver_air_m3"}
 
 
+def stand_or_paper(path: str | Path | None) -> StandDescription:
+    """The stand described in ``path``, or the paper's stand when no file is given."""
+    return read_stand(path) if path else PAPER_STAND
+
+
 def read_stand(path: str | Path) -> StandDescription:
     """A stand description from a TOML file; fields not given keep the paper's values.
 

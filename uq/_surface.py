@@ -49,7 +49,7 @@ import optimistix as optx
 
 from ._errors import InputError
 from ._jax import jax, jnp
-from ._linear import LOG_2PI, draw_one, linear_posterior, map_rows
+from ._linear import LOG_2PI, draw_exact, linear_posterior, map_rows
 from ._physics import BAR_PA, BASIS_SCALE_M, force_noise_var
 from ._recordings import Recordings
 from ._sampler import Chains, Settings, convergence, run_ensembles, thin
@@ -222,15 +222,16 @@ def _bfgs(theta0, Xf, Xl, F, L, c):
     return sol.value, sol.result
 
 
-def _posterior_given(theta, Xf, Xl, F, L, c):
-    """The coefficients' Gaussian posterior given the noise theta (whitened: unit noise, unit prior)."""
+def _whitened_posterior(theta, Xf, Xl, F, L, c):
+    """The whitened design and data given the noise theta, and the coefficients' Gaussian
+    posterior under them (unit noise, unit prior): (X, y, posterior)."""
     X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
-    return linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
+    return X, y, linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
 
 
 def _draw(theta, key, Xf, Xl, F, L, c):
     """One exact coefficient draw given the noise theta (mapped over samples by ``map_rows``)."""
-    return draw_one(theta, key, _posterior_given, Xf, Xl, F, L, c)
+    return draw_exact(_whitened_posterior(theta, Xf, Xl, F, L, c)[2], key)
 
 
 def _pointwise(theta, beta, Xf, Xl, F, L, c):
@@ -266,8 +267,7 @@ def _pointwise_loo(theta, Xf, Xl, F, L, c):
     moves; the coefficients' leave-one-out is exact. Same ELPD, far smaller Pareto k.
     """
 
-    X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
-    post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
+    X, y, post = _whitened_posterior(theta, Xf, Xl, F, L, c)
     L11, _, L22 = _cov_factors(theta, c)
     return _block_loo(X, y, F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
 

@@ -344,12 +344,10 @@ def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None
     queries from one load of the file (heights and pressures spread over the tested ranges,
     each with a force band and a usable stroke, as the reference query). A cold ``uq margin
     --fit`` in a fresh interpreter (imports included) is timed as well."""
-    import argparse
     import tempfile
 
-    from ._cmd_margin import _fit_and_choose
     from ._io import dumps_json
-    from ._margin import load_answer, margin, save_answer
+    from ._margin import fit_and_choose, load_answer, margin, save_answer
     from ._recordings import read_recordings, write_recordings_csv
     from ._stand import simulate
     from ._stand_description import PAPER_STAND
@@ -361,11 +359,9 @@ def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None
             what = f"the paper's campaign from the virtual stand (11 tests, seed {seed}), as data/n50"
         else:
             csv, what = Path(recordings), f"{recordings}"
-        args = argparse.Namespace(model="auto", seed=seed, walkers=settings.n_walkers, ensembles=settings.n_ensembles,
-                                  max_steps=settings.max_steps)
         t0 = time.perf_counter()
         rec = read_recordings(csv)
-        ans, info, diagnostics = _fit_and_choose(args, rec, PAPER_STAND)
+        ans, info, diagnostics = fit_and_choose(rec, model="auto", seed=seed, settings=settings, stand=PAPER_STAND)
         t_fit = time.perf_counter() - t0
         plo, phi = ans.pressure_range_bar
         if recordings is None:

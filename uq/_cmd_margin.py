@@ -12,7 +12,7 @@ from ._errors import InputError
 from ._margin import (
     _ANSWER_NAMES,
     MODEL_CHOICES,
-    choose_model,
+    fit_and_choose,
     load_answer,
     margin,
     save_answer,
@@ -292,23 +292,7 @@ def _print_table(source, ans, info, queries, results) -> None:
 
 
 def _fit_and_choose(args, rec, stand):
-    """Fit what ``--model`` needs; returns (answer, model description, merged sampler diagnostics)."""
+    """Fit what ``--model`` needs (``uq._margin.fit_and_choose``)."""
     from ._cmd_common import settings_from
-    from ._cubic import fit_campaign
-    from ._surface import compare_with_cubics, fit_surface
 
-    settings = settings_from(args)
-    fit = cub = comparison = None
-    warnings, converged = [], True
-    if args.model in ("auto", "surface"):
-        fit = fit_surface(rec, seed=args.seed, settings=settings, stand=stand)
-        warnings += fit.diagnostics["warnings"]
-        converged &= fit.diagnostics["converged"]
-    if args.model in ("auto", "cubics"):
-        cub = fit_campaign(rec, seed=args.seed, settings=settings)  # full settings: the cubics may answer
-        warnings += [f"{t.pressure_bar:g} bar cubic: {w}" for t in cub.tests for w in t.diagnostics["warnings"]]
-        converged &= cub.converged
-    if args.model == "auto":
-        comparison = compare_with_cubics(fit, cub, seed=args.seed, settings=settings)
-    ans, info = choose_model(fit, cub, comparison, forced=args.model)
-    return ans, info, {"warnings": warnings, "converged": bool(converged)}
+    return fit_and_choose(rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand)

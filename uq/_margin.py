@@ -486,3 +486,28 @@ def margin(model, height_m: float, load_N: float, prob: float = 0.95, *, pressur
                 raise InputError(f"option --tolerance-pct: expected a positive tolerance, got {tolerance_pct:g}")
             res["usable_stroke"] = usable_stroke(model, height_m, pressure_bar, load_N, tolerance_pct, prob)
     return res
+
+
+def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, stand=None):
+    """Fit what ``model`` ("auto", "surface" or "cubics") needs and choose the answering model
+    (:func:`choose_model`); returns (answer, model description, merged sampler diagnostics)."""
+    from ._cubic import fit_campaign
+    from ._sampler import Settings
+    from ._stand_description import PAPER_STAND
+    from ._surface import compare_with_cubics, fit_surface
+
+    settings = Settings() if settings is None else settings
+    fit = cub = comparison = None
+    warnings, converged = [], True
+    if model in ("auto", "surface"):
+        fit = fit_surface(rec, seed=seed, settings=settings, stand=PAPER_STAND if stand is None else stand)
+        warnings += fit.diagnostics["warnings"]
+        converged &= fit.diagnostics["converged"]
+    if model in ("auto", "cubics"):
+        cub = fit_campaign(rec, seed=seed, settings=settings)  # full settings: the cubics may answer
+        warnings += [f"{t.pressure_bar:g} bar cubic: {w}" for t in cub.tests for w in t.diagnostics["warnings"]]
+        converged &= cub.converged
+    if model == "auto":
+        comparison = compare_with_cubics(fit, cub, seed=seed, settings=settings)
+    ans, info = choose_model(fit, cub, comparison, forced=model)
+    return ans, info, {"warnings": warnings, "converged": bool(converged)}

@@ -5,7 +5,7 @@
 For each mechanism of CONTRACT.md section 4 at two magnitudes (clearly visible; near the
 detection limit), on two stand layouts (the paper's; pressures 0.5..6.5 bar, 70..150 mm in
 2.5 mm steps), with several seeds; clean controls; campaigns with two mechanisms at once.
-The virtual stand (uq._stand.simulate, spring 'n50-traditional') conceals the effects with
+The virtual stand (uq._stand.simulator.simulate, spring 'n50-traditional') conceals the effects with
 the exact definitions of section 4; the engine is given nothing but the recordings.
 
 Writes results.json (every run), summary.json and README.md (confusion matrix, false-alarm
@@ -70,11 +70,11 @@ def key(case: dict) -> str:
 
 
 def run_case(case: dict) -> dict:
-    from uq._diagnose import diagnose, public
-    from uq._recordings import PressureTest, Recordings
-    from uq._sampler import Settings
-    from uq._stand import Layout, simulate
-    from uq._stand_description import PAPER_STAND
+    from uq._data.recordings import PressureTest, Recordings
+    from uq._data.stand_description import PAPER_STAND
+    from uq._diagnose.engine import diagnose, public
+    from uq._inference.sampler import Settings
+    from uq._stand.simulator import Layout, simulate
 
     stand = PAPER_STAND.replace(**case.get("stand", {}))
     tests = simulate("n50-traditional", seed=case["seed"], effects=case["effects"], layout=Layout(**LAYOUTS[case["layout"]]),
@@ -192,7 +192,7 @@ def main(argv=None) -> int:
     ap.add_argument("--fresh", action="store_true")
     ap.add_argument("--only-summary", action="store_true", help="rewrite summary and README from results.json")
     args = ap.parse_args(argv)
-    from uq._io import dumps_json, write_text_atomic
+    from uq._io.files import dumps_json, write_text_atomic
 
     out = Path(args.out)
     path = out / "results.json"

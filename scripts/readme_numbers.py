@@ -41,7 +41,7 @@ BLOCK = re.compile(r"(<!-- generated: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- 
 
 def _uq() -> list[str]:
     venv = ROOT / ".venv" / "bin" / "uq"
-    return [str(venv)] if venv.exists() else [sys.executable, "-m", "uq.cli"]
+    return [str(venv)] if venv.exists() else [sys.executable, "-m", "uq._cli.main"]
 
 
 TIMINGS = ROOT / "reports" / "readme-timings.json"

@@ -1,7 +1,7 @@
 """Exact SBC of the per-pressure piston model (no MCMC): is the b_L rank test's p = 0.007 a bias?
 
 The truths and data are drawn exactly as ``uq calibrate --truth prior`` draws them
-(uq/_calibrate.py::_test_from_model); the posterior of log sigma_L is computed on a fine grid
+(uq/_drivers/calibrate.py::_test_from_model); the posterior of log sigma_L is computed on a fine grid
 (marginal likelihood y ~ N(0, sigma_L^2 I + X X^T), the model's prior) and the four piston
 coefficients are drawn exactly given sigma_L. Uniform ranks here mean the data generator and the
 model agree; then a non-uniform histogram from ``uq calibrate`` can only come from the sampler or
@@ -17,8 +17,14 @@ import sys
 import numpy as np
 from scipy import stats
 
-from uq._calibrate import N_RANKS, _test_from_model
-from uq._cubic import NOISE_PRIOR_MEAN, NOISE_PRIOR_SD, PISTON_PRIOR_SD_M, basis, to_paper_basis
+from uq._drivers.calibrate import N_RANKS, _test_from_model
+from uq._models.cubic import (
+    NOISE_PRIOR_MEAN,
+    NOISE_PRIOR_SD,
+    PISTON_PRIOR_SD_M,
+    basis,
+    to_paper_basis,
+)
 
 GRID = np.linspace(NOISE_PRIOR_MEAN[2] - 12, NOISE_PRIOR_MEAN[2] + 12, 2401)  # log sigma_L, +-6 prior sd
 

@@ -43,8 +43,8 @@ def test_notebook_one_liner(tmp_path):
 
 def test_simulate_equals_the_cli_csv_read_back(tmp_path):
     """uq.simulate gives the readings `uq simulate` writes and read_recordings reads, bit for bit."""
-    from uq._report import read_comments
-    from uq.cli import main
+    from uq._cli.main import main
+    from uq._report.campaign import read_comments
 
     csv = tmp_path / "r.csv"
     assert main(["simulate", "--out", str(csv), "--pressures", "1,5", "--step-mm", "10", "--seed", "4", "--quiet"]) == 0
@@ -81,7 +81,7 @@ def test_public_names_resolve_and_are_documented():
         obj = getattr(uq, name)
         if callable(obj) and name not in ("InputError",):
             assert (obj.__doc__ or "").strip(), f"uq.{name} has no docstring"
-    assert uq.simulate is uq._stand.simulate_recordings and uq.check is uq._check.check_documents
+    assert uq.simulate is uq._stand.simulator.simulate_recordings and uq.check is uq._derived.check.check_documents
 
 
 def test_import_uq_loads_no_jax_and_leaves_x64_alone():

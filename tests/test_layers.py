@@ -1,14 +1,22 @@
-"""The package's layering, checked on the source: one import graph of uq/*.py, built with ``ast``.
+"""The package's layering, checked on the source: one import graph of uq/**/*.py, built with ``ast``.
 
-Layers, bottom to top: models and library (everything not named below) -> reports
-(``_report``, ``_surface_report``) -> command line (``cli``, ``_cmd_*``). Drivers that run whole
-pipelines (``_batch``, ``_bench``, ``_calibrate``) sit beside the command line. A module may import
-from its own layer or below, never above, and the uq modules import each other without cycles.
-Both top-level and function-level imports count: a cycle through a function-level import is still
-a cycle (the modules cannot be split or loaded on their own), only a later one.
+Each layer is a subpackage of private modules (the optimistix ``_solver/`` style), bottom to top:
 
-The exceptions of today are listed below, each with its reason; a listed exception that is no longer
-needed fails the test too, so the lists only shrink.
+  _io        atomic writes, JSON, errors, option values, progress, the version
+  _physics   basis scale, units, the force-noise formula, the mechanisms
+  _data      recordings, the paper's tables, stand descriptions (reading and validation)
+  _stand     the virtual test stand (simulate -> Recordings)
+  _inference the exact linear-Gaussian draw kernel, the emcee edge, convergence, summaries
+  _models    the cubic, surface and diagnose models
+  _diagnose  the discrepancy engine
+  _derived   bands, margins, checks, result documents
+  _report    the HTML pages and figures
+  _drivers   whole pipelines: batch on Dask, bench, calibration
+  _cli       the command line: one module per command, the only user of argparse
+
+A module may import from its own layer or below, never above; the modules import each other
+without cycles; ``uq/__init__.py`` loads nothing but the version on import. Top-level and
+function-level imports both count: a cycle through a function-level import is still a cycle.
 """
 
 from __future__ import annotations
@@ -17,78 +25,64 @@ import ast
 from pathlib import Path
 
 UQ = Path(__file__).resolve().parents[1] / "uq"
-
-#: Modules that library code must not import: the command line and the HTML reports.
-REPORTS = {"_report", "_surface_report"}
-DRIVERS = {"_batch", "_bench", "_calibrate"}
+LAYERS = ["_io", "_physics", "_data", "_stand", "_inference", "_models", "_diagnose", "_derived", "_report",
+          "_drivers", "_cli"]
 
 
-def is_cli(name: str) -> bool:
-    return name == "cli" or name.startswith("_cmd_")
+def _module_of(path: Path) -> str:
+    parts = path.relative_to(UQ).with_suffix("").parts
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts) or "uq"
 
 
-def is_upper(name: str) -> bool:
-    return is_cli(name) or name in REPORTS
+def _modules() -> dict[str, Path]:
+    return {_module_of(p): p for p in sorted(UQ.rglob("*.py"))}
 
 
-def is_library(name: str) -> bool:
-    return not (is_upper(name) or name in DRIVERS)
+def layer(module: str) -> int:
+    """Index of the module's layer in LAYERS; the package itself (``uq``) is above all of them."""
+    return LAYERS.index(module.split(".")[0]) if module != "uq" else len(LAYERS)
 
 
-#: Library modules that still define their command (``configure_NAME``/``command_NAME`` for
-#: uq/cli.py) and so import the command line's helpers or a report: (module, imported) -> reason.
-#: Each goes when its command moves to a ``_cmd_NAME`` module.
-KNOWN_ARGPARSE: dict = {}
-
-#: Imports that close a cycle, allowed for now: (module, imported) -> reason. The cycle check
-#: runs on the graph without them.
-KNOWN_CYCLE_EDGES: dict = {}
-
-
-def _module_names() -> set[str]:
-    return {"uq" if p.stem == "__init__" else p.stem for p in UQ.glob("*.py")}
-
-
-def _targets(node: ast.AST, modules: set[str]) -> list[str]:
-    """The uq modules an import statement loads (``from . import x``: x when it is a module)."""
-    out = []
+def _targets(node: ast.AST, src: str, modules: set[str]) -> list[str]:
+    """The uq modules an import statement loads, as dotted names below ``uq``."""
     if isinstance(node, ast.Import):
-        for a in node.names:
-            parts = a.name.split(".")
-            if parts[0] == "uq":
-                out.append(parts[1] if len(parts) > 1 else "uq")
+        names = [a.name for a in node.names]
     elif isinstance(node, ast.ImportFrom):
-        if node.level == 0:
-            parts = (node.module or "").split(".")
-            if parts[0] != "uq":
-                return out
-            rest = parts[1:]
-        elif node.level == 1:
-            rest = (node.module or "").split(".") if node.module else []
-        else:  # beyond the package: not a uq module
-            return out
-        if rest:
-            out.append(rest[0])
-        else:  # from . import a, b / from uq import a, b
-            out += [a.name if a.name in modules else "uq" for a in node.names]
-    return [m for m in out if m in modules]
+        assert not node.level, f"uq/{src}: relative import (the package uses absolute ones: from uq._layer.module import)"
+        names = [f"{node.module}.{a.name}" for a in node.names] + [node.module or ""]
+    else:
+        return []
+    out = []
+    for n in names:
+        parts = n.split(".")
+        if parts[0] != "uq":
+            continue
+        dotted = ".".join(parts[1:]) or "uq"
+        while dotted not in modules and "." in dotted:
+            dotted = dotted.rsplit(".", 1)[0]
+        if dotted in modules and dotted not in out:
+            out.append(dotted)
+    # ``from uq._models import cubic`` loads uq._models.cubic, not (only) the package: keep the deepest
+    return [m for m in out if not any(o != m and o.startswith(m + ".") for o in out)]
+
 
 
 def import_graph() -> dict[tuple[str, str], list[str]]:
     """(importer, imported) -> where: 'file:line (top level)' or 'file:line (in function f)'."""
-    modules = _module_names()
+    modules = _modules()
     edges: dict[tuple[str, str], list[str]] = {}
-    for path in sorted(UQ.glob("*.py")):
-        src = "uq" if path.stem == "__init__" else path.stem
+    for src, path in modules.items():
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
 
         def visit(node, scope, path=path, src=src):
             for child in ast.iter_child_nodes(node):
                 inner = child.name if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef) else scope
-                for dst in _targets(child, modules):
+                for dst in _targets(child, src, set(modules)):
                     if dst != src:
                         where = "top level" if scope is None else f"in function {scope}"
-                        edges.setdefault((src, dst), []).append(f"uq/{path.name}:{child.lineno} ({where})")
+                        edges.setdefault((src, dst), []).append(f"{path.relative_to(UQ.parent)}:{child.lineno} ({where})")
                 visit(child, inner)
 
         visit(tree, None)
@@ -130,16 +124,21 @@ def _cycles(edges) -> list[list[str]]:
     return out
 
 
+def test_every_module_is_in_a_layer():
+    stray = [m for m in _modules() if m != "uq" and m.split(".")[0] not in LAYERS]
+    assert not stray, f"modules outside the layer subpackages: {stray}"
+
+
 def test_graph_sees_the_imports_it_must():
     edges = import_graph()
-    assert ("_surface_report", "_surface") in edges  # top-level relative import
-    assert ("_report", "_surface") in edges  # function-level import (command_report --surface)
-    assert ("_batch", "uq") in edges  # from . import __version__
-    assert ("_diagnose", "_diagnose_models") in edges  # from . import _diagnose_models as M
+    assert ("_report.surface", "_models.surface") in edges  # top-level absolute import
+    assert ("_diagnose.engine", "_models.diagnose") in edges  # from uq._models import diagnose as M
+    assert ("_cli.cmd_bench", "_drivers.bench") in edges
+    assert any(a == "_drivers.batch" and b == "_inference.float64" for a, b in edges)  # function level
 
 
 def test_no_import_cycles():
-    edges = {e: w for e, w in import_graph().items() if e not in KNOWN_CYCLE_EDGES}
+    edges = import_graph()
     cycles = _cycles(edges)
     detail = [
         " -> ".join(c) + ": " + "; ".join(f"{a} imports {b} at {', '.join(w)}" for (a, b), w in edges.items()
@@ -149,23 +148,28 @@ def test_no_import_cycles():
     assert not cycles, "import cycles among uq modules:\n" + "\n".join(detail)
 
 
-def test_library_modules_do_not_import_the_cli_or_the_reports():
-    bad = {
-        (a, b): w for (a, b), w in import_graph().items()
-        if is_library(a) and is_upper(b) and (a, b) not in KNOWN_ARGPARSE
-    }
-    assert not bad, "library modules importing the command line or a report:\n" + "\n".join(
+def test_nothing_imports_upward():
+    bad = {(a, b): w for (a, b), w in import_graph().items() if layer(b) > layer(a)}
+    assert not bad, "imports from a higher layer:\n" + "\n".join(
         f"{a} -> {b}: {', '.join(w)}" for (a, b), w in sorted(bad.items()))
 
 
-def test_known_exceptions_are_still_needed():
-    """A listed exception that the code no longer needs must leave the list (it only shrinks)."""
-    edges = import_graph()
-    stale = [e for e in {**KNOWN_ARGPARSE, **KNOWN_CYCLE_EDGES} if e not in edges]
-    assert not stale, f"no longer imported, remove from the lists in tests/test_layers.py: {stale}"
-    assert all(is_library(a) and is_upper(b) for a, b in KNOWN_ARGPARSE)
+def test_only_the_command_line_uses_argparse():
+    users = sorted(m for m, p in _modules().items()
+                   if "argparse" in {n.split(".")[0] for node in ast.walk(ast.parse(p.read_text(encoding="utf-8")))
+                                     for n in ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                                               [node.module or ""] if isinstance(node, ast.ImportFrom) else [])})
+    assert users and all(m.startswith("_cli.") for m in users), users
 
 
-def test_package_imports_no_submodule_on_import():
+def test_package_imports_only_the_version_on_import():
     """uq/__init__.py loads its public names lazily (PEP 562): ``import uq`` stays cheap."""
-    assert not [e for e in import_graph() if e[0] == "uq"]
+    assert [b for a, b in import_graph() if a == "uq"] == ["_io.version"]
+
+
+def test_functions_are_short():
+    """No function over 80 lines (docstring included): long ones hide several jobs."""
+    long = [f"{p.relative_to(UQ.parent)}:{n.lineno} {n.name} ({n.end_lineno - n.lineno + 1} lines)"
+            for p in _modules().values() for n in ast.walk(ast.parse(p.read_text(encoding="utf-8")))
+            if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef) and n.end_lineno - n.lineno + 1 > 80]
+    assert not long, "functions over 80 lines:\n" + "\n".join(long)

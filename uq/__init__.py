@@ -15,11 +15,14 @@ Every ``uq`` command is a function here, and no step needs a file in between::
     answer = uq.margin(surface, 0.112, 20e3)  # pressure that carries 20 kN at 112 mm (uq margin)
     found = uq.diagnose(rec, seed=1)          # the physics the traditional theory misses (uq diagnose)
 
-The module flow: recordings (``_recordings``) -> virtual stand (``_stand``) -> models and
-posteriors (``_cubic``, ``_linear``, ``_sampler``, ``_surface``, ``_diagnose``) -> results
-(``_results``) -> derived quantities, checks and queries (``_bands``, ``_check``, ``_margin``) ->
-reports (``_report``, ``_surface_report``) -> command line (``cli``, ``_cmd_*``). A module imports
-only from its own layer or below (tests/test_layers.py).
+The library is layered, each layer a subpackage of private modules, bottom to top: ``_io``
+(atomic writes, JSON, errors), ``_physics`` (units, basis scale, the noise formula, the
+mechanisms), ``_data`` (recordings, the paper's tables, stand descriptions), ``_stand`` (the
+virtual test stand), ``_inference`` (exact linear-Gaussian draws, the emcee edge, convergence),
+``_models`` (cubic, surface, diagnose models), ``_diagnose`` (the discrepancy engine),
+``_derived`` (bands, margins, checks, result documents), ``_report`` (HTML pages and figures),
+``_drivers`` (batch, bench, calibration) and ``_cli`` (one module per command). A module imports
+only from its own layer or below (tests/test_layers.py). The names below are the public API.
 
 Float64. uq's models need JAX in double precision (the cubics' coefficients span ten orders of
 magnitude in one solve), and JAX's switch for it, ``jax_enable_x64``, holds for the whole
@@ -61,21 +64,21 @@ from __future__ import annotations
 
 import importlib
 
-__version__ = "0.1.0"
+from uq._io.version import __version__
 
 #: public name -> module that defines it, or (module, name there)
 _API = {
-    "CampaignFit": "_cubic", "PressureFit": "_cubic", "fit_campaign": "_cubic", "fit_test": "_cubic",
-    "least_squares": "_cubic", "InputError": "_errors", "MECHANISMS": "_mechanisms",
-    "Recordings": "_recordings", "PressureTest": "_recordings", "read_recordings": "_recordings",
-    "table1": "_reference", "table2": "_reference", "fit_json": "_results", "Settings": "_sampler",
-    "Layout": "_stand", "simulate": ("_stand", "simulate_recordings"), "true_curves": "_stand",
-    "enable_x64": "_jax", "write_report": "_report", "campaign_bands": "_bands", "CampaignBands": "_bands",
-    "fit_surface": "_surface", "SurfaceFit": "_surface", "Orders": "_surface",
-    "margin": "_margin", "SurfaceAnswer": "_margin",
-    "diagnose": "_diagnose", "check": ("_check", "check_documents"),
-    "StandDescription": "_stand_description", "PAPER_STAND": "_stand_description",
-    "read_stand": "_stand_description",
+    "CampaignFit": "_models.cubic", "PressureFit": "_models.cubic", "fit_campaign": "_models.cubic", "fit_test": "_models.cubic",
+    "least_squares": "_models.cubic", "InputError": "_io.errors", "MECHANISMS": "_physics.mechanisms",
+    "Recordings": "_data.recordings", "PressureTest": "_data.recordings", "read_recordings": "_data.recordings",
+    "table1": "_data.reference", "table2": "_data.reference", "fit_json": "_derived.results", "Settings": "_inference.sampler",
+    "Layout": "_stand.simulator", "simulate": ("_stand.simulator", "simulate_recordings"), "true_curves": "_stand.simulator",
+    "enable_x64": "_inference.float64", "write_report": "_report.campaign", "campaign_bands": "_derived.bands", "CampaignBands": "_derived.bands",
+    "fit_surface": "_models.surface", "SurfaceFit": "_models.surface", "Orders": "_models.surface",
+    "margin": "_derived.margin", "SurfaceAnswer": "_derived.margin",
+    "diagnose": "_diagnose.engine", "check": ("_derived.check", "check_documents"),
+    "StandDescription": "_data.stand_description", "PAPER_STAND": "_data.stand_description",
+    "read_stand": "_data.stand_description",
 }
 
 __all__ = sorted(_API) + ["__version__"]

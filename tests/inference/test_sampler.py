@@ -1,0 +1,145 @@
+"""Sampler convergence rules and how the walkers are shown to ArviZ (uq/_inference/sampler.py)."""
+
+from __future__ import annotations
+
+import arviz as az
+import emcee
+import numpy as np
+
+from uq._inference.sampler import ESS_MIN, RHAT_MAX, Settings, chain_diagnostics, run_ensembles
+
+
+def _gauss(theta):
+    return -0.5 * np.sum(np.asarray(theta) ** 2, axis=-1)
+
+
+def _stored(x):
+    """(ensembles, steps, walkers) -> the storage order of Chains.samples: steps x walkers per chain."""
+    return x.reshape(x.shape[0], -1)
+
+
+def test_split_rhat_sees_a_drift_that_walkers_end_to_end_hide():
+    """Walkers that all drift by 1 sd over the run: early and late halves differ."""
+    rng = np.random.default_rng(0)
+    C, T, W = 4, 500, 16
+    x = rng.standard_normal((C, T, W)) + np.linspace(0.0, 1.0, T)[None, :, None]
+    assert chain_diagnostics(_stored(x), W)["r_hat"] > RHAT_MAX
+    # the old storage (each ensemble's walkers laid end to end) splits walkers, not time: no alarm
+    end_to_end = np.swapaxes(x, 1, 2).reshape(C, -1)
+    assert float(az.rhat(end_to_end)) <= RHAT_MAX
+
+
+def test_ess_counts_walkers_only_as_far_as_they_are_independent():
+    """All walkers of an ensemble follow one AR(1) path (plus a little own noise): the
+    information is that of one AR(1) chain per ensemble, whatever the number of walkers."""
+    rng = np.random.default_rng(1)
+    C, T, W, rho = 4, 4000, 16, 0.8
+    path = np.zeros((C, T))
+    e = rng.standard_normal((C, T)) * np.sqrt(1 - rho**2)
+    for t in range(1, T):
+        path[:, t] = rho * path[:, t - 1] + e[:, t]
+    x = path[:, :, None] + 0.05 * rng.standard_normal((C, T, W))
+    honest = C * T * (1 - rho) / (1 + rho)  # AR(1): tau = (1 + rho) / (1 - rho)
+    d = chain_diagnostics(_stored(x), W)
+    assert 0.6 * honest < d["ess_bulk"] < 1.6 * honest, (d, honest)
+    honest_tail = float(az.ess(path, method="tail"))  # the one path per ensemble, given to ArviZ
+    assert 0.6 * honest_tail < d["ess_tail"] < 1.6 * honest_tail, (d, honest_tail)
+    # emcee's tau-based n*W/tau and ArviZ with walkers as chains both count each walker as new
+    tau = emcee.autocorr.integrated_time(np.swapaxes(x, 0, 1).reshape(T, C * W, 1)[:, :W], tol=0)[0]
+    assert C * T * W / tau > 8 * honest
+    assert float(az.ess(np.swapaxes(x, 1, 2).reshape(C * W, T))) > 8 * honest
+    # independent walkers: the same estimator gives emcee's n * W / tau (within noise)
+    rho = 0.5
+    x = np.zeros((C, T // 2, W))
+    for t in range(1, T // 2):
+        x[:, t] = rho * x[:, t - 1] + np.sqrt(1 - rho**2) * rng.standard_normal((C, W))
+    expected = C * (T // 2) * W * (1 - rho) / (1 + rho)
+    assert 0.75 * expected < chain_diagnostics(_stored(x), W)["ess_bulk"] < 1.33 * expected
+
+
+def test_sampler_runs_past_the_tau_rule_until_ess_passes():
+    """With a trivial tau rule the first check at min_steps passes it, but 4 x 4 walkers x 40
+    steps hold far fewer than 400 effective draws: the sampler must keep going."""
+    s = Settings(n_walkers=4, n_ensembles=4, tau_multiple=1.0, burn_tau=1.0, min_steps=40, chunk=40, max_steps=5000)
+    ch = run_ensembles(_gauss, np.zeros(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=3, settings=s)
+    assert ch.n_steps > s.min_steps
+    assert not ch.warnings, ch.warnings
+    for i in range(2):
+        d = chain_diagnostics(ch.samples[..., i], ch.n_walkers)
+        assert min(d["ess_bulk"], d["ess_tail"]) >= ESS_MIN and d["r_hat"] <= RHAT_MAX, d
+
+
+def test_failed_rule_is_named_when_max_steps_is_reached():
+    s = Settings(n_walkers=4, n_ensembles=4, tau_multiple=1.0, burn_tau=1.0, min_steps=30, chunk=20, max_steps=40)
+    ch = run_ensembles(_gauss, np.zeros(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=4, settings=s)
+    assert ch.n_steps == 40
+    assert any("effective sample size" in w for w in ch.warnings), ch.warnings
+
+
+def test_starts_are_overdispersed_across_four_ensembles():
+    """Walkers start several posterior widths wide, drawn afresh per ensemble, and valid."""
+
+    def half_line(theta):  # log-probability -inf for a < 0: bad starts must be redrawn
+        theta = np.asarray(theta)
+        return np.where(theta[:, 0] > 0, _gauss(theta - 1.0), -np.inf)
+
+    s = Settings(min_steps=20, max_steps=20)
+    ch = run_ensembles(half_line, np.ones(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=5, settings=s)
+    assert s.n_ensembles == 4 and ch.start.shape == (4, s.n_walkers, 2)
+    assert np.all(ch.start[..., 0] > 0)
+    spread = ch.start[..., 1].std(axis=1)  # the unconstrained coordinate: posterior sd 1
+    assert np.all(spread > 2.0), spread
+    means = ch.start[..., 1].mean(axis=1)
+    assert np.ptp(means) > 0.1  # not one ball shared by all ensembles
+
+
+def test_grouped_de_with_one_group_is_emcees_de_move():
+    """With a single group the vectorised proposal is emcee's DEMove draw for draw."""
+    from uq._inference.sampler import _GroupedDE
+
+    rng = np.random.default_rng(0)
+    s, c = rng.normal(size=(8, 3)), rng.normal(size=(8, 3))
+    ours, theirs = _GroupedDE(16), emcee.moves.DEMove()
+    ours.setup(s), theirs.setup(s)
+    q1, f1 = ours.get_proposal(s, [c], np.random.RandomState(5))
+    q2, f2 = theirs.get_proposal(s, [c], np.random.RandomState(5))
+    np.testing.assert_array_equal(q1, q2)
+    np.testing.assert_array_equal(f1, f2)
+
+
+def test_grouped_moves_never_mix_groups():
+    """Proposals for a walker use its own group only: groups parked far apart stay apart."""
+    from uq._inference.sampler import _GroupedDE, _GroupedSnooker
+
+    W, G, D = 16, 5, 3
+    centre = 1000.0 * np.arange(G)[:, None]
+    for move in (_GroupedDE(W), _GroupedSnooker(W)):
+        coords = (centre[:, None, :] + np.random.default_rng(1).normal(size=(G, W, D))).reshape(-1, D)
+        move.setup(coords)
+        inds = np.arange(G * W) % move.nsplits
+        sets = [coords[inds == j] for j in range(move.nsplits)]
+        q, _ = move.get_proposal(sets[0], sets[1:], np.random.RandomState(2))
+        group = np.arange(G * W)[inds == 0] // W
+        assert np.all(np.abs(q - centre[group]) < 50.0), type(move).__name__
+
+
+def test_many_problems_in_one_sampler_each_get_their_own_posterior():
+    """run_many: three Gaussian problems of different location and scale sampled in lockstep;
+    each problem's draws have its mean and sd (within 5 MCSE / 10 %), and its own diagnostics."""
+    from uq._inference.sampler import run_many
+
+    mu = np.array([[0.0, 5.0], [-3.0, 100.0], [1e3, -2.0]])
+    sd = np.array([[1.0, 0.1], [10.0, 2.0], [0.01, 1.0]])
+
+    def lp(th):  # (K, m, 2) -> (K, m)
+        return -0.5 * np.sum(((th - mu[:, None]) / sd[:, None]) ** 2, axis=-1)
+
+    runs = run_many(lp, mu + sd, sd / Settings().init_scale, ("a", "b"), seed=3, settings=Settings())
+    assert len(runs) == 3
+    for k, ch in enumerate(runs):
+        assert not ch.warnings, ch.warnings
+        x = ch.samples.reshape(-1, 2)
+        for j in range(2):
+            d = chain_diagnostics(ch.samples[..., j], ch.n_walkers)
+            assert abs(x[:, j].mean() - mu[k, j]) < 5 * d["mcse_mean"] + 1e-12
+            assert abs(x[:, j].std() / sd[k, j] - 1.0) < 0.1

@@ -1,0 +1,136 @@
+"""``uq report``: the HTML page, its figures, and the CLI end to end."""
+
+from __future__ import annotations
+
+import base64
+import re
+
+import pytest
+
+from uq._cli.main import main
+from uq._derived.bands import campaign_bands
+from uq._report.campaign import read_comments, write_report
+
+
+def _check_page(out, n_tests):
+    page = (out / "report.html").read_text(encoding="utf-8")
+    imgs = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    assert len(imgs) == 5 + n_tests  # Figs 2-5, scatter, one per pressure
+    assert all(base64.b64decode(s)[:8] == b"\x89PNG\r\n\x1a\n" for s in imgs)
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert len(pngs) == 5 + n_tests
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".") or p.suffix == ".tmp"]
+    return page
+
+
+def test_report_on_n50_fixture(n50_fit, tmp_path):
+    cb = campaign_bands(n50_fit, n_draws=300, seed=0)
+    path = write_report(n50_fit, tmp_path / "rep", bands=cb)
+    assert path == tmp_path / "rep" / "report.html"
+    page = _check_page(tmp_path / "rep", len(n50_fit.tests))
+    assert "Reconstructed data" in page  # data/n50's comment lines say RECONSTRUCTED
+    for text in ("Table 1", "Table 2", "Sampler diagnostics", "8.41", "75 mm", "hysteresis", "kN/m²", "10³ kN/m³"):
+        assert text in page, text
+    # Table 1 beside the paper's values, one row per pressure, a paper value in every cell
+    assert page.count("paper ") >= 8 * len(n50_fit.tests)
+    assert "5-bar test" in page and "Figure 5" in page
+    for p in (0.1, 5, 10):
+        assert f"test_{p:g}bar.png" in page
+
+
+def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path):
+    """write_report's worker processes (the default on a multi-core machine) change nothing:
+    every PNG and the page are byte for byte those of jobs=1."""
+    cb = campaign_bands(n50_fit, n_draws=200, seed=0)
+    write_report(n50_fit, tmp_path / "one", bands=cb, jobs=1)
+    write_report(n50_fit, tmp_path / "two", bands=cb, jobs=2)
+    names = sorted(p.name for p in (tmp_path / "one").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "two").iterdir()) and len(names) == 6 + len(n50_fit.tests)
+    for n in names:
+        assert (tmp_path / "one" / n).read_bytes() == (tmp_path / "two" / n).read_bytes(), n
+
+
+def test_comments_are_read_only_from_the_top(tmp_path):
+    f = tmp_path / "r.csv"
+    f.write_text("# RECONSTRUCTED by the stand\n#  second\npressure_bar,height_mm\n# not a header comment\n")
+    assert read_comments(f) == ["RECONSTRUCTED by the stand", "second"]
+
+
+@pytest.fixture(scope="module")
+def small_csv(tmp_path_factory):
+    d = tmp_path_factory.mktemp("small")
+    csv = d / "r.csv"
+    assert main(["simulate", "--out", str(csv), "--pressures", "1,5,10", "--seed", "7"]) == 0
+    return csv
+
+
+def test_report_cli_small_campaign(small_csv, tmp_path, capsys):
+    out = tmp_path / "out"
+    js = tmp_path / "fit.json"
+    rc = main(["report", str(small_csv), "--out", str(out), "--json", str(js), "--max-steps", "600", "--draws", "300"])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert f"report: {out / 'report.html'}" in printed
+    assert "F_eff scatter across 1, 5, 10 bar" in printed
+    page = _check_page(out, 3)
+    assert "Reconstructed data" in page
+    import json
+
+    data = json.loads(js.read_text())
+    assert [t["pressure_bar"] for t in data["tests"]] == [1.0, 5.0, 10.0]
+    assert data["bands"]["reference_bar"] == 5.0
+    assert set(data["bands"]["feff_scatter_pct"]["at"]) == {"x0", "x_max", "x_min", "75 mm"}
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_report_cli_bad_input(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("pressure_bar,height_mm\n1,100\n")
+    assert main(["report", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "error" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "report.html").exists()
+
+
+def test_report_links_the_surface_page(tmp_path):
+    """`uq report --surface` writes surface.html beside the report and links it."""
+    from uq._cli.main import main
+    from uq._data.recordings import write_recordings_csv
+    from uq._stand.simulator import Layout, simulate
+
+    csv = tmp_path / "six.csv"
+    csv.write_text(write_recordings_csv(simulate("n50", seed=3, layout=Layout(pressures_bar=(1, 2.5, 4, 5.5, 7, 10)))))
+    out = tmp_path / "rep"
+    assert main(["report", str(csv), "--out", str(out), "--surface", "--draws", "200",
+                 "--max-steps", "400"]) == 0  # short chains: this tests the page, not the posterior
+    assert "href='surface.html'" in (out / "report.html").read_text()
+    assert (out / "surface.html").read_text().count("data:image/png;base64,") == 3
+
+
+def test_page_escapes_what_the_recordings_say(n50_fit, tmp_path, monkeypatch):
+    """The page is a jinja2 template with autoescaping: a file name or comment line holding
+    markup comes out as text (escaped as html.escape does), never as a <script> element."""
+    import dataclasses
+
+    from uq._report import campaign
+
+    png = b"\x89PNG\r\n\x1a\n"  # the figures are not under test here: skip drawing them
+    for name in ("fig_force", "fig_volume", "fig_feff", "fig_traditional", "fig_scatter", "fig_test"):
+        monkeypatch.setattr(campaign, name, lambda *a, **k: png)
+    evil = "<script>alert('x&y')</script>"
+    rec = dataclasses.replace(n50_fit.recordings, path=str(tmp_path / "<script>r.csv"))
+    fit = dataclasses.replace(n50_fit, recordings=rec)
+    page = write_report(fit, tmp_path / "rep", bands=campaign_bands(n50_fit, n_draws=100, seed=0),
+                        comments=["RECONSTRUCTED", evil], jobs=1).read_text(encoding="utf-8")
+    assert "<script" not in page
+    assert "<title>Air-spring report: &lt;script&gt;r.csv</title>" in page
+    assert "<pre>RECONSTRUCTED\n&lt;script&gt;alert(&#x27;x&amp;y&#x27;)&lt;/script&gt;</pre>" in page
+
+
+def test_template_refuses_a_missing_value():
+    """StrictUndefined: a name the template uses but the caller did not give fails, not blank."""
+    from jinja2 import UndefinedError
+
+    from uq._report.html import render
+
+    with pytest.raises(UndefinedError):
+        render("diagnose.html", summary="s", mechanisms=[], baseline={"rms_N": 1.0, "elpd_loo": 2.0})

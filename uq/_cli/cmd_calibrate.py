@@ -1,0 +1,63 @@
+"""``uq calibrate``: the options, the printed lines and the files of uq._drivers.calibrate."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from uq._cli.common import choice_list, positive_int, seed
+from uq._drivers.calibrate import N_RANKS, calibrate, markdown
+from uq._io.files import emit_json, remove_stale, write_figure_atomic, write_text_atomic
+
+
+def configure_calibrate(p) -> None:
+    p.add_argument("--reps", type=positive_int, default=100, help="replications per setting (default 100)")
+    p.add_argument("--truth", type=choice_list("prior", "n50"), default="prior,n50", help="comma list of truths: prior, n50")
+    p.add_argument("--noise", type=choice_list("budget", "constant"), default="budget",
+                   help="comma list of force-noise models to fit: budget, constant")
+    p.add_argument("--seed", type=seed, default=20201, help="random seed")
+    p.add_argument("--out", metavar="DIR", help="the folder to write: calibration.json, calibration.md and rank histograms")
+    p.add_argument("--json", metavar="PATH", help="machine-readable result ('-' for stdout)")
+
+
+def command_calibrate(args) -> int:
+    results = []
+    for truth in [t.strip() for t in args.truth.split(",") if t.strip()]:
+        for noise in [n.strip() for n in args.noise.split(",") if n.strip()]:
+            res = calibrate(args.reps, truth=truth, noise=noise, seed=args.seed)
+            results.append(res)
+            s = res.summary()
+            worst = min(s["quantities"].items(), key=lambda kv: kv[1]["coverage90"])
+            print(f"truth {truth:5s} noise {noise:8s}: {args.reps} reps in {res.seconds:.0f} s; 90 % coverage "
+                  f"{min(q['coverage90'] for q in s['quantities'].values()):.2f}..{max(q['coverage90'] for q in s['quantities'].values()):.2f} "
+                  f"(lowest: {worst[0]}); outside the 99 % region: "
+                  f"{[k for k, q in s['quantities'].items() if not (q['in_region90'] and q['in_region50'])] or 'none'}")
+    command = "uq " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("uq") else "uq calibrate"
+    result = {"command": command, "settings": [r.summary() for r in results]}
+    if args.out:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        out = Path(args.out)
+        emit_json(result, str(out / "calibration.json"))
+        write_text_atomic(out / "calibration.md", markdown(results, command))
+        for res in results:
+            fig, axes = plt.subplots(1, len(res.names), figsize=(1.6 * len(res.names), 2.0), sharey=True)
+            for ax, j in zip(np.atleast_1d(axes), range(len(res.names)), strict=True):
+                ax.hist(res.ranks[:, j], bins=10, range=(0, N_RANKS + 1), color="tab:blue")
+                ax.axhline(res.ranks.shape[0] / 10, color="k", lw=0.8)
+                ax.set_title(res.names[j], fontsize=8)
+                ax.set_xticks([])
+            fig.suptitle(f"SBC ranks, truth {res.truth_kind}, noise {res.noise}", fontsize=9)
+            fig.tight_layout()
+            write_figure_atomic(fig, out / f"sbc_{res.truth_kind}_{res.noise}.png", dpi=80)
+            plt.close(fig)
+        # rank histograms of settings an earlier run had and this one has not would pass for current
+        remove_stale(out, ("sbc_*.png",), keep={f"sbc_{r.truth_kind}_{r.noise}.png" for r in results})
+        print(f"wrote {out}/calibration.json, calibration.md and rank histograms")
+    emit_json(result, args.json)
+    return 0

@@ -1,0 +1,189 @@
+"""Options shared by several commands, so they read and validate the same way everywhere.
+
+This module is imported while the parser is built, so it imports nothing heavy (no numpy,
+JAX, ArviZ): ``uq --help`` stays fast. Option values are checked by the argparse ``type=``
+functions below, so a bad value is a usage error (one line, exit 2) before any data is read
+or any model fitted; output paths are checked by :func:`check_output_path` (the CLI calls it
+for every ``--json``, ``--out`` and ``--report`` before the command starts).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from uq._io import values
+from uq._io.errors import InputError
+
+DEFAULT_SEED = 20201  # fixed: a rerun gives the same numbers
+# The paper's stand constants and the sampler's defaults, repeated here so that building the
+# parser does not import numpy/ArviZ; tests/cli/test_cli.py checks they equal the library's.
+DEFAULT_PISTON_AREA_CM2 = 54.82
+DEFAULT_X0_MM = 112.0
+DEFAULT_WALKERS = 16
+DEFAULT_ENSEMBLES = 4  # independent, overdispersed ensembles for R-hat (uq/_inference/sampler.py)
+DEFAULT_MAX_STEPS = 20000
+
+
+# ----------------------------------------------------------------------------- option types
+
+
+def _option_type(check):
+    """``check`` as an argparse ``type=``: its ValueError becomes a usage error with the same message."""
+
+    def parse(text: str):
+        try:
+            return check(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parse.__name__ = check.__name__
+    return parse
+
+
+positive_float = _option_type(values.positive_float)
+nonnegative_float = _option_type(values.nonnegative_float)
+finite_float = _option_type(values.finite_float)
+positive_int = _option_type(values.positive_int)
+walkers = _option_type(values.walkers)
+seed = _option_type(values.seed)
+
+
+def probability(text: str) -> float:
+    value = finite_float(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a probability strictly between 0 and 1, got '{text}'")
+    return value
+
+
+def choice_list(*allowed: str):
+    """A comma-separated list of names from ``allowed`` (checked at parse time, before any work)."""
+
+    def parse(text: str) -> str:
+        names = [t.strip() for t in text.split(",") if t.strip()]
+        bad = [n for n in names if n not in allowed]
+        if not names or bad:
+            raise argparse.ArgumentTypeError(
+                f"expected a comma-separated list of {', '.join(allowed)}, got '{text}'")
+        return ",".join(names)
+
+    parse.__name__ = "list"
+    return parse
+
+
+# ----------------------------------------------------------------------------- shared options
+
+
+def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> None:
+    p.add_argument("file", nargs="?" if file_optional else None,
+                   help="recordings CSV (format: docs/formats.md)")
+    p.add_argument("--piston-area-cm2", type=positive_float, default=DEFAULT_PISTON_AREA_CM2,
+                   help="area S of the hydraulic cylinder's piston cavity, cm^2 (the paper's value)")
+    p.add_argument("--x0-mm", type=positive_float, default=DEFAULT_X0_MM,
+                   help="reference height x0 of the polynomial basis, mm (the paper's value)")
+
+
+def add_sampling(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
+    p.add_argument("--walkers", type=walkers, default=DEFAULT_WALKERS, help="emcee walkers per ensemble (a multiple of 4)")
+    p.add_argument("--ensembles", type=positive_int, default=DEFAULT_ENSEMBLES, help="independent ensembles (>= 2, for R-hat)")
+    p.add_argument("--max-steps", type=positive_int, default=DEFAULT_MAX_STEPS, help="cap on emcee steps per ensemble")
+    p.add_argument("--strict", action="store_true", help="exit status 1 when sampling did not converge")
+
+
+def settings_from(args):
+    from uq._inference.sampler import Settings
+
+    s = Settings(n_walkers=args.walkers, n_ensembles=args.ensembles, max_steps=args.max_steps)
+    s.validate()
+    return s
+
+
+def add_json(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)")
+
+
+def load(args, min_points: int = 6):
+    from uq._data.recordings import read_recordings
+
+    return read_recordings(args.file, piston_area_cm2=args.piston_area_cm2, x0_mm=args.x0_mm, min_points=min_points)
+
+
+def positive(name: str, value: float) -> float:
+    if not value > 0:
+        raise InputError(f"option {name}: expected a positive number, got {value:g}")
+    return value
+
+
+def say(text: str, json_target: str | None) -> None:
+    """Print the human summary; to stderr when the JSON goes to stdout, so both stay readable."""
+    (sys.stderr if json_target == "-" else sys.stdout).write(text + "\n")
+
+
+# ----------------------------------------------------------------------------- output paths
+
+
+def _probe_writable(folder: Path, option: str, path) -> None:
+    """Create and remove a temporary file in ``folder``: the only sure test (root, /proc, read-only mounts)."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".uq-probe-", dir=folder)
+    except OSError as exc:
+        raise InputError(f"option {option} {path}: cannot write in {folder}: {exc.strerror}") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def check_output_path(path, option: str, kind: str = "file") -> None:
+    """Refuse, before any work, an output the command could not write; writes nothing.
+
+    ``kind`` "file": ``path`` is the file to write ('-' = stdout); it must not be a folder or a
+    symbolic link, and its folder (or the nearest existing ancestor, since missing folders are
+    created) must be a writable folder. An existing device such as /dev/null is written to.
+    ``kind`` "dir": ``path`` is the folder to write into; it must not be an existing file.
+    """
+    if kind == "file" and str(path) == "-":
+        return
+    if not str(path).strip():
+        raise InputError(f"option {option}: empty path")
+    p = Path(path)
+    what = "file" if kind == "file" else "folder"
+    if kind == "file" and p.is_symlink():
+        raise InputError(f"option {option} {path}: is a symbolic link; refusing to replace it (give the real path)")
+    if p.exists():
+        if kind == "dir":
+            if not p.is_dir():
+                raise InputError(f"option {option} {path}: is an existing file; {option} names the folder to write into")
+            _probe_writable(p, option, path)
+        elif p.is_dir():
+            raise InputError(f"option {option} {path}: is a folder; {option} names the {what} to write")
+        elif p.is_file():
+            _probe_writable(p.absolute().parent, option, path)
+        elif not os.access(p, os.W_OK):  # a device or pipe is written to in place
+            raise InputError(f"option {option} {path}: not writable")
+        return
+    ancestor = p.absolute() if kind == "dir" else p.absolute().parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise InputError(f"option {option} {path}: {ancestor} is a file, not a folder")
+    _probe_writable(ancestor, option, path)
+
+
+STAND_HELP = ("the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
+              "p_atm (TOML, keys of uq._data.stand_description.StandDescription; default the paper's stand)")
+
+
+def add_stand(p: argparse.ArgumentParser, help: str = STAND_HELP) -> None:
+    """``--stand FILE.toml`` (one option for every command)."""
+    p.add_argument("--stand", metavar="FILE.toml", help=help)
+
+
+def stand_from(args):
+    """The StandDescription of ``--stand`` (the paper's stand without it); a bad file is InputError."""
+    from uq._data.stand_description import stand_or_paper
+
+    return stand_or_paper(getattr(args, "stand", None))
+

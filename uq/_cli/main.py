@@ -1,0 +1,219 @@
+"""The ``uq`` command line (CONTRACT.md section 2): thin drivers around the library.
+
+Each command lives in the module that owns its concept and exposes ``configure_NAME(parser)``
+and ``command_NAME(args) -> int``; this file wires them up. Only the module of the command
+being run is imported (``uq --help`` imports no numpy, JAX, ArviZ or matplotlib).
+
+Exit status, the same for every command (README, "Exit status"):
+
+* 0  done (for ``uq check``: all agree)
+* 1  ``uq check`` found a disagreement, or sampling did not converge under ``--strict``
+* 2  bad input or usage: one line on stderr naming the file, row, column or option; nothing written
+* 3  internal error (a bug): one line naming the exception; ``--debug`` or ``UQ_DEBUG=1`` prints the traceback
+* 130 interrupted (Ctrl-C): one line
+
+Before a command starts, every output it names (``--json``, ``--out``, ``--report``) is checked
+(:func:`uq._cli.common.check_output_path`), so a path that cannot be written fails at once, not
+after the fit. With ``--json -`` stdout carries only the JSON: the command's human summary goes
+to stderr and the JSON is printed when the command has finished.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib.util
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from uq._io.errors import InputError
+from uq._io.version import __version__
+
+#: (command, module, one-line help). Modules are imported only when their command runs.
+COMMANDS = [
+    ("simulate", "uq._cli.cmd_basic", "virtual test stand: write recordings following the paper's procedure and error budget"),
+    ("fit", "uq._cli.cmd_basic", "per-pressure Bayesian cubic fits of force and piston coordinate (eqs. 8, 9)"),
+    ("report", "uq._cli.cmd_report", "posterior report: one self-contained HTML page (+ PNG figures) per campaign"),
+    ("check", "uq._cli.cmd_check", "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)"),
+    ("bench", "uq._cli.cmd_bench", "effective samples per second of the project's sampler against a plain emcee baseline"),
+    ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
+    ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
+    ("diagnose", "uq._cli.cmd_diagnose", "locate the mismatch with the traditional model, name and model the missing physics"),
+    ("calibrate", "uq._cli.cmd_calibrate", "coverage of the credible intervals on simulated campaigns with known truth"),
+    ("batch", "uq._cli.cmd_batch", "a catalogue of campaigns (fit, report, surface, diagnose) on Dask: summary table, reruns skip finished ones"),
+]
+
+#: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"
+#: (the folder to write into). --out is always "where this command writes": the file for
+#: simulate (CONTRACT.md: --out FILE.csv), the folder for every other command.
+OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir"}
+OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
+
+EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 0, 1, 2, 3, 130, 141
+
+EPILOG = ("exit status: 0 done, 1 check disagrees or not converged under --strict, 2 bad input or usage, "
+          "3 internal error, 130 interrupted. --out is where a command writes: the CSV file for simulate, "
+          "the folder for the others. --json - prints the JSON alone on stdout.")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit 2 (argparse's own status for usage errors)
+        message = " ".join(message.split())
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(EXIT_INPUT)
+
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Show every option's default, unless its help already says it or there is none to show."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text.lower() or action.default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+            return text
+        return super()._get_help_string(action)
+
+
+def _available() -> list[tuple[str, str, str]]:
+    return [c for c in COMMANDS if importlib.util.find_spec(c[1]) is not None]
+
+
+def _add_general(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("general")
+    g.add_argument("--quiet", action="store_true", help="no progress display (it is also off when stderr is not a terminal)")
+    g.add_argument("--debug", action="store_true", help="on an internal error, print the traceback (or set UQ_DEBUG=1)")
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The ``uq`` parser. Only the command named in ``argv`` is configured (its module imported);
+    the others are listed with their one-line help, which is all ``uq --help`` shows."""
+    wanted = _command_in(argv or [])
+    parser = _Parser(prog="uq", description="Bayesian uncertainty quantification of air-spring test-stand recordings",
+                     epilog=EPILOG, formatter_class=_Formatter)
+    parser.add_argument("--version", action="version", version=f"uq {__version__}")
+    sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND", parser_class=_Parser)
+    parser._uq_commands = {}
+    for name, module, help_ in _available():
+        p = sub.add_parser(name, help=help_, description=help_, epilog=EPILOG, formatter_class=_Formatter)
+        p.set_defaults(_module=module, _name=name)
+        if name == wanted:
+            getattr(importlib.import_module(module), f"configure_{name}")(p)
+            _add_general(p)
+        parser._uq_commands[name] = p
+    return parser
+
+
+def _command_in(argv: list[str]) -> str | None:
+    """The command named in ``argv``: the first word that is not an option."""
+    names = {c[0] for c in COMMANDS}
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in names else None
+    return None
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    args = parser.parse_args(argv)
+    if getattr(args, "config", None):  # a fit definition sets defaults; the command line still wins
+        from uq._cli.cmd_basic import read_fit_config
+
+        try:
+            values = read_fit_config(args.config)
+        except InputError as exc:
+            parser._uq_commands[args._name].error(str(exc))
+        parser._uq_commands[args._name].set_defaults(**values)
+        args = parser.parse_args(argv)
+    return args
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Every output path of the command, checked before it starts (nothing is written)."""
+    from uq._cli.common import check_output_path
+
+    for dest, kind in OUTPUT_KIND.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            kind = OUTPUT_KIND_BY_COMMAND.get((args._name, dest), kind)
+            check_output_path(value, f"--{dest}", kind)
+
+
+@contextlib.contextmanager
+def _json_on_stdout(args: argparse.Namespace):
+    """With ``--json -``: run with stdout sent to stderr, then print the JSON alone on stdout."""
+    if getattr(args, "json", None) != "-":
+        yield
+        return
+    stdout = sys.stdout
+    folder = tempfile.mkdtemp(prefix="uq-json-")
+    args.json = str(Path(folder) / "result.json")
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+        if os.path.exists(args.json):
+            stdout.write(Path(args.json).read_text(encoding="utf-8"))
+            stdout.flush()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _fail(name: str, text: str, status: int) -> int:
+    sys.stderr.write(f"uq {name}: {text}\n")
+    return status
+
+
+def _compile_cache() -> None:
+    """JAX's persistent compilation cache for the command line (not for library users): compiled
+    log-probabilities are kept in ``$UQ_CACHE_DIR`` (default ``$XDG_CACHE_HOME/airspring-uq/jax``,
+    i.e. ``~/.cache/airspring-uq/jax``), so a second run skips XLA compilation. ``UQ_CACHE_DIR=off``
+    turns it off. Only environment variables are set (JAX reads them when first imported), so
+    commands that never import JAX stay fast; a cache location set by the user wins."""
+    where = os.environ.get("UQ_CACHE_DIR", "")
+    if where.lower() in ("off", "0", "none") or "JAX_COMPILATION_CACHE_DIR" in os.environ or "jax" in sys.modules:
+        return
+    if not where:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        where = os.path.join(base, "airspring-uq", "jax")
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = where
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
+    args = _parse(parser, argv)
+    name = args._name
+    debug = args.debug or os.environ.get("UQ_DEBUG", "") not in ("", "0")
+    from uq._io.progress import set_enabled
+
+    set_enabled(not args.quiet)
+    _compile_cache()
+    try:
+        check_outputs(args)
+        with _json_on_stdout(args):
+            return int(getattr(importlib.import_module(args._module), f"command_{name}")(args) or 0)
+    except InputError as exc:
+        return _fail(name, f"error: {exc}", EXIT_INPUT)
+    except KeyboardInterrupt:
+        return _fail(name, "interrupted", EXIT_INTERRUPTED)
+    except BrokenPipeError:  # the reader of stdout went away (`| head`): the shell's status for SIGPIPE
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
+    except OSError as exc:  # a file the command could not read or write (disk full, permissions)
+        where = f": {exc.filename}" if exc.filename else ""
+        return _fail(name, f"error: {exc.strerror or exc}{where}", EXIT_INPUT)
+    except Exception as exc:
+        if debug:
+            import traceback
+
+            traceback.print_exc()
+        first = (str(exc).splitlines() or [""])[0]
+        hint = "" if debug else "; rerun with --debug (or UQ_DEBUG=1) for the traceback"
+        return _fail(name, f"internal error: {type(exc).__name__}: {first} (a bug, please report it{hint})", EXIT_INTERNAL)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

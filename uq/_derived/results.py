@@ -1,0 +1,87 @@
+"""The JSON of ``uq fit`` (CONTRACT.md section 3) and the saved posteriors (NetCDF).
+
+Extends the contract with each test's posterior covariance of the coefficients (used by
+``uq check``), the least-squares coefficients, the noise parameters and the convergence
+diagnostics. SI units throughout.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from uq._data.reference import FORCE_NAMES, PISTON_NAMES
+from uq._inference.summary import estimate
+from uq._models.cubic import NOISE_NAMES, CampaignFit, PressureFit
+
+
+def _coef_block(draws: np.ndarray, names, diag: dict) -> dict:
+    out = {}
+    for i, n in enumerate(names):
+        e = estimate(draws[..., i])
+        v = diag["variables"][n]
+        e |= {"r_hat": v["r_hat"], "ess_bulk": v["ess_bulk"], "ess_tail": v["ess_tail"], "mcse_mean": v["mcse_mean"]}
+        out[n] = e
+    return out
+
+
+def test_json(fit: PressureFit) -> dict:
+    d = fit.diagnostics
+    s_P, eps_P = fit.deviation_measures()
+    f, p = fit.flat("force"), fit.flat("piston")
+    return {
+        "pressure_bar": fit.pressure_bar,
+        "n_points": fit.test.n_points,
+        "force": _coef_block(fit.force, FORCE_NAMES, d),
+        "piston": _coef_block(fit.piston, PISTON_NAMES, d),
+        "s_P_N": s_P,
+        "eps_P_pct": eps_P,
+        "noise": {n: estimate(fit.noise[..., i]) | {"r_hat": d["variables"][n]["r_hat"], "ess_bulk": d["variables"][n]["ess_bulk"]}
+                  for i, n in enumerate(NOISE_NAMES)},
+        "least_squares": {
+            "force": dict(zip(FORCE_NAMES, fit.lsq_force.tolist(), strict=True)),
+            "piston": dict(zip(PISTON_NAMES, fit.lsq_piston.tolist(), strict=True)),
+        },
+        "covariance": {"force": np.cov(f, rowvar=False), "piston": np.cov(p, rowvar=False)},
+        "convergence": {k: v for k, v in d.items() if k != "variables"},
+    }
+
+
+def fit_json(cf: CampaignFit) -> dict:
+    """What ``uq fit --json`` writes for a fit (docs/formats.md): per test the coefficients' and
+    noise's posterior summaries, the coefficient blocks' covariance, least squares and diagnostics.
+    Values are NumPy; ``uq._io.files.dumps_json`` gives the file's text. See :func:`uq.check` for a use."""
+    rec = cf.recordings
+    tests = [test_json(t) for t in cf.tests]
+    warnings = [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in t.diagnostics["warnings"]]
+    return {
+        "x0_m": rec.x0_m,
+        "piston_area_m2": rec.piston_area_m2,
+        "source": os.path.basename(rec.path),
+        "seed": cf.seed,
+        "converged": cf.converged,
+        "warnings": warnings,
+        "tests": tests,
+    }
+
+
+def save_posteriors(cf: CampaignFit, out_dir: str | Path) -> list[Path]:
+    """One NetCDF file (ArviZ InferenceData) per test, written atomically."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for t in cf.tests:
+        target = out_dir / f"posterior_{t.pressure_bar:g}bar.nc"
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=out_dir)
+        os.close(fd)
+        try:
+            t.idata.to_netcdf(tmp, engine="h5netcdf")
+            os.replace(tmp, target)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        paths.append(target)
+    return paths

@@ -1,0 +1,478 @@
+"""``uq batch CATALOGUE --out DIR``: many campaigns, one command, run on Dask distributed.
+
+A catalogue (TOML or CSV, docs/batch.md) lists recordings files and the tasks to run on each
+(``fit``, ``report``, ``surface``, ``diagnose``) with per-campaign options (seed, sampler,
+stand constants). Every (campaign, task) pair is one Dask task: a ``LocalCluster`` on this
+machine by default (worker processes, one thread each, because JAX dispatch and emcee hold
+the GIL), or the cluster at ``--scheduler ADDRESS``. The work calls the library directly
+(``read_recordings``, ``fit_campaign``, ``write_report``, ``fit_surface``, ``diagnose``).
+
+Outputs: ``DIR/<campaign>/<task>/`` per pair, with a stamp ``batch.json`` written last, holding
+the content hash of (recordings bytes, stand file bytes, task, options, package version); a
+rerun skips every pair whose stamp matches. ``DIR/summary.csv``, ``summary.json`` and
+``index.html`` list every pair (done, skipped or failed with its one-line error), all written
+atomically. A failed pair does not stop the others; the command exits 1 at the end if any failed.
+
+The catalogue is validated before any work: an unknown task or option, a missing file or a
+duplicate name is one line naming the catalogue and the row (exit 2).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import io
+import json
+import os
+import re
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from uq._io.errors import InputError, where
+from uq._io.values import positive_float, positive_int, seed, walkers
+
+TASKS = ("fit", "report", "surface", "diagnose")
+#: Per-campaign options: name -> parser (the same checks as the single-campaign commands' options).
+OPTIONS = {"seed": seed, "walkers": walkers, "ensembles": positive_int, "max_steps": positive_int,
+           "x0_mm": positive_float, "piston_area_cm2": positive_float, "draws": positive_int, "stand": str}
+DEFAULT_SEED = 20201  # as every command's --seed
+STAMP = "batch.json"
+SUMMARY_COLUMNS = ("campaign", "task", "status", "seconds", "converged", "result", "output", "error", "file")
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")  # becomes a folder name: no separators, no dot-files
+
+
+# ----------------------------------------------------------------------------- catalogue
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    file: Path  # absolute
+    tasks: tuple[str, ...]
+    options: dict = field(hash=False)  # parsed values; "stand" an absolute path
+    where: str = ""  # "catalogue.csv, row 3": for messages
+
+
+def _split_tasks(value, loc: str) -> tuple[str, ...]:
+    items = value if isinstance(value, list) else re.split(r"[;+,\s]+", str(value))
+    tasks = tuple(str(t).strip() for t in items if str(t).strip())
+    if not tasks:
+        raise InputError(f"{loc}: no task given; expected one or more of {', '.join(TASKS)}")
+    for t in tasks:
+        if t not in TASKS:
+            raise InputError(f"{loc}: unknown task '{t}'; expected {', '.join(TASKS)}")
+    if len(set(tasks)) != len(tasks):
+        raise InputError(f"{loc}: a task is listed twice in '{value}'")
+    return tasks
+
+
+def _campaign(entry: dict, folder: Path, loc: str) -> Campaign:
+    """One catalogue entry (keys already known to be allowed) -> a checked Campaign."""
+    if not str(entry.get("file", "")).strip():
+        raise InputError(f"{loc}: no 'file' given (the recordings CSV, relative to the catalogue's folder)")
+    path = (folder / str(entry["file"]).strip()).resolve()
+    if not path.is_file():
+        raise InputError(f"{where(loc, column='file')}: no such file {path}")
+    name = str(entry.get("name") or "").strip() or path.stem
+    if not _NAME.match(name):
+        raise InputError(f"{where(loc, column='name')}: '{name}' cannot name a folder; use letters, digits, '.', '_', '-'")
+    if "tasks" not in entry:
+        raise InputError(f"{loc}: no 'tasks' given; expected one or more of {', '.join(TASKS)}")
+    tasks = _split_tasks(entry["tasks"], where(loc, column="tasks"))
+    options = {}
+    for key, parse in OPTIONS.items():
+        value = entry.get(key)
+        if value is None or str(value).strip() == "":
+            continue
+        if key == "stand":
+            stand = (folder / str(value).strip()).resolve()
+            if not stand.is_file():
+                raise InputError(f"{where(loc, column='stand')}: no such file {stand}")
+            options[key] = str(stand)
+            continue
+        try:
+            options[key] = parse(str(value).strip())
+        except ValueError as exc:
+            raise InputError(f"{where(loc, column=key)}: {exc}") from None
+    return Campaign(name, path, tasks, options, loc)
+
+
+def _check_keys(keys, loc: str, allowed) -> None:
+    for k in keys:
+        if k not in allowed:
+            raise InputError(f"{loc}: unknown column '{k}'; expected {', '.join(allowed)}")
+
+
+ENTRY_KEYS = ("name", "file", "tasks", *OPTIONS)
+
+
+def _read_csv(path: Path) -> list[Campaign]:
+    """CSV: a header row (name, file, tasks, option columns), one row per campaign; '#' lines are comments."""
+    text = _text(path)
+    lines = [(i, line) for i, line in enumerate(text.splitlines(), start=1) if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
+        raise InputError(f"{path}: empty catalogue; expected a header row (name,file,tasks,...) and one row per campaign")
+    head_row, head_line = lines[0]
+    header = [h.strip() for h in next(csv.reader([head_line]))]
+    _check_keys(header, where(str(path), head_row), ENTRY_KEYS)
+    if "file" not in header or "tasks" not in header:
+        raise InputError(f"{where(str(path), head_row)}: the header needs the columns 'file' and 'tasks'")
+    out = []
+    for row, line in lines[1:]:
+        cells = next(csv.reader([line]))
+        if len(cells) > len(header):
+            raise InputError(f"{where(str(path), row)}: {len(cells)} cells for {len(header)} columns")
+        entry = dict(zip(header, (c.strip() for c in cells), strict=False))
+        out.append(_campaign(entry, path.parent, where(str(path), row)))
+    return out
+
+
+def _read_toml(path: Path) -> list[Campaign]:
+    """TOML: optional [defaults] (any entry key) and one [[campaign]] table per campaign."""
+    try:
+        raw = tomllib.loads(_text(path))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    for key in raw:
+        if key not in ("defaults", "campaign"):
+            raise InputError(f"{path}: unknown key '{key}'; expected [defaults] and [[campaign]] tables")
+    defaults = raw.get("defaults", {})
+    entries = raw.get("campaign", [])
+    if not isinstance(defaults, dict) or not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise InputError(f"{path}: expected a [defaults] table and [[campaign]] tables")
+    _check_keys(defaults, f"{path}, [defaults]", ENTRY_KEYS)
+    if not entries:
+        raise InputError(f"{path}: no [[campaign]] table")
+    out = []
+    for i, e in enumerate(entries, start=1):
+        loc = f"{path}, campaign {i}" + (f" ('{e['name']}')" if e.get("name") else "")
+        _check_keys(e, loc, ENTRY_KEYS)
+        out.append(_campaign(defaults | e, path.parent, loc))
+    return out
+
+
+def _text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, expected a catalogue (.toml or .csv)") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file") from None
+
+
+def read_catalogue(path) -> list[Campaign]:
+    """Read and check a catalogue before any work: every file exists, every task and option is known,
+    names are unique. One line naming the catalogue and its row on the first problem."""
+    path = Path(path)
+    if path.suffix.lower() not in (".toml", ".csv"):
+        raise InputError(f"{path}: a catalogue is a .toml or .csv file")
+    campaigns = _read_toml(path) if path.suffix.lower() == ".toml" else _read_csv(path)
+    if not campaigns:
+        raise InputError(f"{path}: no campaign listed")
+    seen: dict[str, str] = {}
+    for c in campaigns:
+        if c.name.lower() in seen:  # folders: case-insensitive file systems would merge them
+            raise InputError(f"{c.where}: duplicate campaign name '{c.name}' (also {seen[c.name.lower()]})")
+        seen[c.name.lower()] = c.where
+    return campaigns
+
+
+# ----------------------------------------------------------------------------- jobs
+
+
+def _version() -> str:
+    from uq._io.version import __version__
+
+    return __version__
+
+
+def job_hash(c: Campaign, task: str) -> str:
+    """Content hash deciding a rerun: recordings bytes, stand bytes, task, options, package version."""
+    h = hashlib.sha256()
+    h.update(c.file.read_bytes())
+    if "stand" in c.options:
+        h.update(Path(c.options["stand"]).read_bytes())
+    opts = {k: v for k, v in c.options.items() if k != "stand"}
+    h.update(json.dumps({"task": task, "options": opts, "version": _version()}, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def jobs_of(campaigns: list[Campaign], out_dir) -> list[dict]:
+    """One plain dict per (campaign, task): all a worker needs, picklable, no live objects."""
+    out = Path(out_dir).resolve()
+    return [{"campaign": c.name, "task": t, "file": str(c.file), "options": dict(c.options),
+             "out": str(out / c.name / t), "hash": job_hash(c, t)} for c in campaigns for t in c.tasks]
+
+
+def _stamp(job: dict) -> dict | None:
+    """The finished row of a job run before with the same hash, else None."""
+    try:
+        stamp = json.loads((Path(job["out"]) / STAMP).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return stamp.get("row") if stamp.get("hash") == job["hash"] else None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
+
+
+def run_job(job: dict) -> dict:
+    """Run one (campaign, task) in this process (a Dask worker or the caller); never raises.
+
+    Returns the summary row; on success the stamp is written last, so a crash leaves no stamp."""
+    import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
+
+    out = Path(job["out"])
+    row = {"campaign": job["campaign"], "task": job["task"], "file": job["file"], "status": "failed",
+           "seconds": 0.0, "converged": None, "result": "", "output": "", "error": ""}
+    t0 = time.perf_counter()
+    try:
+        (out / STAMP).unlink(missing_ok=True)  # stale stamp of other inputs: gone before new outputs appear
+        out.mkdir(parents=True, exist_ok=True)
+        row |= TASK_RUNNERS[job["task"]](job, out) | {"status": "done"}
+    except Exception as exc:  # the batch goes on: the error is this row's, one line
+        row["error"] = _one_line(exc)
+    row["seconds"] = round(time.perf_counter() - t0, 2)
+    if row["status"] == "done":
+        from uq._io.files import dumps_json, write_text_atomic
+
+        write_text_atomic(out / STAMP, dumps_json({"hash": job["hash"], "version": _version(), "task": job["task"],
+                                                   "options": job["options"], "file": job["file"], "row": row}))
+    return row
+
+
+# ----------------------------------------------------------------------------- tasks
+
+
+def _recordings(job: dict):
+    from uq._data.recordings import read_recordings
+
+    o = job["options"]
+    kw = {k: o[k] for k in ("piston_area_cm2", "x0_mm") if k in o}
+    return read_recordings(job["file"], **kw)
+
+
+def _settings(job: dict):
+    from uq._inference.sampler import Settings
+
+    o = job["options"]
+    kw = {"n_walkers": o.get("walkers"), "n_ensembles": o.get("ensembles"), "max_steps": o.get("max_steps")}
+    s = Settings(**{k: v for k, v in kw.items() if v is not None})
+    s.validate()
+    return s
+
+
+def _stand(job: dict):
+    from uq._data.stand_description import stand_or_paper
+
+    return stand_or_paper(job["options"].get("stand"))
+
+
+def _seed(job: dict) -> int:
+    return int(job["options"].get("seed", DEFAULT_SEED))
+
+
+def _task_fit(job: dict, out: Path) -> dict:
+    from uq._derived.results import fit_json, save_posteriors
+    from uq._io.files import emit_json
+    from uq._models.cubic import fit_campaign
+
+    rec = _recordings(job)
+    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
+    save_posteriors(cf, out)
+    emit_json(fit_json(cf), str(out / "fit.json"))
+    return {"converged": cf.converged, "output": "fit.json",
+            "result": f"{len(rec.tests)} tests, {rec.n_points} points"}
+
+
+def _task_report(job: dict, out: Path) -> dict:
+    from uq._derived.bands import campaign_bands
+    from uq._derived.results import fit_json
+    from uq._io.files import emit_json
+    from uq._models.cubic import fit_campaign
+    from uq._report.campaign import write_report
+
+    rec = _recordings(job)
+    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
+    cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
+    page = write_report(cf, out, bands=cb)
+    emit_json(fit_json(cf) | {"bands": cb.summary(), "report": page.name}, str(out / "fit.json"))
+    return {"converged": cf.converged, "output": page.name, "result": f"{len(rec.tests)} tests, {rec.n_points} points"}
+
+
+def _task_surface(job: dict, out: Path) -> dict:
+    from uq._io.files import emit_json
+    from uq._models.surface import fit_surface, summary
+    from uq._report.surface import write_surface_report
+
+    fit = fit_surface(_recordings(job), seed=_seed(job), settings=_settings(job), stand=_stand(job))
+    res = summary(fit)
+    page = write_surface_report(fit, res, out)
+    emit_json(res, str(out / "surface.json"))
+    return {"converged": bool(res["converged"]), "output": page.name,
+            "result": f"{fit.orders.label}, {fit.beta.shape[-1]} coefficients"}
+
+
+def _task_diagnose(job: dict, out: Path) -> dict:
+    from uq._diagnose.engine import diagnose, public
+    from uq._io.files import emit_json
+    from uq._report.diagnose import write_diagnose_report
+
+    # the same shorter sampling as `uq diagnose` (its command_diagnose)
+    s = _settings(job)
+    settings = dataclasses.replace(s, chunk=200, min_steps=min(300, s.max_steps))
+    res = diagnose(_recordings(job), seed=_seed(job), settings=settings, stand=_stand(job))
+    emit_json(public(res), str(out / "diagnose.json"))
+    page = write_diagnose_report(res, out)
+    names = ", ".join(m["name"] for m in res["mechanisms"]) or "none"
+    warn = (res.get("sampling") or {}).get("warnings") or []
+    return {"converged": not warn, "output": Path(page).name if page else "diagnose.json",
+            "result": f"mismatch {'yes' if res['mismatch_detected'] else 'no'}; mechanisms: {names}"}
+
+
+TASK_RUNNERS = {"fit": _task_fit, "report": _task_report, "surface": _task_surface, "diagnose": _task_diagnose}
+
+
+# ----------------------------------------------------------------------------- running
+
+
+def worker_env(threads: int = 1) -> dict:
+    """Environment of LocalCluster workers: one compute thread each, so two workers fill two cores
+    instead of fighting over them (XLA's CPU backend otherwise starts a thread per core)."""
+    if threads != 1:
+        return {}
+    flags = os.environ.get("XLA_FLAGS", "")
+    extra = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    return {"XLA_FLAGS": f"{flags} {extra}".strip(), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+            "MKL_NUM_THREADS": "1"}
+
+
+def _client(scheduler: str | None, workers: int):
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"option --scheduler {scheduler}: cannot connect: {_one_line(exc)}") from None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR, env=worker_env())
+    return Client(cluster)
+
+
+def run_dask(jobs: list[dict], *, scheduler: str | None = None, workers: int = 2, on_row=None) -> list[dict]:
+    """Run ``jobs`` on Dask (a new LocalCluster, or the cluster at ``scheduler``); rows as they finish."""
+    from distributed import as_completed
+
+    rows = []
+    client = _client(scheduler, workers)
+    try:
+        futures = {client.submit(run_job, j, key=f"uq-batch-{j['campaign']}-{j['task']}-{j['hash'][:12]}", pure=False): j
+                   for j in jobs}
+        for fut in as_completed(futures):
+            try:
+                row = fut.result()
+            except Exception as exc:  # the worker itself died (KilledWorker, out of memory): this row fails
+                j = futures[fut]
+                row = {"campaign": j["campaign"], "task": j["task"], "file": j["file"], "status": "failed",
+                       "seconds": None, "converged": None, "result": "", "output": "", "error": _one_line(exc)}
+            rows.append(row)
+            if on_row:
+                on_row(row)
+    finally:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None and not scheduler:
+            cluster.close()
+    return rows
+
+
+def run_serial(jobs: list[dict], on_row=None) -> list[dict]:
+    """The same jobs one after another in this process (the benchmark's reference, and for debugging)."""
+    rows = []
+    for j in jobs:
+        rows.append(run_job(j))
+        if on_row:
+            on_row(rows[-1])
+    return rows
+
+
+# ----------------------------------------------------------------------------- summary
+
+
+def _ordered(rows: list[dict], jobs: list[dict]) -> list[dict]:
+    """Rows in catalogue order (Dask finishes them in any order; the summary should not depend on it)."""
+    pos = {(j["campaign"], j["task"]): i for i, j in enumerate(jobs)}
+    return sorted(rows, key=lambda r: pos[(r["campaign"], r["task"])])
+
+
+def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
+    """summary.csv, summary.json and index.html in ``out_dir``, each written atomically."""
+    from uq._io.files import dumps_json, write_text_atomic
+
+    out = Path(out_dir)
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "skipped", "failed")}
+    result = {"catalogue": str(catalogue), "version": _version(), "counts": counts, "campaigns": rows}
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    w.writerows({k: ("" if r.get(k) is None else r.get(k)) for k in SUMMARY_COLUMNS} for r in rows)
+    write_text_atomic(out / "summary.csv", buf.getvalue())
+    write_text_atomic(out / "summary.json", dumps_json(result))
+    write_text_atomic(out / "index.html", _index_html(rows, catalogue, counts))
+    return result
+
+
+def _index_html(rows: list[dict], catalogue, counts: dict) -> str:
+    """index.html: the template ``batch_index.html`` of ``uq._report`` (autoescaped)."""
+    from uq._report.html import render
+
+    return render("batch_index.html", rows=rows, catalogue=Path(catalogue).name, counts=counts, version=_version())
+
+
+# ----------------------------------------------------------------------------- command
+
+
+def run_batch(catalogue, out_dir, *, scheduler: str | None = None, workers: int = 2, serial: bool = False,
+              force: bool = False, on_row=None) -> dict:
+    """Validate ``catalogue``, skip finished pairs, run the rest, write the summary; return it."""
+    campaigns = read_catalogue(catalogue)
+    jobs = jobs_of(campaigns, out_dir)
+    rows, todo = [], []
+    for j in jobs:
+        done = None if force else _stamp(j)
+        if done is not None:
+            rows.append(done | {"status": "skipped"})
+        else:
+            todo.append(j)
+    if todo:
+        rows += run_serial(todo, on_row) if serial else run_dask(todo, scheduler=scheduler, workers=workers, on_row=on_row)
+    return write_summary(_ordered(rows, jobs), out_dir, catalogue)
+
+
+# ----------------------------------------------------------------------------- benchmark
+
+
+def bench_catalogue(folder, n: int, *, seed: int = 20201, pressures: str = "2,5", step_mm: float = 5.0) -> Path:
+    """``n`` simulated campaigns (virtual stand, seeds seed+i) and a catalogue running ``fit`` on each."""
+    from uq._data.recordings import write_recordings_csv
+    from uq._io.files import write_text_atomic
+    from uq._stand.simulator import Layout, simulate
+
+    folder = Path(folder)
+    layout = Layout(tuple(float(p) for p in pressures.split(",")), step_m=step_mm * 1e-3)
+    rows = ["name,file,tasks,seed"]
+    for i in range(n):
+        tests = simulate("n50", seed=seed + i, layout=layout)
+        write_text_atomic(folder / f"c{i:02d}.csv", write_recordings_csv(tests, f"benchmark campaign {i}, seed {seed + i}"))
+        rows.append(f"c{i:02d},c{i:02d}.csv,fit,{seed + i}")
+    return write_text_atomic(folder / "catalogue.csv", "\n".join(rows) + "\n")

@@ -1,0 +1,450 @@
+"""``uq bench``: effective samples per second of the force posterior, project sampler vs plain emcee.
+
+Workload: one 37-point test, the 5 bar test of the virtual stand (``uq._stand.simulator.simulate``,
+spring n50, seeded by ``--seed``), or the test at ``--pressure-bar`` of ``--recordings FILE``.
+
+Measure: ESS/s = min over the four force coefficients (a_P, b_P, c_P, d_P) of bulk ESS,
+divided by the wall time of the run, and the same ratio for every quantity of the force
+posterior both report (the coefficients, sigma0, r). ESS is the project's estimator for both
+samplers (``uq._inference.sampler.bulk_ess``: ArviZ's ESS of the ensemble-mean chain converted
+to draws, so coupled walkers are not counted as independent chains). Both runs are in the same
+process, after a JIT warm-up run that is not timed.
+
+(a) project: ``uq._models.cubic.fit_test`` unchanged (least squares, optimistix start, emcee over
+    the three noise parameters with DE moves until 50 autocorrelation times, exact Gaussian
+    draws of the eight coefficients, ArviZ diagnostics); the timed wall time covers all of
+    it, including the piston block it also fits. Repeated with fresh seeds until
+    ``--seconds`` have passed (at least once); ESS of independent runs adds up.
+(b) baseline: plain emcee (stretch move, ``vectorize=False``: one Python/numpy call per
+    walker) over (a_P, b_P, c_P, d_P, log sigma0, log r) in the paper's monomial basis, with
+    the project's force likelihood (sd sqrt(sigma0^2 + (r |Phat|)^2), Phat the least-squares
+    curve) and priors (the scaled-basis N(0, (100 kN)^2) carried to the monomial basis,
+    log sigma0 ~ N(log 10, 2^2), log r ~ N(log 0.005, 1)), 32 walkers started in a small
+    ball around the least-squares solution, run for the same wall time as (a); burn-in
+    5 autocorrelation times (emcee's estimate), as the project's.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import emcee
+import numpy as np
+
+from uq._data.recordings import PressureTest
+from uq._data.reference import FORCE_NAMES
+from uq._inference.sampler import Settings, bulk_ess
+from uq._io.errors import InputError
+
+BENCH_PRESSURE_BAR = 5.0
+BASELINE_WALKERS = 32
+
+
+def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = BENCH_PRESSURE_BAR) -> tuple[PressureTest, float, str]:
+    """The workload: (test, x0_m, description)."""
+    if recordings:
+        from uq._data.recordings import read_recordings
+
+        rec = read_recordings(recordings)
+        try:
+            return rec.test_at(pressure_bar), rec.x0_m, f"{pressure_bar:g} bar test of {recordings}"
+        except KeyError:
+            have = ", ".join(f"{p:g}" for p in rec.pressures_bar)
+            raise InputError(f"{recordings}: no test at {pressure_bar:g} bar (option --pressure-bar); it has {have} bar") from None
+    from uq._data.reference import PAPER_X0_M
+    from uq._stand.simulator import Layout, simulate
+
+    t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
+    test = PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
+                np.arange(t["step"].size))
+    return test, PAPER_X0_M, f"{pressure_bar:g} bar test of the virtual stand (n50, seed {seed})"
+
+
+#: Every quantity of the force posterior both samplers report: the coefficients and the noise
+#: (the baseline samples log sigma0 and log r; bulk ESS is rank-based, so the same for sigma0, r).
+QUANTITIES = (*FORCE_NAMES, "sigma0_N", "rel_force")
+
+
+# --------------------------------------------------------------------------- (a) project
+
+
+def run_project(test: PressureTest, x0_m: float, *, seed: int, seconds: float, settings: Settings) -> dict:
+    from uq._models.cubic import fit_test
+
+    # JIT warm-up, not timed: a whole fit, so the draw programs of the timed runs' bucket are compiled too
+    fit_test(test, x0_m, seed=seed, settings=settings)
+    runs, total_time = 0, 0.0
+    each = dict.fromkeys(QUANTITIES, 0.0)
+    rs = np.random.SeedSequence(seed)
+    while runs == 0 or total_time < seconds:
+        s = int(rs.spawn(1)[0].generate_state(1)[0])
+        t0 = time.perf_counter()
+        fit = fit_test(test, x0_m, seed=s, settings=settings)
+        total_time += time.perf_counter() - t0
+        for n in QUANTITIES:
+            each[n] += float(fit.diagnostics["variables"][n]["ess_bulk"])
+        runs += 1
+    total_ess = min(each[n] for n in FORCE_NAMES)
+    return {"name": "project: uq._models.cubic.fit_test (collapsed: emcee DE moves on the noise, exact coefficient draws)",
+            "runs": runs, "wall_s": total_time, "ess_bulk_min": total_ess, "ess_per_s": total_ess / total_time,
+            "ess_per_s_each": {n: e / total_time for n, e in each.items()},
+            "n_steps_last": fit.diagnostics["n_steps"], "n_chains": fit.diagnostics["n_chains"]}
+
+
+# --------------------------------------------------------------------------- (b) baseline
+
+
+class PlainForcePosterior:
+    """Log posterior of (a, b, c, d, log sigma0, log r), paper basis, plain numpy, one walker a call."""
+
+    def __init__(self, test: PressureTest, x0_m: float):
+        from uq._models.cubic import FORCE_PRIOR_SD_N, NOISE_PRIOR_MEAN, NOISE_PRIOR_SD
+        from uq._physics.quantities import BASIS_SCALE_M
+
+        u = test.height_m - x0_m
+        self.U = np.vander(u, 4, increasing=True)
+        self.y = np.asarray(test.force_N, float)
+        self.lsq, *_ = np.linalg.lstsq(self.U, self.y, rcond=None)
+        self.ref2 = (self.U @ self.lsq) ** 2
+        self.prior_sd = FORCE_PRIOR_SD_N / BASIS_SCALE_M ** np.arange(4)
+        self.noise_mean = NOISE_PRIOR_MEAN[:2]
+        self.noise_sd = NOISE_PRIOR_SD[:2]
+        self.n = self.y.size
+
+    def __call__(self, theta: np.ndarray) -> float:
+        coef, log_s0, log_r = theta[:4], theta[4], theta[5]
+        var = math.exp(2.0 * log_s0) + math.exp(2.0 * log_r) * self.ref2
+        res = self.y - self.U @ coef
+        ll = -0.5 * float(np.sum(res * res / var + np.log(var)))
+        lp = -0.5 * float(np.sum((coef / self.prior_sd) ** 2))
+        lp -= 0.5 * float(np.sum(((np.array([log_s0, log_r]) - self.noise_mean) / self.noise_sd) ** 2))
+        out = ll + lp
+        return out if math.isfinite(out) else -math.inf
+
+    def start(self, n_walkers: int, rng: np.random.Generator) -> np.ndarray:
+        res = self.y - self.U @ self.lsq
+        s2 = float(res @ res) / (self.n - 4)
+        se = np.sqrt(np.diag(s2 * np.linalg.inv(self.U.T @ self.U)))
+        center = np.concatenate([self.lsq, [math.log(math.sqrt(s2) / math.sqrt(2.0)), math.log(0.005)]])
+        spread = np.concatenate([0.1 * se, [0.05, 0.05]])
+        return center + spread * rng.standard_normal((n_walkers, 6))
+
+
+def run_baseline(test: PressureTest, x0_m: float, *, seed: int, seconds: float, n_walkers: int = BASELINE_WALKERS,
+                 chunk: int = 100) -> dict:
+    post = PlainForcePosterior(test, x0_m)
+    rng = np.random.default_rng(seed)
+    sampler = emcee.EnsembleSampler(n_walkers, 6, post, vectorize=False)  # default: stretch move
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
+    state = post.start(n_walkers, rng)
+    t0 = time.perf_counter()
+    state = sampler.run_mcmc(state, chunk, progress=False)
+    while time.perf_counter() - t0 < seconds:
+        state = sampler.run_mcmc(state, chunk, progress=False)
+    wall = time.perf_counter() - t0
+    chain = sampler.get_chain()  # (steps, walkers, 6)
+    n = chain.shape[0]
+    tau = emcee.autocorr.integrated_time(chain[n // 5:], tol=0, quiet=True)
+    tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else float(n)
+    burn = min(max(int(math.ceil(5.0 * tau_max)), 20), n // 2)
+    draws = np.swapaxes(chain[burn:], 0, 1)  # (walkers, draws, 6): a, b, c, d, log sigma0, log r
+    # ESS by the project's own estimator (uq._inference.sampler.chain_diagnostics: the ensemble-mean chain, so
+    # coupled walkers do not count as independent chains), as the project's ESS is measured
+    stored = chain[burn:].reshape(1, -1, 6)  # one ensemble, storage order step x walker
+    each = {}
+    for j, name in enumerate(QUANTITIES):
+        e = bulk_ess(stored[..., j], n_walkers)
+        each[name] = e if np.isfinite(e) else 0.0
+    ess = min(each[n] for n in FORCE_NAMES)
+    return {"name": "baseline: plain emcee, stretch move, per-walker numpy log-prob over 6 parameters",
+            "runs": 1, "wall_s": wall, "ess_bulk_min": ess, "ess_per_s": ess / wall,
+            "ess_per_s_each": {n: e / wall for n, e in each.items()}, "n_steps": n, "burn_in": burn,
+            "n_walkers": n_walkers, "tau_max": tau_max, "acceptance": float(np.mean(sampler.acceptance_fraction)),
+            "posterior_mean_force": dict(zip(FORCE_NAMES, draws[..., :4].reshape(-1, 4).mean(0).tolist(), strict=True))}
+
+
+# --------------------------------------------------------------------------- memory and scale
+
+MB = 1024.0  # ru_maxrss is in KiB on Linux
+SCALING_FACTORS = (1, 4, 16)
+SCALING_BASE_STEP_MM = 5.0  # the paper's step: 37 points per test; 1.25 and 0.3125 mm give 4x and 16x
+# Run in a child: the uq command, then its own peak RSS and that of its reaped children (Dask workers).
+_CHILD = ("import json, resource, sys\n"
+          "from uq._cli.main import main\n"
+          "rc = main(sys.argv[2:])\n"
+          "ru = lambda who: resource.getrusage(who).ru_maxrss / 1024.0\n"
+          "open(sys.argv[1], 'w').write(json.dumps({'rc': rc, 'self_mb': ru(resource.RUSAGE_SELF), "
+          "'children_mb': ru(resource.RUSAGE_CHILDREN)}))\n"
+          "sys.exit(rc)\n")
+
+
+def run_child(argv: list[str]) -> dict:
+    """``uq ARGV`` in a fresh interpreter (cold: imports and JIT included): wall time and peak RSS.
+
+    ``peak_rss_mb`` is the command's own process, ``children_peak_rss_mb`` the largest of the
+    processes it started and reaped (the Dask workers of ``uq batch``; 0 without any)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    fd, out = tempfile.mkstemp(suffix=".json")
+    os.close(fd)
+    try:
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", _CHILD, out, *map(str, argv), "--quiet"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        wall = time.perf_counter() - t0
+        r = json.loads(open(out).read() or "{}")
+    finally:
+        os.unlink(out)
+    if proc.returncode not in (0, 1) or not r:
+        raise RuntimeError(f"uq {argv[0]} failed in the bench (exit {proc.returncode}): {proc.stderr.strip()[-300:]}")
+    return {"command": "uq " + " ".join(map(str, argv)), "exit": proc.returncode, "wall_s": wall,
+            "peak_rss_mb": r["self_mb"], "children_peak_rss_mb": r["children_mb"]}
+
+
+class PeakRSS:
+    """Peak resident memory of this process while the block runs (psutil, sampled every 10 ms)."""
+
+    def __enter__(self):
+        import threading
+
+        import psutil
+
+        self._proc = psutil.Process()
+        self.before_mb = self.peak_mb = self._proc.memory_info().rss / MB**2
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+        return self
+
+    def _watch(self):
+        while not self._stop.wait(0.01):
+            self.peak_mb = max(self.peak_mb, self._proc.memory_info().rss / MB**2)
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.peak_mb = max(self.peak_mb, self._proc.memory_info().rss / MB**2)
+
+    @property
+    def added_mb(self) -> float:
+        return self.peak_mb - self.before_mb
+
+
+def _scaled_campaign(folder, factor: int, seed: int, pressures: tuple[float, ...]):
+    from uq._data.recordings import read_recordings, write_recordings_csv
+    from uq._stand.simulator import Layout, simulate
+
+    step = SCALING_BASE_STEP_MM / factor
+    tests = simulate("n50", seed=seed, layout=Layout(pressures, step_m=step * 1e-3))
+    path = Path(folder) / f"x{factor}.csv"
+    path.write_text(write_recordings_csv(tests, f"bench --scaling: step {step:g} mm"))
+    return read_recordings(path), step
+
+
+def scaling(*, seed: int, settings: Settings, pressures: tuple[float, ...] = (2.0, 5.0),
+            factors=SCALING_FACTORS) -> dict:
+    """``fit_campaign`` at 1x, 4x, 16x the points per test, one process; ratios against 1x.
+
+    Each size is fitted once untimed with a 20-step chain first (JAX compiles per array shape),
+    then timed. The adaptive chain length differs between runs, so the time per sampler step is
+    given beside the wall time; memory is the peak RSS the fit added over the RSS before it."""
+    import tempfile
+
+    from uq._models.cubic import fit_campaign
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="uq-bench-scaling-") as tmp:
+        for f in factors:
+            rec, step = _scaled_campaign(tmp, f, seed, pressures)
+            fit_campaign(rec, seed=seed, settings=Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles,
+                                                           max_steps=20, min_steps=20))
+            with PeakRSS() as mem:
+                t0 = time.perf_counter()
+                cf = fit_campaign(rec, seed=seed, settings=settings)
+                wall = time.perf_counter() - t0
+            steps = sum(int(t.diagnostics["n_steps"]) for t in cf.tests)
+            rows.append({"factor": f, "step_mm": step, "points_per_test": rec.n_points / len(rec.tests),
+                         "n_points": rec.n_points, "wall_s": wall, "sampler_steps": steps, "ms_per_step": 1e3 * wall / steps,
+                         "peak_rss_mb": mem.peak_mb, "added_rss_mb": mem.added_mb})
+    one = rows[0]
+    for r in rows:
+        r["points_ratio"] = r["n_points"] / one["n_points"]
+        r["time_ratio"] = r["wall_s"] / one["wall_s"]
+        r["per_step_time_ratio"] = r["ms_per_step"] / one["ms_per_step"]
+        r["peak_rss_ratio"] = r["peak_rss_mb"] / one["peak_rss_mb"]
+        r["added_rss_ratio"] = r["added_rss_mb"] / one["added_rss_mb"] if one["added_rss_mb"] > 0 else math.nan
+    return {"workload": f"uq fit of a simulated n50 campaign at {', '.join(f'{p:g}' for p in pressures)} bar, "
+                        f"steps {', '.join(format(r['step_mm'], 'g') for r in rows)} mm, seed {seed}",
+            "measure": "wall time after a JIT warm-up of the same shape; peak RSS of this process during the fit "
+                       "(psutil, 10 ms) and the part the fit added", "runs": rows}
+
+
+def report_memory(seed: int) -> dict:
+    """``uq report`` on the paper's campaign (virtual stand, as data/n50) in a fresh process: time and peak RSS."""
+    import tempfile
+
+    from uq._data.recordings import write_recordings_csv
+    from uq._stand.simulator import simulate
+
+    with tempfile.TemporaryDirectory(prefix="uq-bench-report-") as tmp:
+        csv = Path(tmp) / "n50.csv"
+        csv.write_text(write_recordings_csv(simulate("n50", seed=seed), "bench: the paper's campaign"))
+        return run_child(["report", csv, "--out", Path(tmp) / "report", "--seed", seed]) | {
+            "workload": f"uq report of the paper's campaign from the virtual stand (11 tests, seed {seed}), cold process"}
+
+
+def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
+    """``uq batch`` of ``n`` simulated campaigns (fit) on a LocalCluster against ``--serial``, both cold processes."""
+    import json
+    import tempfile
+
+    from uq._drivers.batch import bench_catalogue
+
+    with tempfile.TemporaryDirectory(prefix="uq-bench-batch-") as tmp:
+        cat = bench_catalogue(tmp, n, seed=seed)
+        serial = run_child(["batch", cat, "--out", Path(tmp) / "serial", "--serial"])
+        dask = run_child(["batch", cat, "--out", Path(tmp) / "dask", "--workers", workers])
+        means = [[_means(json.loads((Path(tmp) / run / f"c{i:02d}" / "fit" / "fit.json").read_text())["tests"])
+                  for i in range(n)] for run in ("serial", "dask")]
+    # observed not bit-identical (probably the workers' single-threaded XLA rounding sums differently,
+    # after which the chains part ways), so the two runs are compared to Monte Carlo error
+    diff = max(abs(a - b) / sd for ms, md in zip(*means, strict=True) for (a, sd), (b, _) in zip(ms, md, strict=True))
+    return {"workload": f"{n} simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, seeds {seed}..{seed + n - 1}",
+            "cores": _cores(), "workers": workers, "serial": serial, "dask": dask,
+            "speedup": serial["wall_s"] / dask["wall_s"], "max_mean_difference_in_sd": diff,
+            "note": f"end-to-end wall time of each command in a fresh process (imports, JIT, cluster start included); "
+                    f"the ideal speed-up is below {workers} on {workers} cores"}
+
+
+def _means(tests: list[dict]) -> list[tuple[float, float]]:
+    """(mean, sd) of every coefficient of every test of a fit.json."""
+    return [(v["mean"], v["sd"]) for t in tests for block in ("force", "piston") for v in t[block].values()]
+
+
+def _cores() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None, n_queries: int = 100) -> dict:
+    """``uq margin``: one full query (fit + choice + answer) against the same query from the saved file.
+
+    All in this process, in the order a user meets them: the full query first (JAX compilation
+    included, as in a fresh ``uq margin`` run), then the answer saved with ``--save-fit``'s
+    writer, then the same query answered from the file (load + answer), then ``n_queries``
+    queries from one load of the file (heights and pressures spread over the tested ranges,
+    each with a force band and a usable stroke, as the reference query). A cold ``uq margin
+    --fit`` in a fresh interpreter (imports included) is timed as well."""
+    import tempfile
+
+    from uq._data.recordings import read_recordings, write_recordings_csv
+    from uq._data.stand_description import PAPER_STAND
+    from uq._derived.margin import fit_and_choose, load_answer, margin, save_answer
+    from uq._io.files import dumps_json
+    from uq._stand.simulator import simulate
+
+    with tempfile.TemporaryDirectory(prefix="uq-bench-margin-") as tmp:
+        if recordings is None:
+            csv = Path(tmp) / "n50.csv"
+            csv.write_text(write_recordings_csv(simulate("n50", seed=seed), "bench --margin: the paper's campaign"))
+            what = f"the paper's campaign from the virtual stand (11 tests, seed {seed}), as data/n50"
+        else:
+            csv, what = Path(recordings), f"{recordings}"
+        t0 = time.perf_counter()
+        rec = read_recordings(csv)
+        ans, info, diagnostics = fit_and_choose(rec, model="auto", seed=seed, settings=settings, stand=PAPER_STAND)
+        t_fit = time.perf_counter() - t0
+        plo, phi = ans.pressure_range_bar
+        if recordings is None:
+            h, load, pb = 0.112, 13020.0, 5.0  # the README's query
+        else:
+            h, pb = rec.x0_m, (plo + phi) / 2
+            load = float(ans.force_draws(h, pb).mean())
+        query = {"height_m": h, "load_N": load, "prob": 0.95, "pressure_bar": pb, "tolerance_pct": 10.0}
+
+        def ask(a, i, q=query):
+            return margin(a, q["height_m"], q["load_N"], q["prob"], pressure_bar=q["pressure_bar"],
+                          tolerance_pct=q["tolerance_pct"], model_info=i)
+
+        t0 = time.perf_counter()
+        full = ask(ans, info)
+        t_answer = time.perf_counter() - t0
+        path = Path(tmp) / "fit.nc"
+        t0 = time.perf_counter()
+        save_answer(path, ans, info, recordings=rec, seed=seed, written_by="uq bench --margin", settings=settings,
+                    stand=PAPER_STAND, diagnostics=diagnostics)
+        t_save = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        ans2, info2, _ = load_answer(path)
+        t_load = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        again = ask(ans2, info2)
+        t_again = time.perf_counter() - t0
+
+        queries = _spread_queries(ans2, n_queries, seed)
+        t0 = time.perf_counter()
+        many_ans, many_info, _ = load_answer(path)
+        for q in queries:
+            ask(many_ans, many_info, q)
+        t_many = time.perf_counter() - t0
+        cold = run_child(["margin", "--fit", path, "--height-mm", h * 1e3, "--load-N", load, "--pressure-bar", pb,
+                          "--tolerance-pct", 10])
+        size = path.stat().st_size
+    full_s, saved_s = t_fit + t_answer, t_load + t_again
+    return {
+        "workload": f"uq margin on {what}: {load:g} N at {h * 1e3:g} mm, force band at {pb:g} bar, stroke within 10 %",
+        "answered_by": info["name"], "settings": {"walkers": settings.n_walkers, "ensembles": settings.n_ensembles,
+                                                  "max_steps": settings.max_steps},
+        "full_query": {"wall_s": full_s, "fit_and_choice_s": t_fit, "answer_s": t_answer,
+                       "note": "read, fit both models, PSIS-LOO comparison, answer; JAX compilation included"},
+        "save_s": t_save, "saved_file_bytes": size,
+        "from_saved_file": {"wall_s": saved_s, "load_s": t_load, "answer_s": t_again},
+        "identical_answer": dumps_json(full) == dumps_json(again),
+        "ratio_full_to_saved": full_s / saved_s,
+        "queries_from_saved_file": {"n": n_queries, "wall_s": t_many, "per_query_s": t_many / n_queries,
+                                    "note": "one load of the file, then each query with a force band and a usable stroke"},
+        "cold_cli_from_saved_file": cold,
+        "measure": "wall time in this process (perf_counter) unless named cold: a fresh interpreter, imports included",
+    }
+
+
+def _spread_queries(ans, n: int, seed: int) -> list[dict]:
+    """n margin queries spread over the middle 70 % of the tested heights and pressures, each at the
+    mean posterior force there (a load the spring can carry)."""
+    rng = np.random.default_rng(seed)
+    (lo, hi), (plo, phi) = ans.height_range_m, ans.pressure_range_bar
+    queries = []
+    for _ in range(n):
+        x = float(rng.uniform(lo + 0.15 * (hi - lo), hi - 0.15 * (hi - lo)))
+        p = float(rng.uniform(plo + 0.15 * (phi - plo), phi - 0.15 * (phi - plo)))
+        queries.append({"height_m": x, "pressure_bar": p, "prob": 0.95, "tolerance_pct": 10.0,
+                        "load_N": float(ans.force_draws(x, p).mean())})
+    return queries
+
+
+def bench(*, seconds: float, seed: int, settings: Settings | None = None, recordings: str | None = None,
+          pressure_bar: float = BENCH_PRESSURE_BAR, baseline_walkers: int = BASELINE_WALKERS) -> dict:
+    settings = settings or Settings()
+    test, x0_m, what = bench_test(seed, recordings, pressure_bar)
+    project = run_project(test, x0_m, seed=seed, seconds=seconds, settings=settings)
+    baseline = run_baseline(test, x0_m, seed=seed, seconds=max(seconds, project["wall_s"]), n_walkers=baseline_walkers)
+    def ratio_of(p, b):
+        return p / b if b > 0 else math.inf
+
+    each = {n: ratio_of(project["ess_per_s_each"][n], baseline["ess_per_s_each"][n]) for n in QUANTITIES}
+    return {
+        "workload": what, "n_points": test.n_points, "seed": seed,
+        "measure": "min over a_P, b_P, c_P, d_P of ArviZ bulk ESS / wall time (s), after JIT warm-up; "
+                   "ratio_each: the ratio of ESS/s of every reported quantity of the force posterior",
+        "project": project, "baseline": baseline, "ratio": ratio_of(project["ess_per_s"], baseline["ess_per_s"]),
+        "ratio_each": each, "ratio_min_all": min(each.values()),
+    }
+
+

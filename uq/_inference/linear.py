@@ -1,0 +1,118 @@
+"""Collapsed linear-Gaussian kernel: the coefficients of a model that is linear in them.
+
+For y ~ N(X beta, diag(sigma^2)) with prior beta ~ N(0, diag(tau^2)), the posterior of beta
+given the noise scales is Gaussian, N(m, A^-1) with precision A = X^T W X + T^-1 and mean
+m = A^-1 X^T W y (W = diag(sigma^-2), T = diag(tau^2)), and beta integrates out of the
+likelihood in closed form:
+
+    log p(y | sigma) = -1/2 [ y^T W y - m^T A m + sum log sigma^2 + sum log tau^2
+                             + log det A + n log 2 pi ]          (Woodbury / matrix determinant lemma)
+
+So emcee only has to explore the noise (and any nonlinear mechanism) parameters; the
+coefficients are drawn exactly for every retained sample (PHYSICS.md, sampling note).
+All functions are pure and jittable; shapes in the docstrings.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import numpy as np
+
+from uq._inference.float64 import jax, jnp
+
+LOG_2PI = 1.8378770664093453
+
+
+class LinearPosterior(NamedTuple):
+    mean: jnp.ndarray  # (k,)
+    chol: jnp.ndarray  # (k, k) lower Cholesky factor of the precision A
+    log_marginal: jnp.ndarray  # () log p(y | sigma)
+
+
+def linear_posterior(X, y, sigma, prior_sd) -> LinearPosterior:
+    """Posterior of beta given noise scales. X (n, k), y (n,), sigma (n,), prior_sd (k,)."""
+    w = 1.0 / sigma**2
+    A = X.T @ (w[:, None] * X) + jnp.diag(1.0 / prior_sd**2)
+    chol = jnp.linalg.cholesky(A)
+    rhs = X.T @ (w * y)
+    mean = jax.scipy.linalg.cho_solve((chol, True), rhs)
+    quad = jnp.sum(w * y**2) - rhs @ mean
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
+    log_marginal = -0.5 * (
+        quad + jnp.sum(jnp.log(sigma**2)) + jnp.sum(jnp.log(prior_sd**2)) + logdet + y.size * LOG_2PI
+    )
+    return LinearPosterior(mean, chol, log_marginal)
+
+
+def draw_coefficients(post: LinearPosterior, z):
+    """Exact draw beta = m + A^{-1/2} z; z (k,) standard normal."""
+    return post.mean + jax.scipy.linalg.solve_triangular(post.chol.T, z, lower=False)
+
+
+def posterior_cov(post: LinearPosterior):
+    """Covariance A^-1 of beta given the noise, (k, k)."""
+    k = post.mean.size
+    inv_chol = jax.scipy.linalg.solve_triangular(post.chol, jnp.eye(k), lower=True)
+    return inv_chol.T @ inv_chol
+
+
+def gaussian_loglik(y, mu, sigma):
+    """Pointwise log N(y | mu, sigma^2), any matching shapes."""
+    return -0.5 * (((y - mu) / sigma) ** 2 + 2.0 * jnp.log(sigma) + LOG_2PI)
+
+
+DRAW_BATCH = 64  # rows per vmapped block inside the map: bounded memory
+DRAW_CHUNK = 1024  # rows per call of the compiled program: one program whatever the number of rows
+
+
+def draw_exact(post: LinearPosterior, key):
+    """One exact draw of the coefficients from ``post`` (a model's posterior given its sampled
+    parameters): ``m + A^{-1/2} z``, z ~ N(0, I) from the JAX ``key``. Every model draws with it,
+    mapped over posterior samples by ``map_rows``."""
+    return draw_coefficients(post, jax.random.normal(key, post.mean.shape))
+
+
+def bucket(n: int, size: int = DRAW_BATCH) -> int:
+    """``size`` times the power of two that covers ``n``: the padded length of a computation whose
+    length changes from run to run (the retained samples follow tau), so that its compiled program
+    serves every run in the bucket and JAX's persistent compilation cache finds it again."""
+    blocks = max(1, -(-int(n) // size))
+    return size * (1 << (blocks - 1).bit_length())
+
+
+def pad_rows(a, size: int) -> np.ndarray:
+    """``a`` (N, ...) with its last row repeated up to ``size`` rows (as numpy)."""
+    a = np.asarray(a)
+    return np.concatenate([a, np.repeat(a[-1:], size - a.shape[0], axis=0)]) if size > a.shape[0] else a
+
+
+def row_keys(key, n: int) -> np.ndarray:
+    """``jax.random.split(key, n)``, the same keys, computed at the bucket size: JAX's threefry split
+    is partitionable (``jax_threefry_partitionable``, the default since JAX 0.5), so the first n
+    keys of a longer split are the keys of the short one, and the compiled split is shared."""
+    return np.asarray(jax.random.split(key, bucket(n)))[: int(n)]
+
+
+def map_rows(fn, rows, args=(), *, batch_size: int = DRAW_BATCH, chunk: int = DRAW_CHUNK):
+    """``fn(*row, *args)`` for every row of the arrays in ``rows`` (a tuple, leading axis N), as numpy.
+
+    The one way every model maps a function over posterior samples (exact coefficient draws with
+    ``draw_exact`` and keys from :func:`row_keys`, pointwise log-likelihoods, log posteriors):
+    the rows are padded to a multiple of ``chunk`` (the padding computed and dropped) and each
+    chunk goes through one jitted ``jax.lax.map`` over vmapped blocks of ``batch_size`` rows
+    (``batch_size=1``: a plain sequential map). So a model compiles one program however many
+    rows it maps, memory is bounded by the chunk, and the chunks' loop is the only Python loop.
+    ``fn`` must be a module-level function (it is a static argument)."""
+    n = int(np.shape(rows[0])[0])
+    padded = tuple(pad_rows(r, n + (-n % chunk)) for r in rows)
+    args = tuple(args)
+    parts = [_map_rows(fn, tuple(r[i:i + chunk] for r in padded), args, batch_size)
+             for i in range(0, padded[0].shape[0], chunk)]
+    return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a])[:n], *parts)
+
+
+@functools.partial(jax.jit, static_argnames=("fn", "batch_size"))
+def _map_rows(fn, rows, args, batch_size):
+    return jax.lax.map(lambda r: fn(*r, *args), rows, batch_size=batch_size)

@@ -1,0 +1,55 @@
+"""Checks of option values shared by the command line and the batch catalogue: each takes the text and
+returns the value, or raises ValueError with a message fit to follow "option --x:" or "row 3, column x:"."""
+
+from __future__ import annotations
+
+import math
+
+
+def _number(text: str, kind=float):
+    try:
+        value = kind(text)
+    except ValueError:
+        raise ValueError(f"expected {'an integer' if kind is int else 'a number'}, got '{text}'") from None
+    if kind is float and not math.isfinite(value):
+        raise ValueError(f"expected a finite number, got '{text}'")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = _number(text)
+    if not value > 0:
+        raise ValueError(f"expected a positive number, got '{text}'")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise ValueError(f"expected a number >= 0, got '{text}'")
+    return value
+
+
+def finite_float(text: str) -> float:
+    return _number(text)
+
+
+def positive_int(text: str) -> int:
+    value = _number(text, int)
+    if value < 1:
+        raise ValueError(f"expected a positive integer, got '{text}'")
+    return value
+
+
+def walkers(text: str) -> int:
+    value = _number(text, int)
+    if value < 4 or value % 4:  # emcee's snooker move splits each ensemble in four sub-ensembles
+        raise ValueError(f"expected a multiple of 4 walkers, at least 4, got '{text}'")
+    return value
+
+
+def seed(text: str) -> int:
+    value = _number(text, int)
+    if not 0 <= value < 2**63:  # numpy's seed sequences take non-negative integers
+        raise ValueError(f"expected an integer seed >= 0, got '{text}'")
+    return value

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from uq._cli.common import positive_int
-from uq._drivers.batch import read_catalogue, run_batch
+from uq._drivers import batch as B
 from uq._io.errors import InputError
 
 
@@ -29,7 +29,7 @@ def command_batch(args) -> int:
     from uq._io.files import emit_json
     from uq._io.progress import progress
 
-    campaigns = read_catalogue(args.catalogue)  # every problem reported before a cluster starts
+    campaigns = B.read_catalogue(args.catalogue)  # every problem reported before a cluster starts
     n_jobs = sum(len(c.tasks) for c in campaigns)
     if args.serial and args.scheduler:
         raise InputError("options --serial and --scheduler: choose one (--serial runs without Dask)")
@@ -42,7 +42,7 @@ def command_batch(args) -> int:
             print(_row_line(row), flush=True)
 
         t0 = time.perf_counter()
-        res = run_batch(args.catalogue, args.out, scheduler=args.scheduler, workers=args.workers, force=args.force,
+        res = B.run_batch(args.catalogue, args.out, scheduler=args.scheduler, workers=args.workers, force=args.force,
                         serial=args.serial, on_row=on_row)
         bar.update(res["counts"]["skipped"])
     c = res["counts"]

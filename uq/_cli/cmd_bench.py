@@ -7,16 +7,7 @@ import os
 from pathlib import Path
 
 from uq._cli.common import positive_float, positive_int, say, seed
-from uq._drivers.bench import (
-    BASELINE_WALKERS,
-    BENCH_PRESSURE_BAR,
-    _cores,
-    batch_speedup,
-    bench,
-    margin_speed,
-    report_memory,
-    scaling,
-)
+from uq._drivers import bench as B  # looked up at call time: tests may replace its functions
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 from uq._io.files import emit_json
@@ -40,10 +31,10 @@ def configure_bench(p) -> None:
                    help="minimum timed wall time of each sampler, s (default 10; the project runs whole fits)")
     p.add_argument("--seed", type=seed, default=20201, help="random seed (workload and samplers; default 20201)")
     p.add_argument("--recordings", metavar="FILE", help="take the test from this recordings CSV instead of the virtual stand")
-    p.add_argument("--pressure-bar", type=positive_float, default=BENCH_PRESSURE_BAR, help="pressure of the test (default 5)")
+    p.add_argument("--pressure-bar", type=positive_float, default=B.BENCH_PRESSURE_BAR, help="pressure of the test (default 5)")
     p.add_argument("--walkers", type=positive_int, default=Settings.n_walkers, help="project: emcee walkers per ensemble")
     p.add_argument("--max-steps", type=positive_int, default=Settings.max_steps, help="project: cap on emcee steps per ensemble")
-    p.add_argument("--baseline-walkers", type=positive_int, default=BASELINE_WALKERS, help="baseline: emcee walkers (>= 12, even)")
+    p.add_argument("--baseline-walkers", type=positive_int, default=B.BASELINE_WALKERS, help="baseline: emcee walkers (>= 12, even)")
     p.add_argument("--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)")
     p.add_argument("--scaling", action="store_true",
                    help="instead: uq fit at 1x, 4x, 16x the points per test (time and peak-RSS ratios) and the peak RSS of "
@@ -65,16 +56,16 @@ def command_scale(args) -> int:
     settings.validate()
     results = {}
     if args.scaling:
-        results["scaling"] = scaling(seed=args.seed, settings=settings) | {"report": report_memory(args.seed)}
+        results["scaling"] = B.scaling(seed=args.seed, settings=settings) | {"report": B.report_memory(args.seed)}
     if args.batch:
-        results["batch"] = batch_speedup(args.batch, seed=args.seed)
+        results["batch"] = B.batch_speedup(args.batch, seed=args.seed)
     if args.margin:
         from uq._models.surface import NOISE_NAMES
 
         settings.require_walkers(len(NOISE_NAMES))  # the surface model samples five noise parameters
-        results["margin"] = margin_speed(seed=args.seed, settings=settings, recordings=args.recordings)
+        results["margin"] = B.margin_speed(seed=args.seed, settings=settings, recordings=args.recordings)
     for name, r in results.items():
-        r = {"load_average_1min": os.getloadavg()[0], "cores": _cores()} | r
+        r = {"load_average_1min": os.getloadavg()[0], "cores": B.cores()} | r
         emit_json(r, str(Path(args.bench_dir) / f"{name}.json"))
         say(scale_summary(name, r) + f"\n  written to {Path(args.bench_dir) / f'{name}.json'}", args.json)
     emit_json(results, args.json)
@@ -120,7 +111,7 @@ def command_bench(args) -> int:
         raise InputError("option --baseline-walkers: an even number of at least 12 walkers (2 x 6 parameters) is needed")
     settings = Settings(n_walkers=args.walkers, max_steps=args.max_steps)
     settings.validate()
-    r = bench(seconds=args.seconds, seed=args.seed, settings=settings, recordings=args.recordings,
+    r = B.bench(seconds=args.seconds, seed=args.seed, settings=settings, recordings=args.recordings,
               pressure_bar=args.pressure_bar, baseline_walkers=args.baseline_walkers)
     emit_json(r, args.json)
     say(summary(r), args.json)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from uq._cli.common import choice_list, positive_int, seed
-from uq._drivers.calibrate import N_RANKS, calibrate, markdown
+from uq._drivers import calibrate as C
 from uq._io.files import emit_json, remove_stale, write_figure_atomic, write_text_atomic
 
 
@@ -26,7 +26,7 @@ def command_calibrate(args) -> int:
     results = []
     for truth in [t.strip() for t in args.truth.split(",") if t.strip()]:
         for noise in [n.strip() for n in args.noise.split(",") if n.strip()]:
-            res = calibrate(args.reps, truth=truth, noise=noise, seed=args.seed)
+            res = C.calibrate(args.reps, truth=truth, noise=noise, seed=args.seed)
             results.append(res)
             s = res.summary()
             worst = min(s["quantities"].items(), key=lambda kv: kv[1]["coverage90"])
@@ -44,11 +44,11 @@ def command_calibrate(args) -> int:
 
         out = Path(args.out)
         emit_json(result, str(out / "calibration.json"))
-        write_text_atomic(out / "calibration.md", markdown(results, command))
+        write_text_atomic(out / "calibration.md", C.markdown(results, command))
         for res in results:
             fig, axes = plt.subplots(1, len(res.names), figsize=(1.6 * len(res.names), 2.0), sharey=True)
             for ax, j in zip(np.atleast_1d(axes), range(len(res.names)), strict=True):
-                ax.hist(res.ranks[:, j], bins=10, range=(0, N_RANKS + 1), color="tab:blue")
+                ax.hist(res.ranks[:, j], bins=10, range=(0, C.N_RANKS + 1), color="tab:blue")
                 ax.axhline(res.ranks.shape[0] / 10, color="k", lw=0.8)
                 ax.set_title(res.names[j], fontsize=8)
                 ax.set_xticks([])

@@ -316,7 +316,7 @@ def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
     # after which the chains part ways), so the two runs are compared to Monte Carlo error
     diff = max(abs(a - b) / sd for ms, md in zip(*means, strict=True) for (a, sd), (b, _) in zip(ms, md, strict=True))
     return {"workload": f"{n} simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, seeds {seed}..{seed + n - 1}",
-            "cores": _cores(), "workers": workers, "serial": serial, "dask": dask,
+            "cores": cores(), "workers": workers, "serial": serial, "dask": dask,
             "speedup": serial["wall_s"] / dask["wall_s"], "max_mean_difference_in_sd": diff,
             "note": f"end-to-end wall time of each command in a fresh process (imports, JIT, cluster start included); "
                     f"the ideal speed-up is below {workers} on {workers} cores"}
@@ -327,7 +327,7 @@ def _means(tests: list[dict]) -> list[tuple[float, float]]:
     return [(v["mean"], v["sd"]) for t in tests for block in ("force", "piston") for v in t[block].values()]
 
 
-def _cores() -> int:
+def cores() -> int:
     import os
 
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

@@ -311,3 +311,30 @@ def test_reading_covariance_has_the_gas_law_sign():
     assert cov_fl == pytest.approx(expected, rel=1e-12)
     var_l = L21**2 + L22**2
     assert var_l == pytest.approx((dp * (V0 - dv) / (p_abs * S)) ** 2 + 1.0e-10, rel=1e-12)
+
+
+def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
+    """The sampler's log posterior forms the Gram matrix from the plan; it must equal the collapsed
+    posterior of the explicitly whitened (force, piston) design on data/n50, at noise values
+    across the prior (the reading covariance's determinant included)."""
+    import jax.numpy as jnp
+
+    from uq._inference.linear import gram_plan, linear_posterior
+    from uq._models import surface as S
+
+    rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
+    g = S.geometry_of(rec)
+    x, p, F, L, idx = S._arrays(rec)
+    _, phat, feff, dv, Xf, Xl = S._reference(DEFAULT_ORDERS, g, x, p, F, L, idx, len(rec.tests))
+    c = {**S._consts(x, p, phat, feff, dv, g.area_m2, PAPER_STAND), "gram": gram_plan(S.gram_groups(Xf, Xl))}
+    args = (jnp.asarray(Xf), jnp.asarray(Xl), jnp.asarray(F), jnp.asarray(L), c)
+    rng = np.random.default_rng(0)
+    for theta in S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((4, 5)):
+        X, y = S._whiten(theta, *args)
+        L11, _, L22 = S._cov_factors(theta, c)
+        ref = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
+        got = S._posterior(theta, *args)
+        assert float(got.log_marginal) == pytest.approx(float(ref.log_marginal - jnp.sum(jnp.log(L11) + jnp.log(L22))),
+                                                        rel=1e-9)
+        assert np.allclose(np.asarray(got.mean), np.asarray(ref.mean), rtol=1e-7, atol=1e-9)
+        assert np.allclose(np.asarray(got.chol), np.asarray(ref.chol), rtol=1e-7, atol=1e-9)

@@ -34,16 +34,84 @@ class LinearPosterior(NamedTuple):
 def linear_posterior(X, y, sigma, prior_sd) -> LinearPosterior:
     """Posterior of beta given noise scales. X (n, k), y (n,), sigma (n,), prior_sd (k,)."""
     w = 1.0 / sigma**2
-    A = X.T @ (w[:, None] * X) + jnp.diag(1.0 / prior_sd**2)
+    return posterior_from_moments(X.T @ (w[:, None] * X), X.T @ (w * y), jnp.sum(w * y**2), y.size,
+                                  jnp.sum(jnp.log(sigma**2)), prior_sd)
+
+
+def posterior_from_moments(gram, rhs, yy, n, log_noise_det, prior_sd) -> LinearPosterior:
+    """The same posterior from the data's sufficient statistics: gram = X^T W X (k, k),
+    rhs = X^T W y (k,), yy = y^T W y, n readings, log_noise_det = log det of the noise
+    covariance (sum log sigma^2 for independent readings). For models whose Gram matrix is
+    cheaper to form than the weighted design (``GramPlan``)."""
+    A = gram + jnp.diag(1.0 / prior_sd**2)
     chol = jnp.linalg.cholesky(A)
-    rhs = X.T @ (w * y)
     mean = jax.scipy.linalg.cho_solve((chol, True), rhs)
-    quad = jnp.sum(w * y**2) - rhs @ mean
+    quad = yy - rhs @ mean
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
-    log_marginal = -0.5 * (
-        quad + jnp.sum(jnp.log(sigma**2)) + jnp.sum(jnp.log(prior_sd**2)) + logdet + y.size * LOG_2PI
-    )
+    log_marginal = -0.5 * (quad + log_noise_det + jnp.sum(jnp.log(prior_sd**2)) + logdet + n * LOG_2PI)
     return LinearPosterior(mean, chol, log_marginal)
+
+
+class GramPlan(NamedTuple):
+    """``sum_g sum_(A, B) in group g  A^T diag(w_g) B`` for designs fixed during sampling and weights
+    w_g that change with every noise draw (``gram_plan``, ``weighted_gram``).
+
+    Entry (j, k) of ``A^T diag(w) B`` is ``w @ (A[:, j] * B[:, k])``. Polynomial designs repeat the
+    same column products up to a constant many times over (t^a t^b = t^(a+b)), so each group keeps
+    only its distinct products (``products[g]``, (n, m_g)) and every Gram entry gathers its terms
+    from them (``index``, ``coef``: (k*k, T), pointing into the concatenated moments w_g @ products[g]
+    followed by one zero). For the surface model this is 420 moments instead of a 51 x 51 Gram
+    from 814 rows: about 12 times fewer operations per noise draw, and one matrix product for all
+    walkers at once."""
+
+    products: tuple  # (n, m_g) per weight group
+    index: np.ndarray  # (k*k, T) int
+    coef: np.ndarray  # (k*k, T)
+
+
+def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
+    """Plan for ``weighted_gram``: ``groups`` is a sequence, one entry per weight vector, of
+    sequences of (A, B) design pairs (each (n, k), numpy, the same k). Column products equal up
+    to a constant (checked to ``rtol`` of their norm, not just hashed) share one moment."""
+    k = np.shape(groups[0][0][0])[1]
+    products, entries, offset = [], [[] for _ in range(k * k)], 0
+    for pairs in groups:
+        unique, buckets = [], {}
+        for A, B in pairs:
+            A, B = np.asarray(A, float), np.asarray(B, float)
+            for j in range(k):
+                cols = A[:, j:j + 1] * B
+                norms = np.linalg.norm(cols, axis=0)
+                for kk in np.flatnonzero(norms > 0):
+                    v = cols[:, kk] / norms[kk]
+                    v = v * np.sign(v[np.flatnonzero(np.abs(v) > 1e-8)[0]])
+                    key = np.round(v * 1e8).astype(np.int64).tobytes()
+                    for u in buckets.setdefault(key, []):
+                        if np.max(np.abs(unique[u][0] - v)) <= rtol * 10:
+                            break
+                    else:
+                        u = len(unique)
+                        unique.append((v, cols[:, kk]))
+                        buckets[key].append(u)
+                    ref = unique[u][1]
+                    scale = (cols[:, kk] @ ref) / (ref @ ref)
+                    entries[j * k + kk].append((offset + u, scale))
+        products.append(np.stack([col for _, col in unique], axis=1) if unique else np.zeros((A.shape[0], 0)))
+        offset += len(unique)
+    width = max(1, max(len(e) for e in entries))
+    index = np.full((k * k, width), offset, dtype=np.int32)  # ``offset``: the zero moment
+    coef = np.zeros((k * k, width))
+    for i, e in enumerate(entries):
+        for t, (u, scale) in enumerate(e):
+            index[i, t], coef[i, t] = u, scale
+    return GramPlan(tuple(products), index, coef)
+
+
+def weighted_gram(plan: GramPlan, weights):
+    """``sum_g sum_(A, B) A^T diag(weights[g]) B`` (k, k) from the plan; weights one (n,) per group."""
+    moments = jnp.concatenate([w @ Q for w, Q in zip(weights, plan.products)] + [jnp.zeros(1)])
+    k = int(round(np.sqrt(plan.index.shape[0])))
+    return jnp.sum(moments[plan.index] * plan.coef, axis=-1).reshape(k, k)
 
 
 def draw_coefficients(post: LinearPosterior, z):

@@ -50,7 +50,8 @@ import optimistix as optx
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import LOG_2PI, draw_exact, linear_posterior, map_rows, row_keys
+from uq._inference.linear import (LOG_2PI, draw_exact, gram_plan, linear_posterior, map_rows, posterior_from_moments,
+                                  row_keys, weighted_gram)
 from uq._inference.sampler import Chains, Settings, convergence, run_ensembles, thin
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
@@ -190,7 +191,31 @@ def _whiten(theta, Xf, Xl, F, L, c):
     xf = Xf / L11[:, None]
     yl = (L - L21 * yf) / L22
     xl = (Xl - L21[:, None] * xf) / L22[:, None]
-    return jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl]), jnp.sum(jnp.log(L11) + jnp.log(L22))
+    return jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])
+
+
+def gram_groups(Xf, Xl):
+    """The design pairs of the whitened Gram matrix, grouped by their weight (``_posterior``)."""
+    return [[(Xf, Xf)], [(Xl, Xl)], [(Xl, Xf), (Xf, Xl)]]
+
+
+def _posterior(theta, Xf, Xl, F, L, c):
+    """The coefficients' Gaussian posterior given the noise theta (log_marginal includes the
+    readings' covariance determinant).
+
+    Whitening reading i, a = xf / L11 and b = xl / L22 - s xf with s = L21 / (L11 L22), makes the
+    Gram matrix  Xf^T diag(1/L11^2 + s^2) Xf + Xl^T diag(1/L22^2) Xl - (Xl^T diag(s/L22) Xf + its
+    transpose): three weight vectors on designs that do not change while sampling, formed from
+    the plan ``c["gram"]`` (``uq._inference.linear.GramPlan``) without the whitened design.
+    """
+    L11, L21, L22 = _cov_factors(theta, c)
+    s = L21 / (L11 * L22)
+    yf = F / L11
+    yl = (L - L21 * yf) / L22
+    gram = weighted_gram(c["gram"], (1.0 / L11**2 + s**2, 1.0 / L22**2, -s / L22))
+    rhs = Xf.T @ (yf / L11 - s * yl) + Xl.T @ (yl / L22)
+    log_det = 2.0 * jnp.sum(jnp.log(L11) + jnp.log(L22))
+    return posterior_from_moments(gram, rhs, jnp.sum(yf**2 + yl**2), 2 * F.size, log_det, jnp.ones(Xf.shape[1]))
 
 
 def _log_prior(theta, mean):
@@ -199,9 +224,7 @@ def _log_prior(theta, mean):
 
 
 def _one_log_prob(theta, Xf, Xl, F, L, c):
-    X, y, logdet = _whiten(theta, Xf, Xl, F, L, c)
-    post = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
-    lp = _log_prior(theta, c["prior_mean"]) + post.log_marginal - logdet
+    lp = _log_prior(theta, c["prior_mean"]) + _posterior(theta, Xf, Xl, F, L, c).log_marginal
     return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
 
@@ -222,16 +245,9 @@ def _bfgs(theta0, Xf, Xl, F, L, c):
     return sol.value, sol.result
 
 
-def _whitened_posterior(theta, Xf, Xl, F, L, c):
-    """The whitened design and data given the noise theta, and the coefficients' Gaussian
-    posterior under them (unit noise, unit prior): (X, y, posterior)."""
-    X, y, _ = _whiten(theta, Xf, Xl, F, L, c)
-    return X, y, linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
-
-
 def _draw(theta, key, Xf, Xl, F, L, c):
     """One exact coefficient draw given the noise theta (mapped over samples by ``map_rows``)."""
-    return draw_exact(_whitened_posterior(theta, Xf, Xl, F, L, c)[2], key)
+    return draw_exact(_posterior(theta, Xf, Xl, F, L, c), key)
 
 
 def _pointwise(theta, beta, Xf, Xl, F, L, c):
@@ -267,7 +283,8 @@ def _pointwise_loo(theta, Xf, Xl, F, L, c):
     moves; the coefficients' leave-one-out is exact. Same ELPD, far smaller Pareto k.
     """
 
-    X, y, post = _whitened_posterior(theta, Xf, Xl, F, L, c)
+    X, y = _whiten(theta, Xf, Xl, F, L, c)
+    post = _posterior(theta, Xf, Xl, F, L, c)
     L11, _, L22 = _cov_factors(theta, c)
     return _block_loo(X, y, F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
 
@@ -481,7 +498,7 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     g = geometry_of(rec)
     x, p, F, L, idx = _arrays(rec)
     _, phat, feff, dv, Xf, Xl = _reference(orders, g, x, p, F, L, idx, n_tests)
-    c = _consts(x, p, phat, feff, dv, g.area_m2, stand)
+    c = {**_consts(x, p, phat, feff, dv, g.area_m2, stand), "gram": gram_plan(gram_groups(Xf, Xl))}
     args = (jnp.asarray(Xf), jnp.asarray(Xl), jnp.asarray(F), jnp.asarray(L), c)
     theta0 = jnp.asarray(noise_prior_mean(stand))
     theta, result = _bfgs(theta0, *args)

@@ -151,7 +151,7 @@ def surface_coverage_summary(rel: str):
         t = d["truth"]
         lines = [f"From `{rel}` (spring `{d['spring']}`, check point {t['x_m'] * 1e3:g} mm and {t['p_bar']:g} bar, "
                  f"{n} replications, 99 % binomial acceptance region {lo}-{hi}):", ""]
-        for key, label in (("feff_covered", "90 % band of the pressure area contained the truth"),
+        for key, label in (("feff_covered", "90 % band of F_eff = P/p_u contained the truth"),
                            ("pressure_area_covered", "90 % band of the pressure area F_p contained the truth"),
                            ("pressure_covered", "90 % interval of the pressure needed contained the truth")):
             if key in d:

@@ -63,6 +63,6 @@ def test_posterior_from_moments_is_linear_posterior():
     a = linear_posterior(X, y, sigma, prior)
     w = sigma**-2
     b = posterior_from_moments(X.T @ (w[:, None] * X), X.T @ (w * y), np.sum(w * y**2), 40, np.sum(np.log(sigma**2)), prior)
-    for u, v in zip(a, b):
+    for u, v in zip(a, b, strict=True):
         assert np.allclose(np.asarray(u), np.asarray(v), rtol=1e-12, atol=0)
     assert float(b.log_marginal) == pytest.approx(float(a.log_marginal), rel=1e-12)

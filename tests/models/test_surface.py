@@ -251,7 +251,7 @@ def run_slow_coverage(tmp_path, n: int, out: Path | None):
 
 @pytest.mark.slow
 def test_slow_coverage(tmp_path):
-    """UQ_COVERAGE_REPS replications (default 100, about 2 h on 2 free cores); a run of 30 or more
+    """UQ_COVERAGE_REPS replications (default 100, about 12 min on 2 free cores); a run of 30 or more
     writes reports/surface-coverage/coverage.json. Acceptance: exact binomial, false failure < 1e-3."""
     n = int(os.environ.get("UQ_COVERAGE_REPS", "100"))
     out = ROOT / "reports" / "surface-coverage" / "coverage.json" if n >= 30 else tmp_path / "coverage.json"

@@ -265,8 +265,8 @@ def usable_stroke(model, height_m: float, pressure_bar: float, target_N: float, 
 
 
 COVERAGE_NOTE = ("the fallback when the data do not decide; its coverage for truths inside the default orders' class "
-                 "is checked by tests/models/test_surface.py::test_fast_coverage (10 replications); the committed "
-                 "100-replication report predates the pressure-error sign fix (README, known gap)")
+                 "is checked by tests/models/test_surface.py (reports/surface-coverage/coverage.json: 100 replications "
+                 "on the paper's layout)")
 
 
 def choose_model(fit: SurfaceFit | None, cubic_fit=None, comparison: dict | None = None, forced: str = "auto"):

@@ -109,7 +109,7 @@ def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
 
 def weighted_gram(plan: GramPlan, weights):
     """``sum_g sum_(A, B) A^T diag(weights[g]) B`` (k, k) from the plan; weights one (n,) per group."""
-    moments = jnp.concatenate([w @ Q for w, Q in zip(weights, plan.products)] + [jnp.zeros(1)])
+    moments = jnp.concatenate([w @ Q for w, Q in zip(weights, plan.products, strict=True)] + [jnp.zeros(1)])
     k = int(round(np.sqrt(plan.index.shape[0])))
     return jnp.sum(moments[plan.index] * plan.coef, axis=-1).reshape(k, k)
 

@@ -50,8 +50,16 @@ import optimistix as optx
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import (LOG_2PI, draw_exact, gram_plan, linear_posterior, map_rows, posterior_from_moments,
-                                  row_keys, weighted_gram)
+from uq._inference.linear import (
+    LOG_2PI,
+    draw_exact,
+    gram_plan,
+    linear_posterior,
+    map_rows,
+    posterior_from_moments,
+    row_keys,
+    weighted_gram,
+)
 from uq._inference.sampler import Chains, Settings, convergence, run_ensembles, thin
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError

@@ -281,7 +281,8 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         "fit": ["fit", csv, *quick],
         "report": ["report", csv, "--out", d / "rep", "--draws", "50", *quick],
         "check": ["check", fit, "--against", d / "points.json"],
-        "bench": ["bench", "--seconds", "0", "--seed", "3", "--walkers", "8", "--max-steps", "60", "--baseline-walkers", "12"],
+        "bench": ["bench", "--seconds", "0", "--seed", "3", "--walkers", "8", "--max-steps", "60", "--baseline-walkers", "12",
+                  "--bench-dir", d / "bench"],
         "surface": ["surface", csv, "--no-compare", "--max-steps", "300"],  # 5 sampled parameters: >= 10 walkers
         "margin": ["margin", csv, "--height-mm", 110, "--load-N", 8000, "--max-steps", "300"],
         "diagnose": ["diagnose", csv, "--max-mechanisms", "0", *quick],

@@ -10,9 +10,11 @@ from uq._cli.main import main
 def test_bench_tiny_run_writes_both_rates(tmp_path, capsys):
     out = tmp_path / "bench.json"
     rc = main(["bench", "--seconds", "0", "--seed", "3", "--walkers", "8", "--max-steps", "60",
-               "--baseline-walkers", "12", "--json", str(out)])
+               "--baseline-walkers", "12", "--json", str(out), "--bench-dir", str(tmp_path / "bench")])
     assert rc == 0
     r = json.loads(out.read_text())
+    assert json.loads((tmp_path / "bench" / "ess.json").read_text()) == r  # the record under reports/bench/ by default
+    assert r["cores"] >= 1 and r["load_average_1min"] >= 0
     assert r["n_points"] == 37 and r["seed"] == 3 and "5 bar" in r["workload"]
     for name in ("project", "baseline"):
         block = r[name]

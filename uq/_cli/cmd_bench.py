@@ -47,7 +47,7 @@ def configure_bench(p) -> None:
                         "a saved fit (--fit), written to BENCH_DIR/margin.json; the campaign is --recordings or the "
                         "paper's from the virtual stand")
     p.add_argument("--bench-dir", default="reports/bench", metavar="BENCH_DIR",
-                   help="folder for scaling.json, batch.json and margin.json")
+                   help="folder for ess.json, scaling.json, batch.json and margin.json")
 
 
 def command_scale(args) -> int:
@@ -113,6 +113,9 @@ def command_bench(args) -> int:
     settings.validate()
     r = B.bench(seconds=args.seconds, seed=args.seed, settings=settings, recordings=args.recordings,
               pressure_bar=args.pressure_bar, baseline_walkers=args.baseline_walkers)
+    r = {"load_average_1min": os.getloadavg()[0], "cores": B.cores()} | r
+    path = Path(args.bench_dir) / "ess.json"
+    emit_json(r, str(path))
     emit_json(r, args.json)
-    say(summary(r), args.json)
+    say(summary(r) + f"\n  written to {path}", args.json)
     return 0

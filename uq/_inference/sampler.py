@@ -41,6 +41,7 @@ independently started ensembles (Buchner's autoemcee: four) compared with each o
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
 from dataclasses import dataclass
@@ -201,10 +202,14 @@ class _GroupedSnooker(_Grouped, emcee.moves.DESnookerMove):
         return q.reshape(G * ns, ndim), (0.5 * (ndim - 1.0) * metropolis).reshape(-1)
 
 
+@functools.lru_cache(maxsize=16)
 def _nondiagonal_pairs(n: int) -> np.ndarray:
-    """Ordered pairs (i, j), i != j, of n walkers, in emcee's DEMove order."""
+    """Ordered pairs (i, j), i != j, of n walkers, in emcee's DEMove order (read-only, cached: every
+    move of a run asks for the same n)."""
     rows, cols = np.tril_indices(n, -1)
-    return np.column_stack([np.concatenate([rows, cols]), np.concatenate([cols, rows])])
+    pairs = np.column_stack([np.concatenate([rows, cols]), np.concatenate([cols, rows])])
+    pairs.flags.writeable = False
+    return pairs
 
 
 def _moves(group_size: int):

@@ -25,6 +25,13 @@ def _rec(effects, seed=7, layout=Layout(), x0=0.112, area=54.82e-4):
                       x0_m=x0, piston_area_m2=area)
 
 
+def _consistent(mag: dict, truth: float) -> bool:
+    """The truth within 3.29 posterior sd of the mean: a single campaign's check with a false-failure
+    rate of 1e-3 (a 90 % interval misses 1 time in 10 by design; whether the 90 % intervals are 90 %
+    intervals is the proof's question, checked below on its committed summary)."""
+    return abs(mag["mean"] - truth) <= 3.29 * mag["sd"]
+
+
 def _run(rec, **kw):
     from uq._diagnose.engine import diagnose, public
     from uq._inference.sampler import Settings
@@ -45,7 +52,7 @@ def test_visible_mechanism_is_named_with_its_magnitude(name, value):
     assert res["mismatch_detected"] is True
     assert [m["name"] for m in res["mechanisms"]] == [name]
     mag = res["mechanisms"][0]["magnitude"]
-    assert mag["q05"] <= value <= mag["q95"]
+    assert _consistent(mag, value), mag
     assert res["final"]["elpd_loo"] > res["baseline"]["elpd_loo"] + 20
     assert set(res) >= {"mismatch_detected", "baseline", "where", "mechanisms", "final"}
     assert {"by_pressure", "by_height", "by_branch", "by_recording_order"} <= set(res["where"]["force"])
@@ -56,7 +63,7 @@ def test_offset_preferred_over_casing_force_on_other_stand():
     res = _run(_rec({"force_offset": 56.3}, layout=ALT, x0=0.100, area=40e-4), max_mechanisms=2)
     assert [m["name"] for m in res["mechanisms"]][:1] == ["force_offset"]
     mag = res["mechanisms"][0]["magnitude"]
-    assert mag["q05"] <= 56.3 <= mag["q95"]
+    assert _consistent(mag, 56.3), mag
 
 
 @pytest.mark.slow
@@ -66,7 +73,7 @@ def test_other_mechanisms_paper_layout(name, value):
     res = _run(_rec({name: value}))
     assert [m["name"] for m in res["mechanisms"]] == [name]
     mag = res["mechanisms"][0]["magnitude"]
-    assert mag["q05"] <= value <= mag["q95"]
+    assert _consistent(mag, value), mag
 
 
 def test_proof_results_committed():
@@ -82,6 +89,13 @@ def test_proof_results_committed():
     for k, v in s["detection"].items():
         if "|visible|" in k:
             assert v["named"] == v["runs"], k
+    # the 90 % intervals of the named true mechanisms: a binomial acceptance region (false failure
+    # < 1e-3; approximate, as the campaigns of one seed share their stand noise)
+    from scipy import stats
+
+    cov = s["coverage_90_overall"]
+    n = cov["named_true"]
+    assert stats.binom.ppf(5e-4, n, 0.9) <= cov["true_in_90"] <= stats.binom.ppf(1 - 5e-4, n, 0.9), cov
 
 
 @pytest.mark.parametrize("argv,needle", [

@@ -168,9 +168,8 @@ def test_pressure_error_cancels_in_the_decorrelated_force():
     spring = TraditionalSpring()
     F_true, L_true = map(np.concatenate, zip(*(true_curves(spring, {}, t.height_m, t.pressure_bar, t.compression,
                                                            t.step) for t in rec.tests), strict=True))
-    theta, mask = np.zeros(M.N_THETA), M.mask_of((), 3)
-    y_noisy = np.asarray(M._stacked(theta, mask, d)[1])[: F_true.size]
-    y_true = np.asarray(M._stacked(theta, mask, d._replace(force=F_true, piston=L_true))[1])[: F_true.size]
+    y_noisy = np.asarray(M.decorrelated_force(d))
+    y_true = np.asarray(M.decorrelated_force(d._replace(force=F_true, piston=L_true)))
     scatter_z = np.std(y_noisy - y_true)
     scatter_P = np.std(np.asarray(d.force) - F_true)
     assert scatter_P > 100.0  # the pressure term is there to cancel

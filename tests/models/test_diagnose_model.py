@@ -1,0 +1,72 @@
+"""The diagnose model's likelihood from the moments of its expanded design equals the model
+written out as an explicit design (eq. 1, 2 with every mechanism's columns), built here from
+the module docstring of uq._models.diagnose, independently of the moments."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uq._data.recordings import read_recordings
+from uq._inference.float64 import jax, jnp
+from uq._inference.linear import gaussian_loglik, linear_posterior
+from uq._models import diagnose as M
+from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _explicit(theta, mask, d):
+    """Stacked design of (z = P + cL, L) rows, written out column by column (the reference)."""
+    m_area, m_hyst, m_vol = mask[0] * theta[2], mask[2] * theta[3], mask[5] * theta[4]
+    g, hy = 1.0 + m_area * d.p_bar, 1.0 + m_hyst * d.sgn
+    pw = jnp.arange(M.K_MAX + 1)
+    on = mask[M.N_MECH:]
+    T = d.t[:, None] ** pw * on
+    Tint = d.t[:, None] ** (pw + 1) / (pw + 1) * on
+    n = d.t.size
+    Tc = d.t[:, None] ** jnp.arange(M.CASING_DEG + 1)
+    XF = jnp.concatenate([(d.p_bar * BAR_PA * g * hy)[:, None] * T, jnp.zeros_like(d.R), mask[1] * hy[:, None] * Tc,
+                          mask[3] * jnp.ones((n, 1)), jnp.zeros((n, 1))], axis=1)
+    XL = jnp.concatenate([-(BASIS_SCALE_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint, d.R,
+                          jnp.zeros_like(Tc), jnp.zeros((n, 1)), mask[4] * (d.step * 1e-6 / d.area)[:, None]], axis=1)
+    X = jnp.concatenate([XF + d.c[:, None] * XL, XL])
+    y = jnp.concatenate([d.force + d.c * d.piston, d.piston])
+    sigma = jnp.concatenate([jnp.exp(theta[0]) * d.sd_z, jnp.exp(theta[1]) * d.sd_L])
+    return X, y, sigma, XF, XL
+
+
+def _explicit_log_post(theta, mask, d):
+    X, y, sigma, *_ = _explicit(theta, mask, d)
+    keep = d.fit_w > 0
+    lp = linear_posterior(X[keep], y[keep], sigma[keep], d.prior_sd).log_marginal
+    lp += 0.5 * (np.sum(keep) - y.size) * 1.8378770664093453  # the model counts every row's 2 pi
+    active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2], mask[5]])])
+    return lp - 0.5 * jnp.sum(active * (theta / M.THETA_PRIOR_SD) ** 2)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return M.prepare(read_recordings(ROOT / "data" / "n50" / "recordings.csv"))[0]
+
+
+@pytest.mark.parametrize("names,order", [((), 3), (("pressure_dependent_area", "volume_excess", "casing_force"), 4),
+                                         (M.MECHS, 5)])
+def test_log_posterior_and_draws_equal_the_explicit_design(data, names, order):
+    rng = np.random.default_rng(3)
+    mask = M.mask_of(names, order)
+    thetas = np.column_stack([rng.normal(1.0, 1.0, (6, 2)), rng.normal(0.0, 0.05, (6, M.N_THETA - 2))])
+    held = rng.random(data.force.size) < 0.1
+    for d in (data, M.hold_out(data, held)):
+        got = M.log_post(thetas, mask, d)
+        want = np.array([float(_explicit_log_post(jnp.asarray(t), mask, d)) for t in thetas])
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-6)
+    # the draws' means: XF beta and XL beta of the explicit design, and every row's log-likelihood
+    ll, muF, muL, beta, sigma = M.draw_rows(thetas, jax.random.PRNGKey(0), mask, data)
+    for i, t in enumerate(thetas):
+        X, y, s, XF, XL = _explicit(jnp.asarray(t), mask, data)
+        np.testing.assert_allclose(muF[i], XF @ beta[i], rtol=1e-9, atol=1e-6 * np.max(np.abs(muF[i])))
+        np.testing.assert_allclose(muL[i], XL @ beta[i], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(ll[i], gaussian_loglik(y, X @ beta[i], s), rtol=1e-9, atol=1e-9)

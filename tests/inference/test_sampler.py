@@ -5,6 +5,7 @@ from __future__ import annotations
 import arviz as az
 import emcee
 import numpy as np
+import pytest
 
 from uq._inference.sampler import ESS_MIN, RHAT_MAX, Settings, chain_diagnostics, run_ensembles
 
@@ -109,11 +110,11 @@ def test_grouped_de_with_one_group_is_emcees_de_move():
 
 def test_grouped_moves_never_mix_groups():
     """Proposals for a walker use its own group only: groups parked far apart stay apart."""
-    from uq._inference.sampler import _GroupedDE, _GroupedSnooker
+    from uq._inference.sampler import _GroupedDE, _GroupedIndependence, _GroupedSnooker
 
     W, G, D = 16, 5, 3
     centre = 1000.0 * np.arange(G)[:, None]
-    for move in (_GroupedDE(W), _GroupedSnooker(W)):
+    for move in (_GroupedDE(W), _GroupedSnooker(W), _GroupedIndependence(W)):
         coords = (centre[:, None, :] + np.random.default_rng(1).normal(size=(G, W, D))).reshape(-1, D)
         move.setup(coords)
         inds = np.arange(G * W) % move.nsplits
@@ -123,9 +124,11 @@ def test_grouped_moves_never_mix_groups():
         assert np.all(np.abs(q - centre[group]) < 50.0), type(move).__name__
 
 
-def test_many_problems_in_one_sampler_each_get_their_own_posterior():
+@pytest.mark.parametrize("mix", ["DE_MIX", "INDEPENDENCE_MIX"])
+def test_many_problems_in_one_sampler_each_get_their_own_posterior(mix):
     """run_many: three Gaussian problems of different location and scale sampled in lockstep;
     each problem's draws have its mean and sd (within 5 MCSE / 10 %), and its own diagnostics."""
+    from uq._inference import sampler
     from uq._inference.sampler import run_many
 
     mu = np.array([[0.0, 5.0], [-3.0, 100.0], [1e3, -2.0]])
@@ -134,7 +137,8 @@ def test_many_problems_in_one_sampler_each_get_their_own_posterior():
     def lp(th):  # (K, m, 2) -> (K, m)
         return -0.5 * np.sum(((th - mu[:, None]) / sd[:, None]) ** 2, axis=-1)
 
-    runs = run_many(lp, mu + sd, sd / Settings().init_scale, ("a", "b"), seed=3, settings=Settings())
+    runs = run_many(lp, mu + sd, sd / Settings().init_scale, ("a", "b"), seed=3, settings=Settings(),
+                    mix=getattr(sampler, mix))
     assert len(runs) == 3
     for k, ch in enumerate(runs):
         assert not ch.warnings, ch.warnings
@@ -143,3 +147,50 @@ def test_many_problems_in_one_sampler_each_get_their_own_posterior():
             d = chain_diagnostics(ch.samples[..., j], ch.n_walkers)
             assert abs(x[:, j].mean() - mu[k, j]) < 5 * d["mcse_mean"] + 1e-12
             assert abs(x[:, j].std() / sd[k, j] - 1.0) < 0.1
+
+
+def test_independence_moves_keep_a_non_gaussian_target():
+    """The independence-t proposal's Metropolis factor must make the chain target the posterior
+    even where a Gaussian fit is poor: a banana, x1 ~ N(0, 1), x2 | x1 ~ N(x1^2, 0.5^2), so
+    E x2 = 1, sd x2 = 1.5, P(x2 < 0) = 0.081 (computed below). Means within 5 MCSE; the sd and the
+    tail probability within 10 % and 0.02 (fixed seed)."""
+    from scipy import integrate, stats
+
+    from uq._inference.sampler import INDEPENDENCE_MIX, run_many
+
+    def lp(th):  # (1, m, 2) -> (1, m)
+        x1, x2 = th[..., 0], th[..., 1]
+        return -0.5 * x1**2 - 0.5 * ((x2 - x1**2) / 0.5) ** 2
+
+    (ch,) = run_many(lp, np.array([[0.0, 1.0]]), np.array([[1.0, 1.5]]) / Settings().init_scale, ("x1", "x2"),
+                     seed=4, settings=Settings(), mix=INDEPENDENCE_MIX)
+    assert not ch.warnings, ch.warnings
+    x = ch.samples.reshape(-1, 2)
+    for j, mean in enumerate((0.0, 1.0)):
+        d = chain_diagnostics(ch.samples[..., j], ch.n_walkers)
+        assert abs(x[:, j].mean() - mean) < 5 * d["mcse_mean"], (j, x[:, j].mean(), d)
+    assert abs(x[:, 1].std() / 1.5 - 1.0) < 0.1
+    p_neg = integrate.quad(lambda a: stats.norm.pdf(a) * stats.norm.cdf(-a * a / 0.5), -np.inf, np.inf)[0]
+    assert abs(np.mean(x[:, 1] < 0) - p_neg) < 0.02, (np.mean(x[:, 1] < 0), p_neg)
+
+
+def test_small_ensembles_fall_back_to_de_moves():
+    """The independence proposal is fitted to the other half of the ensemble; with fewer than
+    2 (D + 1) walkers there its weight goes to the DE move, and the acceptance rule keeps its
+    upper bound only where no independence move runs."""
+    from uq._inference.sampler import (ACCEPT_RANGE, DE_MIX, INDEPENDENCE_MIX, effective_mix,
+                                       min_walkers_for_independence, run_many)
+
+    assert min_walkers_for_independence(3) == 16 and min_walkers_for_independence(5) == 24
+    assert effective_mix(INDEPENDENCE_MIX, 32, 5) == INDEPENDENCE_MIX
+    de, snooker, ind = INDEPENDENCE_MIX
+    assert effective_mix(INDEPENDENCE_MIX, 16, 5) == (de + ind, snooker, 0.0)
+    assert effective_mix(DE_MIX, 4, 5) == DE_MIX
+
+    def lp(th):
+        return -0.5 * np.sum(th**2, axis=-1)
+
+    for walkers, upper in ((8, ACCEPT_RANGE[1]), (16, 1.0)):
+        settings = Settings(n_walkers=walkers, max_steps=100, min_steps=50, chunk=50)
+        (ch,) = run_many(lp, np.zeros((1, 3)), np.ones((1, 3)), ("a", "b", "c"), seed=1, settings=settings)
+        assert ch.accept_range == (ACCEPT_RANGE[0], upper)

@@ -23,7 +23,7 @@ DEFAULT_SEED = 20201  # fixed: a rerun gives the same numbers
 # parser does not import numpy/ArviZ; tests/cli/test_cli.py checks they equal the library's.
 DEFAULT_PISTON_AREA_CM2 = 54.82
 DEFAULT_X0_MM = 112.0
-DEFAULT_WALKERS = 16
+DEFAULT_WALKERS = 32
 DEFAULT_ENSEMBLES = 4  # independent, overdispersed ensembles for R-hat (uq/_inference/sampler.py)
 DEFAULT_MAX_STEPS = 20000
 

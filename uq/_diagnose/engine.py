@@ -514,7 +514,7 @@ def _sample(fit: Fit, d, seed: int, settings: Settings):
             warnings.simplefilter("ignore")
             diag[n] = chain_diagnostics(full.samples[..., i], full.n_walkers)
     out = {m: diag[M.THETA_NAMES[i]] for m, i in M.NONLINEAR.items() if m in fit.names}
-    out["_summary"] = {"sampler": "emcee (DE moves) on noise scales and nonlinear magnitudes; coefficients drawn exactly",
+    out["_summary"] = {"sampler": "emcee (independence-t and DE moves) on noise scales and nonlinear magnitudes; coefficients drawn exactly",
                        "n_steps": chains.n_steps, "burn_in": chains.burn, "parameters": diag,
                        "warnings": chains.warnings}
     return final, out

@@ -11,7 +11,7 @@ to draws, so coupled walkers are not counted as independent chains). Both runs a
 process, after a JIT warm-up run that is not timed.
 
 (a) project: ``uq._models.cubic.fit_test`` unchanged (least squares, optimistix start, emcee over
-    the three noise parameters with DE moves until 50 autocorrelation times, exact Gaussian
+    the three noise parameters with DE and independence-t moves until 50 autocorrelation times, exact Gaussian
     draws of the eight coefficients, ArviZ diagnostics); the timed wall time covers all of
     it, including the piston block it also fits. Repeated with fresh seeds until
     ``--seconds`` have passed (at least once); ESS of independent runs adds up.
@@ -87,7 +87,7 @@ def run_project(test: PressureTest, x0_m: float, *, seed: int, seconds: float, s
             each[n] += float(fit.diagnostics["variables"][n]["ess_bulk"])
         runs += 1
     total_ess = min(each[n] for n in FORCE_NAMES)
-    return {"name": "project: uq._models.cubic.fit_test (collapsed: emcee DE moves on the noise, exact coefficient draws)",
+    return {"name": "project: uq._models.cubic.fit_test (collapsed: emcee DE and independence-t moves on the noise, exact coefficient draws)",
             "runs": runs, "wall_s": total_time, "ess_bulk_min": total_ess, "ess_per_s": total_ess / total_time,
             "ess_per_s_each": {n: e / total_time for n, e in each.items()},
             "n_steps_last": fit.diagnostics["n_steps"], "n_chains": fit.diagnostics["n_chains"]}

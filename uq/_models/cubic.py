@@ -15,7 +15,8 @@ Priors (weakly informative, fixed physical scales, so they can be sampled for ca
     log sigma0[N] ~ N(log 10, 2^2),  log r ~ N(log 0.005, 1),  log sigma_L[m] ~ N(log 1e-3, 2^2)
 
 Given the three noise parameters the coefficients are Gaussian (``uq._inference.linear``): emcee samples
-(log sigma0, log r, log sigma_L) and every retained sample gets an exact draw of the eight
+(log sigma0, log r, log sigma_L) (mostly independence proposals fitted to the other walkers, with
+DE moves: ``uq._inference.sampler.INDEPENDENCE_MIX``) and every retained sample gets an exact draw of the eight
 coefficients, reported in the paper's basis (a + b u + c u^2 + d u^3, SI units).
 """
 
@@ -344,7 +345,7 @@ def _idata(posterior, test, x0_m, chains):
         sample_stats={"lp": chains.log_prob},
         attrs={"n_ensembles": chains.n_ensembles, "n_walkers": chains.n_walkers,
                "draw_order": "each chain is one emcee ensemble; draw = step * n_walkers + walker",
-               "sampler": "emcee (DE + DE-snooker moves), coefficients drawn exactly"},
+               "sampler": "emcee (DE, DE-snooker and independence-t moves), coefficients drawn exactly"},
     )
 
 

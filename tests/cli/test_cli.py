@@ -195,6 +195,25 @@ def test_help_imports_nothing_heavy():
     assert r.returncode == 0 and all(name in r.stdout for name, _, _ in COMMANDS)
 
 
+@pytest.mark.parametrize("name", [c[0] for c in COMMANDS])
+def test_compilation_cache_is_on_for_every_command(name, tmp_path):
+    """The persistent compilation cache must be configured before a command's module is imported
+    (some import JAX at the top, and JAX reads its cache settings on import): in a fresh
+    interpreter, after `uq NAME --help`, JAX's cache directory is UQ_CACHE_DIR."""
+    code = ("import sys\n"
+            "from uq._cli.main import main\n"
+            "try:\n"
+            f"    main([{name!r}, '--help'])\n"
+            "except SystemExit:\n"
+            "    pass\n"
+            "import jax\n"
+            "print('CACHE', jax.config.jax_compilation_cache_dir)\n")
+    env = {**os.environ, "UQ_CACHE_DIR": str(tmp_path)}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env).stdout
+    assert out.strip().splitlines()[-1] == f"CACHE {tmp_path}"
+
+
 def _subparser(name: str) -> argparse.ArgumentParser:
     return build_parser([name])._uq_commands[name]
 

@@ -182,6 +182,7 @@ def _compile_cache() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    _compile_cache()  # before the command's module is imported: JAX reads the settings on its import
     parser = build_parser(argv)
     args = _parse(parser, argv)
     name = args._name
@@ -189,7 +190,6 @@ def main(argv: list[str] | None = None) -> int:
     from uq._io.progress import set_enabled
 
     set_enabled(not args.quiet)
-    _compile_cache()
     try:
         check_outputs(args)
         with _json_on_stdout(args):

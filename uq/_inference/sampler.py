@@ -75,7 +75,7 @@ class Settings:
     tau_multiple: float = 50.0
     burn_tau: float = 5.0
     chunk: int = 200
-    min_steps: int = 400
+    min_steps: int = 200
     max_steps: int = 20000
     init_scale: float = 0.05
     init_spread: float = 3.0

@@ -74,6 +74,18 @@ def test_fast_coverage_on_the_n50_stand():
     assert 0.75 <= pc["low_force_third"] <= 1.0 and 0.75 <= pc["high_force_third"] <= 1.0, pc
 
 
+def test_calibration_on_a_stand_unlike_the_model(tmp_path):
+    """`--stand` runs the n50 truth on another stand (here with t-distributed errors) and the
+    results say which; the prior truth has no stand, so the option is refused with it (exit 2)."""
+    stand = tmp_path / "rough.toml"
+    stand.write_text("error_df = 5\n")
+    assert main(["calibrate", "--reps", "2", "--truth", "n50", "--stand", str(stand), "--out", str(tmp_path / "c")]) == 0
+    res = json.loads((tmp_path / "c" / "calibration.json").read_text())
+    assert res["settings"][0]["stand"] == {"error_df": 5.0}
+    assert "on a stand with error_df = 5" in (tmp_path / "c" / "calibration.md").read_text()
+    assert main(["calibrate", "--reps", "2", "--truth", "prior,n50", "--stand", str(stand)]) == 2
+
+
 def test_calibrate_cli_writes_results(tmp_path):
     assert main(["calibrate", "--reps", "2", "--truth", "n50", "--noise", "budget,constant", "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "calibration.json").read_text())

@@ -178,8 +178,14 @@ def test_small_ensembles_fall_back_to_de_moves():
     """The independence proposal is fitted to the other half of the ensemble; with fewer than
     2 (D + 1) walkers there its weight goes to the DE move, and the acceptance rule keeps its
     upper bound only where no independence move runs."""
-    from uq._inference.sampler import (ACCEPT_RANGE, DE_MIX, INDEPENDENCE_MIX, effective_mix,
-                                       min_walkers_for_independence, run_many)
+    from uq._inference.sampler import (
+        ACCEPT_RANGE,
+        DE_MIX,
+        INDEPENDENCE_MIX,
+        effective_mix,
+        min_walkers_for_independence,
+        run_many,
+    )
 
     assert min_walkers_for_independence(3) == 16 and min_walkers_for_independence(5) == 24
     assert effective_mix(INDEPENDENCE_MIX, 32, 5) == INDEPENDENCE_MIX

@@ -136,6 +136,9 @@ def test_fit_cli_json_contract_strict_and_reproducible(tmp_path, capsys):
         assert k in t["force"]["a_P"]
     assert {"s_P_N", "eps_P_pct", "n_points", "pressure_bar"} <= set(t)
     assert np.array(t["covariance"]["force"]).shape == (4, 4)
+    # the recording-order check of the residuals (uq/_derived/residuals.py): a p-value per block
+    assert set(t["residual_order"]) == {"force", "piston", "alpha"} and 0 < t["residual_order"]["piston"]["p"] <= 1
+    assert res["model_warnings"] == []  # the paper's stand: independent errors
     # --strict turns a non-converged run into exit status 1, with a visible warning
     assert main(["fit", str(csv), "--max-steps", "16", "--walkers", "8", "--strict"]) == 1
     assert "WARNING" in capsys.readouterr().err

@@ -16,6 +16,7 @@ from uq._stand.simulator import (
     TraditionalSpring,
     noise_sd,
     simulate,
+    simulate_recordings,
     true_curves,
 )
 
@@ -147,3 +148,52 @@ def test_pressure_error_obeys_boyle_force_up_piston_short():
     boyle = (p_abs + dp_pa) * (v_gas + S * dL) / (p_abs * v_gas) - 1.0
     assert np.max(np.abs(boyle)) < 1e-4  # second order in dp / p_abs (first order would be ~3e-3)
     assert np.corrcoef(dp_pa, dL)[0, 1] < -0.9  # force and piston errors anti-correlated
+
+
+def test_reading_errors_keep_their_sd_in_every_form():
+    """Gaussian by default (the very draws of rng.normal, so the bundled data stay byte-identical);
+    Student t scaled to the same sd, with the t's heavier tails (excess kurtosis 6 / (df - 4));
+    AR(1) with the requested lag-one correlation and the same sd. 200 000 draws: tolerances are
+    several standard errors wide (fixed seed)."""
+    from scipy import stats
+
+    from uq._stand.simulator import ar1, reading_errors
+
+    n = 200_000
+    a = reading_errors(np.random.default_rng(1), 0.5, n)
+    assert np.array_equal(a, np.random.default_rng(1).normal(0.0, 0.5, n))
+    t = reading_errors(np.random.default_rng(2), 0.5, n, df=7.0)
+    assert abs(np.std(t) / 0.5 - 1.0) < 0.02
+    assert abs(stats.kurtosis(t) - 6.0 / 3.0) < 0.5  # a Gaussian gives 0 +- 0.01
+    r = ar1(np.random.default_rng(3).normal(0.0, 2.0, n), 0.6)
+    assert abs(np.std(r) / 2.0 - 1.0) < 0.02
+    assert abs(np.corrcoef(r[:-1], r[1:])[0, 1] - 0.6) < 0.01
+    assert ar1(a, 0.0) is a
+
+
+def test_stand_of_another_noise_form(tmp_path):
+    """A stand whose errors are heavy-tailed and whose pressure errors are correlated in recording
+    order: the force errors from the pressure holding (the only term left on) follow an AR(1) in
+    the step order; the file says which fields differ; impossible values are one-line errors."""
+    from uq._data.stand_description import PAPER_STAND, read_stand
+
+    stand = PAPER_STAND.replace(load_cell_rel_sd=0.0, displacement_sd_m=0.0, caliper_sd_m=0.0,
+                                pressure_error_corr=0.8)
+    spring = N50Spring()
+    lag1 = []
+    for seed in range(20):
+        (test,) = simulate("n50", seed=seed, layout=Layout(pressures_bar=(6.0,)), stand=stand)
+        dp = (test["force_N"] - spring.force_N(test["height_m"], 6.0)) / spring.effective_area_m2(test["height_m"], 6.0)
+        lag1.append(np.corrcoef(dp[:-1], dp[1:])[0, 1])
+    assert 0.6 < np.mean(lag1) < 0.85  # 37 readings per test: the estimate is biased low by about 0.1
+    assert stand.noise_form_fields() == ["pressure_error_corr"] and PAPER_STAND.noise_form_fields() == []
+    rec = simulate_recordings("n50", seed=1, layout=Layout(pressures_bar=(1.0,)),
+                              stand=PAPER_STAND.replace(error_df=5.0))
+    assert "except error_df = 5" in rec.comments[2]
+    for text, what in (("error_df = 1.5", "error_df must be 0"), ("pressure_error_corr = 1.0", "pressure_error_corr"),
+                       ("error_df = -3", "non-negative")):
+        f = tmp_path / "s.toml"
+        f.write_text(text + "\n")
+        with pytest.raises(InputError, match=what) as exc:
+            read_stand(f)
+        assert str(f) in str(exc.value) and "\n" not in str(exc.value)

@@ -58,12 +58,11 @@ def _pressures(text: str) -> tuple[float, ...]:
 
 def command_simulate(args) -> int:
     from uq._data.recordings import write_recordings_csv
-    from uq._data.stand_description import PAPER_STAND
     from uq._io.files import emit_json, write_text_atomic
     from uq._physics.mechanisms import parse_effects
-    from uq._stand.simulator import SPRINGS, Layout, simulate
+    from uq._stand.simulator import Layout, simulate, simulation_comment
 
-    stand = stand_from(args)
+    stand = stand_from(args, model=False)
     effects = parse_effects(args.effect)
     if not 0 < args.x_min_mm < args.x_max_mm:
         raise InputError(f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}")
@@ -74,16 +73,7 @@ def command_simulate(args) -> int:
     cmd = (f"uq simulate --out {args.out} --spring {args.spring} --seed {args.seed} --pressures {args.pressures} "
            f"--x-max-mm {args.x_max_mm:g} --x-min-mm {args.x_min_mm:g} --step-mm {args.step_mm:g} "
            f"--piston-area-cm2 {args.piston_area_cm2:g} {eff}{' --stand ' + str(args.stand) if args.stand else ''}").strip()
-    differs = {f: getattr(stand, f) for f in stand.__dataclass_fields__ if getattr(stand, f) != getattr(PAPER_STAND, f)}
-    noise = ("noise from its error budget (section 3.2)" if not differs else
-             "noise from its error budget (section 3.2) except " + ", ".join(f"{k} = {v:g}" for k, v in differs.items()))
-    comment = (
-        "RECONSTRUCTED recordings from the virtual test stand of airspring-uq, not measured data.\n"
-        f"Spring: {SPRINGS[args.spring].description}.\n"
-        f"Procedure of the paper's section 3.4, {noise}.\n"
-        f"Concealed effects: {', '.join(f'{k}={v:g}' for k, v in effects.items()) or 'none'}.\n"
-        f"Regenerate: {cmd}"
-    )
+    comment = simulation_comment(args.spring, effects, stand, cmd)
     write_text_atomic(args.out, write_recordings_csv(tests, comment))
     n = sum(len(t["height_m"]) for t in tests)
     print(f"wrote {args.out}: {len(tests)} tests, {n} points (spring {args.spring}, seed {args.seed}"
@@ -165,6 +155,8 @@ def command_fit(args) -> int:
               f"{t['s_P_N']:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}")
     for w in result["warnings"]:
         print(f"WARNING: {w}", file=sys.stderr)
+    for w in result["model_warnings"]:
+        print(f"WARNING (model): {w}", file=sys.stderr)
     if args.out:
         paths = save_posteriors(cf, args.out)
         emit_json(result, str(Path(args.out) / "fit.json"))

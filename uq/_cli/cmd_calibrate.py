@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from uq._cli.common import choice_list, positive_int, seed
+from uq._cli.common import add_stand, choice_list, positive_int, seed, stand_from
 from uq._drivers import calibrate as C
+from uq._io.errors import InputError
 from uq._io.files import emit_json, remove_stale, write_figure_atomic, write_text_atomic
 
 
@@ -20,13 +21,19 @@ def configure_calibrate(p) -> None:
     p.add_argument("--seed", type=seed, default=20201, help="random seed")
     p.add_argument("--out", metavar="DIR", help="the folder to write: calibration.json, calibration.md and rank histograms")
     p.add_argument("--json", metavar="PATH", help="machine-readable result ('-' for stdout)")
+    add_stand(p, help="stand description (TOML) of the virtual stand that makes the n50 truth's recordings "
+                      "(default: the paper's; error_df and pressure_error_corr give noise unlike the model's)")
 
 
 def command_calibrate(args) -> int:
+    stand = stand_from(args, model=False)
+    truths = [t.strip() for t in args.truth.split(",") if t.strip()]
+    if args.stand and "prior" in truths:
+        raise InputError("option --stand: only the n50 truth runs on a stand; use it with --truth n50")
     results = []
-    for truth in [t.strip() for t in args.truth.split(",") if t.strip()]:
+    for truth in truths:
         for noise in [n.strip() for n in args.noise.split(",") if n.strip()]:
-            res = C.calibrate(args.reps, truth=truth, noise=noise, seed=args.seed)
+            res = C.calibrate(args.reps, truth=truth, noise=noise, seed=args.seed, stand=stand)
             results.append(res)
             s = res.summary()
             worst = min(s["quantities"].items(), key=lambda kv: kv[1]["coverage90"])

@@ -181,9 +181,17 @@ def add_stand(p: argparse.ArgumentParser, help: str = STAND_HELP) -> None:
     p.add_argument("--stand", metavar="FILE.toml", help=help)
 
 
-def stand_from(args):
-    """The StandDescription of ``--stand`` (the paper's stand without it); a bad file is InputError."""
+def stand_from(args, model: bool = True):
+    """The StandDescription of ``--stand`` (the paper's stand without it); a bad file is InputError.
+
+    ``model``: the stand is given to a model (not to the virtual stand), which uses its budget and
+    gas volumes but cannot use the fields of the noise's form: a note on stderr says so."""
     from uq._data.stand_description import stand_or_paper
 
-    return stand_or_paper(getattr(args, "stand", None))
+    stand = stand_or_paper(getattr(args, "stand", None))
+    if model and stand.noise_form_fields():
+        sys.stderr.write(f"note: --stand {args.stand}: {', '.join(stand.noise_form_fields())} describe the noise's "
+                         "form for the virtual stand; the models assume independent Gaussian errors and do not use "
+                         "them\n")
+    return stand
 

@@ -41,6 +41,17 @@ class StandDescription:
     receiver_air_m3             air outside the element: receiver, pipes, cylinder (assumed 2 L)
     element_volume_at_xmax_m3   element's own air volume at the highest height (assumed 4.2 L)
     p_atm_bar                   atmospheric pressure
+    error_df                    0: every reading error is Gaussian (the models' assumption);
+                                > 2: Student t with that many degrees of freedom, scaled to the
+                                same sd (a stand with occasional larger disturbances)
+    pressure_error_corr         0: the pressure-holding errors of successive readings are
+                                independent (the models' assumption); in (0, 1): their lag-one
+                                correlation in recording order (AR(1), same sd), as a slow
+                                pressure controller leaves them
+
+The last two describe stands whose noise differs in *form* from what every model's likelihood
+assumes (independent Gaussian errors): the stand uses them, the models ignore them, so the
+tests can check the models' intervals against noise that the models do not share.
 
     ``PAPER_STAND`` is the default; :meth:`replace` or :func:`read_stand` give another stand, which
     ``uq.simulate(..., stand=)`` makes noise with and ``uq.fit_surface``/``uq.diagnose`` model:
@@ -60,6 +71,14 @@ class StandDescription:
     receiver_air_m3: float = 2.0e-3
     element_volume_at_xmax_m3: float = 4.2e-3
     p_atm_bar: float = 1.01325
+    error_df: float = 0.0
+    pressure_error_corr: float = 0.0
+
+    def __post_init__(self):
+        if self.error_df != 0 and not self.error_df > 2:
+            raise ValueError(f"error_df must be 0 (Gaussian) or above 2 (finite variance), got {self.error_df!r}")
+        if not 0 <= self.pressure_error_corr < 1:
+            raise ValueError(f"pressure_error_corr must lie in 0 <= corr < 1, got {self.pressure_error_corr!r}")
 
     @property
     def gas_volume_at_xmax_m3(self) -> float:
@@ -75,11 +94,17 @@ class StandDescription:
     def replace(self, **changes) -> StandDescription:
         return dataclasses.replace(self, **changes)
 
+    def noise_form_fields(self) -> list[str]:
+        """The fields set here that make the noise differ in form from the models' independent
+        Gaussian errors (``error_df``, ``pressure_error_corr``): the virtual stand uses them, the
+        models cannot."""
+        return [f for f in ("error_df", "pressure_error_corr") if getattr(self, f) != 0]
+
 
 PAPER_STAND = StandDescription()
 
 _ALLOW_ZERO = {"load_cell_rel_sd", "pressure_holding_bar", "pressure_holding_floor_bar",
-               "displacement_sd_m", "caliper_sd_m", "receiver_air_m3"}
+               "displacement_sd_m", "caliper_sd_m", "receiver_air_m3", "error_df", "pressure_error_corr"}
 
 
 def stand_or_paper(path: str | Path | None) -> StandDescription:
@@ -120,4 +145,7 @@ def read_stand(path: str | Path) -> StandDescription:
         if value < 0 or (value == 0 and key not in _ALLOW_ZERO):
             raise InputError(f"{path}: key '{key}' must be {'non-negative' if key in _ALLOW_ZERO else 'positive'}, got {value!r}")
         values[key] = float(value)
-    return StandDescription(**values)
+    try:
+        return StandDescription(**values)
+    except ValueError as exc:
+        raise InputError(f"{path}: {exc}") from None

@@ -18,6 +18,7 @@ import numpy as np
 from uq._data.recordings import leading_comments
 from uq._data.reference import table1, table2
 from uq._derived.bands import CampaignBands, campaign_bands
+from uq._derived.residuals import order_check, order_warnings
 from uq._io.files import remove_stale, write_bytes_atomic, write_text_atomic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import Figure, _plt, _png, render
@@ -342,7 +343,7 @@ def _at_x0(cb: CampaignBands) -> list[dict]:
 
 
 def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
-    """One per test: the numbers of its paragraph, its sampler warnings and its figure."""
+    """One per test: the numbers of its paragraph, its sampler and model warnings and its figure."""
     out = []
     for tf, tb in zip(cf.tests, cb.tests, strict=True):
         a = tb.at_x0
@@ -355,7 +356,8 @@ def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
             "feff_volume_cm2": a["feff_volume_m2"]["mean"] * 1e4, "spread_own_pct": a["spread_own_pct"]["mean"],
             "spread_ref_pct": a["spread_ref_pct"]["mean"], "s_P": s, "eps_P": e, "sigma0": np.mean(noise[:, 0]),
             "rel_pct": 100 * np.mean(noise[:, 1]), "sigma_L_mm": 1e3 * np.mean(noise[:, 2]),
-            "warnings": tf.diagnostics["warnings"], "figure": figures[f"test_{tf.pressure_bar:g}bar.png"]})
+            "warnings": tf.diagnostics["warnings"] + order_warnings(order_check(tf)),
+            "figure": figures[f"test_{tf.pressure_bar:g}bar.png"]})
     return out
 
 

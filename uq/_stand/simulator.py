@@ -28,6 +28,12 @@ reading reproduces the s_P the budget predicts):
 * calipers 0.01 mm on the piston coordinate: L gains N(0, 0.01 mm).
 * p_atm = 1.01325 bar.
 
+A stand description may change the *form* of this noise, which no model shares (the models
+assume independent Gaussian reading errors): ``error_df`` draws every term from a Student t of
+that many degrees of freedom scaled to the same sd, ``pressure_error_corr`` makes the pressure
+errors of successive readings an AR(1) series in recording order with that lag-one correlation
+and the same sd. With the defaults (0, 0) the draws are exactly the Gaussian ones above.
+
 What the budget leaves out, and Table 2 shows: the paper's s_P exceeds the budget from
 4 bar up (by 30-60 N) and at 0.1 bar (19.5 N against about 2 N): the paper attributes the
 0.1-bar scatter to relaxation in the rubber-cord composite, and the growth with pressure is
@@ -37,6 +43,7 @@ by default; ``--effect hysteresis=...`` conceals such a branch difference on req
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -240,6 +247,27 @@ def true_curves(spring, effects: dict[str, float], height_m, p_bar: float, compr
     return force, piston
 
 
+def reading_errors(rng: np.random.Generator, sd, n: int, df: float = 0.0) -> np.ndarray:
+    """n independent reading errors of standard deviation ``sd``: Gaussian (``df`` 0) or Student t
+    with ``df`` > 2 degrees of freedom, scaled to the same sd (heavier tails, same variance)."""
+    if not df:
+        return rng.normal(0.0, sd, n)
+    return np.asarray(sd) * math.sqrt((df - 2.0) / df) * rng.standard_t(df, n)
+
+
+def ar1(e: np.ndarray, corr: float) -> np.ndarray:
+    """The stationary AR(1) series with lag-one correlation ``corr`` and the sd of ``e``, driven by
+    the independent errors ``e`` in recording order (``corr`` 0 returns ``e`` itself)."""
+    if not corr:
+        return e
+    out = np.empty_like(e)
+    out[0] = e[0]
+    innovation = math.sqrt(1.0 - corr * corr)
+    for i in range(1, e.size):
+        out[i] = corr * out[i - 1] + innovation * e[i]
+    return out
+
+
 def simulate(
     spring_name: str = "n50",
     *,
@@ -264,10 +292,10 @@ def simulate(
     tests = []
     for p in layout.pressures_bar:
         n = heights.size
-        x_true = heights + rng.normal(0.0, stand.displacement_sd_m, n)
-        dp_bar = rng.normal(0.0, stand.pressure_sd_bar(p), n)
-        e_load = rng.normal(0.0, stand.load_cell_rel_sd, n)
-        e_cal = rng.normal(0.0, stand.caliper_sd_m, n)
+        x_true = heights + reading_errors(rng, stand.displacement_sd_m, n, stand.error_df)
+        dp_bar = ar1(reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df), stand.pressure_error_corr)
+        e_load = reading_errors(rng, stand.load_cell_rel_sd, n, stand.error_df)
+        e_cal = reading_errors(rng, stand.caliper_sd_m, n, stand.error_df)
         force, piston = true_curves(spring, effects, x_true, p, comp, steps, piston_area_m2)
         feff = np.asarray(spring.effective_area_m2(x_true, p)) * (1.0 + effects.get("pressure_dependent_area", 0.0) * p)
         force_read = (force + dp_bar * BAR_PA * feff) * (1.0 + e_load)

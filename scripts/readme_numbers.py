@@ -130,10 +130,11 @@ def calibration_summary(rel: str):
             pc = s.get("predictive_coverage90")
             pred = f"{100 * pc['low_force_third']:.1f} % / {100 * pc['high_force_third']:.1f} %" if pc else "-"
             holm = [v.get("sbc_uniformity_p_holm") for v in q.values() if v.get("sbc_uniformity_p_holm") is not None]
-            out.append(f"| {s['truth']} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
+            truth = s["truth"] + ("".join(f", {k} {v:g}" for k, v in s["stand"].items()) if s.get("stand") else "")
+            out.append(f"| {truth} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
                        f"| {min(cov)}..{max(cov)} of {s['replications']} | {', '.join(outside) or 'none'} "
                        f"| {pmin[0]:.3f} ({pmin[1]}) | {min(holm):.3f} | {pred} |" if holm else
-                       f"| {s['truth']} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
+                       f"| {truth} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
                        f"| {min(cov)}..{max(cov)} of {s['replications']} | {', '.join(outside) or 'none'} "
                        f"| {pmin[0]:.3f} ({pmin[1]}) | - | {pred} |")
         return "\n".join(out) + "\n"
@@ -184,7 +185,8 @@ def diagnose_proof_summary(rel: str):
         lines = [f"From `{rel}` ({d['n_runs']} campaigns):", "",
                  f"- clean campaigns: mismatch detected in {fa['mismatch_detected']} of {fa['runs']}, "
                  f"a mechanism named in {fa['mechanism_named']} ({fa.get('other_stand_runs', 0)} of the clean "
-                 f"campaigns came from a stand noisier than the model assumes)",
+                 f"campaigns came from stands other than the model assumes: noisier, or with heavy-tailed errors and "
+                 f"pressure errors correlated from reading to reading)",
                  f"- wrong mechanisms named (single-mechanism and clean runs): {wrong}; an extra mechanism "
                  f"beside the true one: {extra.get('with_extra', 0)} of {extra.get('runs', 0)} single-mechanism runs",
                  f"- concealed single mechanisms found: {named} of {runs} runs; pairs with both named exactly: "
@@ -224,6 +226,7 @@ BLOCKS = {
     "margin-n50": run_block(f"margin {DATA} --height-mm 112 --load-N 13020 --pressure-bar 5 --tolerance-pct 10"),
     "diagnose-n50": run_block(f"diagnose {DATA}", keep=45),
     "calibration": calibration_summary("reports/calibration/calibration.json"),
+    "calibration-rough-stand": calibration_summary("reports/calibration-rough-stand/calibration.json"),
     "bench-margin": margin_bench_summary("reports/bench/margin.json"),
     "surface-coverage": surface_coverage_summary("reports/surface-coverage/coverage.json"),
     "diagnose-proof": diagnose_proof_summary("reports/diagnose-proof/summary.json"),

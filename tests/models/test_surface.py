@@ -148,12 +148,13 @@ def test_compare_with_cubics(n50_surface, n50_fit):
 def test_exact_refit_agrees_with_integrated_psis_where_k_is_low(n50_fit):
     """The exact refit used for high-k cubic readings gives the same ELPD as the integrated
     PSIS-LOO for a reading whose k is low (independent Monte Carlo, so up to ~0.05)."""
-    from uq._models.surface import _exact_cubic_loo, _loo, cubic_loglik_loo
+    from uq._inference.summary import psis_loo
+    from uq._models.surface import _exact_cubic_loo, cubic_loglik_loo
 
     class One:
         tests = [n50_fit.at(5.0)]
 
-    loo = _loo(cubic_loglik_loo(One))
+    loo = psis_loo(cubic_loglik_loo(One))
     i = int(np.argmin(np.asarray(loo.pareto_k)))
     exact = _exact_cubic_loo(One.tests[0], i, seed=1, settings=FAST)
     assert exact == pytest.approx(float(loo.loo_i[i]), abs=0.05)

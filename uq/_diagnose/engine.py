@@ -38,7 +38,7 @@ import numpy as np
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.float64 import jax
 from uq._inference.sampler import Settings, chain_diagnostics, run_ensembles, thin
-from uq._inference.summary import estimate
+from uq._inference.summary import estimate, psis_loo
 from uq._io.progress import _Silent, progress
 from uq._models import diagnose as M
 from uq._physics.mechanisms import MECHANISMS
@@ -85,7 +85,7 @@ class Fit:
         _SCREEN_BAR.update(1)
         if not loo:
             return
-        self.loo = _loo(self.ll)
+        self.loo = psis_loo(self.ll[None], reff=1.0)  # independent Laplace draws
         self.elpd = float(self.loo.elpd_loo)
         self.loo_i = np.asarray(self.loo.loo_i)
         self.pareto_k = np.asarray(self.loo.pareto_k)
@@ -109,15 +109,6 @@ class Fit:
         if name == "force_offset":
             return self.beta[:, base + M.CASING_DEG + 1]
         return self.beta[:, base + M.CASING_DEG + 2]  # thermal_drift, cm^3 per step
-
-
-def _loo(ll: np.ndarray):
-    import arviz as az
-
-    idata = az.from_dict(posterior={"_": np.zeros((1, ll.shape[0]))}, log_likelihood={"y": ll[None]})
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return az.loo(idata, pointwise=True, reff=1.0)
 
 
 def _gain_of(diff: np.ndarray) -> tuple[float, float]:

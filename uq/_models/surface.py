@@ -61,7 +61,7 @@ from uq._inference.linear import (
     weighted_gram,
 )
 from uq._inference.sampler import Chains, Settings, convergence, run_ensembles, thin
-from uq._inference.summary import band, estimate
+from uq._inference.summary import band, estimate, loglik_idata, psis_loo
 from uq._io.errors import InputError
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
 
@@ -426,21 +426,7 @@ class SurfaceFit:
 
     # ---- LOO
     def loo(self):
-        return _loo(self.loglik_loo)
-
-
-def _loo(ll):
-    """PSIS-LOO; ArviZ's high-Pareto-k warning is reported in the result (max_pareto_k) instead."""
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        return az.loo(_loo_idata(ll), pointwise=True)
-
-
-def _loo_idata(ll):
-    ll = np.asarray(ll)
-    return az.from_dict(posterior={"_": np.zeros(ll.shape[:2])}, log_likelihood={"reading": ll})
+        return psis_loo(self.loglik_loo)
 
 
 def _arrays(rec: Recordings):
@@ -555,7 +541,7 @@ def select_orders(rec: Recordings, candidates=CANDIDATES, *, seed: int = 0, sett
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        cmp = az.compare({k: _loo_idata(f.loglik_loo) for k, f in fits.items()}, ic="loo")
+        cmp = az.compare({k: loglik_idata(f.loglik_loo) for k, f in fits.items()}, ic="loo")
     rows = [{"orders": k, "elpd_loo": float(r["elpd_loo"]), "p_loo": float(r["p_loo"]),
              "elpd_diff": float(r["elpd_diff"]), "dse": float(r["dse"]), "rank": int(r["rank"]),
              "warning": bool(r["warning"])} for k, r in cmp.iterrows()]
@@ -735,8 +721,8 @@ def compare_with_cubics(fit: SurfaceFit, cubic_fit, *, seed: int = 0, settings: 
     reweights the noise draws: the Pareto k that made the plain PSIS-LOO refuse (k > 0.7 at drawn
     coefficients) stays low. Both are reported; the verdict uses the integrated one."""
     cub_ll, n_s, n_c = cubic_loglik(cubic_fit), fit.beta.shape[-1], 8 * len(cubic_fit.tests)
-    loo_s, loo_c = _loo(fit.loglik_loo), _loo(cubic_loglik_loo(cubic_fit))
-    plain_s, plain_c = _loo(fit.loglik), _loo(cub_ll)
+    loo_s, loo_c = psis_loo(fit.loglik_loo), psis_loo(cubic_loglik_loo(cubic_fit))
+    plain_s, plain_c = psis_loo(fit.loglik), psis_loo(cub_ll)
     k_c = _loo_part(loo_c, n_c, cub_ll)  # Pareto k before the refits
     loo_c = _reloo_cubics(cubic_fit, loo_c, seed, settings)
     cubics = _loo_part(loo_c, n_c, cub_ll) | {"max_pareto_k_psis": k_c["max_pareto_k"],

@@ -260,8 +260,9 @@ def _nondiagonal_pairs(n: int) -> np.ndarray:
 #: independence proposals fitted to the rest of the walker's ensemble with DE moves: the sampled
 #: parameters of every model here are a few noise scales and magnitudes whose posterior is near
 #: Gaussian, where a fitted proposal is accepted often and each acceptance is a fresh draw. On
-#: data/n50 (32 walkers per ensemble) it cuts the run of the per-pressure cubics from about 850 to
-#: 400 steps and that of the surface's five noise parameters from about 4500 to 1500 steps. The DE
+#: data/n50 (32 walkers per ensemble) the per-pressure cubics meet their rules within the 200-step
+#: floor (about 850 steps with DE moves alone) and the surface's five noise parameters after about
+#: 1500 steps instead of 4500. The DE
 #: moves stay in the mixture so that a posterior far from Gaussian is still explored.
 #: ``DE_MIX`` is the mixture without independence proposals.
 DE_MIX = (0.8, 0.2, 0.0)

@@ -449,6 +449,19 @@ def test_set_up_scripts_install_from_the_lock_and_ci_runs_the_test_command():
     assert "bash scripts/test.sh" in (ROOT / "README.md").read_text()
 
 
+def test_a_model_says_it_does_not_use_the_noise_form(tmp_path, capsys):
+    """A stand file whose noise differs in form (error_df, pressure_error_corr) given to a model
+    command: one note on stderr that the model uses the budget but not the form (the stand is
+    read before the recordings, so a missing recordings file still ends in exit 2 after it)."""
+    stand = tmp_path / "rough.toml"
+    stand.write_text("error_df = 5\npressure_error_corr = 0.7\n")
+    assert run(["surface", tmp_path / "missing.csv", "--stand", stand]) == 2
+    err = capsys.readouterr().err
+    assert f"note: --stand {stand}: error_df, pressure_error_corr describe the noise's form" in err
+    assert run(["simulate", "--out", tmp_path / "x.csv", "--pressures", "1", "--stand", stand]) == 0
+    assert "note:" not in capsys.readouterr().err  # the virtual stand does use the form
+
+
 def test_simulate_with_another_stand(tmp_path):
     """`uq simulate --stand` makes the noise of the stand described, and the file says so."""
     import numpy as np

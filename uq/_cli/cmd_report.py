@@ -7,7 +7,7 @@ import time
 
 from uq._cli.common import add_recordings, add_sampling, load, positive_int, settings_from
 from uq._derived.bands import campaign_bands
-from uq._derived.residuals import order_check, order_warnings
+from uq._derived.residuals import campaign_order_warnings
 from uq._io.files import emit_json
 from uq._report.campaign import MIN_DRAWS, read_comments, write_report
 
@@ -51,9 +51,8 @@ def command_report(args) -> int:
     warnings = [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in t.diagnostics["warnings"]]
     for w in warnings:
         print(f"WARNING: {w}", file=sys.stderr)
-    for t in cf.tests:
-        for w in order_warnings(order_check(t)):
-            print(f"WARNING (model): {t.pressure_bar:g} bar: {w}", file=sys.stderr)
+    for w in campaign_order_warnings(cf):
+        print(f"WARNING (model): {w}", file=sys.stderr)
     print(f"report: {path}")
     if args.json:
         emit_json(fit_json(cf) | {"bands": cb.summary(), "report": str(path)}, args.json)

@@ -94,6 +94,11 @@ tests can check the models' intervals against noise that the models do not share
     def replace(self, **changes) -> StandDescription:
         return dataclasses.replace(self, **changes)
 
+    def changes(self) -> dict[str, float]:
+        """The fields whose values differ from the paper's stand (empty for ``PAPER_STAND``)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if getattr(self, f.name) != f.default}
+
     def noise_form_fields(self) -> list[str]:
         """The fields set here that make the noise differ in form from the models' independent
         Gaussian errors (``error_df``, ``pressure_error_corr``): the virtual stand uses them, the

@@ -23,10 +23,12 @@ warning is then just as true: the intervals rest on a model the readings do not 
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
-from uq._models.cubic import PressureFit
-from uq._physics.quantities import BASIS_SCALE_M, force_noise_var
+from uq._models.cubic import CampaignFit, PressureFit, basis
+from uq._physics.quantities import force_noise_var
 
 ALPHA = 1e-3  # per block: 22 blocks in a campaign like data/n50 give a false warning about once in 45 campaigns
 N_NULL = 10000
@@ -40,7 +42,7 @@ def lag_one_check(residuals: np.ndarray, sd: np.ndarray, u_m: np.ndarray, *, n_n
     ``residuals``, ``sd``, ``u_m``: (n,) in recording order. Returns ``{"lag1", "p"}``.
     """
     z = np.asarray(residuals, float) / np.asarray(sd, float)
-    W = np.vander(np.asarray(u_m, float) / BASIS_SCALE_M, 4, increasing=True) / np.asarray(sd, float)[:, None]
+    W = np.asarray(basis(np.asarray(u_m, float))) / np.asarray(sd, float)[:, None]
     q, _ = np.linalg.qr(W)
     null = np.random.default_rng(seed).standard_normal((n_null, z.size))
     null -= (null @ q) @ q.T  # the residuals of a weighted cubic fit to pure noise
@@ -53,18 +55,25 @@ def _lag_one(z: np.ndarray) -> np.ndarray:
     return np.sum(z[:, 1:] * z[:, :-1], axis=1) / np.sum(z * z, axis=1)
 
 
+_CHECKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # fit -> its check, made once
+
+
 def order_check(fit: PressureFit) -> dict:
     """:func:`lag_one_check` of the force and piston blocks of one test, from the posterior-mean
-    curves and noise scales; ``{"force": {...}, "piston": {...}, "alpha": ALPHA}``."""
-    t = fit.test
-    u = t.height_m - fit.x0_m
-    V = np.vander(u, 4, increasing=True)
-    noise = fit.flat("noise").mean(axis=0)
-    sd_force = np.sqrt(force_noise_var(noise[0], noise[1], fit.ref_force()))
-    sd_piston = np.full(u.shape, noise[2])
-    return {"force": lag_one_check(t.force_N - V @ fit.flat("force").mean(axis=0), sd_force, u),
-            "piston": lag_one_check(t.piston_m - V @ fit.flat("piston").mean(axis=0), sd_piston, u),
-            "alpha": ALPHA}
+    curves and noise scales; ``{"force": {...}, "piston": {...}, "alpha": ALPHA}``. Computed once
+    per fit (the JSON, the printed warnings and the report page all ask for it)."""
+    if fit not in _CHECKS:
+        u = fit.test.height_m - fit.x0_m
+        noise = fit.flat("noise").mean(axis=0)
+        sd = {"force": np.sqrt(force_noise_var(noise[0], noise[1], fit.ref_force())),
+              "piston": np.full(u.shape, noise[2])}
+        _CHECKS[fit] = {b: lag_one_check(fit.mean_residuals(b), sd[b], u) for b in ("force", "piston")} | {"alpha": ALPHA}
+    return _CHECKS[fit]
+
+
+def campaign_order_warnings(cf: CampaignFit) -> list[str]:
+    """The warning lines of every test of a campaign, each prefixed with its pressure."""
+    return [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in order_warnings(order_check(t))]
 
 
 def order_warnings(check: dict) -> list[str]:

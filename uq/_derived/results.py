@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from uq._data.reference import FORCE_NAMES, PISTON_NAMES
-from uq._derived.residuals import order_check, order_warnings
+from uq._derived.residuals import campaign_order_warnings, order_check
 from uq._inference.summary import estimate
 from uq._models.cubic import NOISE_NAMES, CampaignFit, PressureFit
 
@@ -59,7 +59,6 @@ def fit_json(cf: CampaignFit) -> dict:
     rec = cf.recordings
     tests = [test_json(t) for t in cf.tests]
     warnings = [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in t.diagnostics["warnings"]]
-    model_warnings = [f"{t['pressure_bar']:g} bar: {w}" for t in tests for w in order_warnings(t["residual_order"])]
     return {
         "x0_m": rec.x0_m,
         "piston_area_m2": rec.piston_area_m2,
@@ -67,7 +66,7 @@ def fit_json(cf: CampaignFit) -> dict:
         "seed": cf.seed,
         "converged": cf.converged,
         "warnings": warnings,
-        "model_warnings": model_warnings,
+        "model_warnings": campaign_order_warnings(cf),
         "tests": tests,
     }
 

@@ -93,16 +93,11 @@ class CalibrationResult:
     predictive: np.ndarray | None = None
     stand: StandDescription = PAPER_STAND  # of the n50 truth's stand
 
-    def stand_differs(self) -> dict[str, float]:
-        """The fields of the truth's stand that differ from the paper's (empty for the paper's)."""
-        return {f: getattr(self.stand, f) for f in self.stand.__dataclass_fields__
-                if getattr(self.stand, f) != getattr(PAPER_STAND, f)}
-
     def summary(self) -> dict:
         n = self.inside90.shape[0]
         p_sbc = [_sbc_p(self.ranks[:, j]) for j in range(len(self.names))]
         p_holm = _holm(p_sbc)
-        out = {"truth": self.truth_kind, "noise_model": self.noise, "replications": n, "stand": self.stand_differs(),
+        out = {"truth": self.truth_kind, "noise_model": self.noise, "replications": n, "stand": self.stand.changes(),
                "converged_fraction": float(self.converged.mean()),
                "predictive_coverage90": None if self.predictive is None else {
                    "low_force_third": float(self.predictive[:, 0].mean()),

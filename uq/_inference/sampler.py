@@ -504,7 +504,7 @@ def _rule_warnings(diag: dict) -> list[str]:
     return warns
 
 
-def _acceptance_warnings(acc: np.ndarray, accept_range: tuple[float, float] = ACCEPT_RANGE) -> list[str]:
+def _acceptance_warnings(acc: np.ndarray, accept_range: tuple[float, float]) -> list[str]:
     lo, hi = accept_range
     if lo <= acc.mean() <= hi:
         return []

@@ -167,11 +167,15 @@ class PressureFit:
             return np.full(u.shape, float(np.mean(self.ref_force_N)))
         return _noise_reference(self.lsq_force, u, self.noise_model)
 
+    def mean_residuals(self, block: str) -> np.ndarray:
+        """Readings minus the posterior-mean curve of ``block`` ("force" N or "piston" m), (n,)."""
+        y = self.test.force_N if block == "force" else self.test.piston_m
+        return y - _cubic_eval(self.flat(block).mean(0), self.test.height_m - self.x0_m)
+
     def deviation_measures(self) -> tuple[float, float]:
         """The paper's s_P (N) and eps_P (%) of the posterior-mean curve (section 5)."""
-        P = self.test.force_N
-        res = P - _cubic_eval(self.flat("force").mean(0), self.test.height_m - self.x0_m)
-        return float(np.sqrt(np.mean(res**2))), float(100.0 * np.mean(np.abs(res / P)))
+        res = self.mean_residuals("force")
+        return float(np.sqrt(np.mean(res**2))), float(100.0 * np.mean(np.abs(res / self.test.force_N)))
 
     def pointwise_loglik(self, max_draws: int = 2000, seed: int = 0) -> dict[str, np.ndarray]:
         """Pointwise log-likelihood (chains, draws', n) of force and piston, for PSIS-LOO."""

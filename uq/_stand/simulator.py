@@ -347,7 +347,7 @@ def simulate_recordings(
 
 def simulation_comment(spring: str, effects: dict[str, float], stand: StandDescription, regenerate: str) -> str:
     """The comment lines of simulated recordings: what made them, and how to make them again."""
-    differs = {f: getattr(stand, f) for f in stand.__dataclass_fields__ if getattr(stand, f) != getattr(PAPER_STAND, f)}
+    differs = stand.changes()
     noise = ("noise from its error budget (section 3.2)" if not differs else
              "noise from its error budget (section 3.2) except " + ", ".join(f"{k} = {v:g}" for k, v in differs.items()))
     return (

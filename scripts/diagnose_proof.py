@@ -29,7 +29,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-MECHS = ("pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift", "volume_excess")
+MECHS = (
+    "pressure_dependent_area",
+    "casing_force",
+    "hysteresis",
+    "force_offset",
+    "thermal_drift",
+    "volume_excess",
+)
 MAGNITUDES = {  # (clearly visible, near the detection limit), units of section 4
     "pressure_dependent_area": (0.01, 0.002),
     "casing_force": (200.0, 40.0),
@@ -45,10 +52,23 @@ OTHER_STAND = {"load_cell_rel_sd": 0.008}
 #: heavy-tailed reading errors and pressure errors correlated from reading to reading.
 ROUGH_STAND = {"error_df": 5.0, "pressure_error_corr": 0.7}
 LAYOUTS = {
-    "paper": dict(pressures_bar=(0.1, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10), x_max_m=0.155, x_min_m=0.065, step_m=0.005),
-    "alt": dict(pressures_bar=(0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5), x_max_m=0.150, x_min_m=0.070, step_m=0.0025),
+    "paper": dict(
+        pressures_bar=(0.1, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10),
+        x_max_m=0.155,
+        x_min_m=0.065,
+        step_m=0.005,
+    ),
+    "alt": dict(
+        pressures_bar=(0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5),
+        x_max_m=0.150,
+        x_min_m=0.070,
+        step_m=0.0025,
+    ),
 }
-PAIRS = [{"hysteresis": 0.02, "thermal_drift": 2.0}, {"pressure_dependent_area": 0.01, "force_offset": 56.3}]
+PAIRS = [
+    {"hysteresis": 0.02, "thermal_drift": 2.0},
+    {"pressure_dependent_area": 0.01, "force_offset": 56.3},
+]
 
 
 def cases(n_seeds: int) -> list[dict]:
@@ -58,8 +78,12 @@ def cases(n_seeds: int) -> list[dict]:
             s = 1000 + seed
             out.append(dict(layout=layout, seed=s, effects={}, level="clean"))
             out.append(dict(layout=layout, seed=s + 500, effects={}, level="clean"))
-            out.append(dict(layout=layout, seed=s + 250, effects={}, level="clean", stand=OTHER_STAND))
-            out.append(dict(layout=layout, seed=s + 750, effects={}, level="clean", stand=ROUGH_STAND))
+            out.append(
+                dict(layout=layout, seed=s + 250, effects={}, level="clean", stand=OTHER_STAND)
+            )
+            out.append(
+                dict(layout=layout, seed=s + 750, effects={}, level="clean", stand=ROUGH_STAND)
+            )
             for m in MECHS:
                 for level, mag in zip(("visible", "near-limit"), MAGNITUDES[m], strict=True):
                     out.append(dict(layout=layout, seed=s, effects={m: mag}, level=level))
@@ -82,21 +106,51 @@ def run_case(case: dict) -> dict:
     from uq._stand.simulator import Layout, simulate
 
     stand = PAPER_STAND.replace(**case.get("stand", {}))
-    tests = simulate("n50-traditional", seed=case["seed"], effects=case["effects"], layout=Layout(**LAYOUTS[case["layout"]]),
-                     stand=stand)
-    rec = Recordings("proof", tuple(PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"],
-                                         t["step"], np.arange(t["step"].size)) for t in tests))
+    tests = simulate(
+        "n50-traditional",
+        seed=case["seed"],
+        effects=case["effects"],
+        layout=Layout(**LAYOUTS[case["layout"]]),
+        stand=stand,
+    )
+    rec = Recordings(
+        "proof",
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                t["piston_m"],
+                t["compression"],
+                t["step"],
+                np.arange(t["step"].size),
+            )
+            for t in tests
+        ),
+    )
     t0 = time.time()
-    res = public(diagnose(rec, seed=case["seed"], settings=Settings(min_steps=300, chunk=200, tau_multiple=30.0)))
-    return {**case, "key": key(case), "seconds": time.time() - t0, "n_points": rec.n_points,
-            "mismatch_detected": res["mismatch_detected"],
-            "named": [m["name"] for m in res["mechanisms"]],
-            "provisional": res["provisional"], "noise_check_passes": res["final"]["noise_check"]["passes"],
-            "magnitudes": {m["name"]: m["magnitude"] for m in res["mechanisms"]},
-            "gains": {m["name"]: [m["delta_elpd"], m["delta_elpd_se"]] for m in res["mechanisms"]},
-            "baseline_rms_N": res["baseline"]["rms_N"], "final_rms_N": res["final"]["rms_N"],
-            "baseline_elpd": res["baseline"]["elpd_loo"], "final_elpd": res["final"]["elpd_loo"],
-            "flags": res["where"]["flagged"]}
+    res = public(
+        diagnose(
+            rec, seed=case["seed"], settings=Settings(min_steps=300, chunk=200, tau_multiple=30.0)
+        )
+    )
+    return {
+        **case,
+        "key": key(case),
+        "seconds": time.time() - t0,
+        "n_points": rec.n_points,
+        "mismatch_detected": res["mismatch_detected"],
+        "named": [m["name"] for m in res["mechanisms"]],
+        "provisional": res["provisional"],
+        "noise_check_passes": res["final"]["noise_check"]["passes"],
+        "magnitudes": {m["name"]: m["magnitude"] for m in res["mechanisms"]},
+        "gains": {m["name"]: [m["delta_elpd"], m["delta_elpd_se"]] for m in res["mechanisms"]},
+        "baseline_rms_N": res["baseline"]["rms_N"],
+        "final_rms_N": res["final"]["rms_N"],
+        "baseline_elpd": res["baseline"]["elpd_loo"],
+        "final_elpd": res["final"]["elpd_loo"],
+        "flags": res["where"]["flagged"],
+    }
 
 
 def summarise(results: list[dict]) -> dict:
@@ -117,75 +171,144 @@ def summarise(results: list[dict]) -> dict:
     for m in MECHS:
         for level in ("visible", "near-limit"):
             for lay in LAYOUTS:
-                rs = [r for r in results if r["level"] == level and r["layout"] == lay and m in r["effects"]]
+                rs = [
+                    r
+                    for r in results
+                    if r["level"] == level and r["layout"] == lay and m in r["effects"]
+                ]
                 if not rs:
                     continue
                 hit = [r for r in rs if m in r["named"]]
-                inside = [r for r in hit if r["magnitudes"][m]["q05"] <= r["effects"][m] <= r["magnitudes"][m]["q95"]]
+                inside = [
+                    r
+                    for r in hit
+                    if r["magnitudes"][m]["q05"] <= r["effects"][m] <= r["magnitudes"][m]["q95"]
+                ]
                 exact = [r for r in rs if r["named"] == [m]]
-                det[f"{m}|{level}|{lay}"] = {"runs": len(rs), "named": len(hit), "named_alone": len(exact)}
+                det[f"{m}|{level}|{lay}"] = {
+                    "runs": len(rs),
+                    "named": len(hit),
+                    "named_alone": len(exact),
+                }
                 cov[f"{m}|{level}|{lay}"] = {"named": len(hit), "true_in_90": len(inside)}
     pairs = [r for r in results if r["level"] == "pair"]
     pair_ok = [r for r in pairs if set(r["named"]) == set(r["effects"])]
     all_cov = [(r, m) for r in results for m in r["effects"] if m in r["named"]]
-    inside = sum(r["magnitudes"][m]["q05"] <= r["effects"][m] <= r["magnitudes"][m]["q95"] for r, m in all_cov)
+    inside = sum(
+        r["magnitudes"][m]["q05"] <= r["effects"][m] <= r["magnitudes"][m]["q95"]
+        for r, m in all_cov
+    )
     single = [r for r in results if r["level"] in ("visible", "near-limit")]
     spurious = sum(len(set(r["named"]) - set(r["effects"])) > 0 for r in single)
     return {
         "n_runs": len(results),
-        "confusion": conf, "runs_per_true": counts,
-        "false_alarm_rate_clean": {"runs": len(clean), "mismatch_detected": sum(r["mismatch_detected"] for r in clean),
-                                   "mechanism_named": sum(bool(r["named"]) for r in clean),
-                                   "other_stand_runs": sum("stand" in r for r in clean),
-                                   "other_stand_mechanism_named": sum(bool(r["named"]) for r in clean if "stand" in r)},
-        "detection": det, "coverage_90": cov,
+        "confusion": conf,
+        "runs_per_true": counts,
+        "false_alarm_rate_clean": {
+            "runs": len(clean),
+            "mismatch_detected": sum(r["mismatch_detected"] for r in clean),
+            "mechanism_named": sum(bool(r["named"]) for r in clean),
+            "other_stand_runs": sum("stand" in r for r in clean),
+            "other_stand_mechanism_named": sum(bool(r["named"]) for r in clean if "stand" in r),
+        },
+        "detection": det,
+        "coverage_90": cov,
         "coverage_90_overall": {"named_true": len(all_cov), "true_in_90": int(inside)},
         "spurious_extra_mechanism_in_single_runs": {"runs": len(single), "with_extra": spurious},
-        "pairs": {"runs": len(pairs), "both_named_exactly": len(pair_ok),
-                  "named": [[r["key"], r["named"]] for r in pairs]},
-        "seconds": {"mean": float(np.mean([r["seconds"] for r in results])),
-                    "max": float(np.max([r["seconds"] for r in results])),
-                    "paper_layout_mean": float(np.mean([r["seconds"] for r in results if r["layout"] == "paper"]))},
+        "pairs": {
+            "runs": len(pairs),
+            "both_named_exactly": len(pair_ok),
+            "named": [[r["key"], r["named"]] for r in pairs],
+        },
+        "seconds": {
+            "mean": float(np.mean([r["seconds"] for r in results])),
+            "max": float(np.max([r["seconds"] for r in results])),
+            "paper_layout_mean": float(
+                np.mean([r["seconds"] for r in results if r["layout"] == "paper"])
+            ),
+        },
     }
 
 
 def markdown(s: dict, results: list[dict]) -> str:
-    short = {"pressure_dependent_area": "pda", "casing_force": "casing", "hysteresis": "hyst",
-             "force_offset": "offset", "thermal_drift": "drift", "volume_excess": "vol-excess", "nothing named": "nothing"}
-    lines = ["# uq diagnose: proof on concealed effects", "",
-             "Regenerate: `.venv/bin/python scripts/diagnose_proof.py --seeds N`. Spring `n50-traditional`"
-             " (obeys the traditional theory exactly) with effects concealed by the virtual stand.", "",
-             f"Runs: {s['n_runs']}. Layouts: paper (0.1, 1..10 bar, 155..65 mm, 5 mm steps); alt (0.5..6.5 bar,"
-             " 150..70 mm, 2.5 mm steps).", "",
-             "## Confusion matrix (single-mechanism and clean runs; rows: truth, columns: named)", "",
-             "| true \\ named | " + " | ".join(short[c] for c in [*MECHS, "nothing named"]) + " | runs |",
-             "|---" * (len(MECHS) + 3) + "|"]
+    short = {
+        "pressure_dependent_area": "pda",
+        "casing_force": "casing",
+        "hysteresis": "hyst",
+        "force_offset": "offset",
+        "thermal_drift": "drift",
+        "volume_excess": "vol-excess",
+        "nothing named": "nothing",
+    }
+    lines = [
+        "# uq diagnose: proof on concealed effects",
+        "",
+        "Regenerate: `.venv/bin/python scripts/diagnose_proof.py --seeds N`. Spring `n50-traditional`"
+        " (obeys the traditional theory exactly) with effects concealed by the virtual stand.",
+        "",
+        f"Runs: {s['n_runs']}. Layouts: paper (0.1, 1..10 bar, 155..65 mm, 5 mm steps); alt (0.5..6.5 bar,"
+        " 150..70 mm, 2.5 mm steps).",
+        "",
+        "## Confusion matrix (single-mechanism and clean runs; rows: truth, columns: named)",
+        "",
+        "| true \\ named | "
+        + " | ".join(short[c] for c in [*MECHS, "nothing named"])
+        + " | runs |",
+        "|---" * (len(MECHS) + 3) + "|",
+    ]
     for r, row in s["confusion"].items():
-        lines.append(f"| {short.get(r, r)} | " + " | ".join(str(v) for v in row.values()) + f" | {s['runs_per_true'][r]} |")
+        lines.append(
+            f"| {short.get(r, r)} | "
+            + " | ".join(str(v) for v in row.values())
+            + f" | {s['runs_per_true'][r]} |"
+        )
     fa = s["false_alarm_rate_clean"]
-    lines += ["", f"False alarms on clean data: mismatch_detected in {fa['mismatch_detected']}/{fa['runs']} runs, "
-              f"a mechanism named in {fa['mechanism_named']}/{fa['runs']} (of them, clean campaigns from a stand "
-              f"other than the model assumes, {OTHER_STAND} or {ROUGH_STAND}: named in {fa.get('other_stand_mechanism_named', 0)}/"
-              f"{fa.get('other_stand_runs', 0)}).", "",
-              "## Detection and coverage of the true magnitude by the 90 % interval", "",
-              "| mechanism | level | layout | named / runs | named alone | truth in 90 % / named |", "|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        f"False alarms on clean data: mismatch_detected in {fa['mismatch_detected']}/{fa['runs']} runs, "
+        f"a mechanism named in {fa['mechanism_named']}/{fa['runs']} (of them, clean campaigns from a stand "
+        f"other than the model assumes, {OTHER_STAND} or {ROUGH_STAND}: named in {fa.get('other_stand_mechanism_named', 0)}/"
+        f"{fa.get('other_stand_runs', 0)}).",
+        "",
+        "## Detection and coverage of the true magnitude by the 90 % interval",
+        "",
+        "| mechanism | level | layout | named / runs | named alone | truth in 90 % / named |",
+        "|---|---|---|---|---|---|",
+    ]
     for k, v in s["detection"].items():
         m, level, lay = k.split("|")
         c = s["coverage_90"][k]
-        lines.append(f"| {m} | {level} ({MAGNITUDES[m][0 if level == 'visible' else 1]:g}) | {lay} | {v['named']}/{v['runs']} | "
-                     f"{v['named_alone']} | {c['true_in_90']}/{c['named']} |")
+        lines.append(
+            f"| {m} | {level} ({MAGNITUDES[m][0 if level == 'visible' else 1]:g}) | {lay} | {v['named']}/{v['runs']} | "
+            f"{v['named_alone']} | {c['true_in_90']}/{c['named']} |"
+        )
     co = s["coverage_90_overall"]
     sp = s["spurious_extra_mechanism_in_single_runs"]
-    lines += ["", f"Overall coverage: {co['true_in_90']}/{co['named_true']} named true mechanisms have the truth in the"
-              " 90 % interval.", f"Single-mechanism runs with an extra (wrong) mechanism named: {sp['with_extra']}/{sp['runs']}.",
-              "", f"Two-mechanism campaigns: both named exactly in {s['pairs']['both_named_exactly']}/{s['pairs']['runs']}:", ""]
+    lines += [
+        "",
+        f"Overall coverage: {co['true_in_90']}/{co['named_true']} named true mechanisms have the truth in the"
+        " 90 % interval.",
+        f"Single-mechanism runs with an extra (wrong) mechanism named: {sp['with_extra']}/{sp['runs']}.",
+        "",
+        f"Two-mechanism campaigns: both named exactly in {s['pairs']['both_named_exactly']}/{s['pairs']['runs']}:",
+        "",
+    ]
     lines += [f"- `{k}` -> {', '.join(n) or 'nothing'}" for k, n in s["pairs"]["named"]]
     sec = s["seconds"]
-    lines += ["", f"Time per campaign: mean {sec['mean']:.1f} s, max {sec['max']:.1f} s (paper layout mean "
-              f"{sec['paper_layout_mean']:.1f} s; wall time on the shared 2-core machine, including compilation).", "",
-              "## Every run", "", "| run | named | baseline rms N | final rms N | s |", "|---|---|---|---|---|"]
+    lines += [
+        "",
+        f"Time per campaign: mean {sec['mean']:.1f} s, max {sec['max']:.1f} s (paper layout mean "
+        f"{sec['paper_layout_mean']:.1f} s; wall time on the shared 2-core machine, including compilation).",
+        "",
+        "## Every run",
+        "",
+        "| run | named | baseline rms N | final rms N | s |",
+        "|---|---|---|---|---|",
+    ]
     for r in results:
-        lines.append(f"| `{r['key']}` | {', '.join(r['named']) or '-'} | {r['baseline_rms_N']:.1f} | {r['final_rms_N']:.1f} | {r['seconds']:.0f} |")
+        lines.append(
+            f"| `{r['key']}` | {', '.join(r['named']) or '-'} | {r['baseline_rms_N']:.1f} | {r['final_rms_N']:.1f} | {r['seconds']:.0f} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -195,22 +318,36 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "reports" / "diagnose-proof"))
     ap.add_argument("--fresh", action="store_true")
-    ap.add_argument("--only-summary", action="store_true", help="rewrite summary and README from results.json")
+    ap.add_argument(
+        "--only-summary", action="store_true", help="rewrite summary and README from results.json"
+    )
     args = ap.parse_args(argv)
     from uq._io.files import dumps_json, write_text_atomic
 
     out = Path(args.out)
     path = out / "results.json"
-    done = {} if args.fresh or not path.exists() else {r["key"]: r for r in json.loads(path.read_text())}
+    done = (
+        {}
+        if args.fresh or not path.exists()
+        else {r["key"]: r for r in json.loads(path.read_text())}
+    )
     todo = [c for c in cases(args.seeds) if key(c) not in done]
     if not args.only_summary and todo:
         # Clean controls and visible effects first, so a cut-short run still says something.
-        todo.sort(key=lambda c: ((c["seed"] - 1000) % 250, {"clean": 0, "visible": 1, "pair": 2, "near-limit": 3}[c["level"]]))
+        todo.sort(
+            key=lambda c: (
+                (c["seed"] - 1000) % 250,
+                {"clean": 0, "visible": 1, "pair": 2, "near-limit": 3}[c["level"]],
+            )
+        )
         ctx = mp.get_context("spawn")
         with ctx.Pool(args.jobs, maxtasksperchild=None) as pool:
             for r in pool.imap_unordered(run_case, todo):
                 done[r["key"]] = r
-                print(f"{r['key']}: named {r['named'] or 'nothing'} ({r['seconds']:.0f} s)", flush=True)
+                print(
+                    f"{r['key']}: named {r['named'] or 'nothing'} ({r['seconds']:.0f} s)",
+                    flush=True,
+                )
                 write_text_atomic(path, dumps_json(sorted(done.values(), key=lambda r: r["key"])))
     results = sorted(done.values(), key=lambda r: r["key"])
     s = summarise(results)

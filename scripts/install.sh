@@ -3,7 +3,7 @@
 # project itself without touching them. Used by main.sh and test.sh; safe to rerun.
 # pyproject.toml keeps compatible ranges for library users; the lock is what CI and the README's
 # numbers were made with. Regenerate it (e.g. after changing pyproject.toml) with uv:
-#   uv pip compile pyproject.toml requirements/build.in --extra test --python-version 3.11 \
+#   uv pip compile pyproject.toml requirements/build.in --extra test --extra docs --python-version 3.11 \
 #       --generate-hashes -o requirements/lock.txt          (add --upgrade to move to newer versions)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -26,7 +26,9 @@ from uq._models.cubic import (
     to_paper_basis,
 )
 
-GRID = np.linspace(NOISE_PRIOR_MEAN[2] - 12, NOISE_PRIOR_MEAN[2] + 12, 2401)  # log sigma_L, +-6 prior sd
+GRID = np.linspace(
+    NOISE_PRIOR_MEAN[2] - 12, NOISE_PRIOR_MEAN[2] + 12, 2401
+)  # log sigma_L, +-6 prior sd
 
 
 def ranks_of_one(rng, pressure_bar: float) -> np.ndarray:
@@ -43,7 +45,11 @@ def ranks_of_one(rng, pressure_bar: float) -> np.ndarray:
     draws = []
     for s in np.exp(log_s):
         A = X.T @ X / s**2 + np.eye(4) / PISTON_PRIOR_SD_M**2
-        draws.append(to_paper_basis(rng.multivariate_normal(np.linalg.solve(A, X.T @ y / s**2), np.linalg.inv(A))))
+        draws.append(
+            to_paper_basis(
+                rng.multivariate_normal(np.linalg.solve(A, X.T @ y / s**2), np.linalg.inv(A))
+            )
+        )
     return np.sum(np.array(draws) < truth[4:8], axis=0)
 
 

@@ -27,18 +27,28 @@ def _run_examples(obj, name: str) -> None:
     for t in tests:
         runner.run(t)
     result = runner.summarize(verbose=False)
-    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed (output above)"
+    assert result.failed == 0, (
+        f"{result.failed} of {result.attempted} examples of {name} failed (output above)"
+    )
 
 
 def test_notebook_one_liner(tmp_path):
     """uq.write_report(uq.fit_campaign(uq.simulate("n50")), "out/"), small."""
-    page = uq.write_report(uq.fit_campaign(uq.simulate("n50", **SMALL), settings=QUICK), tmp_path / "out", draws=100)
+    page = uq.write_report(
+        uq.fit_campaign(uq.simulate("n50", **SMALL), settings=QUICK), tmp_path / "out", draws=100
+    )
     assert page == tmp_path / "out" / "report.html"
     text = page.read_text(encoding="utf-8")
     assert "Reconstructed data" in text and "simulated n50 (seed 0)" in text
     assert sorted(p.name for p in page.parent.glob("*.png")) == [
-        "fig2_force.png", "fig3_volume.png", "fig4_feff.png", "fig5_traditional.png", "fig_feff_scatter.png",
-        "test_1bar.png", "test_5bar.png"]
+        "fig2_force.png",
+        "fig3_volume.png",
+        "fig4_feff.png",
+        "fig5_traditional.png",
+        "fig_feff_scatter.png",
+        "test_1bar.png",
+        "test_5bar.png",
+    ]
 
 
 def test_simulate_equals_the_cli_csv_read_back(tmp_path):
@@ -47,7 +57,23 @@ def test_simulate_equals_the_cli_csv_read_back(tmp_path):
     from uq._report.campaign import read_comments
 
     csv = tmp_path / "r.csv"
-    assert main(["simulate", "--out", str(csv), "--pressures", "1,5", "--step-mm", "10", "--seed", "4", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(csv),
+                "--pressures",
+                "1,5",
+                "--step-mm",
+                "10",
+                "--seed",
+                "4",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     from_file = uq.read_recordings(csv)
     in_memory = uq.simulate("n50", seed=4, **SMALL)
     assert (in_memory.x0_m, in_memory.piston_area_m2) == (from_file.x0_m, from_file.piston_area_m2)
@@ -64,8 +90,20 @@ def test_write_report_refuses_too_few_draws(tmp_path):
         uq.write_report(object(), tmp_path, draws=5)
 
 
-@pytest.mark.parametrize("name", ["simulate", "fit_campaign", "write_report", "campaign_bands", "check",
-                                  "enable_x64", "read_stand", "StandDescription", "table1"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "simulate",
+        "fit_campaign",
+        "write_report",
+        "campaign_bands",
+        "check",
+        "enable_x64",
+        "read_stand",
+        "StandDescription",
+        "table1",
+    ],
+)
 def test_docstring_examples(name):
     _run_examples(getattr(uq, name), name)
 
@@ -81,14 +119,19 @@ def test_public_names_resolve_and_are_documented():
         obj = getattr(uq, name)
         if callable(obj) and name not in ("InputError",):
             assert (obj.__doc__ or "").strip(), f"uq.{name} has no docstring"
-    assert uq.simulate is uq._stand.simulator.simulate_recordings and uq.check is uq._derived.check.check_documents
+    assert (
+        uq.simulate is uq._stand.simulator.simulate_recordings
+        and uq.check is uq._derived.check.check_documents
+    )
 
 
 def test_import_uq_loads_no_jax_and_leaves_x64_alone():
-    code = ("import sys, uq; assert 'jax' not in sys.modules and 'numpy' not in sys.modules, sorted(sys.modules); "
-            "uq.Layout; import jax; assert not jax.config.read('jax_enable_x64'); "
-            "uq.fit_campaign; assert jax.config.read('jax_enable_x64'); "
-            "uq.enable_x64(); uq.enable_x64(); assert jax.config.read('jax_enable_x64')")
+    code = (
+        "import sys, uq; assert 'jax' not in sys.modules and 'numpy' not in sys.modules, sorted(sys.modules); "
+        "uq.Layout; import jax; assert not jax.config.read('jax_enable_x64'); "
+        "uq.fit_campaign; assert jax.config.read('jax_enable_x64'); "
+        "uq.enable_x64(); uq.enable_x64(); assert jax.config.read('jax_enable_x64')"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "" and "Warning" not in out.stderr

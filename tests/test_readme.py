@@ -24,12 +24,16 @@ def test_every_generated_block_is_known_and_filled():
     assert set(names) <= set(mod.BLOCKS)
     assert {"fit-n50", "calibration", "diagnose-proof", "diagnose-n50", "speed"} <= set(names)
     for m in mod.BLOCK.finditer((ROOT / "README.md").read_text()):
-        assert m["body"].strip(), f"README block {m['name']} is empty: run python scripts/readme_numbers.py"
+        assert m["body"].strip(), (
+            f"README block {m['name']} is empty: run python scripts/readme_numbers.py"
+        )
 
 
 def test_report_blocks_agree_with_committed_reports():
     """Blocks made from reports/ (calibration, coverage, proof, timings) are what the script makes of them."""
-    proc = subprocess.run([sys.executable, str(SCRIPT), "--check"], cwd=ROOT, capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT), "--check"], cwd=ROOT, capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
@@ -41,4 +45,7 @@ def test_regenerate_replaces_only_the_block_body():
         out, changed = mod.regenerate(text.replace("speed", "__t"), {"__t"})
     finally:
         del mod.BLOCKS["__t"]
-    assert out == "a\n<!-- generated: __t -->\nnew\n<!-- end generated: __t -->\nb\n" and changed == ["__t"]
+    assert (
+        out == "a\n<!-- generated: __t -->\nnew\n<!-- end generated: __t -->\nb\n"
+        and changed == ["__t"]
+    )

@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from uq._check import lsq_covariance
-from uq._io import dumps_json, write_text_atomic
-from uq._reference import FORCE_NAMES, PAPER_X0_M, PISTON_NAMES, table1, table2
-from uq._stand import Layout, N50Spring, noise_sd
+from uq._data.reference import FORCE_NAMES, PAPER_X0_M, PISTON_NAMES, table1, table2
+from uq._derived.check import lsq_covariance
+from uq._io.files import dumps_json, write_text_atomic
+from uq._stand.simulator import Layout, N50Spring, noise_sd
 
 HERE = Path(__file__).resolve().parent
 
@@ -44,7 +44,8 @@ def _clean(v: float) -> float:
 COVARIANCE_SOURCE = (
     "sampling covariance of the paper's least-squares estimator on the 37 readings of section 3.4: "
     "force with Table 2's s_P (s_P^2 N/(N-4) (X^T X)^-1), piston with the stand's error budget "
-    "(uq._stand.noise_sd); see fits/n50/make_points.py")
+    "(uq._stand.simulator.noise_sd); see fits/n50/make_points.py"
+)
 
 
 def covariances(p_bar: float) -> dict:
@@ -56,7 +57,10 @@ def covariances(p_bar: float) -> dict:
     # The budget differentiates along height, so it wants each height once, in order.
     unique, back = np.unique(heights, return_inverse=True)
     sd_piston = noise_sd(N50Spring(), unique, float(p_bar))[1][back]
-    return {"force": lsq_covariance(u, s_p * np.sqrt(n / (n - 4))), "piston": lsq_covariance(u, sd_piston)}
+    return {
+        "force": lsq_covariance(u, s_p * np.sqrt(n / (n - 4))),
+        "piston": lsq_covariance(u, sd_piston),
+    }
 
 
 def points() -> dict:
@@ -64,13 +68,19 @@ def points() -> dict:
     tests = []
     for i, p in enumerate(t.pressures_bar):
         cov = covariances(p)
-        tests.append({
-            "pressure_bar": float(p),
-            "force": {n: _clean(v) for n, v in zip(FORCE_NAMES, t.force[i], strict=True)},
-            "piston": {n: _clean(v) for n, v in zip(PISTON_NAMES, t.piston[i], strict=True)},
-            "covariance": {b: [[_clean(v) for v in row] for row in c] for b, c in cov.items()},
-        })
-    return {"source": "Table 1 of the paper, converted to SI", "covariance_source": COVARIANCE_SOURCE, "tests": tests}
+        tests.append(
+            {
+                "pressure_bar": float(p),
+                "force": {n: _clean(v) for n, v in zip(FORCE_NAMES, t.force[i], strict=True)},
+                "piston": {n: _clean(v) for n, v in zip(PISTON_NAMES, t.piston[i], strict=True)},
+                "covariance": {b: [[_clean(v) for v in row] for row in c] for b, c in cov.items()},
+            }
+        )
+    return {
+        "source": "Table 1 of the paper, converted to SI",
+        "covariance_source": COVARIANCE_SOURCE,
+        "tests": tests,
+    }
 
 
 def main() -> None:

@@ -56,8 +56,14 @@ def _bad_usage_rows(tmp: Path):
         (["margin", N50, "--height-mm", 112, "--load-N", 13000, "--prob", 1.5], ["--prob", "1.5"]),
         (["margin", N50, "--height-mm", 112, "--load-N", 13000, "--prob", 0], ["--prob"]),
         (["margin", N50, "--height-mm", 112, "--load-N", -5], ["--load-N"]),
-        (["margin", N50, "--height-mm", 112, "--load-N", 13000, "--tolerance-pct", 5], ["--tolerance-pct", "--pressure-bar"]),
-        (["margin", N50, "--height-mm", 112, "--load-N", 13000, "--pressure-bar", 20], ["--pressure-bar", "20"]),
+        (
+            ["margin", N50, "--height-mm", 112, "--load-N", 13000, "--tolerance-pct", 5],
+            ["--tolerance-pct", "--pressure-bar"],
+        ),
+        (
+            ["margin", N50, "--height-mm", 112, "--load-N", 13000, "--pressure-bar", 20],
+            ["--pressure-bar", "20"],
+        ),
         (["margin", N50, "--height-mm", "nan", "--load-N", 13000], ["--height-mm"]),
         (["fit", N50, "--seed", -1], ["--seed"]),
         (["fit", N50, "--walkers", 3], ["--walkers"]),
@@ -72,8 +78,14 @@ def _bad_usage_rows(tmp: Path):
         (["report", N50, "--out", afile], ["--out", "existing file"]),
         (["report", N50, "--out", tmp / "r", "--draws", 0], ["--draws"]),
         (["surface", N50, "--report", afile], ["--report"]),
-        (["surface", N50, "--walkers", 8], ["--walkers", "12"]),  # 5 noise parameters: emcee needs >= 10, a multiple of 4
-        (["margin", N50, "--height-mm", 112, "--load-N", 13000, "--walkers", 8], ["--walkers", "12"]),
+        (
+            ["surface", N50, "--walkers", 8],
+            ["--walkers", "12"],
+        ),  # 5 noise parameters: emcee needs >= 10, a multiple of 4
+        (
+            ["margin", N50, "--height-mm", 112, "--load-N", 13000, "--walkers", 8],
+            ["--walkers", "12"],
+        ),
         (["diagnose", N50, "--report", afile], ["--report"]),
         (["diagnose", N50, "--json", tmp], ["--json"]),
         (["calibrate", "--truth", "prior,bogus"], ["--truth", "bogus"]),
@@ -137,11 +149,22 @@ def _raise(exc):
     return command
 
 
-@pytest.mark.parametrize("exc, status, words", [
-    (RuntimeError("boom\nsecond line"), 3, ["internal error", "RuntimeError", "boom", "--debug"]),
-    (KeyboardInterrupt(), 130, ["interrupted"]),
-    (PermissionError(13, "Permission denied", "/somewhere/x.json"), 2, ["Permission denied", "/somewhere/x.json"]),
-])
+@pytest.mark.parametrize(
+    "exc, status, words",
+    [
+        (
+            RuntimeError("boom\nsecond line"),
+            3,
+            ["internal error", "RuntimeError", "boom", "--debug"],
+        ),
+        (KeyboardInterrupt(), 130, ["interrupted"]),
+        (
+            PermissionError(13, "Permission denied", "/somewhere/x.json"),
+            2,
+            ["Permission denied", "/somewhere/x.json"],
+        ),
+    ],
+)
 def test_exit_status_of_failures(monkeypatch, capsys, exc, status, words):
     monkeypatch.setattr(_cmd_basic, "command_simulate", _raise(exc))
     assert run(["simulate", "--out", os.devnull]) == status
@@ -161,7 +184,9 @@ def test_debug_prints_the_traceback(monkeypatch, capsys, how):
         argv += how
     assert run(argv) == 3
     err = capsys.readouterr().err
-    assert "Traceback" in err and err.strip().splitlines()[-1].startswith("uq simulate: internal error: RuntimeError: boom")
+    assert "Traceback" in err and err.strip().splitlines()[-1].startswith(
+        "uq simulate: internal error: RuntimeError: boom"
+    )
 
 
 @pytest.mark.parametrize("returned, status", [(0, 0), (1, 1), (None, 0)])
@@ -185,13 +210,19 @@ def test_help_imports_nothing_heavy():
 
     Checked in a fresh interpreter (this one has them loaded already); not a timed assertion.
     """
-    code = ("import sys, uq._cli.main\n"
-            "for argv in ([], ['fit'], ['simulate']):\n"
-            "    uq._cli.main.build_parser(argv).format_help()\n"
-            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    code = (
+        "import sys, uq._cli.main\n"
+        "for argv in ([], ['fit'], ['simulate']):\n"
+        "    uq._cli.main.build_parser(argv).format_help()\n"
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"
-    r = subprocess.run([sys.executable, "-m", "uq._cli.main", "--help"], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "uq._cli.main", "--help"], capture_output=True, text=True
+    )
     assert r.returncode == 0 and all(name in r.stdout for name, _, _ in COMMANDS)
 
 
@@ -200,17 +231,21 @@ def test_compilation_cache_is_on_for_every_command(name, tmp_path):
     """The persistent compilation cache must be configured before a command's module is imported
     (some import JAX at the top, and JAX reads its cache settings on import): in a fresh
     interpreter, after `uq NAME --help`, JAX's cache directory is UQ_CACHE_DIR."""
-    code = ("import sys\n"
-            "from uq._cli.main import main\n"
-            "try:\n"
-            f"    main([{name!r}, '--help'])\n"
-            "except SystemExit:\n"
-            "    pass\n"
-            "import jax\n"
-            "print('CACHE', jax.config.jax_compilation_cache_dir)\n")
+    code = (
+        "import sys\n"
+        "from uq._cli.main import main\n"
+        "try:\n"
+        f"    main([{name!r}, '--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "import jax\n"
+        "print('CACHE', jax.config.jax_compilation_cache_dir)\n"
+    )
     env = {**os.environ, "UQ_CACHE_DIR": str(tmp_path)}
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env).stdout
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    ).stdout
     assert out.strip().splitlines()[-1] == f"CACHE {tmp_path}"
 
 
@@ -228,13 +263,17 @@ def test_every_default_is_shown_in_help(name):
             continue
         text = fmt._get_help_string(action) % {"default": action.default}
         shown = re.search(r"default:? ([^);]*)[);]", text) or re.search(r"(\S+) \(default\)", text)
-        assert shown, f"{name} {action.option_strings[0]}: default {action.default!r} not shown: {text!r}"
+        assert shown, (
+            f"{name} {action.option_strings[0]}: default {action.default!r} not shown: {text!r}"
+        )
         value = shown.group(1)
         try:
             same = float(value) == float(action.default)
         except (TypeError, ValueError):
             same = value == str(action.default)
-        assert same, f"{name} {action.option_strings[0]}: help says default {value!r}, parser uses {action.default!r}"
+        assert same, (
+            f"{name} {action.option_strings[0]}: help says default {value!r}, parser uses {action.default!r}"
+        )
         checked += 1
     assert checked >= 1
 
@@ -257,10 +296,16 @@ def test_light_constants_equal_the_library():
     from uq._inference.sampler import Settings
     from uq._stand.simulator import SPRINGS
 
-    assert (_cmd_common.DEFAULT_PISTON_AREA_CM2, _cmd_common.DEFAULT_X0_MM) == (DEFAULT_PISTON_AREA_CM2, DEFAULT_X0_MM)
+    assert (_cmd_common.DEFAULT_PISTON_AREA_CM2, _cmd_common.DEFAULT_X0_MM) == (
+        DEFAULT_PISTON_AREA_CM2,
+        DEFAULT_X0_MM,
+    )
     s = Settings()
-    assert (_cmd_common.DEFAULT_WALKERS, _cmd_common.DEFAULT_ENSEMBLES, _cmd_common.DEFAULT_MAX_STEPS) == (
-        s.n_walkers, s.n_ensembles, s.max_steps)
+    assert (
+        _cmd_common.DEFAULT_WALKERS,
+        _cmd_common.DEFAULT_ENSEMBLES,
+        _cmd_common.DEFAULT_MAX_STEPS,
+    ) == (s.n_walkers, s.n_ensembles, s.max_steps)
     assert set(_cmd_basic.SPRING_NAMES) == set(SPRINGS)
     assert _cmd_basic._pressures(_cmd_basic.PAPER_PRESSURES) == tuple(PAPER_PRESSURES_BAR)
 
@@ -283,13 +328,35 @@ def small(tmp_path_factory):
     """A small campaign (6 tests, the fewest the surface model takes; 15 mm steps) and its fit JSON, made through the CLI."""
     d = tmp_path_factory.mktemp("small")
     csv = d / "r.csv"
-    assert main(["simulate", "--out", str(csv), "--pressures", "1,2,4,6,8,10", "--step-mm", "15", "--seed", "3"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(csv),
+                "--pressures",
+                "1,2,4,6,8,10",
+                "--step-mm",
+                "15",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     fit = d / "fit.json"
     assert main(["fit", str(csv), "--json", str(fit), "--max-steps", "400"]) == 0
-    means = [{"pressure_bar": t["pressure_bar"], **{b: {k: v["mean"] for k, v in t[b].items()} for b in ("force", "piston")}}
-             for t in json.loads(fit.read_text())["tests"]]
+    means = [
+        {
+            "pressure_bar": t["pressure_bar"],
+            **{b: {k: v["mean"] for k, v in t[b].items()} for b in ("force", "piston")},
+        }
+        for t in json.loads(fit.read_text())["tests"]
+    ]
     (d / "points.json").write_text(json.dumps({"source": "the fit's own means", "tests": means}))
-    (d / "batch.csv").write_text("name,file,tasks,walkers,ensembles,max_steps\nsmall,r.csv,fit,8,2,60\n")
+    (d / "batch.csv").write_text(
+        "name,file,tasks,walkers,ensembles,max_steps\nsmall,r.csv,fit,8,2,60\n"
+    )
     return d, csv, fit
 
 
@@ -300,9 +367,28 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         "fit": ["fit", csv, *quick],
         "report": ["report", csv, "--out", d / "rep", "--draws", "50", *quick],
         "check": ["check", fit, "--against", d / "points.json"],
-        "bench": ["bench", "--seconds", "0", "--seed", "3", "--walkers", "8", "--max-steps", "60", "--baseline-walkers", "12",
-                  "--bench-dir", d / "bench"],
-        "surface": ["surface", csv, "--no-compare", "--max-steps", "300"],  # 5 sampled parameters: >= 10 walkers
+        "bench": [
+            "bench",
+            "--seconds",
+            "0",
+            "--seed",
+            "3",
+            "--walkers",
+            "8",
+            "--max-steps",
+            "60",
+            "--baseline-walkers",
+            "12",
+            "--bench-dir",
+            d / "bench",
+        ],
+        "surface": [
+            "surface",
+            csv,
+            "--no-compare",
+            "--max-steps",
+            "300",
+        ],  # 5 sampled parameters: >= 10 walkers
         "margin": ["margin", csv, "--height-mm", 110, "--load-N", 8000, "--max-steps", "300"],
         "diagnose": ["diagnose", csv, "--max-mechanisms", "0", *quick],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
@@ -355,7 +441,9 @@ def test_progress_only_on_a_terminal_and_not_quiet(monkeypatch, restore_progress
 def test_cli_quiet_switches_progress_off(monkeypatch, restore_progress, quiet, shown):
     seen = []
     monkeypatch.setattr(sys, "stderr", FakeTerminal())
-    monkeypatch.setattr(_cmd_basic, "command_simulate", lambda args: seen.append(_progress.active()) or 0)
+    monkeypatch.setattr(
+        _cmd_basic, "command_simulate", lambda args: seen.append(_progress.active()) or 0
+    )
     assert run(["simulate", "--out", os.devnull, *quiet]) == 0
     assert seen == [shown]
 
@@ -392,17 +480,24 @@ def test_fit_config_is_read_and_the_command_line_wins():
     assert Path(args.file).resolve() == Path(N50).resolve()
     raw = tomllib.loads(toml.read_text())
     assert (args.seed, args.walkers, args.max_steps, args.x0_mm) == (
-        raw["sampling"]["seed"], raw["sampling"]["walkers"], raw["sampling"]["max_steps"], raw["data"]["x0_mm"])
+        raw["sampling"]["seed"],
+        raw["sampling"]["walkers"],
+        raw["sampling"]["max_steps"],
+        raw["data"]["x0_mm"],
+    )
     args = _parse(build_parser(["fit"]), ["fit", "--config", str(toml), "--seed", "7", "other.csv"])
     assert (args.seed, args.file) == (7, "other.csv")
 
 
-@pytest.mark.parametrize("text, words", [
-    ("[data]\nrecordings = 'r.csv'\nx0mm = 112\n", ["x0mm"]),
-    ("[sampling]\nwalkers = 3\n", ["walkers"]),
-    ("[sampler]\nwalkers = 16\n", ["[sampler]"]),
-    ("[data\n", ["TOML"]),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("[data]\nrecordings = 'r.csv'\nx0mm = 112\n", ["x0mm"]),
+        ("[sampling]\nwalkers = 3\n", ["walkers"]),
+        ("[sampler]\nwalkers = 16\n", ["[sampler]"]),
+        ("[data\n", ["TOML"]),
+    ],
+)
 def test_bad_fit_config_exits_2(tmp_path, capsys, no_fitting, text, words):
     cfg = tmp_path / "fit.toml"
     cfg.write_text(text)
@@ -430,11 +525,15 @@ def test_lock_pins_every_dependency_within_pyproject_ranges():
 
     pins = _lock()
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    reqs = [Requirement(r) for r in project["dependencies"] + project["optional-dependencies"]["test"]]
+    reqs = [
+        Requirement(r) for r in project["dependencies"] + project["optional-dependencies"]["test"]
+    ]
     for r in reqs:
         name = re.sub(r"[-_.]+", "-", r.name).lower()
         assert name in pins, f"{r.name} is not in requirements/lock.txt"
-        assert r.specifier.contains(pins[name], prereleases=True), f"lock {name}=={pins[name]} outside {r}"
+        assert r.specifier.contains(pins[name], prereleases=True), (
+            f"lock {name}=={pins[name]} outside {r}"
+        )
     hashes = (ROOT / "requirements" / "lock.txt").read_text().count("--hash=sha256:")
     assert hashes >= len(pins)
 
@@ -477,7 +576,9 @@ def test_simulate_with_another_stand(tmp_path):
         (t,) = read_recordings(str(out)).tests
         res = t.force_N - np.polyval(np.polyfit(t.height_m, t.force_N, 3), t.height_m)
         scatter[name] = float(np.std(res))
-    assert "load_cell_rel_sd = 0.02" in (tmp_path / "noisy.csv").read_text().split("pressure_bar")[0]
+    assert (
+        "load_cell_rel_sd = 0.02" in (tmp_path / "noisy.csv").read_text().split("pressure_bar")[0]
+    )
     # 2 % against 0.5 % of about 22 kN: the load-cell term dominates, so the scatter is several times larger
     assert scatter["noisy"] > 3 * scatter["paper"]
     bad = tmp_path / "bad.toml"
@@ -499,7 +600,9 @@ def test_sampling_runs_show_a_step_bar(monkeypatch, restore_progress):
     tty = FakeTerminal()
     monkeypatch.setattr(sys, "stderr", tty)
     _progress.set_enabled(True)
-    run_ensembles(lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings, desc="surface sampling")
+    run_ensembles(
+        lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings, desc="surface sampling"
+    )
     assert "surface sampling" in tty.getvalue() and "step" in tty.getvalue()
     before = tty.getvalue()
     run_ensembles(lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings)

@@ -18,7 +18,9 @@ from uq._io.errors import InputError
 from uq._io.files import remove_stale, write_text_atomic
 from uq._stand.simulator import Layout, simulate
 
-GOOD = write_recordings_csv(simulate("n50", seed=5, layout=Layout(pressures_bar=(1.0, 5.0)))).splitlines()
+GOOD = write_recordings_csv(
+    simulate("n50", seed=5, layout=Layout(pressures_bar=(1.0, 5.0)))
+).splitlines()
 COLS = GOOD[0].split(",")
 FIRST = 2  # file line of the first data row (line 1 is the header)
 
@@ -52,7 +54,9 @@ def _scaled(factor):
     return lambda text: f"{float(text) * factor:.6g}"
 
 
-def _heights_down_up(lines, i, text):  # a mistyped height that still fits the compression branch's order
+def _heights_down_up(
+    lines, i, text
+):  # a mistyped height that still fits the compression branch's order
     return _cell(lines, i, "height_mm", lambda _: text)
 
 
@@ -60,31 +64,100 @@ def _heights_down_up(lines, i, text):  # a mistyped height that still fits the c
 RECORDINGS = [
     ("force-1e300", _cell(GOOD, 10, "force_N", lambda _: "1e300"), [], ["row 12", "'force_N'"]),
     ("one-force-1e9", _cell(GOOD, 3, "force_N", lambda _: "1e9"), [], ["row 5", "'force_N'"]),
-    ("one-height-1e12", _cell(GOOD, 3, "height_mm", lambda _: "1e12"), [], ["row 5", "'height_mm'"]),
-    ("heights-in-micrometres", _column(GOOD, "height_mm", _scaled(1000)), [], ["row 2", "'height_mm'", "micrometres"]),
-    ("heights-in-metres", _column(GOOD, "height_mm", _scaled(0.001)), [], ["row 2", "'height_mm'", "metres"]),
+    (
+        "one-height-1e12",
+        _cell(GOOD, 3, "height_mm", lambda _: "1e12"),
+        [],
+        ["row 5", "'height_mm'"],
+    ),
+    (
+        "heights-in-micrometres",
+        _column(GOOD, "height_mm", _scaled(1000)),
+        [],
+        ["row 2", "'height_mm'", "micrometres"],
+    ),
+    (
+        "heights-in-metres",
+        _column(GOOD, "height_mm", _scaled(0.001)),
+        [],
+        ["row 2", "'height_mm'", "metres"],
+    ),
     ("force-in-kN", _column(GOOD, "force_N", _scaled(0.001)), [], ["row 39", "'force_N'", "kN"]),
-    ("piston-in-m", _column(GOOD, "piston_mm", _scaled(0.001)), [], ["row 39", "'piston_mm'", "in m"]),
-    ("pressure-in-kPa", _column(GOOD, "pressure_bar", _scaled(100)), [], ["row 2", "'pressure_bar'", "kPa"]),
-    ("low-pressures-in-kPa", _column(write_recordings_csv(simulate("n50-traditional", seed=5, layout=Layout(
-        pressures_bar=(0.1, 0.3)))).splitlines(), "pressure_bar", _scaled(100)), [], ["row 39", "unit slip"]),
+    (
+        "piston-in-m",
+        _column(GOOD, "piston_mm", _scaled(0.001)),
+        [],
+        ["row 39", "'piston_mm'", "in m"],
+    ),
+    (
+        "pressure-in-kPa",
+        _column(GOOD, "pressure_bar", _scaled(100)),
+        [],
+        ["row 2", "'pressure_bar'", "kPa"],
+    ),
+    (
+        "low-pressures-in-kPa",
+        _column(
+            write_recordings_csv(
+                simulate("n50-traditional", seed=5, layout=Layout(pressures_bar=(0.1, 0.3)))
+            ).splitlines(),
+            "pressure_bar",
+            _scaled(100),
+        ),
+        [],
+        ["row 39", "unit slip"],
+    ),
     ("x0-outside-heights", GOOD, ["--x0-mm", "40"], ["--x0-mm", "65..155"]),
-    ("force-outlier-x10", _cell(GOOD, 47, "force_N", _scaled(10)), [], ["row 49", "'force_N'", "outlier"]),
-    ("force-outlier-x0.1", _cell(GOOD, 20, "force_N", _scaled(0.1)), [], ["row 22", "'force_N'", "outlier"]),
-    ("piston-outlier-x10", _cell(GOOD, 60, "piston_mm", _scaled(10)), [], ["row 62", "'piston_mm'", "outlier"]),
-    ("mistyped-height-named", _heights_down_up(GOOD, 2, "14.5"), [], ["row 4", "'height_mm'", "14.5 mm"]),
-    ("decimal-comma-in-csv", [GOOD[0]] + ['"1,5"' + GOOD[1][1:]] + GOOD[2:], [], ["row 2", "'pressure_bar'", "decimal comma"]),
-    ("extra-field-hint", GOOD[:5] + [GOOD[5].replace(".", ",", 1)] + GOOD[6:], [], ["row 6", "decimal comma"]),
+    (
+        "force-outlier-x10",
+        _cell(GOOD, 47, "force_N", _scaled(10)),
+        [],
+        ["row 49", "'force_N'", "outlier"],
+    ),
+    (
+        "force-outlier-x0.1",
+        _cell(GOOD, 20, "force_N", _scaled(0.1)),
+        [],
+        ["row 22", "'force_N'", "outlier"],
+    ),
+    (
+        "piston-outlier-x10",
+        _cell(GOOD, 60, "piston_mm", _scaled(10)),
+        [],
+        ["row 62", "'piston_mm'", "outlier"],
+    ),
+    (
+        "mistyped-height-named",
+        _heights_down_up(GOOD, 2, "14.5"),
+        [],
+        ["row 4", "'height_mm'", "14.5 mm"],
+    ),
+    (
+        "decimal-comma-in-csv",
+        [GOOD[0]] + ['"1,5"' + GOOD[1][1:]] + GOOD[2:],
+        [],
+        ["row 2", "'pressure_bar'", "decimal comma"],
+    ),
+    (
+        "extra-field-hint",
+        GOOD[:5] + [GOOD[5].replace(".", ",", 1)] + GOOD[6:],
+        [],
+        ["row 6", "decimal comma"],
+    ),
     ("step-gap-named", GOOD[:8] + GOOD[9:], [], ["row 9", "'step'", "step 7 is missing"]),
 ]
 
 
-@pytest.mark.parametrize("lines, options, names", [r[1:] for r in RECORDINGS], ids=[r[0] for r in RECORDINGS])
+@pytest.mark.parametrize(
+    "lines, options, names", [r[1:] for r in RECORDINGS], ids=[r[0] for r in RECORDINGS]
+)
 def test_bad_recordings_exit_2_one_line_nothing_written(tmp_path, capsys, lines, options, names):
     csv = tmp_path / "rec.csv"
     csv.write_text("\n".join(lines) + "\n")
     out = tmp_path / "out"
-    status = _run(["fit", str(csv), "--json", str(out / "fit.json"), "--max-steps", "400", *options])
+    status = _run(
+        ["fit", str(csv), "--json", str(out / "fit.json"), "--max-steps", "400", *options]
+    )
     captured = capsys.readouterr()
     err = captured.err.strip()
     assert status == 2, err
@@ -111,8 +184,16 @@ def test_bad_options_exit_2_one_line_nothing_written(tmp_path, capsys, argv, nam
     assert sorted(os.listdir(tmp_path)) == before
 
 
-@pytest.mark.parametrize("layout", [dict(step_m=0.0), dict(step_m=float("nan")), dict(step_m=1e-12),
-                                    dict(x_min_m=0.2), dict(pressures_bar=())])
+@pytest.mark.parametrize(
+    "layout",
+    [
+        dict(step_m=0.0),
+        dict(step_m=float("nan")),
+        dict(step_m=1e-12),
+        dict(x_min_m=0.2),
+        dict(pressures_bar=()),
+    ],
+)
 def test_layout_refuses_what_it_cannot_step(layout):
     with pytest.raises(InputError):
         Layout(**layout)
@@ -142,8 +223,11 @@ def read_recordings_text(text, tmp=None):
 
 
 def _same(a, b):
-    return all(np.array_equal(getattr(x, k), getattr(y, k)) for x, y in zip(a.tests, b.tests, strict=True)
-               for k in ("height_m", "force_N", "piston_m", "compression", "step"))
+    return all(
+        np.array_equal(getattr(x, k), getattr(y, k))
+        for x, y in zip(a.tests, b.tests, strict=True)
+        for k in ("height_m", "force_N", "piston_m", "compression", "step")
+    )
 
 
 def test_utf8_bom_is_read(tmp_path):
@@ -182,7 +266,11 @@ def test_rows_are_file_lines_with_comments_bom_and_crlf(tmp_path):
 
 
 def test_non_utf8_byte_names_its_row(tmp_path):
-    data = ("\n".join(GOOD[:6]) + "\n").encode() + b"# Pr\xfcfstand\n" + ("\n".join(GOOD[6:]) + "\n").encode()
+    data = (
+        ("\n".join(GOOD[:6]) + "\n").encode()
+        + b"# Pr\xfcfstand\n"
+        + ("\n".join(GOOD[6:]) + "\n").encode()
+    )
     with pytest.raises(InputError, match="row 7: not UTF-8"):
         _read(tmp_path, data)
 
@@ -210,7 +298,9 @@ def test_new_files_respect_the_umask_and_replaced_files_keep_their_mode(tmp_path
         p = write_text_atomic(tmp_path / "new.json", "{}")
         assert stat.S_IMODE(p.stat().st_mode) == 0o644
         os.umask(0o027)
-        assert stat.S_IMODE(write_text_atomic(tmp_path / "other.json", "{}").stat().st_mode) == 0o640
+        assert (
+            stat.S_IMODE(write_text_atomic(tmp_path / "other.json", "{}").stat().st_mode) == 0o640
+        )
         p.chmod(0o664)
         write_text_atomic(p, "[]")
         assert stat.S_IMODE(p.stat().st_mode) == 0o664 and p.read_text() == "[]"
@@ -245,7 +335,9 @@ def test_symbolic_link_is_not_replaced(tmp_path):
 def test_device_is_written_to_not_replaced(monkeypatch):
     real_replace = os.replace
 
-    def guarded(src, dst, *a, **kw):  # a broken writer must fail this test, not replace the machine's /dev/null
+    def guarded(
+        src, dst, *a, **kw
+    ):  # a broken writer must fail this test, not replace the machine's /dev/null
         if os.path.realpath(dst) == os.path.realpath(os.devnull):
             raise AssertionError("tried to replace /dev/null")
         return real_replace(src, dst, *a, **kw)
@@ -254,7 +346,10 @@ def test_device_is_written_to_not_replaced(monkeypatch):
     before = os.stat(os.devnull)
     write_text_atomic(os.devnull, "discarded")
     after = os.stat(os.devnull)
-    assert stat.S_ISCHR(after.st_mode) and (after.st_ino, after.st_rdev) == (before.st_ino, before.st_rdev)
+    assert stat.S_ISCHR(after.st_mode) and (after.st_ino, after.st_rdev) == (
+        before.st_ino,
+        before.st_rdev,
+    )
 
 
 def test_pipe_is_written_to_not_replaced(tmp_path):
@@ -272,11 +367,14 @@ def test_pipe_is_written_to_not_replaced(tmp_path):
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and got == b"through the pipe"
 
 
-@pytest.mark.parametrize("where, expect", [
-    ("{tmp}", "is a folder"),
-    ("{tmp}/file.txt/out.json", "is a file, not a folder"),
-    ("/proc/uq-test/out.json", "cannot create the folder"),
-])
+@pytest.mark.parametrize(
+    "where, expect",
+    [
+        ("{tmp}", "is a folder"),
+        ("{tmp}/file.txt/out.json", "is a file, not a folder"),
+        ("/proc/uq-test/out.json", "cannot create the folder"),
+    ],
+)
 def test_unwritable_targets_are_input_errors_naming_the_path(tmp_path, where, expect):
     (tmp_path / "file.txt").write_text("x")
     path = where.replace("{tmp}", str(tmp_path))
@@ -290,10 +388,17 @@ def test_remove_stale_keeps_the_users_files(tmp_path):
     for name in ("fig2_force.png", "test_3bar.png", "test_5bar.png", "holiday.png", "notes.txt"):
         (tmp_path / name).write_bytes(b"x")
     (tmp_path / "test_9bar.png").symlink_to(tmp_path / "holiday.png")
-    removed = remove_stale(tmp_path, ("fig2_*.png", "test_*bar.png"), keep={"fig2_force.png", "test_5bar.png"})
+    removed = remove_stale(
+        tmp_path, ("fig2_*.png", "test_*bar.png"), keep={"fig2_force.png", "test_5bar.png"}
+    )
     assert [p.name for p in removed] == ["test_3bar.png"]
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "fig2_force.png", "holiday.png", "notes.txt", "test_5bar.png", "test_9bar.png"]
+        "fig2_force.png",
+        "holiday.png",
+        "notes.txt",
+        "test_5bar.png",
+        "test_9bar.png",
+    ]
 
 
 def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
@@ -303,8 +408,12 @@ def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
     from uq._report.campaign import write_report
 
     csv = tmp_path / "r.csv"
-    csv.write_text(write_recordings_csv(simulate("n50", seed=2, layout=Layout(pressures_bar=(3.0,)))))
-    fit = fit_campaign(read_recordings(csv), seed=1, settings=Settings(n_walkers=8, n_ensembles=2, max_steps=400))
+    csv.write_text(
+        write_recordings_csv(simulate("n50", seed=2, layout=Layout(pressures_bar=(3.0,))))
+    )
+    fit = fit_campaign(
+        read_recordings(csv), seed=1, settings=Settings(n_walkers=8, n_ensembles=2, max_steps=400)
+    )
     out = tmp_path / "rep"
     out.mkdir()
     for name in ("test_7bar.png", "surface_spread.png", "surface.html", "my_photo.png"):

@@ -60,18 +60,40 @@ def test_column_order_free_extra_columns_and_comments(tmp_path):
     "mutate, expect",
     [
         (lambda L: [L[0].replace("force_N", "force")] + L[1:], "missing column 'force_N'"),
-        (lambda L: L[:3] + [L[3].replace(L[3].split(",")[2], "abc", 1)] + L[4:], "row 4, column 'force_N': 'abc' is not a number"),
-        (lambda L: L[:3] + [L[3].replace(L[3].split(",")[3], "nan", 1)] + L[4:], "column 'piston_mm': 'nan' is not a finite number"),
-        (lambda L: L[:2] + [L[2].replace("compression", "down")] + L[3:], "row 3, column 'branch': 'down' is not a branch"),
+        (
+            lambda L: L[:3] + [L[3].replace(L[3].split(",")[2], "abc", 1)] + L[4:],
+            "row 4, column 'force_N': 'abc' is not a number",
+        ),
+        (
+            lambda L: L[:3] + [L[3].replace(L[3].split(",")[3], "nan", 1)] + L[4:],
+            "column 'piston_mm': 'nan' is not a finite number",
+        ),
+        (
+            lambda L: L[:2] + [L[2].replace("compression", "down")] + L[3:],
+            "row 3, column 'branch': 'down' is not a branch",
+        ),
         (lambda L: L[:6], "needs at least 6 points"),
         (lambda L: L + [L[5]], "duplicated row"),
         (lambda L: [HEADER], "no data rows"),
         (lambda L: [], "empty file"),
-        (lambda L: L[:4] + [L[4].replace(L[4].split(",")[0] + ",", "-1,", 1)] + L[5:], "not positive"),
+        (
+            lambda L: L[:4] + [L[4].replace(L[4].split(",")[0] + ",", "-1,", 1)] + L[5:],
+            "not positive",
+        ),
         (lambda L: L[:5] + L[6:], "step 4 is missing"),
     ],
-    ids=["missing-column", "non-numeric", "nan", "unknown-branch", "too-few-points", "duplicated-row",
-         "no-rows", "empty", "negative-pressure", "gap-in-steps"],
+    ids=[
+        "missing-column",
+        "non-numeric",
+        "nan",
+        "unknown-branch",
+        "too-few-points",
+        "duplicated-row",
+        "no-rows",
+        "empty",
+        "negative-pressure",
+        "gap-in-steps",
+    ],
 )
 def test_bad_input_is_named(tmp_path, mutate, expect):
     msg = _err(tmp_path, mutate(_good_lines((1.0,))))
@@ -111,6 +133,11 @@ def test_cli_exit_status_2_and_one_line(tmp_path, capsys):
 
 def test_bad_option_exit_2(tmp_path):
     path = _write(tmp_path, _good_lines((1.0,)))
-    r = subprocess.run([sys.executable, "-m", "uq._cli.main", "fit", path, "--piston-area-cm2", "-3"],
-                       capture_output=True, text=True)
-    assert r.returncode == 2 and "--piston-area-cm2" in r.stderr and r.stderr.strip().count("\n") == 0
+    r = subprocess.run(
+        [sys.executable, "-m", "uq._cli.main", "fit", path, "--piston-area-cm2", "-3"],
+        capture_output=True,
+        text=True,
+    )
+    assert (
+        r.returncode == 2 and "--piston-area-cm2" in r.stderr and r.stderr.strip().count("\n") == 0
+    )

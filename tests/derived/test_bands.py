@@ -24,8 +24,14 @@ X_GRID = np.linspace(0.065, 0.155, 181)
 def paper_bands():
     """Table 1 itself as a one-draw 'posterior'."""
     t = table1()
-    return bands_from_coefficients(t.pressures_bar, t.force[:, None, :], t.piston[:, None, :], x_grid=X_GRID,
-                                   x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2)
+    return bands_from_coefficients(
+        t.pressures_bar,
+        t.force[:, None, :],
+        t.piston[:, None, :],
+        x_grid=X_GRID,
+        x0_m=PAPER_X0_M,
+        piston_area_m2=PAPER_PISTON_AREA_M2,
+    )
 
 
 def test_feff_at_x0_is_a_over_p(paper_bands):
@@ -106,9 +112,13 @@ def test_bands_contain_truth_for_n50(n50_fit):
         truth = cubic(t.force[k], u)
         cover.append(tb.force.contains(truth).mean())
         cover_pred.append(tb.force_pred.contains(truth).mean())
-        dV_true = cb.piston_area_m2 * (cubic(t.piston[k], u) - cubic(t.piston[k], np.array(tb.x_max_m - cb.x0_m)))
+        dV_true = cb.piston_area_m2 * (
+            cubic(t.piston[k], u) - cubic(t.piston[k], np.array(tb.x_max_m - cb.x0_m))
+        )
         cover_dV.append(tb.dV.contains(dV_true).mean())
-        assert np.all(tb.force_pred.lo <= tb.force.lo + 1e-9) and np.all(tb.force_pred.hi >= tb.force.hi - 1e-9)
+        assert np.all(tb.force_pred.lo <= tb.force.lo + 1e-9) and np.all(
+            tb.force_pred.hi >= tb.force.hi - 1e-9
+        )
     assert np.mean(cover) > 0.7, cover
     assert np.mean(cover_pred) > 0.97, cover_pred
     assert np.mean(cover_dV) > 0.7, cover_dV
@@ -172,17 +182,29 @@ def test_simultaneous_band_holds_whole_draw_curves_and_pointwise_does_not():
     rng = np.random.default_rng(11)
     pressures = (1.0, 5.0, 10.0)
     F, L = _gaussian_draws(pressures, 2000, rng)
-    cb = bands_from_coefficients(pressures, F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2)
+    cb = bands_from_coefficients(
+        pressures, F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2
+    )
     F2, L2 = _gaussian_draws(pressures, 2000, rng)
     u = X_GRID - PAPER_X0_M
     for k, tb in enumerate(cb.tests):
-        for name, curves, fresh in zip(("feff", "spread_own"), _curves(F[k], L[k], tb.pressure_bar, u),
-                                       _curves(F2[k], L2[k], tb.pressure_bar, u), strict=True):
+        for name, curves, fresh in zip(
+            ("feff", "spread_own"),
+            _curves(F[k], L[k], tb.pressure_bar, u),
+            _curves(F2[k], L2[k], tb.pressure_bar, u),
+            strict=True,
+        ):
             sim, pw = tb.simultaneous[name], getattr(tb, name)
             assert sim.contains_curve(curves).mean() >= 0.9
-            assert np.all(pw.contains(curves), axis=1).mean() < 0.8  # pointwise: a band per height, not per curve
+            assert (
+                np.all(pw.contains(curves), axis=1).mean() < 0.8
+            )  # pointwise: a band per height, not per curve
             assert abs(sim.contains_curve(fresh).mean() - 0.9) <= 0.04, (tb.pressure_bar, name)
-            assert 1.8 < sim.critical < 3.5 and np.all(sim.lo <= pw.lo + 1e-12) and np.all(sim.hi >= pw.hi - 1e-12)
+            assert (
+                1.8 < sim.critical < 3.5
+                and np.all(sim.lo <= pw.lo + 1e-12)
+                and np.all(sim.hi >= pw.hi - 1e-12)
+            )
 
 
 def _plugin_draws(test, x0_m, n, rng):
@@ -200,8 +222,12 @@ def _plugin_draws(test, x0_m, n, rng):
     args = (X, jnp.asarray(test.force_N), jnp.asarray(test.piston_m), jnp.asarray(ref))
     theta = jnp.asarray(_start(X, test.force_N, test.piston_m, ref, lsq_f, lsq_l, u))
     D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))
-    return [rng.multivariate_normal(D @ np.asarray(post.mean), D @ np.asarray(posterior_cov(post)) @ D, n)
-            for post in _posteriors(theta, *args)]
+    return [
+        rng.multivariate_normal(
+            D @ np.asarray(post.mean), D @ np.asarray(posterior_cov(post)) @ D, n
+        )
+        for post in _posteriors(theta, *args)
+    ]
 
 
 def _truth_coverage(seeds, pressure_bar: float = 5.0, n_draws: int = 1000):
@@ -211,16 +237,29 @@ def _truth_coverage(seeds, pressure_bar: float = 5.0, n_draws: int = 1000):
 
     spring, x = N50Spring(), X_GRID
     truth_feff = spring.force_N(x, pressure_bar) / (pressure_bar * 1e5)
-    truth_spread = pressure_bar * 1e5 * (-PAPER_PISTON_AREA_M2 * spring.piston_slope(x, pressure_bar)) - spring.force_N(x, pressure_bar)
+    truth_spread = pressure_bar * 1e5 * (
+        -PAPER_PISTON_AREA_M2 * spring.piston_slope(x, pressure_bar)
+    ) - spring.force_N(x, pressure_bar)
     counts = np.zeros(3, int)
     for seed in seeds:
         sim = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
-        test = SimpleNamespace(height_m=sim["height_m"], force_N=sim["force_N"], piston_m=sim["piston_m"])
+        test = SimpleNamespace(
+            height_m=sim["height_m"], force_N=sim["force_N"], piston_m=sim["piston_m"]
+        )
         F, L = _plugin_draws(test, PAPER_X0_M, n_draws, np.random.default_rng(seed))
-        tb = bands_from_coefficients((pressure_bar,), F[None], L[None], x_grid=x, x0_m=PAPER_X0_M,
-                                     piston_area_m2=PAPER_PISTON_AREA_M2).tests[0]
-        counts += [tb.simultaneous["feff"].contains_curve(truth_feff), tb.simultaneous["spread_own"].contains_curve(truth_spread),
-                   np.all(tb.feff.contains(truth_feff))]
+        tb = bands_from_coefficients(
+            (pressure_bar,),
+            F[None],
+            L[None],
+            x_grid=x,
+            x0_m=PAPER_X0_M,
+            piston_area_m2=PAPER_PISTON_AREA_M2,
+        ).tests[0]
+        counts += [
+            tb.simultaneous["feff"].contains_curve(truth_feff),
+            tb.simultaneous["spread_own"].contains_curve(truth_spread),
+            np.all(tb.feff.contains(truth_feff)),
+        ]
     return counts
 
 
@@ -241,15 +280,27 @@ def test_simultaneous_band_coverage_400_replications():
     n = 400
     lo, hi = _region(n, 0.9)
     sim_feff, sim_spread, pw_feff = _truth_coverage(range(1000, 1000 + n), pressure_bar=8.0)
-    assert lo <= sim_feff <= hi and lo <= sim_spread <= hi and pw_feff < lo, (sim_feff, sim_spread, pw_feff, lo, hi)
+    assert lo <= sim_feff <= hi and lo <= sim_spread <= hi and pw_feff < lo, (
+        sim_feff,
+        sim_spread,
+        pw_feff,
+        lo,
+        hi,
+    )
 
 
 def test_curve_bands_in_the_json_summary(paper_bands):
     rng = np.random.default_rng(2)
     F, L = _gaussian_draws((5.0,), 500, rng)
-    cb = bands_from_coefficients((5.0,), F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2)
+    cb = bands_from_coefficients(
+        (5.0,), F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2
+    )
     cv = cb.summary()["curve_bands"]
-    assert len(cv["height_m"]) == 19 and cv["height_m"][0] == pytest.approx(0.065) and cv["level"] == 0.9
+    assert (
+        len(cv["height_m"]) == 19
+        and cv["height_m"][0] == pytest.approx(0.065)
+        and cv["level"] == 0.9
+    )
     assert "pointwise" in cv["pointwise"] and "whole curve" in cv["simultaneous"]
     row = cv["tests"][0]["feff_m2"]
     assert np.all(np.asarray(row["simultaneous_lo"]) < np.asarray(row["pointwise_q05"]))

@@ -36,7 +36,12 @@ def _write(path: Path, doc) -> Path:
 
 def _estimate(mean, cov) -> dict:
     sd = np.sqrt(np.diag(cov))
-    return {"mean": mean, "sd": sd, "q05": mean + norm.ppf(0.05) * sd, "q95": mean + norm.ppf(0.95) * sd}
+    return {
+        "mean": mean,
+        "sd": sd,
+        "q05": mean + norm.ppf(0.05) * sd,
+        "q95": mean + norm.ppf(0.95) * sd,
+    }
 
 
 def _test_json(p: float, mean_f, cov_f, mean_l, cov_l) -> dict:
@@ -58,7 +63,9 @@ def synthetic_result(pressures=(1.0, 5.0, 10.0)) -> dict:
     """A RESULT centred on Table 1 with realistic least-squares covariances (50 N, 20 um)."""
     t = table1()
     cov_f, cov_l = _ols_cov(50.0), _ols_cov(2e-5)
-    tests = [_test_json(p, t.force[t.index(p)], cov_f, t.piston[t.index(p)], cov_l) for p in pressures]
+    tests = [
+        _test_json(p, t.force[t.index(p)], cov_f, t.piston[t.index(p)], cov_l) for p in pressures
+    ]
     return {"x0_m": 0.112, "tests": tests}
 
 
@@ -83,8 +90,12 @@ def test_points_file_is_table1_in_si():
     t = table1()
     assert doc["source"] == "Table 1 of the paper, converted to SI"
     assert [x["pressure_bar"] for x in doc["tests"]] == t.pressures_bar.tolist()
-    np.testing.assert_allclose([[x["force"][n] for n in FORCE_NAMES] for x in doc["tests"]], t.force, rtol=1e-12)
-    np.testing.assert_allclose([[x["piston"][n] for n in PISTON_NAMES] for x in doc["tests"]], t.piston, rtol=1e-12)
+    np.testing.assert_allclose(
+        [[x["force"][n] for n in FORCE_NAMES] for x in doc["tests"]], t.force, rtol=1e-12
+    )
+    np.testing.assert_allclose(
+        [[x["piston"][n] for n in PISTON_NAMES] for x in doc["tests"]], t.piston, rtol=1e-12
+    )
     assert doc["tests"][-1]["force"]["a_P"] == 28570.0  # PHYSICS.md: P(x0) = 28.57 kN at 10 bar
 
 
@@ -94,11 +105,15 @@ def test_points_file_carries_the_paper_estimators_covariance():
 
     doc = json.loads(POINTS.read_text())
     five = next(t for t in doc["tests"] if t["pressure_bar"] == 5.0)
-    heights = np.r_[np.arange(155, 64, -5), np.arange(70, 156, 5)] * 1e-3  # section 3.4, 37 readings
+    heights = (
+        np.r_[np.arange(155, 64, -5), np.arange(70, 156, 5)] * 1e-3
+    )  # section 3.4, 37 readings
     X = np.vander(heights - 0.112, 4, increasing=True)
     s2 = table2()[5.0][0] ** 2 * 37 / 33  # s_P has divisor N; the unbiased residual variance N - 4
     np.testing.assert_allclose(five["covariance"]["force"], s2 * np.linalg.inv(X.T @ X), rtol=1e-9)
-    assert np.sqrt(five["covariance"]["force"][0][0]) == pytest.approx(21.9, abs=0.1)  # a_P +/- 22 N
+    assert np.sqrt(five["covariance"]["force"][0][0]) == pytest.approx(
+        21.9, abs=0.1
+    )  # a_P +/- 22 N
     # piston: the budget's ~2 mm per reading at 5 bar (gas volume x 0.01 bar / p_abs / S) -> a_L +/- 0.4 mm
     assert 3e-4 < np.sqrt(five["covariance"]["piston"][0][0]) < 5e-4
     assert "covariance_source" in doc
@@ -114,7 +129,9 @@ def test_lsq_covariance_matches_monte_carlo_of_least_squares():
     emp = np.cov(coefs.T)
     cov = lsq_covariance(U, sd)
     s = np.sqrt(np.diag(cov))
-    np.testing.assert_allclose(np.sqrt(np.diag(emp)), s, rtol=0.03)  # 20000 draws: sd of an sd ~0.5 %
+    np.testing.assert_allclose(
+        np.sqrt(np.diag(emp)), s, rtol=0.03
+    )  # 20000 draws: sd of an sd ~0.5 %
     np.testing.assert_allclose(emp / np.outer(s, s), cov / np.outer(s, s), atol=0.03)
     np.testing.assert_allclose(lsq_covariance(U, 2.0), 4.0 * np.linalg.inv(X.T @ X), rtol=1e-9)
 
@@ -135,7 +152,9 @@ def test_perturbed_point_estimate_fails_and_is_named(n50_result, tmp_path, capsy
     doc = json.loads(POINTS.read_text())
     five = next(t for t in doc["tests"] if t["pressure_bar"] == 5.0)
     j = (FORCE_NAMES if block == "force" else PISTON_NAMES).index(name)
-    sd = np.hypot(sd, np.sqrt(five["covariance"][block][j][j]))  # the check's scale: posterior + Table 1's own
+    sd = np.hypot(
+        sd, np.sqrt(five["covariance"][block][j][j])
+    )  # the check's scale: posterior + Table 1's own
     five[block][name] += 10.0 * sd  # d^2 >= (10 - sqrt(d^2 before))^2 > 50 > threshold 20.2
     assert main(["check", str(n50_result), "--against", str(_write(tmp_path / "p.json", doc))]) == 1
     out = capsys.readouterr().out
@@ -178,10 +197,25 @@ def _bad_cases():
         ("text_value", text_value, "p", "tests[0] (1 bar).piston.b_L: expected a finite number"),
         ("absent_test", absent_test, "p", "no test at 7 bar in"),
         ("singular", singular, "r", "tests[1] (5 bar).covariance.force: singular covariance"),
-        ("no_cov", no_cov, "r", "tests[2] (10 bar).covariance: missing (uq check needs the posterior covariance"),
-        ("nan_mean", nan_mean, "r", "tests[0] (1 bar).force.d_P.mean: expected a finite number, got null"),
+        (
+            "no_cov",
+            no_cov,
+            "r",
+            "tests[2] (10 bar).covariance: missing (uq check needs the posterior covariance",
+        ),
+        (
+            "nan_mean",
+            nan_mean,
+            "r",
+            "tests[0] (1 bar).force.d_P.mean: expected a finite number, got null",
+        ),
         ("no_tests", no_tests, "p", "'tests': missing"),
-        ("point_cov_shape", point_cov_shape, "p", "tests[0] (1 bar).covariance.piston: expected a 4x4 matrix"),
+        (
+            "point_cov_shape",
+            point_cov_shape,
+            "p",
+            "tests[0] (1 bar).covariance.piston: expected a 4x4 matrix",
+        ),
     ]
 
 
@@ -196,8 +230,14 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys, name, edit, blamed, m
     assert str(p if blamed == "p" else r) in err and message in err, err
 
 
-@pytest.mark.parametrize("content,message", [(None, "RESULT file not found"), ("{not json", "invalid JSON at line 1"),
-                                             ("[1, 2]", "expected a JSON object")])
+@pytest.mark.parametrize(
+    "content,message",
+    [
+        (None, "RESULT file not found"),
+        ("{not json", "invalid JSON at line 1"),
+        ("[1, 2]", "expected a JSON object"),
+    ],
+)
 def test_unreadable_result_exits_2(tmp_path, capsys, content, message):
     r = tmp_path / "result.json"
     if content is not None:
@@ -222,12 +262,38 @@ def test_assumption_about_point_uncertainty_is_stated(tmp_path, capsys):
     for t in exact["tests"]:
         del t["covariance"]
     out = tmp_path / "v.json"
-    assert main(["check", str(r), "--against", str(_write(tmp_path / "p.json", exact)), "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "check",
+                str(r),
+                "--against",
+                str(_write(tmp_path / "p.json", exact)),
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     v = json.loads(out.read_text())
     assert v["point_uncertainty"].startswith("stored estimates treated as exact for all blocks")
-    assert len(v["blocks_treated_as_exact"]) == 6 and not any(b["point_covariance"] for b in v["blocks"])
+    assert len(v["blocks_treated_as_exact"]) == 6 and not any(
+        b["point_covariance"] for b in v["blocks"]
+    )
     assert "stored estimates treated as exact" in capsys.readouterr().out
-    assert main(["check", str(r), "--against", str(_write(tmp_path / "q.json", points_doc())), "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "check",
+                str(r),
+                "--against",
+                str(_write(tmp_path / "q.json", points_doc())),
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     v = json.loads(out.read_text())
     assert v["point_uncertainty"].startswith("included") and v["blocks_treated_as_exact"] == []
     assert "point-estimate uncertainty: included" in capsys.readouterr().out
@@ -261,7 +327,11 @@ def test_rule_false_failure_rate_on_gaussian_draws():
         for pt in base:
             m = result[pt["pressure_bar"]]
             # x - m ~ N(0, S) exactly here, so the points carry no covariance of their own
-            pts.append(pt | {"cov": {}} | {b: m[b]["mean"] + chol[b] @ rng.standard_normal(4) for b in ("force", "piston")})
+            pts.append(
+                pt
+                | {"cov": {}}
+                | {b: m[b]["mean"] + chol[b] @ rng.standard_normal(4) for b in ("force", "piston")}
+            )
         fails += not check(result, pts, alpha=0.01)["agree"]
     assert 8 <= fails <= 34, fails
 
@@ -280,9 +350,21 @@ def _simulated(seed: int, pressures=(1.0, 5.0, 10.0)):
     from uq._stand.simulator import Layout, simulate
 
     tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=pressures))
-    return Recordings(f"simulated seed {seed}", tuple(
-        PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
-             np.arange(t["step"].size)) for t in tests))
+    return Recordings(
+        f"simulated seed {seed}",
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                t["piston_m"],
+                t["compression"],
+                t["step"],
+                np.arange(t["step"].size),
+            )
+            for t in tests
+        ),
+    )
 
 
 def _check_fit(cf, tmp_path: Path, tag: str) -> bool:
@@ -304,7 +386,10 @@ def test_correct_fits_pass_on_seeded_simulations(tmp_path):
     passed, ess = [], []
     for seed in range(6):
         cf = fit_campaign(_simulated(1000 + seed), seed=seed, settings=settings)
-        ess += [min(t.diagnostics["variables"][n]["ess_bulk"] for n in FORCE_NAMES + PISTON_NAMES) for t in cf.tests]
+        ess += [
+            min(t.diagnostics["variables"][n]["ess_bulk"] for n in FORCE_NAMES + PISTON_NAMES)
+            for t in cf.tests
+        ]
         passed.append(_check_fit(cf, tmp_path, str(seed)))
     assert min(ess) >= 400  # the coefficients' posterior is well sampled even with reduced settings
     assert sum(not p for p in passed) <= 1, passed
@@ -328,8 +413,15 @@ def _plugin_result(rec) -> dict:
         theta = jnp.asarray(_start(X, t.force_N, t.piston_m, ref, lsq_f, lsq_l, u))
         pf, pl = _posteriors(theta, *args)
         cf, cl = posterior_cov(pf), posterior_cov(pl)
-        tests.append(_test_json(t.pressure_bar, D @ np.asarray(pf.mean), D @ np.asarray(cf) @ D,
-                                D @ np.asarray(pl.mean), D @ np.asarray(cl) @ D))
+        tests.append(
+            _test_json(
+                t.pressure_bar,
+                D @ np.asarray(pf.mean),
+                D @ np.asarray(cf) @ D,
+                D @ np.asarray(pl.mean),
+                D @ np.asarray(cl) @ D,
+            )
+        )
     return {"tests": tests}
 
 
@@ -350,7 +442,10 @@ def test_false_failure_rate_over_30_full_fits(tmp_path):
     """30 full default-settings fits: P(>= 3 failures of 30 | p = 0.01) = 0.0033."""
     from uq._models.cubic import fit_campaign
 
-    fails = sum(not _check_fit(fit_campaign(_simulated(9000 + s), seed=s), tmp_path, str(s)) for s in range(30))
+    fails = sum(
+        not _check_fit(fit_campaign(_simulated(9000 + s), seed=s), tmp_path, str(s))
+        for s in range(30)
+    )
     assert fails <= 2, fails
 
 
@@ -377,12 +472,23 @@ def _lsq_points(rec) -> list[dict]:
         u = t.height_m - rec.x0_m
         X = np.vander(u, 4, increasing=True)
         force, piston = (np.linalg.lstsq(X, y, rcond=None)[0] for y in (t.force_N, t.piston_m))
-        s2 = np.mean((t.force_N - X @ force) ** 2) * u.size / (u.size - 4)  # Table 2's s_P^2, unbiased
+        s2 = (
+            np.mean((t.force_N - X @ force) ** 2) * u.size / (u.size - 4)
+        )  # Table 2's s_P^2, unbiased
         heights, back = np.unique(t.height_m, return_inverse=True)
         sd_piston = noise_sd(N50Spring(), heights, t.pressure_bar)[1][back]
-        out.append({"pressure_bar": t.pressure_bar, "label": f"{t.pressure_bar:g} bar", "force": force,
-                    "piston": piston, "cov": {"force": lsq_covariance(u, np.sqrt(s2)),
-                                              "piston": lsq_covariance(u, sd_piston)}})
+        out.append(
+            {
+                "pressure_bar": t.pressure_bar,
+                "label": f"{t.pressure_bar:g} bar",
+                "force": force,
+                "piston": piston,
+                "cov": {
+                    "force": lsq_covariance(u, np.sqrt(s2)),
+                    "piston": lsq_covariance(u, sd_piston),
+                },
+            }
+        )
     return out
 
 
@@ -416,8 +522,13 @@ def test_false_failure_rate_with_stored_estimates_from_an_independent_campaign()
     about half of the checks fail (expected ~24 of 44).
     """
     alpha = 0.1
-    pairs = [(read_result(_plugin_result(_simulated(7000 + 2 * k, ALL_PRESSURES)), "r"),
-              _lsq_points(_simulated(7001 + 2 * k, ALL_PRESSURES))) for k in range(4)]
+    pairs = [
+        (
+            read_result(_plugin_result(_simulated(7000 + 2 * k, ALL_PRESSURES)), "r"),
+            _lsq_points(_simulated(7001 + 2 * k, ALL_PRESSURES)),
+        )
+        for k in range(4)
+    ]
     n, new, old = _per_test_failures(pairs, alpha)
     limit = _binomial_limit(n, alpha)
     assert (n, limit) == (44, 11)
@@ -435,11 +546,31 @@ def test_false_failure_rate_with_sampled_posteriors_from_an_independent_campaign
     from uq._models.cubic import fit_campaign
 
     alpha, settings = 0.1, Settings(tau_multiple=25.0, min_steps=250, chunk=50)
-    sampled = [(read_result(json.loads(dumps_json(fit_json(fit_campaign(_simulated(7100 + 2 * k, ALL_PRESSURES),
-                                                                        seed=k, settings=settings)))), "r"),
-                _lsq_points(_simulated(7101 + 2 * k, ALL_PRESSURES))) for k in range(6)]
-    closed = [(read_result(_plugin_result(_simulated(7200 + 2 * k, ALL_PRESSURES)), "r"),
-               _lsq_points(_simulated(7201 + 2 * k, ALL_PRESSURES))) for k in range(20)]
+    sampled = [
+        (
+            read_result(
+                json.loads(
+                    dumps_json(
+                        fit_json(
+                            fit_campaign(
+                                _simulated(7100 + 2 * k, ALL_PRESSURES), seed=k, settings=settings
+                            )
+                        )
+                    )
+                ),
+                "r",
+            ),
+            _lsq_points(_simulated(7101 + 2 * k, ALL_PRESSURES)),
+        )
+        for k in range(6)
+    ]
+    closed = [
+        (
+            read_result(_plugin_result(_simulated(7200 + 2 * k, ALL_PRESSURES)), "r"),
+            _lsq_points(_simulated(7201 + 2 * k, ALL_PRESSURES)),
+        )
+        for k in range(20)
+    ]
     for pairs in (sampled, closed):
         n, new, old = _per_test_failures(pairs, alpha)
         limit = _binomial_limit(n, alpha)

@@ -41,7 +41,9 @@ def test_refusals(n50_surface):
 def test_cli_refuses_height(tmp_path, capsys):
     from uq._cli.main import main
 
-    assert main(["margin", "data/n50/recordings.csv", "--height-mm", "300", "--load-N", "1000"]) == 2
+    assert (
+        main(["margin", "data/n50/recordings.csv", "--height-mm", "300", "--load-N", "1000"]) == 2
+    )
     assert "outside the tested heights" in capsys.readouterr().err
 
 
@@ -50,12 +52,35 @@ def test_cli_json(tmp_path):
     from uq._cli.main import main
 
     out = tmp_path / "m.json"
-    assert main(["margin", "data/n50/recordings.csv", "--height-mm", "112", "--load-N", "13020", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "margin",
+                "data/n50/recordings.csv",
+                "--height-mm",
+                "112",
+                "--load-N",
+                "13020",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     d = json.loads(out.read_text())
-    assert {"height_m", "load_N", "prob", "pressure_bar_needed", "pressure_bar_for_prob", "model"} <= set(d)
+    assert {
+        "height_m",
+        "load_N",
+        "prob",
+        "pressure_bar_needed",
+        "pressure_bar_for_prob",
+        "model",
+    } <= set(d)
     assert np.isclose(d["height_m"], 0.112)
     c = d["model"]["comparison"]
-    assert d["model"]["name"] == ("per-pressure cubics" if c["better"] == "per-pressure cubics" else "surface")
+    assert d["model"]["name"] == (
+        "per-pressure cubics" if c["better"] == "per-pressure cubics" else "surface"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +112,9 @@ def test_cubic_interpolation_error_between_tested_pressures(n50_cubics):
         n50_cubics.z[:] = z
     assert mid.std() > no_err.std()
     assert n50_cubics.curvature_sd(np.array([0.14]), np.array([4]))[0] > 0
-    assert abs(mid.mean() - no_err.mean()) < 3 * mid.std() / np.sqrt(mid.size) + 1e-9 * abs(mid.mean())
+    assert abs(mid.mean() - no_err.mean()) < 3 * mid.std() / np.sqrt(mid.size) + 1e-9 * abs(
+        mid.mean()
+    )
 
 
 def test_margin_from_the_cubics(n50_cubics):
@@ -102,13 +129,26 @@ def test_margin_from_the_cubics(n50_cubics):
 
 def test_choice_follows_the_loo_verdict(n50_surface, n50_fit):
     def comparison(better):
-        return {"better": better, "reason": f"made-up verdict {better}", "elpd_diff": -50.0, "elpd_diff_se": 10.0}
+        return {
+            "better": better,
+            "reason": f"made-up verdict {better}",
+            "elpd_diff": -50.0,
+            "elpd_diff_se": 10.0,
+        }
 
     ans, info = choose_model(n50_surface, n50_fit, comparison("per-pressure cubics"))
-    assert isinstance(ans, CubicInterpolation) and "made-up verdict" in info["why"] and "interpolation" in info
+    assert (
+        isinstance(ans, CubicInterpolation)
+        and "made-up verdict" in info["why"]
+        and "interpolation" in info
+    )
     for verdict in ("indistinguishable", "refused", "surface"):
         ans, info = choose_model(n50_surface, n50_fit, comparison(verdict))
-        assert info["name"] == "surface" and info["comparison"]["better"] == verdict and "coverage" in info["why"]
+        assert (
+            info["name"] == "surface"
+            and info["comparison"]["better"] == verdict
+            and "coverage" in info["why"]
+        )
     res = margin(ans, 0.112, 13020.0, model_info=info)
     assert res["model"]["comparison"]["better"] == "surface"
 
@@ -134,7 +174,9 @@ def test_cubic_interpolation_coverage(tmp_path):
         path = tmp_path / f"n50-{s}.csv"
         path.write_text(write_recordings_csv(simulate("n50", seed=s)))
         cub = fit_campaign(read_recordings(path), seed=s)
-        q05, q95 = np.quantile(pressure_needed(CubicInterpolation(cub, seed=s), 0.112, load), [0.05, 0.95])
+        q05, q95 = np.quantile(
+            pressure_needed(CubicInterpolation(cub, seed=s), 0.112, load), [0.05, 0.95]
+        )
         covered.append(bool(q05 <= p <= q95))
     b = stats.binom(n, 0.9)  # accepted counts: each tail <= 5e-4
     lo = min(k for k in range(n + 1) if b.cdf(k) > 5e-4)

@@ -41,7 +41,22 @@ def assert_same(a, b, path="result"):
 def campaign(tmp_path_factory):
     d = tmp_path_factory.mktemp("saved")
     csv = d / "r.csv"
-    assert run(["simulate", "--out", csv, "--pressures", "1,2,4,6,8,10", "--step-mm", "15", "--seed", "3"]) == 0
+    assert (
+        run(
+            [
+                "simulate",
+                "--out",
+                csv,
+                "--pressures",
+                "1,2,4,6,8,10",
+                "--step-mm",
+                "15",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     return d, csv
 
 
@@ -50,18 +65,37 @@ def _fit_and_save(d: Path, csv: Path, model: str, walkers: int):
     import uq._models.surface
 
     fit, out = d / f"{model}.nc", d / f"{model}.json"
-    argv = ["margin", csv, *QUERY, "--model", model, "--walkers", walkers, *QUICK, "--save-fit", fit, "--json", out]
+    argv = [
+        "margin",
+        csv,
+        *QUERY,
+        "--model",
+        model,
+        "--walkers",
+        walkers,
+        *QUICK,
+        "--save-fit",
+        fit,
+        "--json",
+        out,
+    ]
     made = []
     real = uq._models.surface.fit_surface
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(uq._models.surface, "fit_surface", lambda *a, **k: made.append(real(*a, **k)) or made[-1])
+        mp.setattr(
+            uq._models.surface,
+            "fit_surface",
+            lambda *a, **k: made.append(real(*a, **k)) or made[-1],
+        )
         assert run(argv) == 0
     return fit, json.loads(out.read_text()), (made or [None])[0]
 
 
 @pytest.fixture(scope="module")
 def surface_saved(campaign):
-    return _fit_and_save(*campaign, "surface", 12)  # 5 sampled noise parameters: >= 10 walkers, a multiple of 4
+    return _fit_and_save(
+        *campaign, "surface", 12
+    )  # 5 sampled noise parameters: >= 10 walkers, a multiple of 4
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +111,9 @@ def test_saved_fit_gives_the_same_answer(which, request, tmp_path, capsys):
     assert_same(json.loads(out.read_text()), original)
     text = capsys.readouterr().out
     assert "no refit" in text and "answered by the" in text
-    assert original["model"]["name"] == ("surface" if which == "surface_saved" else "per-pressure cubics")
+    assert original["model"]["name"] == (
+        "surface" if which == "surface_saved" else "per-pressure cubics"
+    )
     assert "usable_stroke" in original and "force_at_pressure" in original
 
 
@@ -91,8 +127,12 @@ def test_saved_file_is_netcdf_inference_data(surface_saved, cubics_saved, campai
         idata = az.from_netcdf(fit)
         a = idata.attrs
         assert a["uq_file_kind"] == ANSWER_KIND and a["answer"] == kind and a["seed"] == 20201
-        assert a["recordings_sha256"] == sha256_of(csv) and Path(a["recordings_path"]) == csv.resolve()
-        assert json.loads(a["model_info_json"])["name"] == ("surface" if kind == "surface" else "per-pressure cubics")
+        assert (
+            a["recordings_sha256"] == sha256_of(csv) and Path(a["recordings_path"]) == csv.resolve()
+        )
+        assert json.loads(a["model_info_json"])["name"] == (
+            "surface" if kind == "surface" else "per-pressure cubics"
+        )
         c = idata.constant_data
         assert list(c["tested_pressure_range_bar"].values) == [1.0, 10.0]
         lo, hi = c["tested_height_range_m"].values
@@ -121,20 +161,42 @@ def test_surface_answer_is_the_fits_force(surface_saved, tmp_path):
     save_surface_answer(fit, None, tmp_path / "lib", seed=7)
     back, info, meta = load_answer(tmp_path / "lib" / "surface.nc")
     np.testing.assert_array_equal(back.force_draws(h, p), want)
-    assert back.height_range_m == ans.height_range_m and back.pressure_range_bar == ans.pressure_range_bar
+    assert (
+        back.height_range_m == ans.height_range_m
+        and back.pressure_range_bar == ans.pressure_range_bar
+    )
     assert meta["seed"] == 7 and info["orders"] == fit.orders.label
 
 
-def test_uq_surface_out_writes_a_saved_answer(campaign, surface_saved, monkeypatch, tmp_path, capsys):
+def test_uq_surface_out_writes_a_saved_answer(
+    campaign, surface_saved, monkeypatch, tmp_path, capsys
+):
     """``uq surface --out DIR`` writes DIR/surface.nc, which ``uq margin --fit`` answers from (the fit is the
     margin run's, handed in, so this checks the wiring, not the sampler)."""
     import uq._models.surface
 
     monkeypatch.setattr(uq._models.surface, "fit_surface", lambda *a, **k: surface_saved[2])
-    assert run(["surface", campaign[1], "--no-compare", "--walkers", 12, *QUICK, "--out", tmp_path / "s"]) == 0
+    assert (
+        run(
+            [
+                "surface",
+                campaign[1],
+                "--no-compare",
+                "--walkers",
+                12,
+                *QUICK,
+                "--out",
+                tmp_path / "s",
+            ]
+        )
+        == 0
+    )
     assert "saved fit" in capsys.readouterr().out
     out = tmp_path / "m.json"
-    assert run(["margin", "--fit", tmp_path / "s" / "surface.nc", *QUERY, "--json", out, "--quiet"]) == 0
+    assert (
+        run(["margin", "--fit", tmp_path / "s" / "surface.nc", *QUERY, "--json", out, "--quiet"])
+        == 0
+    )
     res, original = json.loads(out.read_text()), surface_saved[1]
     assert res["model"]["name"] == "surface" and "uq surface --out" in res["model"]["why"]
     res["model"] = original["model"]  # same fit, same draws: only the stated reason differs
@@ -144,11 +206,13 @@ def test_uq_surface_out_writes_a_saved_answer(campaign, surface_saved, monkeypat
 def test_queries_file(surface_saved, tmp_path, capsys):
     fit, original, _ = surface_saved
     q = tmp_path / "q.csv"
-    q.write_text("# three queries\nheight_mm,load_N,prob,pressure_bar,tolerance_pct\n"
-                 "110,8000,,5,5\n"
-                 "100,9000,0.9,,\n"
-                 "\n"
-                 "120,7000,0.99,4,\n")
+    q.write_text(
+        "# three queries\nheight_mm,load_N,prob,pressure_bar,tolerance_pct\n"
+        "110,8000,,5,5\n"
+        "100,9000,0.9,,\n"
+        "\n"
+        "120,7000,0.99,4,\n"
+    )
     out = tmp_path / "q.json"
     assert run(["margin", "--fit", fit, "--queries", q, "--json", out, "--quiet"]) == 0
     res = json.loads(out.read_text())
@@ -157,7 +221,9 @@ def test_queries_file(surface_saved, tmp_path, capsys):
     assert res[1]["prob"] == 0.9 and "force_at_pressure" not in res[1]
     assert res[2]["force_at_pressure"]["pressure_bar"] == 4.0 and "usable_stroke" not in res[2]
     table = capsys.readouterr().out
-    assert "3 queries" in table and re.search(r"^\s+6\s+120\s", table, re.M)  # rows as an editor counts lines
+    assert "3 queries" in table and re.search(
+        r"^\s+6\s+120\s", table, re.M
+    )  # rows as an editor counts lines
 
 
 def test_queries_without_saved_fit_fits_once(campaign, cubics_saved, monkeypatch, tmp_path, capsys):
@@ -169,31 +235,53 @@ def test_queries_without_saved_fit_fits_once(campaign, cubics_saved, monkeypatch
     q.write_text("height_mm,load_N\n110,8000\n100,9000\n")
     calls = []
     saved = uq._derived.margin.load_answer(cubics_saved[0])
-    monkeypatch.setattr(uq._cli.cmd_margin, "_fit_and_choose", lambda *a: calls.append(1) or (*saved[:2], saved[2]))
+    monkeypatch.setattr(
+        uq._cli.cmd_margin, "_fit_and_choose", lambda *a: calls.append(1) or (*saved[:2], saved[2])
+    )
     out = tmp_path / "q.json"
-    assert run(["margin", campaign[1], "--queries", q, "--model", "cubics", "--json", out, "--quiet"]) == 0
+    assert (
+        run(["margin", campaign[1], "--queries", q, "--model", "cubics", "--json", out, "--quiet"])
+        == 0
+    )
     res = json.loads(out.read_text())
-    assert calls == [1] and len(res) == 2 and res[0]["height_m"] == 0.11 and res[1]["load_N"] == 9000.0
+    assert (
+        calls == [1] and len(res) == 2 and res[0]["height_m"] == 0.11 and res[1]["load_N"] == 9000.0
+    )
     capsys.readouterr()
 
 
-@pytest.mark.parametrize("body, row, column, words", [
-    ("height_mm,load_N\n110,8000\n100,abc\n", 3, "load_N", ["expected a number", "abc"]),
-    ("height_mm,load_N,prob\n110,8000,1.5\n", 2, "prob", ["probability"]),
-    ("height_mm,load_N\n110,8000\n,9000\n", 3, "height_mm", ["empty"]),
-    ("height_mm,load_N,tolerance_pct\n110,8000,5\n", 2, "tolerance_pct", ["pressure_bar"]),
-    ("height_mm,load_N\n110,8000\n300,8000\n", 3, "height_mm", ["outside the tested heights"]),
-    ("height_mm,load_N,pressure_bar\n110,8000,20\n", 2, "pressure_bar", ["outside the tested pressures"]),
-    ("height_mm,load_N\n110,8000\n110,90000\n", 3, "load_N", ["outside what the tested pressures"]),
-    ("height_mm,load\n110,8000\n", 1, "load", ["unknown column"]),
-])
+@pytest.mark.parametrize(
+    "body, row, column, words",
+    [
+        ("height_mm,load_N\n110,8000\n100,abc\n", 3, "load_N", ["expected a number", "abc"]),
+        ("height_mm,load_N,prob\n110,8000,1.5\n", 2, "prob", ["probability"]),
+        ("height_mm,load_N\n110,8000\n,9000\n", 3, "height_mm", ["empty"]),
+        ("height_mm,load_N,tolerance_pct\n110,8000,5\n", 2, "tolerance_pct", ["pressure_bar"]),
+        ("height_mm,load_N\n110,8000\n300,8000\n", 3, "height_mm", ["outside the tested heights"]),
+        (
+            "height_mm,load_N,pressure_bar\n110,8000,20\n",
+            2,
+            "pressure_bar",
+            ["outside the tested pressures"],
+        ),
+        (
+            "height_mm,load_N\n110,8000\n110,90000\n",
+            3,
+            "load_N",
+            ["outside what the tested pressures"],
+        ),
+        ("height_mm,load\n110,8000\n", 1, "load", ["unknown column"]),
+    ],
+)
 def test_queries_bad_row_exit_2(body, row, column, words, surface_saved, tmp_path, capsys):
     q = tmp_path / "q.csv"
     q.write_text(body)
     out = tmp_path / "q.json"
     assert run(["margin", "--fit", surface_saved[0], "--queries", q, "--json", out, "--quiet"]) == 2
     line = one_line(capsys.readouterr().err)
-    assert line.startswith("uq margin: error: ") and f"{q}, row {row}, column '{column}'" in line, line
+    assert line.startswith("uq margin: error: ") and f"{q}, row {row}, column '{column}'" in line, (
+        line
+    )
     for w in words:
         assert w in line
     assert not out.exists()
@@ -221,7 +309,12 @@ def _not_answers(tmp_path: Path, good: Path) -> dict[str, Path]:
     truncated.write_bytes(good.read_bytes()[:3000])
     other = tmp_path / "other.nc"
     xr.Dataset({"x": ("d", np.arange(3.0))}).to_netcdf(other, engine="h5netcdf")
-    return {"garbage": garbage, "truncated": truncated, "other": other, "missing": tmp_path / "missing.nc"}
+    return {
+        "garbage": garbage,
+        "truncated": truncated,
+        "other": other,
+        "missing": tmp_path / "missing.nc",
+    }
 
 
 @pytest.mark.parametrize("kind", ["garbage", "truncated", "other", "missing"])
@@ -234,12 +327,27 @@ def test_bad_fit_file_exit_2(kind, surface_saved, tmp_path, capsys):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("extra, words", [
-    (["--height-mm", 300, "--load-N", 8000], ["--height-mm", "300 mm", "outside the tested heights"]),
-    (["--height-mm", 110, "--load-N", 8000, "--pressure-bar", 20], ["--pressure-bar", "outside the tested pressures"]),
-    (["--height-mm", 110, "--load-N", 90000], ["--load-N", "outside what the tested pressures"]),
-    (["--height-mm", 110, "--load-N", 8000, "--model", "cubics"], ["--model cubics", "surface model"]),
-])
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (
+            ["--height-mm", 300, "--load-N", 8000],
+            ["--height-mm", "300 mm", "outside the tested heights"],
+        ),
+        (
+            ["--height-mm", 110, "--load-N", 8000, "--pressure-bar", 20],
+            ["--pressure-bar", "outside the tested pressures"],
+        ),
+        (
+            ["--height-mm", 110, "--load-N", 90000],
+            ["--load-N", "outside what the tested pressures"],
+        ),
+        (
+            ["--height-mm", 110, "--load-N", 8000, "--model", "cubics"],
+            ["--model cubics", "surface model"],
+        ),
+    ],
+)
 def test_saved_fit_refuses_what_a_fit_refuses(extra, words, surface_saved, capsys):
     assert run(["margin", "--fit", surface_saved[0], *extra]) == 2
     line = one_line(capsys.readouterr().err)
@@ -256,7 +364,11 @@ def no_fitting(monkeypatch):
     def forbidden(*a, **k):
         raise AssertionError("read or fitted before the options were checked")
 
-    for mod, name in ((uq._models.cubic, "fit_campaign"), (uq._models.surface, "fit_surface"), (uq._cli.common, "load")):
+    for mod, name in (
+        (uq._models.cubic, "fit_campaign"),
+        (uq._models.surface, "fit_surface"),
+        (uq._cli.common, "load"),
+    ):
         monkeypatch.setattr(mod, name, forbidden)
 
 
@@ -266,12 +378,34 @@ def test_exactly_one_source_exit_2(surface_saved, campaign, tmp_path, capsys, no
     q.write_text("height_mm,load_N\n110,8000\n")
     rows = [
         (["margin", "--height-mm", 110, "--load-N", 8000], ["exactly one of FILE.csv", "--fit"]),
-        (["margin", csv, "--fit", fit, "--height-mm", 110, "--load-N", 8000], ["--fit", "FILE.csv"]),
-        (["margin", "--fit", fit, "--save-fit", tmp_path / "x.nc", "--height-mm", 110, "--load-N", 8000], ["--save-fit"]),
+        (
+            ["margin", csv, "--fit", fit, "--height-mm", 110, "--load-N", 8000],
+            ["--fit", "FILE.csv"],
+        ),
+        (
+            [
+                "margin",
+                "--fit",
+                fit,
+                "--save-fit",
+                tmp_path / "x.nc",
+                "--height-mm",
+                110,
+                "--load-N",
+                8000,
+            ],
+            ["--save-fit"],
+        ),
         (["margin", csv, "--save-fit", "-", "--height-mm", 110, "--load-N", 8000], ["--save-fit"]),
-        (["margin", csv, "--save-fit", tmp_path, "--height-mm", 110, "--load-N", 8000], ["--save-fit", "folder"]),
+        (
+            ["margin", csv, "--save-fit", tmp_path, "--height-mm", 110, "--load-N", 8000],
+            ["--save-fit", "folder"],
+        ),
         (["margin", "--fit", fit, "--load-N", 8000], ["--height-mm", "required"]),
-        (["margin", "--fit", fit, "--queries", q, "--height-mm", 110], ["--height-mm", "--queries"]),
+        (
+            ["margin", "--fit", fit, "--queries", q, "--height-mm", 110],
+            ["--height-mm", "--queries"],
+        ),
         (["margin", "--fit", fit, "--queries", tmp_path / "none.csv"], ["none.csv", "cannot read"]),
     ]
     for argv, words in rows:

@@ -10,7 +10,9 @@ from uq._data.stand_description import PAPER_STAND
 from uq._derived.residuals import ALPHA, lag_one_check, order_check, order_warnings
 from uq._stand.simulator import Layout, ar1, simulate_recordings
 
-U = np.concatenate([np.linspace(0.043, -0.047, 19), np.linspace(-0.042, 0.043, 18)])  # the paper's order
+U = np.concatenate(
+    [np.linspace(0.043, -0.047, 19), np.linspace(-0.042, 0.043, 18)]
+)  # the paper's order
 
 
 def _noisy(rng, errors):
@@ -26,7 +28,12 @@ def test_p_values_are_uniform_under_independent_errors():
     """400 tests with independent Gaussian errors: the share of p < 0.05 and of p < 0.25 lies in
     its binomial acceptance region (false failure < 1e-3 for the two together)."""
     rng = np.random.default_rng(0)
-    p = np.array([lag_one_check(*_noisy(rng, rng.standard_normal(U.size)), U, n_null=4000)["p"] for _ in range(400)])
+    p = np.array(
+        [
+            lag_one_check(*_noisy(rng, rng.standard_normal(U.size)), U, n_null=4000)["p"]
+            for _ in range(400)
+        ]
+    )
     for level in (0.05, 0.25):
         lo, hi = binom.ppf(2.5e-4, 400, level), binom.isf(2.5e-4, 400, level)
         assert lo <= np.sum(p < level) <= hi, (level, np.sum(p < level))
@@ -37,7 +44,10 @@ def test_correlated_errors_are_found():
     with this seed; at 0.6 the check finds about 40 % at ALPHA and 65 % at 0.01: its power is
     what 37 readings allow, which is why the README states it)."""
     rng = np.random.default_rng(1)
-    hits = sum(lag_one_check(*_noisy(rng, ar1(rng.standard_normal(U.size), 0.8)), U)["p"] < ALPHA for _ in range(60))
+    hits = sum(
+        lag_one_check(*_noisy(rng, ar1(rng.standard_normal(U.size), 0.8)), U)["p"] < ALPHA
+        for _ in range(60)
+    )
     assert hits >= 36, hits
 
 
@@ -51,8 +61,15 @@ def test_a_stand_with_correlated_pressure_errors_gets_a_model_warning():
     layout = Layout(pressures_bar=(1.0, 3.0, 5.0, 8.0))
     settings = uq.Settings(max_steps=2000)
     found = {}
-    for name, stand in (("paper", PAPER_STAND), ("correlated", PAPER_STAND.replace(pressure_error_corr=0.7))):
-        cf = uq.fit_campaign(simulate_recordings("n50", seed=3, layout=layout, stand=stand), seed=1, settings=settings)
+    for name, stand in (
+        ("paper", PAPER_STAND),
+        ("correlated", PAPER_STAND.replace(pressure_error_corr=0.7)),
+    ):
+        cf = uq.fit_campaign(
+            simulate_recordings("n50", seed=3, layout=layout, stand=stand),
+            seed=1,
+            settings=settings,
+        )
         found[name] = [order_warnings(order_check(t)) for t in cf.tests]
     assert not any(found["paper"]), found["paper"]
     piston = [any(w.startswith("piston") for w in ws) for ws in found["correlated"]]

@@ -14,16 +14,29 @@ from uq._io.errors import InputError
 from uq._io.files import write_text_atomic
 from uq._stand.simulator import Layout, simulate
 
-VALID = write_recordings_csv(simulate("n50", seed=4, layout=Layout(pressures_bar=(1.0, 4.0)))).splitlines()
+VALID = write_recordings_csv(
+    simulate("n50", seed=4, layout=Layout(pressures_bar=(1.0, 4.0)))
+).splitlines()
 N_ROWS = len(VALID) - 1
 
 corruptions = st.one_of(
-    st.tuples(st.just("cell"), st.integers(1, N_ROWS), st.integers(0, 5),
-              st.sampled_from(["", "abc", "nan", "inf", "-", "1e999", "0x10", "1,2", " ", "NaN", "--5", "1.2.3"])),
+    st.tuples(
+        st.just("cell"),
+        st.integers(1, N_ROWS),
+        st.integers(0, 5),
+        st.sampled_from(
+            ["", "abc", "nan", "inf", "-", "1e999", "0x10", "1,2", " ", "NaN", "--5", "1.2.3"]
+        ),
+    ),
     st.tuples(st.just("drop_field"), st.integers(1, N_ROWS), st.integers(0, 5), st.just("")),
     st.tuples(st.just("duplicate"), st.integers(1, N_ROWS), st.just(0), st.just("")),
     st.tuples(st.just("delete"), st.integers(1, N_ROWS), st.just(0), st.just("")),
-    st.tuples(st.just("header"), st.just(0), st.integers(0, 5), st.sampled_from(["", "Force_N", "height_m", "x"])),
+    st.tuples(
+        st.just("header"),
+        st.just(0),
+        st.integers(0, 5),
+        st.sampled_from(["", "Force_N", "height_m", "x"]),
+    ),
     st.tuples(st.just("truncate"), st.integers(0, N_ROWS), st.just(0), st.just("")),
 )
 
@@ -57,7 +70,9 @@ def _apply(lines: list[str], kind: str, row: int, col: int, text: str) -> list[s
     return lines
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(corruption=st.lists(corruptions, min_size=1, max_size=3))
 def test_corrupted_files_fail_with_one_line_or_keep_every_row(tmp_path_factory, corruption):
     lines = VALID
@@ -129,9 +144,17 @@ def read_recordings_from_lines(lines):
 
 
 @settings(max_examples=40, deadline=None)
-@given(sep=st.sampled_from([",", ";", "\t"]), bom=st.booleans(), crlf=st.booleans(), comma=st.booleans(),
-       order=st.permutations(range(6)), extra=st.booleans())
-def test_same_recordings_in_any_spreadsheet_dialect_read_the_same(sep, bom, crlf, comma, order, extra):
+@given(
+    sep=st.sampled_from([",", ";", "\t"]),
+    bom=st.booleans(),
+    crlf=st.booleans(),
+    comma=st.booleans(),
+    order=st.permutations(range(6)),
+    extra=st.booleans(),
+)
+def test_same_recordings_in_any_spreadsheet_dialect_read_the_same(
+    sep, bom, crlf, comma, order, extra
+):
     """BOM, ';' or tab with decimal commas, CRLF, column order, extra columns: the same numbers."""
     rows = [ln.split(",") for ln in VALID]
     out = []

@@ -19,10 +19,26 @@ SMALL = Layout(pressures_bar=(1.0, 3.0, 5.0, 7.0, 9.0))
 
 
 def _rec(effects, seed=7, layout=Layout(), x0=0.112, area=54.82e-4):
-    tests = simulate("n50-traditional", seed=seed, effects=effects, layout=layout, piston_area_m2=area)
-    return Recordings("test", tuple(PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"],
-                                         t["compression"], t["step"], np.arange(t["step"].size)) for t in tests),
-                      x0_m=x0, piston_area_m2=area)
+    tests = simulate(
+        "n50-traditional", seed=seed, effects=effects, layout=layout, piston_area_m2=area
+    )
+    return Recordings(
+        "test",
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                t["piston_m"],
+                t["compression"],
+                t["step"],
+                np.arange(t["step"].size),
+            )
+            for t in tests
+        ),
+        x0_m=x0,
+        piston_area_m2=area,
+    )
 
 
 def _consistent(mag: dict, truth: float) -> bool:
@@ -36,7 +52,9 @@ def _run(rec, **kw):
     from uq._diagnose.engine import diagnose, public
     from uq._inference.sampler import Settings
 
-    return public(diagnose(rec, seed=1, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0), **kw))
+    return public(
+        diagnose(rec, seed=1, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0), **kw)
+    )
 
 
 def test_clean_control_stays_quiet():
@@ -46,7 +64,9 @@ def test_clean_control_stays_quiet():
     assert res["final"]["elpd_loo"] == res["baseline"]["elpd_loo"]
 
 
-@pytest.mark.parametrize("name,value", [pytest.param("hysteresis", 0.02, marks=pytest.mark.slow), ("thermal_drift", 2.0)])
+@pytest.mark.parametrize(
+    "name,value", [pytest.param("hysteresis", 0.02, marks=pytest.mark.slow), ("thermal_drift", 2.0)]
+)
 def test_visible_mechanism_is_named_with_its_magnitude(name, value):
     res = _run(_rec({name: value}, layout=SMALL))
     assert res["mismatch_detected"] is True
@@ -55,7 +75,9 @@ def test_visible_mechanism_is_named_with_its_magnitude(name, value):
     assert _consistent(mag, value), mag
     assert res["final"]["elpd_loo"] > res["baseline"]["elpd_loo"] + 20
     assert set(res) >= {"mismatch_detected", "baseline", "where", "mechanisms", "final"}
-    assert {"by_pressure", "by_height", "by_branch", "by_recording_order"} <= set(res["where"]["force"])
+    assert {"by_pressure", "by_height", "by_branch", "by_recording_order"} <= set(
+        res["where"]["force"]
+    )
 
 
 def test_offset_preferred_over_casing_force_on_other_stand():
@@ -67,8 +89,10 @@ def test_offset_preferred_over_casing_force_on_other_stand():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name,value", [("pressure_dependent_area", 0.01), ("casing_force", 200.0),
-                                        ("force_offset", 56.3)])
+@pytest.mark.parametrize(
+    "name,value",
+    [("pressure_dependent_area", 0.01), ("casing_force", 200.0), ("force_offset", 56.3)],
+)
 def test_other_mechanisms_paper_layout(name, value):
     res = _run(_rec({name: value}))
     assert [m["name"] for m in res["mechanisms"]] == [name]
@@ -95,14 +119,19 @@ def test_proof_results_committed():
 
     cov = s["coverage_90_overall"]
     n = cov["named_true"]
-    assert stats.binom.ppf(5e-4, n, 0.9) <= cov["true_in_90"] <= stats.binom.ppf(1 - 5e-4, n, 0.9), cov
+    assert (
+        stats.binom.ppf(5e-4, n, 0.9) <= cov["true_in_90"] <= stats.binom.ppf(1 - 5e-4, n, 0.9)
+    ), cov
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["--gain-se", "0"], "--gain-se"),
-    (["--max-mechanisms", "9"], "--max-mechanisms"),
-    (["--walkers", "3"], "--walkers"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--gain-se", "0"], "--gain-se"),
+        (["--max-mechanisms", "9"], "--max-mechanisms"),
+        (["--walkers", "3"], "--walkers"),
+    ],
+)
 def test_bad_options_exit_2(tmp_path, capsys, argv, needle):
     from uq._cli.main import main
     from uq._data.recordings import write_recordings_csv
@@ -122,8 +151,24 @@ def test_cli_json_and_report(tmp_path, capsys):
     from uq._data.recordings import write_recordings_csv
 
     f = tmp_path / "r.csv"
-    f.write_text(write_recordings_csv(simulate("n50-traditional", seed=2, layout=SMALL, effects={"hysteresis": 0.02})))
-    assert main(["diagnose", str(f), "--json", str(tmp_path / "d.json"), "--report", str(tmp_path / "rep")]) == 0
+    f.write_text(
+        write_recordings_csv(
+            simulate("n50-traditional", seed=2, layout=SMALL, effects={"hysteresis": 0.02})
+        )
+    )
+    assert (
+        main(
+            [
+                "diagnose",
+                str(f),
+                "--json",
+                str(tmp_path / "d.json"),
+                "--report",
+                str(tmp_path / "rep"),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "hysteresis" in out
     res = json.loads((tmp_path / "d.json").read_text())
@@ -137,10 +182,17 @@ def test_same_seed_gives_byte_identical_json(tmp_path):
     from uq._data.recordings import write_recordings_csv
 
     csv = tmp_path / "r.csv"
-    csv.write_text(write_recordings_csv(simulate("n50-traditional", seed=3, effects={"force_offset": 56.3}, layout=SMALL)))
+    csv.write_text(
+        write_recordings_csv(
+            simulate("n50-traditional", seed=3, effects={"force_offset": 56.3}, layout=SMALL)
+        )
+    )
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     for out in (a, b):
-        assert main(["diagnose", str(csv), "--json", str(out), "--seed", "5", "--max-steps", "400"]) == 0
+        assert (
+            main(["diagnose", str(csv), "--json", str(out), "--seed", "5", "--max-steps", "400"])
+            == 0
+        )
     assert a.read_bytes() == b.read_bytes()
 
 
@@ -149,8 +201,21 @@ def test_same_seed_gives_byte_identical_json(tmp_path):
 
 def _rec_stand(effects, stand, seed=7, layout=SMALL):
     tests = simulate("n50-traditional", seed=seed, effects=effects, layout=layout, stand=stand)
-    return Recordings("test", tuple(PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"],
-                                         t["compression"], t["step"], np.arange(t["step"].size)) for t in tests))
+    return Recordings(
+        "test",
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                t["piston_m"],
+                t["compression"],
+                t["step"],
+                np.arange(t["step"].size),
+            )
+            for t in tests
+        ),
+    )
 
 
 def test_pressure_error_cancels_in_the_decorrelated_force():
@@ -161,13 +226,22 @@ def test_pressure_error_cancels_in_the_decorrelated_force():
     from uq._models import diagnose as M
     from uq._stand.simulator import TraditionalSpring, true_curves
 
-    stand = PAPER_STAND.replace(pressure_holding_bar=0.05, load_cell_rel_sd=0.0, displacement_sd_m=0.0,
-                                caliper_sd_m=0.0)
+    stand = PAPER_STAND.replace(
+        pressure_holding_bar=0.05, load_cell_rel_sd=0.0, displacement_sd_m=0.0, caliper_sd_m=0.0
+    )
     rec = _rec_stand({}, stand)
     d, _ = M.prepare(rec, stand)
     spring = TraditionalSpring()
-    F_true, L_true = map(np.concatenate, zip(*(true_curves(spring, {}, t.height_m, t.pressure_bar, t.compression,
-                                                           t.step) for t in rec.tests), strict=True))
+    F_true, L_true = map(
+        np.concatenate,
+        zip(
+            *(
+                true_curves(spring, {}, t.height_m, t.pressure_bar, t.compression, t.step)
+                for t in rec.tests
+            ),
+            strict=True,
+        ),
+    )
     y_noisy = np.asarray(M.decorrelated_force(d))
     y_true = np.asarray(M.decorrelated_force(d._replace(force=F_true, piston=L_true)))
     scatter_z = np.std(y_noisy - y_true)
@@ -248,7 +322,11 @@ def test_n50_no_stand_in_offset_and_force_fit_not_worse(n50_recordings):
     from uq._diagnose.engine import diagnose, public
     from uq._inference.sampler import Settings
 
-    res = public(diagnose(n50_recordings, seed=0, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0)))
+    res = public(
+        diagnose(
+            n50_recordings, seed=0, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0)
+        )
+    )
     names = [m["name"] for m in res["mechanisms"]]
     assert "force_offset" not in names
     assert "volume_excess" in names
@@ -264,10 +342,17 @@ def test_nested_mechanisms_the_larger_goes_first():
     to leave out, the casing force is removed first, whichever is cheaper by a few nats."""
     from uq._diagnose.engine import GAIN_MIN, _to_remove
 
-    table = {"force_offset": {"delta_elpd": 0.4}, "casing_force": {"delta_elpd": 1.5},
-             "hysteresis": {"delta_elpd": 30.0}}
+    table = {
+        "force_offset": {"delta_elpd": 0.4},
+        "casing_force": {"delta_elpd": 1.5},
+        "hysteresis": {"delta_elpd": 30.0},
+    }
     assert _to_remove(["force_offset", "casing_force", "hysteresis"], table) == "casing_force"
-    table["casing_force"]["delta_elpd"] = 0.4 + GAIN_MIN + 1.0  # clearly costlier: the cheapest goes
+    table["casing_force"]["delta_elpd"] = (
+        0.4 + GAIN_MIN + 1.0
+    )  # clearly costlier: the cheapest goes
     assert _to_remove(["force_offset", "casing_force"], table) == "force_offset"
     table = {"hysteresis": {"delta_elpd": 2.0}, "thermal_drift": {"delta_elpd": 1.0}}
-    assert _to_remove(["hysteresis", "thermal_drift"], table) == "thermal_drift"  # equal size: cheapest
+    assert (
+        _to_remove(["hysteresis", "thermal_drift"], table) == "thermal_drift"
+    )  # equal size: cheapest

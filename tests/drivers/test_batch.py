@@ -22,8 +22,22 @@ def campaigns(tmp_path_factory):
     """Two tiny simulated campaigns (2 tests x 10 points) and one with a non-number in row 12."""
     d = tmp_path_factory.mktemp("batch")
     for s in (1, 2):
-        assert main(["simulate", "--out", str(d / f"c{s}.csv"), "--seed", str(s), "--pressures", "2,5",
-                     "--step-mm", "10"]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--out",
+                    str(d / f"c{s}.csv"),
+                    "--seed",
+                    str(s),
+                    "--pressures",
+                    "2,5",
+                    "--step-mm",
+                    "10",
+                ]
+            )
+            == 0
+        )
     lines = (d / "c1.csv").read_text().splitlines()
     row = lines[11].split(",")
     row[1] = "abc"
@@ -41,14 +55,29 @@ def _csv(d, text, name="cat.csv"):
     return str(d / name)
 
 
-@pytest.mark.parametrize("body, says", [
-    ("name,file,tasks\na,c1.csv,fit\nb,c2.csv,fitt\n", "row 3, column 'tasks': unknown task 'fitt'"),
-    ("name,file,tasks\na,c1.csv,fit\nb,nope.csv,fit\n", "row 3, column 'file': no such file"),
-    ("name,file,tasks\na,c1.csv,fit\n# comment\na,c2.csv,report\n", "row 4: duplicate campaign name 'a' (also"),
-    ("name,file,tasks,sed\na,c1.csv,fit,3\n", "row 1: unknown column 'sed'"),
-    ("name,file,tasks,seed\na,c1.csv,fit,-3\n", "row 2, column 'seed': expected an integer seed"),
-    ("name,file,tasks\n../up,c1.csv,fit\n", "row 2, column 'name': '../up' cannot name a folder"),
-])
+@pytest.mark.parametrize(
+    "body, says",
+    [
+        (
+            "name,file,tasks\na,c1.csv,fit\nb,c2.csv,fitt\n",
+            "row 3, column 'tasks': unknown task 'fitt'",
+        ),
+        ("name,file,tasks\na,c1.csv,fit\nb,nope.csv,fit\n", "row 3, column 'file': no such file"),
+        (
+            "name,file,tasks\na,c1.csv,fit\n# comment\na,c2.csv,report\n",
+            "row 4: duplicate campaign name 'a' (also",
+        ),
+        ("name,file,tasks,sed\na,c1.csv,fit,3\n", "row 1: unknown column 'sed'"),
+        (
+            "name,file,tasks,seed\na,c1.csv,fit,-3\n",
+            "row 2, column 'seed': expected an integer seed",
+        ),
+        (
+            "name,file,tasks\n../up,c1.csv,fit\n",
+            "row 2, column 'name': '../up' cannot name a folder",
+        ),
+    ],
+)
 def test_bad_catalogue_is_one_line_exit_2_before_any_work(campaigns, tmp_path, capsys, body, says):
     cat = _csv(campaigns, body, "bad_cat.csv")
     assert main(["batch", cat, "--out", str(tmp_path / "out")]) == 2
@@ -60,37 +89,60 @@ def test_bad_catalogue_is_one_line_exit_2_before_any_work(campaigns, tmp_path, c
 def test_toml_catalogue_defaults_and_relative_paths(campaigns):
     (campaigns / "cat.toml").write_text(
         "[defaults]\ntasks = ['fit']\nseed = 5\n\n[[campaign]]\nfile = 'c1.csv'\n\n"
-        "[[campaign]]\nname = 'second'\nfile = 'c2.csv'\ntasks = 'fit, report'\nseed = 9\nwalkers = 8\n")
+        "[[campaign]]\nname = 'second'\nfile = 'c2.csv'\ntasks = 'fit, report'\nseed = 9\nwalkers = 8\n"
+    )
     a, b = _batch.read_catalogue(campaigns / "cat.toml")
     assert (a.name, a.tasks, a.options) == ("c1", ("fit",), {"seed": 5})
     assert (b.name, b.tasks, b.options) == ("second", ("fit", "report"), {"seed": 9, "walkers": 8})
     assert a.file == (campaigns / "c1.csv").resolve()
-    (campaigns / "dup.toml").write_text("[[campaign]]\nfile = 'c1.csv'\ntasks = ['fit']\n[[campaign]]\nfile = 'c1.csv'\ntasks = ['fit']\n")
-    with pytest.raises(_batch.InputError, match=r"dup.toml, campaign 2: duplicate campaign name 'c1'"):
+    (campaigns / "dup.toml").write_text(
+        "[[campaign]]\nfile = 'c1.csv'\ntasks = ['fit']\n[[campaign]]\nfile = 'c1.csv'\ntasks = ['fit']\n"
+    )
+    with pytest.raises(
+        _batch.InputError, match=r"dup.toml, campaign 2: duplicate campaign name 'c1'"
+    ):
         _batch.read_catalogue(campaigns / "dup.toml")
 
 
 def test_hash_changes_with_data_task_options_and_version(campaigns, monkeypatch):
     c = _batch.Campaign("a", campaigns / "c1.csv", ("fit",), {"seed": 1})
     h = _batch.job_hash(c, "fit")
-    assert h == _batch.job_hash(_batch.Campaign("x", campaigns / "c1.csv", ("fit",), {"seed": 1}), "fit")
+    assert h == _batch.job_hash(
+        _batch.Campaign("x", campaigns / "c1.csv", ("fit",), {"seed": 1}), "fit"
+    )
     assert h != _batch.job_hash(c, "report")
-    assert h != _batch.job_hash(_batch.Campaign("a", campaigns / "c1.csv", ("fit",), {"seed": 2}), "fit")
-    assert h != _batch.job_hash(_batch.Campaign("a", campaigns / "c2.csv", ("fit",), {"seed": 1}), "fit")
+    assert h != _batch.job_hash(
+        _batch.Campaign("a", campaigns / "c1.csv", ("fit",), {"seed": 2}), "fit"
+    )
+    assert h != _batch.job_hash(
+        _batch.Campaign("a", campaigns / "c2.csv", ("fit",), {"seed": 1}), "fit"
+    )
     monkeypatch.setattr(_batch, "_version", lambda: "0.0.0-other")
     assert h != _batch.job_hash(c, "fit")
 
 
 def test_local_cluster_run_failed_campaign_summary_and_rerun_skip(campaigns, tmp_path, capsys):
-    cat = _csv(campaigns, "name,file,tasks,seed,walkers,ensembles,max_steps\n"
-                          "one,c1.csv,fit,3,8,2,60\nbroken,bad.csv,fit,3,8,2,60\ntwo,c2.csv,fit,4,8,2,60\n")
+    cat = _csv(
+        campaigns,
+        "name,file,tasks,seed,walkers,ensembles,max_steps\n"
+        "one,c1.csv,fit,3,8,2,60\nbroken,bad.csv,fit,3,8,2,60\ntwo,c2.csv,fit,4,8,2,60\n",
+    )
     out = tmp_path / "out"
-    assert main(["batch", cat, "--out", str(out), "--quiet"]) == 1  # one failed, the others finished
+    assert (
+        main(["batch", cat, "--out", str(out), "--quiet"]) == 1
+    )  # one failed, the others finished
     text = capsys.readouterr()
     assert "LocalCluster, 2 workers" in text.out and "2 done, 0 skipped, 1 failed" in text.out
     rows = _rows(out)
-    assert [(r["campaign"], r["status"]) for r in rows] == [("one", "done"), ("broken", "failed"), ("two", "done")]
-    assert rows[1]["error"].endswith("row 12, column 'height_mm': 'abc' is not a number") and "\n" not in rows[1]["error"]
+    assert [(r["campaign"], r["status"]) for r in rows] == [
+        ("one", "done"),
+        ("broken", "failed"),
+        ("two", "done"),
+    ]
+    assert (
+        rows[1]["error"].endswith("row 12, column 'height_mm': 'abc' is not a number")
+        and "\n" not in rows[1]["error"]
+    )
     for name in ("one", "two"):
         fit = json.loads((out / name / "fit" / "fit.json").read_text())
         assert [t["pressure_bar"] for t in fit["tests"]] == [2.0, 5.0]
@@ -99,17 +151,27 @@ def test_local_cluster_run_failed_campaign_summary_and_rerun_skip(campaigns, tmp
     summary = json.loads((out / "summary.json").read_text())
     assert summary["counts"] == {"done": 2, "skipped": 0, "failed": 1}
     page = (out / "index.html").read_text()
-    assert "href='one/fit/fit.json'" in page and "href='two/fit/fit.json'" in page and "is not a number" in page
+    assert (
+        "href='one/fit/fit.json'" in page
+        and "href='two/fit/fit.json'" in page
+        and "is not a number" in page
+    )
 
     before = (out / "one" / "fit" / "fit.json").stat().st_mtime_ns
-    assert main(["batch", cat, "--out", str(out), "--quiet"]) == 1  # the broken one runs (and fails) again
+    assert (
+        main(["batch", cat, "--out", str(out), "--quiet"]) == 1
+    )  # the broken one runs (and fails) again
     assert "0 done, 2 skipped, 1 failed" in capsys.readouterr().out
     rows = _rows(out)
     assert [r["status"] for r in rows] == ["skipped", "failed", "skipped"]
     assert (out / "one" / "fit" / "fit.json").stat().st_mtime_ns == before  # not rewritten
 
     # all finished: no cluster is started, and on a terminal the progress bar is drawn
-    cat2 = _csv(campaigns, "name,file,tasks,seed,walkers,ensembles,max_steps\none,c1.csv,fit,3,8,2,60\n", "cat2.csv")
+    cat2 = _csv(
+        campaigns,
+        "name,file,tasks,seed,walkers,ensembles,max_steps\none,c1.csv,fit,3,8,2,60\n",
+        "cat2.csv",
+    )
     tty = _Terminal()
     sys_stderr, sys.stderr = sys.stderr, tty
     try:
@@ -125,17 +187,40 @@ def test_index_page_escapes_names_and_messages(tmp_path):
     """index.html is a jinja2 template with autoescaping: a campaign name or an error message
     holding markup (an error may quote the recordings) is text on the page, never a <script>."""
     evil = "<script>alert('x&y')</script>"
-    rows = [{"campaign": evil, "task": "fit", "file": "f.csv", "status": "failed", "seconds": 0.25, "converged": None,
-             "result": "", "output": "", "error": f"row 3: {evil} is not a number"},
-            {"campaign": "a&b", "task": "report", "file": "f.csv", "status": "done", "seconds": 2.0, "converged": False,
-             "result": evil, "output": "report.html", "error": None}]
+    rows = [
+        {
+            "campaign": evil,
+            "task": "fit",
+            "file": "f.csv",
+            "status": "failed",
+            "seconds": 0.25,
+            "converged": None,
+            "result": "",
+            "output": "",
+            "error": f"row 3: {evil} is not a number",
+        },
+        {
+            "campaign": "a&b",
+            "task": "report",
+            "file": "f.csv",
+            "status": "done",
+            "seconds": 2.0,
+            "converged": False,
+            "result": evil,
+            "output": "report.html",
+            "error": None,
+        },
+    ]
     _batch.write_summary(rows, tmp_path, tmp_path / "cat<script>.csv")
     page = (tmp_path / "index.html").read_text()
     assert "<script" not in page
     esc = "&lt;script&gt;alert(&#x27;x&amp;y&#x27;)&lt;/script&gt;"
     assert f"<td>{esc}</td><td>fit</td><td>failed</td><td>0.2</td><td></td>" in page
     assert f"<td>row 3: {esc} is not a number</td>" in page
-    assert f"<td><b>no</b></td><td>{esc}</td><td><a href='a&amp;b/report/report.html'>report.html</a></td>" in page
+    assert (
+        f"<td><b>no</b></td><td>{esc}</td><td><a href='a&amp;b/report/report.html'>report.html</a></td>"
+        in page
+    )
     assert "<title>uq batch: cat&lt;script&gt;.csv</title>" in page
 
 
@@ -146,5 +231,18 @@ class _Terminal(io.StringIO):
 
 def test_serial_and_scheduler_exclude_each_other(campaigns, tmp_path, capsys):
     cat = _csv(campaigns, "file,tasks\nc1.csv,fit\n", "cat3.csv")
-    assert main(["batch", cat, "--out", str(tmp_path / "o"), "--serial", "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert (
+        main(
+            [
+                "batch",
+                cat,
+                "--out",
+                str(tmp_path / "o"),
+                "--serial",
+                "--scheduler",
+                "tcp://127.0.0.1:1",
+            ]
+        )
+        == 2
+    )
     assert "--serial and --scheduler" in capsys.readouterr().err

@@ -42,8 +42,11 @@ def test_fast_coverage_from_the_prior():
     alpha = FALSE_FAILURE / (2 * len(q) + 1)  # Bonferroni over 2 levels x quantities + convergence
     lo90, hi90 = _accept(reps, 0.9, alpha)
     lo50, hi50 = _accept(reps, 0.5, alpha)
-    bad = {k: (v["covered50"], v["covered90"]) for k, v in q.items()
-           if not (lo50 <= v["covered50"] <= hi50 and lo90 <= v["covered90"] <= hi90)}
+    bad = {
+        k: (v["covered50"], v["covered90"])
+        for k, v in q.items()
+        if not (lo50 <= v["covered50"] <= hi50 and lo90 <= v["covered90"] <= hi90)
+    }
     assert not bad, (bad, (lo50, hi50), (lo90, hi90))
     # one-sided: converged ~ Binomial(12, >= 0.95) if the sampler fails at most 5 % of the time
     n_conv = int(round(s["converged_fraction"] * reps))
@@ -56,10 +59,14 @@ def test_sbc_p_values_are_adjusted_for_the_number_of_quantities():
     rng = np.random.default_rng(0)
     n, k = 100, 11
     ranks = rng.integers(0, 100, size=(n, k))
-    ranks[:, 5] = np.repeat([5, 15, 25, 35, 45, 55, 65, 75, 85, 95], [18, 17, 11, 4, 10, 10, 10, 12, 3, 5])
+    ranks[:, 5] = np.repeat(
+        [5, 15, 25, 35, 45, 55, 65, 75, 85, 95], [18, 17, 11, 4, 10, 10, 10, 12, 3, 5]
+    )
     names = [f"q{j}" for j in range(k)]
     inside = np.ones((n, k), bool)
-    res = CalibrationResult("prior", "budget", names, inside, inside, ranks, np.ones(n), np.ones(n, bool), 1.0)
+    res = CalibrationResult(
+        "prior", "budget", names, inside, inside, ranks, np.ones(n), np.ones(n, bool), 1.0
+    )
     q = res.summary()["quantities"]["q5"]
     assert q["sbc_uniformity_p"] == pytest.approx(0.007, abs=0.001)
     assert 0.05 < q["sbc_uniformity_p_holm"] <= 1.0
@@ -79,7 +86,22 @@ def test_calibration_on_a_stand_unlike_the_model(tmp_path):
     results say which; the prior truth has no stand, so the option is refused with it (exit 2)."""
     stand = tmp_path / "rough.toml"
     stand.write_text("error_df = 5\n")
-    assert main(["calibrate", "--reps", "2", "--truth", "n50", "--stand", str(stand), "--out", str(tmp_path / "c")]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--reps",
+                "2",
+                "--truth",
+                "n50",
+                "--stand",
+                str(stand),
+                "--out",
+                str(tmp_path / "c"),
+            ]
+        )
+        == 0
+    )
     res = json.loads((tmp_path / "c" / "calibration.json").read_text())
     assert res["settings"][0]["stand"] == {"error_df": 5.0}
     assert "on a stand with error_df = 5" in (tmp_path / "c" / "calibration.md").read_text()
@@ -87,7 +109,22 @@ def test_calibration_on_a_stand_unlike_the_model(tmp_path):
 
 
 def test_calibrate_cli_writes_results(tmp_path):
-    assert main(["calibrate", "--reps", "2", "--truth", "n50", "--noise", "budget,constant", "--out", str(tmp_path)]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--reps",
+                "2",
+                "--truth",
+                "n50",
+                "--noise",
+                "budget,constant",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     res = json.loads((tmp_path / "calibration.json").read_text())
     assert [s["noise_model"] for s in res["settings"]] == ["budget", "constant"]
     assert (tmp_path / "calibration.md").exists() and (tmp_path / "sbc_n50_budget.png").exists()

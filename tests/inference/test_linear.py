@@ -37,9 +37,19 @@ def test_gram_plan_equals_the_explicit_gram():
     assert n_moments < 0.3 * 3 * k * k  # repeated products are shared
     for _ in range(3):
         w = [rng.normal(size=A.shape[0]) for _ in range(3)]
-        explicit = A.T @ (w[0][:, None] * A) + B.T @ (w[1][:, None] * B) + B.T @ (w[2][:, None] * A) + A.T @ (w[2][:, None] * B)
+        explicit = (
+            A.T @ (w[0][:, None] * A)
+            + B.T @ (w[1][:, None] * B)
+            + B.T @ (w[2][:, None] * A)
+            + A.T @ (w[2][:, None] * B)
+        )
         got = np.asarray(weighted_gram(plan, [jnp.asarray(v) for v in w]))
-        scale = np.sqrt(np.outer(np.diag(np.abs(A.T @ A) + np.abs(B.T @ B)), np.diag(np.abs(A.T @ A) + np.abs(B.T @ B))))
+        scale = np.sqrt(
+            np.outer(
+                np.diag(np.abs(A.T @ A) + np.abs(B.T @ B)),
+                np.diag(np.abs(A.T @ A) + np.abs(B.T @ B)),
+            )
+        )
         assert np.all(np.abs(got - explicit) <= 1e-12 * scale + 1e-300)
 
 
@@ -51,7 +61,12 @@ def test_gram_plan_merges_only_proportional_products():
     plan = gram_plan([[(A, A)]])
     assert plan.products[0].shape[1] == 5 * 6 // 2
     w = rng.normal(size=50)
-    assert np.allclose(np.asarray(weighted_gram(plan, [jnp.asarray(w)])), A.T @ (w[:, None] * A), rtol=1e-12, atol=1e-12)
+    assert np.allclose(
+        np.asarray(weighted_gram(plan, [jnp.asarray(w)])),
+        A.T @ (w[:, None] * A),
+        rtol=1e-12,
+        atol=1e-12,
+    )
 
 
 def test_posterior_from_moments_is_linear_posterior():
@@ -62,7 +77,9 @@ def test_posterior_from_moments_is_linear_posterior():
     prior = np.full(5, 3.0)
     a = linear_posterior(X, y, sigma, prior)
     w = sigma**-2
-    b = posterior_from_moments(X.T @ (w[:, None] * X), X.T @ (w * y), np.sum(w * y**2), 40, np.sum(np.log(sigma**2)), prior)
+    b = posterior_from_moments(
+        X.T @ (w[:, None] * X), X.T @ (w * y), np.sum(w * y**2), 40, np.sum(np.log(sigma**2)), prior
+    )
     for u, v in zip(a, b, strict=True):
         assert np.allclose(np.asarray(u), np.asarray(v), rtol=1e-12, atol=0)
     assert float(b.log_marginal) == pytest.approx(float(a.log_marginal), rel=1e-12)

@@ -61,8 +61,18 @@ def test_ess_counts_walkers_only_as_far_as_they_are_independent():
 def test_sampler_runs_past_the_tau_rule_until_ess_passes():
     """With a trivial tau rule the first check at min_steps passes it, but 4 x 4 walkers x 40
     steps hold far fewer than 400 effective draws: the sampler must keep going."""
-    s = Settings(n_walkers=4, n_ensembles=4, tau_multiple=1.0, burn_tau=1.0, min_steps=40, chunk=40, max_steps=5000)
-    ch = run_ensembles(_gauss, np.zeros(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=3, settings=s)
+    s = Settings(
+        n_walkers=4,
+        n_ensembles=4,
+        tau_multiple=1.0,
+        burn_tau=1.0,
+        min_steps=40,
+        chunk=40,
+        max_steps=5000,
+    )
+    ch = run_ensembles(
+        _gauss, np.zeros(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=3, settings=s
+    )
     assert ch.n_steps > s.min_steps
     assert not ch.warnings, ch.warnings
     for i in range(2):
@@ -71,8 +81,18 @@ def test_sampler_runs_past_the_tau_rule_until_ess_passes():
 
 
 def test_failed_rule_is_named_when_max_steps_is_reached():
-    s = Settings(n_walkers=4, n_ensembles=4, tau_multiple=1.0, burn_tau=1.0, min_steps=30, chunk=20, max_steps=40)
-    ch = run_ensembles(_gauss, np.zeros(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=4, settings=s)
+    s = Settings(
+        n_walkers=4,
+        n_ensembles=4,
+        tau_multiple=1.0,
+        burn_tau=1.0,
+        min_steps=30,
+        chunk=20,
+        max_steps=40,
+    )
+    ch = run_ensembles(
+        _gauss, np.zeros(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=4, settings=s
+    )
     assert ch.n_steps == 40
     assert any("effective sample size" in w for w in ch.warnings), ch.warnings
 
@@ -85,7 +105,9 @@ def test_starts_are_overdispersed_across_four_ensembles():
         return np.where(theta[:, 0] > 0, _gauss(theta - 1.0), -np.inf)
 
     s = Settings(min_steps=20, max_steps=20)
-    ch = run_ensembles(half_line, np.ones(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=5, settings=s)
+    ch = run_ensembles(
+        half_line, np.ones(2), np.full(2, 1.0 / s.init_scale), ("a", "b"), seed=5, settings=s
+    )
     assert s.n_ensembles == 4 and ch.start.shape == (4, s.n_walkers, 2)
     assert np.all(ch.start[..., 0] > 0)
     spread = ch.start[..., 1].std(axis=1)  # the unconstrained coordinate: posterior sd 1
@@ -115,7 +137,9 @@ def test_grouped_moves_never_mix_groups():
     W, G, D = 16, 5, 3
     centre = 1000.0 * np.arange(G)[:, None]
     for move in (_GroupedDE(W), _GroupedSnooker(W), _GroupedIndependence(W)):
-        coords = (centre[:, None, :] + np.random.default_rng(1).normal(size=(G, W, D))).reshape(-1, D)
+        coords = (centre[:, None, :] + np.random.default_rng(1).normal(size=(G, W, D))).reshape(
+            -1, D
+        )
         move.setup(coords)
         inds = np.arange(G * W) % move.nsplits
         sets = [coords[inds == j] for j in range(move.nsplits)]
@@ -137,8 +161,15 @@ def test_many_problems_in_one_sampler_each_get_their_own_posterior(mix):
     def lp(th):  # (K, m, 2) -> (K, m)
         return -0.5 * np.sum(((th - mu[:, None]) / sd[:, None]) ** 2, axis=-1)
 
-    runs = run_many(lp, mu + sd, sd / Settings().init_scale, ("a", "b"), seed=3, settings=Settings(),
-                    mix=getattr(sampler, mix))
+    runs = run_many(
+        lp,
+        mu + sd,
+        sd / Settings().init_scale,
+        ("a", "b"),
+        seed=3,
+        settings=Settings(),
+        mix=getattr(sampler, mix),
+    )
     assert len(runs) == 3
     for k, ch in enumerate(runs):
         assert not ch.warnings, ch.warnings
@@ -162,15 +193,24 @@ def test_independence_moves_keep_a_non_gaussian_target():
         x1, x2 = th[..., 0], th[..., 1]
         return -0.5 * x1**2 - 0.5 * ((x2 - x1**2) / 0.5) ** 2
 
-    (ch,) = run_many(lp, np.array([[0.0, 1.0]]), np.array([[1.0, 1.5]]) / Settings().init_scale, ("x1", "x2"),
-                     seed=4, settings=Settings(), mix=INDEPENDENCE_MIX)
+    (ch,) = run_many(
+        lp,
+        np.array([[0.0, 1.0]]),
+        np.array([[1.0, 1.5]]) / Settings().init_scale,
+        ("x1", "x2"),
+        seed=4,
+        settings=Settings(),
+        mix=INDEPENDENCE_MIX,
+    )
     assert not ch.warnings, ch.warnings
     x = ch.samples.reshape(-1, 2)
     for j, mean in enumerate((0.0, 1.0)):
         d = chain_diagnostics(ch.samples[..., j], ch.n_walkers)
         assert abs(x[:, j].mean() - mean) < 5 * d["mcse_mean"], (j, x[:, j].mean(), d)
     assert abs(x[:, 1].std() / 1.5 - 1.0) < 0.1
-    p_neg = integrate.quad(lambda a: stats.norm.pdf(a) * stats.norm.cdf(-a * a / 0.5), -np.inf, np.inf)[0]
+    p_neg = integrate.quad(
+        lambda a: stats.norm.pdf(a) * stats.norm.cdf(-a * a / 0.5), -np.inf, np.inf
+    )[0]
     assert abs(np.mean(x[:, 1] < 0) - p_neg) < 0.02, (np.mean(x[:, 1] < 0), p_neg)
 
 
@@ -198,5 +238,7 @@ def test_small_ensembles_fall_back_to_de_moves():
 
     for walkers, upper in ((8, ACCEPT_RANGE[1]), (16, 1.0)):
         settings = Settings(n_walkers=walkers, max_steps=100, min_steps=50, chunk=50)
-        (ch,) = run_many(lp, np.zeros((1, 3)), np.ones((1, 3)), ("a", "b", "c"), seed=1, settings=settings)
+        (ch,) = run_many(
+            lp, np.zeros((1, 3)), np.ones((1, 3)), ("a", "b", "c"), seed=1, settings=settings
+        )
         assert ch.accept_range == (ACCEPT_RANGE[0], upper)

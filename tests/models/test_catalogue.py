@@ -60,9 +60,19 @@ class Problem:
         tests = []
         for i, p in enumerate(PRESSURES):
             a_L = 0.05 + 0.01 * i  # each test's piston reference is arbitrary
-            force = np.polyval(self.force_coefs(p)[::-1], u) + FORCE_SD_N * rng.standard_normal(x.size)
-            piston = a_L + np.polyval([*self.piston_slopes()[::-1], 0.0], u) + PISTON_SD_M * rng.standard_normal(x.size)
-            tests.append(uq.PressureTest(p, x, force, piston, compression, np.arange(x.size), np.arange(x.size) + 2))
+            force = np.polyval(self.force_coefs(p)[::-1], u) + FORCE_SD_N * rng.standard_normal(
+                x.size
+            )
+            piston = (
+                a_L
+                + np.polyval([*self.piston_slopes()[::-1], 0.0], u)
+                + PISTON_SD_M * rng.standard_normal(x.size)
+            )
+            tests.append(
+                uq.PressureTest(
+                    p, x, force, piston, compression, np.arange(x.size), np.arange(x.size) + 2
+                )
+            )
         return uq.Recordings(f"closed form: {self.name}", tuple(tests), x0_m=X0, piston_area_m2=S)
 
 
@@ -101,7 +111,9 @@ def _cubic_and_bands(problem: Problem, rec):
         mid = (x > 0.075) & (x < 0.145)
         for name in ("feff", "feff_volume"):
             b = getattr(tb, name)
-            covered = np.mean((b.lo[mid] <= problem.area(x[mid])) & (problem.area(x[mid]) <= b.hi[mid]))
+            covered = np.mean(
+                (b.lo[mid] <= problem.area(x[mid])) & (problem.area(x[mid]) <= b.hi[mid])
+            )
             assert covered > 0.5, (problem.name, tb.pressure_bar, name, covered)
         # the traditional theory holds: the spread at x0 is zero within 3.3 posterior sd (99.9 %)
         est = tb.at_x0["spread_own_pct"]
@@ -115,7 +127,14 @@ def _surface_and_margin(problem: Problem, rec):
         truth = p * BAR * problem.area(x)
         draws = answer.force_draws(x, p)
         sd = draws.std()
-        assert abs(draws.mean() - truth) < 4 * sd + 0.002 * truth, (problem.name, x, p, draws.mean(), truth, sd)
+        assert abs(draws.mean() - truth) < 4 * sd + 0.002 * truth, (
+            problem.name,
+            x,
+            p,
+            draws.mean(),
+            truth,
+            sd,
+        )
     load = 5.0 * BAR * problem.area(0.112)
     res = uq.margin(surface, height_m=0.112, load_N=load, prob=0.95)
     need = res["pressure_bar_needed"]

@@ -25,7 +25,15 @@ def _test(pressure=5.0, seed=1, spring="n50", layout=None):
     t = simulate(spring, seed=seed, layout=layout)[0]
     from uq._data.recordings import PressureTest
 
-    return PressureTest(pressure, t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"], np.arange(t["step"].size) + 2)
+    return PressureTest(
+        pressure,
+        t["height_m"],
+        t["force_N"],
+        t["piston_m"],
+        t["compression"],
+        t["step"],
+        np.arange(t["step"].size) + 2,
+    )
 
 
 def test_levenberg_marquardt_equals_polyfit():
@@ -50,7 +58,9 @@ def test_collapsed_posterior_is_the_closed_form():
     assert np.allclose(posterior_cov(post), np.linalg.inv(A), rtol=1e-8)
     # marginal likelihood: y ~ N(0, Sigma + X T X^T)
     cov = np.diag(sigma**2) + FORCE_PRIOR_SD_N**2 * X @ X.T
-    assert float(post.log_marginal) == pytest.approx(stats.multivariate_normal(np.zeros(37), cov).logpdf(y), rel=1e-9)
+    assert float(post.log_marginal) == pytest.approx(
+        stats.multivariate_normal(np.zeros(37), cov).logpdf(y), rel=1e-9
+    )
 
 
 def test_exact_draw_kernel_matches_the_closed_form():
@@ -70,12 +80,19 @@ def test_exact_draw_kernel_matches_the_closed_form():
     n = 10_001  # not a multiple of the block size
     for level in (30.0, 300.0):
         sigma = np.full((n, 37), level)
-        draws = np.asarray(map_rows(_draw, (sigma, jax.random.split(jax.random.PRNGKey(3), n)), (X, y, prior)))
+        draws = np.asarray(
+            map_rows(_draw, (sigma, jax.random.split(jax.random.PRNGKey(3), n)), (X, y, prior))
+        )
         A = X.T @ X / level**2 + np.diag(prior**-2.0)
         mean, cov = np.linalg.solve(A, X.T @ y / level**2), np.linalg.inv(A)
         se = np.sqrt(np.diag(cov) / n)
         assert np.all(np.abs(draws.mean(0) - mean) < 5 * se)
-        assert np.allclose(np.cov(draws.T), cov, rtol=0.06, atol=0.06 * np.sqrt(np.outer(np.diag(cov), np.diag(cov))))
+        assert np.allclose(
+            np.cov(draws.T),
+            cov,
+            rtol=0.06,
+            atol=0.06 * np.sqrt(np.outer(np.diag(cov), np.diag(cov))),
+        )
 
 
 def test_paper_basis_conversion():
@@ -123,7 +140,9 @@ def test_non_converged_run_is_reported():
 
 def test_fit_cli_json_contract_strict_and_reproducible(tmp_path, capsys):
     csv = tmp_path / "r.csv"
-    csv.write_text(write_recordings_csv(simulate("n50", seed=5, layout=Layout(pressures_bar=(2.0, 6.0)))))
+    csv.write_text(
+        write_recordings_csv(simulate("n50", seed=5, layout=Layout(pressures_bar=(2.0, 6.0))))
+    )
     j1, j2 = tmp_path / "a.json", tmp_path / "b.json"
     assert main(["fit", str(csv), "--json", str(j1), "--seed", "11"]) == 0
     assert main(["fit", str(csv), "--json", str(j2), "--seed", "11"]) == 0
@@ -131,13 +150,21 @@ def test_fit_cli_json_contract_strict_and_reproducible(tmp_path, capsys):
     res = json.loads(j1.read_text())
     assert res["x0_m"] == pytest.approx(0.112) and res["piston_area_m2"] == pytest.approx(0.005482)
     t = res["tests"][0]
-    assert set(t["force"]) == {"a_P", "b_P", "c_P", "d_P"} and set(t["piston"]) == {"a_L", "b_L", "c_L", "d_L"}
+    assert set(t["force"]) == {"a_P", "b_P", "c_P", "d_P"} and set(t["piston"]) == {
+        "a_L",
+        "b_L",
+        "c_L",
+        "d_L",
+    }
     for k in ("mean", "sd", "q05", "q95", "r_hat", "ess_bulk"):
         assert k in t["force"]["a_P"]
     assert {"s_P_N", "eps_P_pct", "n_points", "pressure_bar"} <= set(t)
     assert np.array(t["covariance"]["force"]).shape == (4, 4)
     # the recording-order check of the residuals (uq/_derived/residuals.py): a p-value per block
-    assert set(t["residual_order"]) == {"force", "piston", "alpha"} and 0 < t["residual_order"]["piston"]["p"] <= 1
+    assert (
+        set(t["residual_order"]) == {"force", "piston", "alpha"}
+        and 0 < t["residual_order"]["piston"]["p"] <= 1
+    )
     assert res["model_warnings"] == []  # the paper's stand: independent errors
     # --strict turns a non-converged run into exit status 1, with a visible warning
     assert main(["fit", str(csv), "--max-steps", "16", "--walkers", "8", "--strict"]) == 1
@@ -148,7 +175,9 @@ def test_fit_out_writes_netcdf(tmp_path):
     import arviz as az
 
     csv = tmp_path / "r.csv"
-    csv.write_text(write_recordings_csv(simulate("n50", seed=6, layout=Layout(pressures_bar=(3.0,)))))
+    csv.write_text(
+        write_recordings_csv(simulate("n50", seed=6, layout=Layout(pressures_bar=(3.0,))))
+    )
     assert main(["fit", str(csv), "--out", str(tmp_path / "post")]) == 0
     idata = az.from_netcdf(tmp_path / "post" / "posterior_3bar.nc")
     assert {"a_P", "d_L", "sigma0_N"} <= set(idata.posterior.data_vars)

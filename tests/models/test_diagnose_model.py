@@ -23,15 +23,31 @@ def _explicit(theta, mask, d):
     m_area, m_hyst, m_vol = mask[0] * theta[2], mask[2] * theta[3], mask[5] * theta[4]
     g, hy = 1.0 + m_area * d.p_bar, 1.0 + m_hyst * d.sgn
     pw = jnp.arange(M.K_MAX + 1)
-    on = mask[M.N_MECH:]
+    on = mask[M.N_MECH :]
     T = d.t[:, None] ** pw * on
     Tint = d.t[:, None] ** (pw + 1) / (pw + 1) * on
     n = d.t.size
     Tc = d.t[:, None] ** jnp.arange(M.CASING_DEG + 1)
-    XF = jnp.concatenate([(d.p_bar * BAR_PA * g * hy)[:, None] * T, jnp.zeros_like(d.R), mask[1] * hy[:, None] * Tc,
-                          mask[3] * jnp.ones((n, 1)), jnp.zeros((n, 1))], axis=1)
-    XL = jnp.concatenate([-(BASIS_SCALE_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint, d.R,
-                          jnp.zeros_like(Tc), jnp.zeros((n, 1)), mask[4] * (d.step * 1e-6 / d.area)[:, None]], axis=1)
+    XF = jnp.concatenate(
+        [
+            (d.p_bar * BAR_PA * g * hy)[:, None] * T,
+            jnp.zeros_like(d.R),
+            mask[1] * hy[:, None] * Tc,
+            mask[3] * jnp.ones((n, 1)),
+            jnp.zeros((n, 1)),
+        ],
+        axis=1,
+    )
+    XL = jnp.concatenate(
+        [
+            -(BASIS_SCALE_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint,
+            d.R,
+            jnp.zeros_like(Tc),
+            jnp.zeros((n, 1)),
+            mask[4] * (d.step * 1e-6 / d.area)[:, None],
+        ],
+        axis=1,
+    )
     X = jnp.concatenate([XF + d.c[:, None] * XL, XL])
     y = jnp.concatenate([d.force + d.c * d.piston, d.piston])
     sigma = jnp.concatenate([jnp.exp(theta[0]) * d.sd_z, jnp.exp(theta[1]) * d.sd_L])
@@ -52,12 +68,16 @@ def data():
     return M.prepare(read_recordings(ROOT / "data" / "n50" / "recordings.csv"))[0]
 
 
-@pytest.mark.parametrize("names,order", [((), 3), (("pressure_dependent_area", "volume_excess", "casing_force"), 4),
-                                         (M.MECHS, 5)])
+@pytest.mark.parametrize(
+    "names,order",
+    [((), 3), (("pressure_dependent_area", "volume_excess", "casing_force"), 4), (M.MECHS, 5)],
+)
 def test_log_posterior_and_draws_equal_the_explicit_design(data, names, order):
     rng = np.random.default_rng(3)
     mask = M.mask_of(names, order)
-    thetas = np.column_stack([rng.normal(1.0, 1.0, (6, 2)), rng.normal(0.0, 0.05, (6, M.N_THETA - 2))])
+    thetas = np.column_stack(
+        [rng.normal(1.0, 1.0, (6, 2)), rng.normal(0.0, 0.05, (6, M.N_THETA - 2))]
+    )
     held = rng.random(data.force.size) < 0.1
     for d in (data, M.hold_out(data, held)):
         got = M.log_post(thetas, mask, d)
@@ -67,6 +87,8 @@ def test_log_posterior_and_draws_equal_the_explicit_design(data, names, order):
     ll, muF, muL, beta, sigma = M.draw_rows(thetas, jax.random.PRNGKey(0), mask, data)
     for i, t in enumerate(thetas):
         X, y, s, XF, XL = _explicit(jnp.asarray(t), mask, data)
-        np.testing.assert_allclose(muF[i], XF @ beta[i], rtol=1e-9, atol=1e-6 * np.max(np.abs(muF[i])))
+        np.testing.assert_allclose(
+            muF[i], XF @ beta[i], rtol=1e-9, atol=1e-6 * np.max(np.abs(muF[i]))
+        )
         np.testing.assert_allclose(muL[i], XL @ beta[i], rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(ll[i], gaussian_loglik(y, X @ beta[i], s), rtol=1e-9, atol=1e-9)

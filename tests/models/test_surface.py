@@ -55,8 +55,15 @@ def _campaign(tmp_path, seed, layout, spring="n50-smooth", stand=PAPER_STAND):
     return read_recordings(path)
 
 
-def coverage_run(tmp_path, seeds, settings=FAST, layout=FAST_LAYOUT, orders=DEFAULT_ORDERS,
-                 data_stand=PAPER_STAND, model_stand=PAPER_STAND):
+def coverage_run(
+    tmp_path,
+    seeds,
+    settings=FAST,
+    layout=FAST_LAYOUT,
+    orders=DEFAULT_ORDERS,
+    data_stand=PAPER_STAND,
+    model_stand=PAPER_STAND,
+):
     """Per seed: is the truth inside the 90 % band of the paper's F_eff = P/p_u, of the pressure
     area F_p = (P - E)/p_u and the 90 % interval of pressure_bar_needed, at a point between the
     tested pressures? The default orders answer, fitted to n50-smooth (a truth in their class)."""
@@ -64,7 +71,13 @@ def coverage_run(tmp_path, seeds, settings=FAST, layout=FAST_LAYOUT, orders=DEFA
 
     # a coverage proof of ``orders`` only if the truth's class is nested in it
     t = TRUTH_ORDERS
-    assert orders.K >= t.K and orders.Lp >= t.Lp and orders.Ke >= t.Ke and orders.Dk >= t.Dk and orders.Dl >= t.Dl
+    assert (
+        orders.K >= t.K
+        and orders.Lp >= t.Lp
+        and orders.Ke >= t.Ke
+        and orders.Dk >= t.Dk
+        and orders.Dl >= t.Dl
+    )
     truth = SmoothSurfaceSpring()
     x, p = np.array(X_CHECK), P_CHECK
     fp_true = float(truth.effective_area_m2(x, p))  # the spring's c-polynomial: its pressure area
@@ -78,19 +91,35 @@ def coverage_run(tmp_path, seeds, settings=FAST, layout=FAST_LAYOUT, orders=DEFA
         need = pressure_needed(fit, truth.x0_m, load)
         q05, q95 = np.quantile(need, [0.05, 0.95])
         feff = np.ravel(fit.feff_draws(x, p))
-        thin = np.linspace(0, feff.size - 1, 99).astype(int)  # SBC: rank of the truth among 99 draws
-        rows.append({"seed": s,
-                     "feff_covered": bool(b["feff_m2"]["lower"] <= feff_true <= b["feff_m2"]["upper"]),
-                     "pressure_area_covered": bool(b["pressure_area_m2"]["lower"] <= fp_true <= b["pressure_area_m2"]["upper"]),
-                     "pressure_covered": bool(q05 <= p <= q95),
-                     "feff_band": [float(b["feff_m2"]["lower"]), float(b["feff_m2"]["upper"])],
-                     "pressure_interval": [float(q05), float(q95)],
-                     "feff_rank": int(np.sum(feff[thin] < feff_true)),
-                     "pressure_rank": int(np.sum(np.ravel(need)[np.linspace(0, np.size(need) - 1, 99).astype(int)] < p)),
-                     "rel_load": float(np.mean(fit.idata.posterior["rel_load"])),
-                     "converged": fit.diagnostics["converged"]})
-    return rows, {"feff_true_m2": feff_true, "pressure_area_true_m2": fp_true, "load_N": load, "x_m": X_CHECK,
-                  "p_bar": P_CHECK, "orders": orders.label}
+        thin = np.linspace(0, feff.size - 1, 99).astype(
+            int
+        )  # SBC: rank of the truth among 99 draws
+        rows.append(
+            {
+                "seed": s,
+                "feff_covered": bool(b["feff_m2"]["lower"] <= feff_true <= b["feff_m2"]["upper"]),
+                "pressure_area_covered": bool(
+                    b["pressure_area_m2"]["lower"] <= fp_true <= b["pressure_area_m2"]["upper"]
+                ),
+                "pressure_covered": bool(q05 <= p <= q95),
+                "feff_band": [float(b["feff_m2"]["lower"]), float(b["feff_m2"]["upper"])],
+                "pressure_interval": [float(q05), float(q95)],
+                "feff_rank": int(np.sum(feff[thin] < feff_true)),
+                "pressure_rank": int(
+                    np.sum(np.ravel(need)[np.linspace(0, np.size(need) - 1, 99).astype(int)] < p)
+                ),
+                "rel_load": float(np.mean(fit.idata.posterior["rel_load"])),
+                "converged": fit.diagnostics["converged"],
+            }
+        )
+    return rows, {
+        "feff_true_m2": feff_true,
+        "pressure_area_true_m2": fp_true,
+        "load_N": load,
+        "x_m": X_CHECK,
+        "p_bar": P_CHECK,
+        "orders": orders.label,
+    }
 
 
 def test_bands_on_n50(n50_surface):
@@ -98,16 +127,23 @@ def test_bands_on_n50(n50_surface):
     assert fit.diagnostics["converged"], fit.diagnostics["warnings"]
     b = fit.bands(np.array([0.112]), 5.0)
     assert b["force_N"]["lower"][0] < b["force_N"]["upper"][0]
-    assert abs(b["feff_m2"]["mean"][0] - 0.026) < 0.002  # Table 1: P/p_u at x0, 5 bar = 13020 N / 5 bar
+    assert (
+        abs(b["feff_m2"]["mean"][0] - 0.026) < 0.002
+    )  # Table 1: P/p_u at x0, 5 bar = 13020 N / 5 bar
     # the pressure area leaves the casing force out: F_p = F_eff - E/p_u, so it differs by E(x0)/p_u
     E = np.ravel(fit.casing_draws(np.array([0.112])).mean(0))[0]
-    assert b["pressure_area_m2"]["mean"][0] == pytest.approx(b["feff_m2"]["mean"][0] - E / 5e5, rel=1e-9)
+    assert b["pressure_area_m2"]["mean"][0] == pytest.approx(
+        b["feff_m2"]["mean"][0] - E / 5e5, rel=1e-9
+    )
     # between tested pressures too
     b = fit.bands(np.array([0.1, 0.13]), 4.5)
     assert np.all(b["feff_m2"]["lower"] < b["feff_m2"]["upper"])
     res = summary(fit)
     assert res["coefficients"]["pressure_area_m2"] and res["noise"]["rel_load"]["r_hat"] < 1.01
-    assert "F_eff_m2" not in res["coefficients"] and "(P - E) / p_u" in res["definitions"]["pressure_area_m2"]
+    assert (
+        "F_eff_m2" not in res["coefficients"]
+        and "(P - E) / p_u" in res["definitions"]["pressure_area_m2"]
+    )
     assert set(res["at_x0"]["5.05"]) >= {"pressure_area_m2", "feff_m2", "force_N", "spread_N"}
     assert 0.0 <= res["spread_credibly_nonzero_fraction"] <= 1.0
 
@@ -132,7 +168,12 @@ def test_surface_report_section(n50_surface, tmp_path):
     path = write_surface_report(n50_surface, summary(n50_surface), tmp_path)
     page = path.read_text()
     assert page.count("data:image/png;base64,") == 3 and "band excludes zero" in page
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["surface.html", "surface_pressure_area.png", "surface_residuals.png", "surface_spread.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "surface.html",
+        "surface_pressure_area.png",
+        "surface_residuals.png",
+        "surface_spread.png",
+    ]
 
 
 def test_compare_with_cubics(n50_surface, n50_fit):
@@ -179,7 +220,11 @@ def test_loo_verdict_uses_the_se_and_pareto_k():
     k = np.zeros(400)
     k[7] = 0.9
     v = loo_verdict(_Loo(clear), _Loo(base, k))
-    assert v["better"] == "refused" and "Pareto k > 0.7" in v["reason"] and "per-pressure cubics: 1" in v["reason"]
+    assert (
+        v["better"] == "refused"
+        and "Pareto k > 0.7" in v["reason"]
+        and "per-pressure cubics: 1" in v["reason"]
+    )
 
 
 def test_integrated_loo_equals_refitting_without_the_reading():
@@ -195,10 +240,14 @@ def test_integrated_loo_equals_refitting_without_the_reading():
     X = rng.normal(size=(n, k))
     y = X @ rng.normal(size=k) + rng.normal(0.0, 0.5, n)
     sg, pr = np.full(n, 0.5), np.full(k, 2.0)
-    got = np.asarray(_diag_loo(jnp.asarray(X), jnp.asarray(y), jnp.asarray(sg[None]), jnp.asarray(pr)))[0]
+    got = np.asarray(
+        _diag_loo(jnp.asarray(X), jnp.asarray(y), jnp.asarray(sg[None]), jnp.asarray(pr))
+    )[0]
     for i in (0, 4):
         keep = np.arange(n) != i
-        post = linear_posterior(jnp.asarray(X[keep]), jnp.asarray(y[keep]), jnp.asarray(sg[keep]), jnp.asarray(pr))
+        post = linear_posterior(
+            jnp.asarray(X[keep]), jnp.asarray(y[keep]), jnp.asarray(sg[keep]), jnp.asarray(pr)
+        )
         var = sg[i] ** 2 + X[i] @ np.asarray(posterior_cov(post)) @ X[i]
         want = -0.5 * ((y[i] - X[i] @ np.asarray(post.mean)) ** 2 / var + np.log(var) + LOG_2PI)
         assert got[i] == pytest.approx(want, rel=1e-9)
@@ -209,7 +258,9 @@ def test_integrated_loo_equals_refitting_without_the_reading():
     got = np.asarray(_block_loo(jnp.asarray(Xb), jnp.asarray(yb), n, post.chol, post.mean))
     i = 2
     keep = (np.arange(2 * n) != i) & (np.arange(2 * n) != n + i)
-    p2 = linear_posterior(jnp.asarray(Xb[keep]), jnp.asarray(yb[keep]), jnp.ones(int(keep.sum())), jnp.ones(k))
+    p2 = linear_posterior(
+        jnp.asarray(Xb[keep]), jnp.asarray(yb[keep]), jnp.ones(int(keep.sum())), jnp.ones(k)
+    )
     rows = Xb[[i, n + i]]
     cov = np.eye(2) + rows @ np.asarray(posterior_cov(p2)) @ rows.T
     r = yb[[i, n + i]] - rows @ np.asarray(p2.mean)
@@ -235,16 +286,34 @@ def run_slow_coverage(tmp_path, n: int, out: Path | None):
 
     from uq._io.files import write_text_atomic
 
-    rows, truth = coverage_run(tmp_path, range(1000, 1000 + n), settings=Settings(), layout=PAPER_LAYOUT)
+    rows, truth = coverage_run(
+        tmp_path, range(1000, 1000 + n), settings=Settings(), layout=PAPER_LAYOUT
+    )
     lo, hi = binomial_acceptance(n, 0.9, ALPHA, n_tails=6)
-    counts = {k: sum(r[k] for r in rows) for k in ("feff_covered", "pressure_area_covered", "pressure_covered")}
-    hist = {k: np.histogram([r[k] for r in rows], bins=10, range=(0, 100))[0].tolist() for k in ("feff_rank", "pressure_rank")}
-    res = {"replications": n, "level": 0.9, "acceptance": [lo, hi], "false_failure_rate": ALPHA,
-           "model": f"DEFAULT_ORDERS ({DEFAULT_ORDERS.label})", "truth": truth, "spring": "n50-smooth",
-           "truth_class": f"{TRUTH_ORDERS.label}, nested in the default orders",
-           "layout": str(PAPER_LAYOUT), **counts, "converged": sum(r["converged"] for r in rows),
-           "sbc_rank_histograms": hist,
-           "sbc_uniformity_p": {k: float(stats.chisquare(h).pvalue) for k, h in hist.items()}, "rows": rows}
+    counts = {
+        k: sum(r[k] for r in rows)
+        for k in ("feff_covered", "pressure_area_covered", "pressure_covered")
+    }
+    hist = {
+        k: np.histogram([r[k] for r in rows], bins=10, range=(0, 100))[0].tolist()
+        for k in ("feff_rank", "pressure_rank")
+    }
+    res = {
+        "replications": n,
+        "level": 0.9,
+        "acceptance": [lo, hi],
+        "false_failure_rate": ALPHA,
+        "model": f"DEFAULT_ORDERS ({DEFAULT_ORDERS.label})",
+        "truth": truth,
+        "spring": "n50-smooth",
+        "truth_class": f"{TRUTH_ORDERS.label}, nested in the default orders",
+        "layout": str(PAPER_LAYOUT),
+        **counts,
+        "converged": sum(r["converged"] for r in rows),
+        "sbc_rank_histograms": hist,
+        "sbc_uniformity_p": {k: float(stats.chisquare(h).pvalue) for k, h in hist.items()},
+        "rows": rows,
+    }
     if out is not None:
         write_text_atomic(out, json.dumps(res, indent=1) + "\n")
     return res
@@ -255,7 +324,11 @@ def test_slow_coverage(tmp_path):
     """UQ_COVERAGE_REPS replications (default 100, about 12 min on 2 free cores); a run of 30 or more
     writes reports/surface-coverage/coverage.json. Acceptance: exact binomial, false failure < 1e-3."""
     n = int(os.environ.get("UQ_COVERAGE_REPS", "100"))
-    out = ROOT / "reports" / "surface-coverage" / "coverage.json" if n >= 30 else tmp_path / "coverage.json"
+    out = (
+        ROOT / "reports" / "surface-coverage" / "coverage.json"
+        if n >= 30
+        else tmp_path / "coverage.json"
+    )
     res = run_slow_coverage(tmp_path, n, out)
     lo, hi = res["acceptance"]
     for key in ("feff_covered", "pressure_area_covered", "pressure_covered"):
@@ -272,7 +345,15 @@ def test_stand_description_reaches_the_likelihood_and_priors():
     from uq._models.surface import _consts, noise_prior_mean
 
     p = np.array([0.1, 0.5, 5.0])
-    c = _consts(np.zeros(3), p, np.ones(3), np.ones(3), np.zeros(3), 5.482e-3, NOISY_STAND.replace(p_atm_bar=0.9))
+    c = _consts(
+        np.zeros(3),
+        p,
+        np.ones(3),
+        np.ones(3),
+        np.zeros(3),
+        5.482e-3,
+        NOISY_STAND.replace(p_atm_bar=0.9),
+    )
     assert np.allclose(c["dp_pa"], [0.002e5, 0.01e5, 0.02e5])
     assert np.allclose(c["p_abs_pa"], (p + 0.9) * 1e5)
     m = noise_prior_mean(NOISY_STAND.replace(receiver_air_m3=1.0e-3))
@@ -287,7 +368,9 @@ def test_stand_calibration(tmp_path):
     truth in a binomial acceptance region (8 replications, false failure < 1e-3); the load-cell
     posterior sits near 0.8 %. (Fitted with the paper's stand instead: see docs/surface.md.)"""
     n = 8
-    rows, _ = coverage_run(tmp_path, range(500, 500 + n), data_stand=NOISY_STAND, model_stand=NOISY_STAND)
+    rows, _ = coverage_run(
+        tmp_path, range(500, 500 + n), data_stand=NOISY_STAND, model_stand=NOISY_STAND
+    )
     lo, hi = binomial_acceptance(n, 0.9, ALPHA, n_tails=4)
     for key in ("feff_covered", "pressure_covered"):
         assert lo <= sum(r[key] for r in rows) <= hi, (key, rows)
@@ -303,8 +386,12 @@ def test_reading_covariance_has_the_gas_law_sign():
     from uq._models.surface import _cov_factors
 
     dp, feff, V0, dv, p_abs, S = 1.0e3, 0.025, 6.2e-3, 1.0e-3, 6.0e5, 54.82e-4
-    c = {k: jnp.asarray([v]) for k, v in dict(phat=1.0e4, feff_hat=feff, dv_hat=dv, dp_pa=dp,
-                                               p_abs_pa=p_abs, area=S).items()}
+    c = {
+        k: jnp.asarray([v])
+        for k, v in dict(
+            phat=1.0e4, feff_hat=feff, dv_hat=dv, dp_pa=dp, p_abs_pa=p_abs, area=S
+        ).items()
+    }
     theta = jnp.log(jnp.asarray([10.0, 0.005, 1.0, 1.0e-5, V0]))
     L11, L21, L22 = (float(v[0]) for v in _cov_factors(theta, c))
     cov_fl = L11 * L21
@@ -327,7 +414,10 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
     g = S.geometry_of(rec)
     x, p, F, L, idx = S._arrays(rec)
     _, phat, feff, dv, Xf, Xl = S._reference(DEFAULT_ORDERS, g, x, p, F, L, idx, len(rec.tests))
-    c = {**S._consts(x, p, phat, feff, dv, g.area_m2, PAPER_STAND), "gram": gram_plan(S.gram_groups(Xf, Xl))}
+    c = {
+        **S._consts(x, p, phat, feff, dv, g.area_m2, PAPER_STAND),
+        "gram": gram_plan(S.gram_groups(Xf, Xl)),
+    }
     args = (jnp.asarray(Xf), jnp.asarray(Xl), jnp.asarray(F), jnp.asarray(L), c)
     rng = np.random.default_rng(0)
     for theta in S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((4, 5)):
@@ -335,7 +425,8 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
         L11, _, L22 = S._cov_factors(theta, c)
         ref = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
         got = S._posterior(theta, *args)
-        assert float(got.log_marginal) == pytest.approx(float(ref.log_marginal - jnp.sum(jnp.log(L11) + jnp.log(L22))),
-                                                        rel=1e-9)
+        assert float(got.log_marginal) == pytest.approx(
+            float(ref.log_marginal - jnp.sum(jnp.log(L11) + jnp.log(L22))), rel=1e-9
+        )
         assert np.allclose(np.asarray(got.mean), np.asarray(ref.mean), rtol=1e-7, atol=1e-9)
         assert np.allclose(np.asarray(got.chol), np.asarray(ref.chol), rtol=1e-7, atol=1e-9)

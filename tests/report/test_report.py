@@ -29,7 +29,16 @@ def test_report_on_n50_fixture(n50_fit, tmp_path):
     assert path == tmp_path / "rep" / "report.html"
     page = _check_page(tmp_path / "rep", len(n50_fit.tests))
     assert "Reconstructed data" in page  # data/n50's comment lines say RECONSTRUCTED
-    for text in ("Table 1", "Table 2", "Sampler diagnostics", "8.41", "75 mm", "hysteresis", "kN/m²", "10³ kN/m³"):
+    for text in (
+        "Table 1",
+        "Table 2",
+        "Sampler diagnostics",
+        "8.41",
+        "75 mm",
+        "hysteresis",
+        "kN/m²",
+        "10³ kN/m³",
+    ):
         assert text in page, text
     # Table 1 beside the paper's values, one row per pressure, a paper value in every cell
     assert page.count("paper ") >= 8 * len(n50_fit.tests)
@@ -45,14 +54,18 @@ def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path):
     write_report(n50_fit, tmp_path / "one", bands=cb, jobs=1)
     write_report(n50_fit, tmp_path / "two", bands=cb, jobs=2)
     names = sorted(p.name for p in (tmp_path / "one").iterdir())
-    assert names == sorted(p.name for p in (tmp_path / "two").iterdir()) and len(names) == 6 + len(n50_fit.tests)
+    assert names == sorted(p.name for p in (tmp_path / "two").iterdir()) and len(names) == 6 + len(
+        n50_fit.tests
+    )
     for n in names:
         assert (tmp_path / "one" / n).read_bytes() == (tmp_path / "two" / n).read_bytes(), n
 
 
 def test_comments_are_read_only_from_the_top(tmp_path):
     f = tmp_path / "r.csv"
-    f.write_text("# RECONSTRUCTED by the stand\n#  second\npressure_bar,height_mm\n# not a header comment\n")
+    f.write_text(
+        "# RECONSTRUCTED by the stand\n#  second\npressure_bar,height_mm\n# not a header comment\n"
+    )
     assert read_comments(f) == ["RECONSTRUCTED by the stand", "second"]
 
 
@@ -67,7 +80,20 @@ def small_csv(tmp_path_factory):
 def test_report_cli_small_campaign(small_csv, tmp_path, capsys):
     out = tmp_path / "out"
     js = tmp_path / "fit.json"
-    rc = main(["report", str(small_csv), "--out", str(out), "--json", str(js), "--max-steps", "600", "--draws", "300"])
+    rc = main(
+        [
+            "report",
+            str(small_csv),
+            "--out",
+            str(out),
+            "--json",
+            str(js),
+            "--max-steps",
+            "600",
+            "--draws",
+            "300",
+        ]
+    )
     assert rc == 0
     printed = capsys.readouterr().out
     assert f"report: {out / 'report.html'}" in printed
@@ -98,10 +124,28 @@ def test_report_links_the_surface_page(tmp_path):
     from uq._stand.simulator import Layout, simulate
 
     csv = tmp_path / "six.csv"
-    csv.write_text(write_recordings_csv(simulate("n50", seed=3, layout=Layout(pressures_bar=(1, 2.5, 4, 5.5, 7, 10)))))
+    csv.write_text(
+        write_recordings_csv(
+            simulate("n50", seed=3, layout=Layout(pressures_bar=(1, 2.5, 4, 5.5, 7, 10)))
+        )
+    )
     out = tmp_path / "rep"
-    assert main(["report", str(csv), "--out", str(out), "--surface", "--draws", "200",
-                 "--max-steps", "400"]) == 0  # short chains: this tests the page, not the posterior
+    assert (
+        main(
+            [
+                "report",
+                str(csv),
+                "--out",
+                str(out),
+                "--surface",
+                "--draws",
+                "200",
+                "--max-steps",
+                "400",
+            ]
+        )
+        == 0
+    )  # short chains: this tests the page, not the posterior
     assert "href='surface.html'" in (out / "report.html").read_text()
     assert (out / "surface.html").read_text().count("data:image/png;base64,") == 3
 
@@ -114,16 +158,30 @@ def test_page_escapes_what_the_recordings_say(n50_fit, tmp_path, monkeypatch):
     from uq._report import campaign
 
     png = b"\x89PNG\r\n\x1a\n"  # the figures are not under test here: skip drawing them
-    for name in ("fig_force", "fig_volume", "fig_feff", "fig_traditional", "fig_scatter", "fig_test"):
+    for name in (
+        "fig_force",
+        "fig_volume",
+        "fig_feff",
+        "fig_traditional",
+        "fig_scatter",
+        "fig_test",
+    ):
         monkeypatch.setattr(campaign, name, lambda *a, **k: png)
     evil = "<script>alert('x&y')</script>"
     rec = dataclasses.replace(n50_fit.recordings, path=str(tmp_path / "<script>r.csv"))
     fit = dataclasses.replace(n50_fit, recordings=rec)
-    page = write_report(fit, tmp_path / "rep", bands=campaign_bands(n50_fit, n_draws=100, seed=0),
-                        comments=["RECONSTRUCTED", evil], jobs=1).read_text(encoding="utf-8")
+    page = write_report(
+        fit,
+        tmp_path / "rep",
+        bands=campaign_bands(n50_fit, n_draws=100, seed=0),
+        comments=["RECONSTRUCTED", evil],
+        jobs=1,
+    ).read_text(encoding="utf-8")
     assert "<script" not in page
     assert "<title>Air-spring report: &lt;script&gt;r.csv</title>" in page
-    assert "<pre>RECONSTRUCTED\n&lt;script&gt;alert(&#x27;x&amp;y&#x27;)&lt;/script&gt;</pre>" in page
+    assert (
+        "<pre>RECONSTRUCTED\n&lt;script&gt;alert(&#x27;x&amp;y&#x27;)&lt;/script&gt;</pre>" in page
+    )
 
 
 def test_template_refuses_a_missing_value():
@@ -133,4 +191,6 @@ def test_template_refuses_a_missing_value():
     from uq._report.html import render
 
     with pytest.raises(UndefinedError):
-        render("diagnose.html", summary="s", mechanisms=[], baseline={"rms_N": 1.0, "elpd_loo": 2.0})
+        render(
+            "diagnose.html", summary="s", mechanisms=[], baseline={"rms_N": 1.0, "elpd_loo": 2.0}
+        )

@@ -24,7 +24,11 @@ from uq._stand.simulator import (
 def test_procedure_of_section_3_4():
     heights, comp = Layout().heights()
     assert heights.size == 37 and comp.sum() == 19
-    assert heights[0] == pytest.approx(0.155) and heights[18] == pytest.approx(0.065) and heights[-1] == pytest.approx(0.155)
+    assert (
+        heights[0] == pytest.approx(0.155)
+        and heights[18] == pytest.approx(0.065)
+        and heights[-1] == pytest.approx(0.155)
+    )
     assert np.allclose(np.diff(heights[:19]), -0.005) and np.allclose(np.diff(heights[19:]), 0.005)
 
 
@@ -83,7 +87,9 @@ def test_effects_follow_the_contract():
     f, _ = true_curves(s, {"hysteresis": 0.02}, x, 4.0, comp, step)
     assert np.allclose(f / f0, [1.02, 1.02, 0.98])
     f, _ = true_curves(s, {"casing_force": 200.0}, x, 4.0, comp, step)
-    assert np.allclose(f - f0, 200.0 * casing_shape(x, 0.112)) and (f - f0)[1] == pytest.approx(200.0)
+    assert np.allclose(f - f0, 200.0 * casing_shape(x, 0.112)) and (f - f0)[1] == pytest.approx(
+        200.0
+    )
     f, l = true_curves(s, {"pressure_dependent_area": 0.01}, x, 4.0, comp, step)
     assert np.allclose(f / f0, 1.04)
     ref = s.piston_m(np.array(0.112), 4.0)
@@ -93,25 +99,56 @@ def test_effects_follow_the_contract():
 
 
 def test_effect_option_parsing():
-    assert parse_effects(["hysteresis=0.01", "force_offset=56.3"]) == {"hysteresis": 0.01, "force_offset": 56.3}
+    assert parse_effects(["hysteresis=0.01", "force_offset=56.3"]) == {
+        "hysteresis": 0.01,
+        "force_offset": 56.3,
+    }
     # the contract's five keep their names; more may be added
-    assert {"pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift"} <= set(MECHANISMS)
-    for bad in (["hysteresis"], ["magic=1"], ["hysteresis=x"], ["hysteresis=1,2"], ["force_offset=1", "force_offset=2"]):
+    assert {
+        "pressure_dependent_area",
+        "casing_force",
+        "hysteresis",
+        "force_offset",
+        "thermal_drift",
+    } <= set(MECHANISMS)
+    for bad in (
+        ["hysteresis"],
+        ["magic=1"],
+        ["hysteresis=x"],
+        ["hysteresis=1,2"],
+        ["force_offset=1", "force_offset=2"],
+    ):
         with pytest.raises(InputError):
             parse_effects(bad)
 
 
 def test_simulate_is_byte_reproducible_and_other_layouts(tmp_path):
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    args = ["simulate", "--pressures", "0.5,1.5,2.5", "--x-max-mm", "150", "--x-min-mm", "70", "--step-mm", "2.5", "--seed", "7"]
+    args = [
+        "simulate",
+        "--pressures",
+        "0.5,1.5,2.5",
+        "--x-max-mm",
+        "150",
+        "--x-min-mm",
+        "70",
+        "--step-mm",
+        "2.5",
+        "--seed",
+        "7",
+    ]
     assert main(args + ["--out", str(a)]) == 0 and main(args + ["--out", str(b)]) == 0
     data = [ln for ln in a.read_text().splitlines() if not ln.startswith("#")]
     assert data == [ln for ln in b.read_text().splitlines() if not ln.startswith("#")]
     first = a.read_bytes()
-    assert main(args + ["--out", str(a)]) == 0 and a.read_bytes() == first  # same command: same bytes
+    assert (
+        main(args + ["--out", str(a)]) == 0 and a.read_bytes() == first
+    )  # same command: same bytes
     rec = read_recordings(a)
     assert [t.pressure_bar for t in rec.tests] == [0.5, 1.5, 2.5] and rec.tests[0].n_points == 65
-    assert main(["simulate", "--out", str(tmp_path / "c.csv"), "--pressures", "12"]) == 2  # outside Table 1
+    assert (
+        main(["simulate", "--out", str(tmp_path / "c.csv"), "--pressures", "12"]) == 2
+    )  # outside Table 1
 
 
 def test_bundled_data_regenerates_byte_for_byte(tmp_path):
@@ -123,7 +160,9 @@ def test_bundled_data_regenerates_byte_for_byte(tmp_path):
     out = tmp_path / "again.csv"
     argv[argv.index("--out") + 1] = str(out)
     assert main(argv) == 0
-    assert out.read_text().splitlines()[5:] == bundled.read_text().splitlines()[5:]  # the command line differs in --out only
+    assert (
+        out.read_text().splitlines()[5:] == bundled.read_text().splitlines()[5:]
+    )  # the command line differs in --out only
 
 
 def test_pressure_error_obeys_boyle_force_up_piston_short():
@@ -143,7 +182,9 @@ def test_pressure_error_obeys_boyle_force_up_piston_short():
     dL = test["piston_m"] - spring.piston_m(x, p)
     assert np.std(dp_pa) > 0.5 * 0.01e5  # the pressure error is there
     S = 54.82e-4
-    v_gas = stand.gas_volume_at_xmax_m3 - S * (spring.piston_m(x, p) - spring.piston_m(np.array(0.155), p))
+    v_gas = stand.gas_volume_at_xmax_m3 - S * (
+        spring.piston_m(x, p) - spring.piston_m(np.array(0.155), p)
+    )
     p_abs = (p + stand.p_atm_bar) * 1e5
     boyle = (p_abs + dp_pa) * (v_gas + S * dL) / (p_abs * v_gas) - 1.0
     assert np.max(np.abs(boyle)) < 1e-4  # second order in dp / p_abs (first order would be ~3e-3)
@@ -177,21 +218,33 @@ def test_stand_of_another_noise_form(tmp_path):
     the step order; the file says which fields differ; impossible values are one-line errors."""
     from uq._data.stand_description import PAPER_STAND, read_stand
 
-    stand = PAPER_STAND.replace(load_cell_rel_sd=0.0, displacement_sd_m=0.0, caliper_sd_m=0.0,
-                                pressure_error_corr=0.8)
+    stand = PAPER_STAND.replace(
+        load_cell_rel_sd=0.0, displacement_sd_m=0.0, caliper_sd_m=0.0, pressure_error_corr=0.8
+    )
     spring = N50Spring()
     lag1 = []
     for seed in range(20):
         (test,) = simulate("n50", seed=seed, layout=Layout(pressures_bar=(6.0,)), stand=stand)
-        dp = (test["force_N"] - spring.force_N(test["height_m"], 6.0)) / spring.effective_area_m2(test["height_m"], 6.0)
+        dp = (test["force_N"] - spring.force_N(test["height_m"], 6.0)) / spring.effective_area_m2(
+            test["height_m"], 6.0
+        )
         lag1.append(np.corrcoef(dp[:-1], dp[1:])[0, 1])
-    assert 0.6 < np.mean(lag1) < 0.85  # 37 readings per test: the estimate is biased low by about 0.1
-    assert stand.noise_form_fields() == ["pressure_error_corr"] and PAPER_STAND.noise_form_fields() == []
-    rec = simulate_recordings("n50", seed=1, layout=Layout(pressures_bar=(1.0,)),
-                              stand=PAPER_STAND.replace(error_df=5.0))
+    assert (
+        0.6 < np.mean(lag1) < 0.85
+    )  # 37 readings per test: the estimate is biased low by about 0.1
+    assert (
+        stand.noise_form_fields() == ["pressure_error_corr"]
+        and PAPER_STAND.noise_form_fields() == []
+    )
+    rec = simulate_recordings(
+        "n50", seed=1, layout=Layout(pressures_bar=(1.0,)), stand=PAPER_STAND.replace(error_df=5.0)
+    )
     assert "except error_df = 5" in rec.comments[2]
-    for text, what in (("error_df = 1.5", "error_df must be 0"), ("pressure_error_corr = 1.0", "pressure_error_corr"),
-                       ("error_df = -3", "non-negative")):
+    for text, what in (
+        ("error_df = 1.5", "error_df must be 0"),
+        ("pressure_error_corr = 1.0", "pressure_error_corr"),
+        ("error_df = -3", "non-negative"),
+    ):
         f = tmp_path / "s.toml"
         f.write_text(text + "\n")
         with pytest.raises(InputError, match=what) as exc:

@@ -12,17 +12,41 @@ from uq._io.errors import InputError
 
 
 def configure_batch(p) -> None:
-    p.add_argument("catalogue", metavar="CATALOGUE", help="TOML or CSV listing campaign files and the tasks to run (docs/batch.md)")
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help="folder for the outputs: DIR/<campaign>/<task>/ and summary.csv, summary.json, index.html")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="address of a running Dask scheduler (tcp://host:8786); default a LocalCluster on this machine")
-    p.add_argument("--workers", type=positive_int, default=2,
-                   help="LocalCluster worker processes, one thread each (ignored with --scheduler)")
-    p.add_argument("--force", action="store_true", help="rerun every task, even those finished with the same inputs")
-    p.add_argument("--serial", action="store_true",
-                   help="no Dask: run the tasks one after another in this process (debugging; the benchmark's reference)")
-    p.add_argument("--json", metavar="PATH", help="also write the summary JSON to PATH ('-' for stdout)")
+    p.add_argument(
+        "catalogue",
+        metavar="CATALOGUE",
+        help="TOML or CSV listing campaign files and the tasks to run (docs/batch.md)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="folder for the outputs: DIR/<campaign>/<task>/ and summary.csv, summary.json, index.html",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="address of a running Dask scheduler (tcp://host:8786); default a LocalCluster on this machine",
+    )
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        default=2,
+        help="LocalCluster worker processes, one thread each (ignored with --scheduler)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="rerun every task, even those finished with the same inputs",
+    )
+    p.add_argument(
+        "--serial",
+        action="store_true",
+        help="no Dask: run the tasks one after another in this process (debugging; the benchmark's reference)",
+    )
+    p.add_argument(
+        "--json", metavar="PATH", help="also write the summary JSON to PATH ('-' for stdout)"
+    )
 
 
 def command_batch(args) -> int:
@@ -32,25 +56,44 @@ def command_batch(args) -> int:
     campaigns = B.read_catalogue(args.catalogue)  # every problem reported before a cluster starts
     n_jobs = sum(len(c.tasks) for c in campaigns)
     if args.serial and args.scheduler:
-        raise InputError("options --serial and --scheduler: choose one (--serial runs without Dask)")
-    where_ = "in this process, one after another" if args.serial else (
-        f"scheduler {args.scheduler}" if args.scheduler else f"LocalCluster, {args.workers} workers x 1 thread")
+        raise InputError(
+            "options --serial and --scheduler: choose one (--serial runs without Dask)"
+        )
+    where_ = (
+        "in this process, one after another"
+        if args.serial
+        else (
+            f"scheduler {args.scheduler}"
+            if args.scheduler
+            else f"LocalCluster, {args.workers} workers x 1 thread"
+        )
+    )
     print(f"{args.catalogue}: {len(campaigns)} campaigns, {n_jobs} tasks; {where_}")
     with progress(total=n_jobs, desc="batch", unit="task") as bar:
+
         def on_row(row):
             bar.update(1)
             print(_row_line(row), flush=True)
 
         t0 = time.perf_counter()
-        res = B.run_batch(args.catalogue, args.out, scheduler=args.scheduler, workers=args.workers, force=args.force,
-                        serial=args.serial, on_row=on_row)
+        res = B.run_batch(
+            args.catalogue,
+            args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            force=args.force,
+            serial=args.serial,
+            on_row=on_row,
+        )
         bar.update(res["counts"]["skipped"])
     c = res["counts"]
     for r in res["campaigns"]:
         if r["status"] == "skipped":
             print(_row_line(r))
-    print(f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed in {time.perf_counter() - t0:.1f} s; "
-          f"summary: {Path(args.out) / 'index.html'}")
+    print(
+        f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed in {time.perf_counter() - t0:.1f} s; "
+        f"summary: {Path(args.out) / 'index.html'}"
+    )
     emit_json(res, args.json)
     if c["failed"]:
         print(f"uq batch: {c['failed']} task(s) failed (see the summary)", file=sys.stderr)

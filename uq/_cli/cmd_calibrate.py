@@ -14,22 +14,42 @@ from uq._io.files import emit_json, remove_stale, write_figure_atomic, write_tex
 
 
 def configure_calibrate(p) -> None:
-    p.add_argument("--reps", type=positive_int, default=100, help="replications per setting (default 100)")
-    p.add_argument("--truth", type=choice_list("prior", "n50"), default="prior,n50", help="comma list of truths: prior, n50")
-    p.add_argument("--noise", type=choice_list("budget", "constant"), default="budget",
-                   help="comma list of force-noise models to fit: budget, constant")
+    p.add_argument(
+        "--reps", type=positive_int, default=100, help="replications per setting (default 100)"
+    )
+    p.add_argument(
+        "--truth",
+        type=choice_list("prior", "n50"),
+        default="prior,n50",
+        help="comma list of truths: prior, n50",
+    )
+    p.add_argument(
+        "--noise",
+        type=choice_list("budget", "constant"),
+        default="budget",
+        help="comma list of force-noise models to fit: budget, constant",
+    )
     p.add_argument("--seed", type=seed, default=20201, help="random seed")
-    p.add_argument("--out", metavar="DIR", help="the folder to write: calibration.json, calibration.md and rank histograms")
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        help="the folder to write: calibration.json, calibration.md and rank histograms",
+    )
     p.add_argument("--json", metavar="PATH", help="machine-readable result ('-' for stdout)")
-    add_stand(p, help="stand description (TOML) of the virtual stand that makes the n50 truth's recordings "
-                      "(default: the paper's; error_df and pressure_error_corr give noise unlike the model's)")
+    add_stand(
+        p,
+        help="stand description (TOML) of the virtual stand that makes the n50 truth's recordings "
+        "(default: the paper's; error_df and pressure_error_corr give noise unlike the model's)",
+    )
 
 
 def command_calibrate(args) -> int:
     stand = stand_from(args, model=False)
     truths = [t.strip() for t in args.truth.split(",") if t.strip()]
     if args.stand and "prior" in truths:
-        raise InputError("option --stand: only the n50 truth runs on a stand; use it with --truth n50")
+        raise InputError(
+            "option --stand: only the n50 truth runs on a stand; use it with --truth n50"
+        )
     results = []
     for truth in truths:
         for noise in [n.strip() for n in args.noise.split(",") if n.strip()]:
@@ -37,11 +57,17 @@ def command_calibrate(args) -> int:
             results.append(res)
             s = res.summary()
             worst = min(s["quantities"].items(), key=lambda kv: kv[1]["coverage90"])
-            print(f"truth {truth:5s} noise {noise:8s}: {args.reps} reps in {res.seconds:.0f} s; 90 % coverage "
-                  f"{min(q['coverage90'] for q in s['quantities'].values()):.2f}..{max(q['coverage90'] for q in s['quantities'].values()):.2f} "
-                  f"(lowest: {worst[0]}); outside the 99 % region: "
-                  f"{[k for k, q in s['quantities'].items() if not (q['in_region90'] and q['in_region50'])] or 'none'}")
-    command = "uq " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("uq") else "uq calibrate"
+            print(
+                f"truth {truth:5s} noise {noise:8s}: {args.reps} reps in {res.seconds:.0f} s; 90 % coverage "
+                f"{min(q['coverage90'] for q in s['quantities'].values()):.2f}..{max(q['coverage90'] for q in s['quantities'].values()):.2f} "
+                f"(lowest: {worst[0]}); outside the 99 % region: "
+                f"{[k for k, q in s['quantities'].items() if not (q['in_region90'] and q['in_region50'])] or 'none'}"
+            )
+    command = (
+        "uq " + " ".join(sys.argv[1:])
+        if sys.argv and sys.argv[0].endswith("uq")
+        else "uq calibrate"
+    )
     result = {"command": command, "settings": [r.summary() for r in results]}
     if args.out:
         import matplotlib
@@ -53,7 +79,9 @@ def command_calibrate(args) -> int:
         emit_json(result, str(out / "calibration.json"))
         write_text_atomic(out / "calibration.md", C.markdown(results, command))
         for res in results:
-            fig, axes = plt.subplots(1, len(res.names), figsize=(1.6 * len(res.names), 2.0), sharey=True)
+            fig, axes = plt.subplots(
+                1, len(res.names), figsize=(1.6 * len(res.names), 2.0), sharey=True
+            )
             for ax, j in zip(np.atleast_1d(axes), range(len(res.names)), strict=True):
                 ax.hist(res.ranks[:, j], bins=10, range=(0, C.N_RANKS + 1), color="tab:blue")
                 ax.axhline(res.ranks.shape[0] / 10, color="k", lw=0.8)
@@ -64,7 +92,9 @@ def command_calibrate(args) -> int:
             write_figure_atomic(fig, out / f"sbc_{res.truth_kind}_{res.noise}.png", dpi=80)
             plt.close(fig)
         # rank histograms of settings an earlier run had and this one has not would pass for current
-        remove_stale(out, ("sbc_*.png",), keep={f"sbc_{r.truth_kind}_{r.noise}.png" for r in results})
+        remove_stale(
+            out, ("sbc_*.png",), keep={f"sbc_{r.truth_kind}_{r.noise}.png" for r in results}
+        )
         print(f"wrote {out}/calibration.json, calibration.md and rank histograms")
     emit_json(result, args.json)
     return 0

@@ -8,12 +8,26 @@ from uq._io.files import emit_json
 
 
 def configure_check(p) -> None:
-    p.add_argument("result", metavar="RESULT.json", help="output of `uq fit --json` (with posterior covariances)")
-    p.add_argument("--against", required=True, metavar="POINTS.json",
-                   help="point estimates to check (CONTRACT.md section 3, e.g. fits/n50/table1_points.json)")
-    p.add_argument("--alpha", type=probability, default=DEFAULT_ALPHA,
-                   help=f"false-failure rate of the whole check, Bonferroni over blocks (default {DEFAULT_ALPHA:g})")
-    p.add_argument("--json", metavar="PATH", help="write the machine-readable verdict to PATH ('-' for stdout)")
+    p.add_argument(
+        "result",
+        metavar="RESULT.json",
+        help="output of `uq fit --json` (with posterior covariances)",
+    )
+    p.add_argument(
+        "--against",
+        required=True,
+        metavar="POINTS.json",
+        help="point estimates to check (CONTRACT.md section 3, e.g. fits/n50/table1_points.json)",
+    )
+    p.add_argument(
+        "--alpha",
+        type=probability,
+        default=DEFAULT_ALPHA,
+        help=f"false-failure rate of the whole check, Bonferroni over blocks (default {DEFAULT_ALPHA:g})",
+    )
+    p.add_argument(
+        "--json", metavar="PATH", help="write the machine-readable verdict to PATH ('-' for stdout)"
+    )
 
 
 def command_check(args) -> int:

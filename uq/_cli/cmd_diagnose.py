@@ -20,11 +20,21 @@ def configure_diagnose(p: argparse.ArgumentParser) -> None:
     add_recordings(p)
     add_sampling(p)
     add_json(p)
-    p.add_argument("--report", metavar="DIR", help="write the HTML section and residual plots to DIR")
-    p.add_argument("--gain-se", type=float, default=GAIN_SE,
-                   help=f"ELPD gain, in standard errors, a mechanism must exceed (default {GAIN_SE:g})")
-    p.add_argument("--max-mechanisms", type=int, default=len(M.MECHS),
-                   help=f"stop after this many mechanisms (default {len(M.MECHS)})")
+    p.add_argument(
+        "--report", metavar="DIR", help="write the HTML section and residual plots to DIR"
+    )
+    p.add_argument(
+        "--gain-se",
+        type=float,
+        default=GAIN_SE,
+        help=f"ELPD gain, in standard errors, a mechanism must exceed (default {GAIN_SE:g})",
+    )
+    p.add_argument(
+        "--max-mechanisms",
+        type=int,
+        default=len(M.MECHS),
+        help=f"stop after this many mechanisms (default {len(M.MECHS)})",
+    )
     add_stand(p)
 
 
@@ -32,17 +42,32 @@ def command_diagnose(args) -> int:
     if not (math.isfinite(args.gain_se) and args.gain_se > 0):
         raise InputError(f"option --gain-se: expected a positive number, got {args.gain_se:g}")
     if not 0 <= args.max_mechanisms <= len(M.MECHS):
-        raise InputError(f"option --max-mechanisms: expected 0..{len(M.MECHS)}, got {args.max_mechanisms}")
-    settings = Settings(n_walkers=args.walkers, n_ensembles=args.ensembles, max_steps=args.max_steps,
-                        min_steps=min(300, args.max_steps), chunk=200)
+        raise InputError(
+            f"option --max-mechanisms: expected 0..{len(M.MECHS)}, got {args.max_mechanisms}"
+        )
+    settings = Settings(
+        n_walkers=args.walkers,
+        n_ensembles=args.ensembles,
+        max_steps=args.max_steps,
+        min_steps=min(300, args.max_steps),
+        chunk=200,
+    )
     settings.validate()
     rec = load(args)
     stand = stand_from(args)
-    res = _diagnose.diagnose(rec, seed=args.seed, settings=settings, max_mechanisms=args.max_mechanisms, gain_se=args.gain_se,
-                   stand=stand)
+    res = _diagnose.diagnose(
+        rec,
+        seed=args.seed,
+        settings=settings,
+        max_mechanisms=args.max_mechanisms,
+        gain_se=args.gain_se,
+        stand=stand,
+    )
     if args.json != "-":
         sys.stdout.write(summary_text(res))
-        print(f"time: {res['_timing_s']['total']:.1f} s (screening {res['_timing_s']['screening']:.1f} s)")
+        print(
+            f"time: {res['_timing_s']['total']:.1f} s (screening {res['_timing_s']['screening']:.1f} s)"
+        )
     emit_json(public(res), args.json)
     if args.report:
         write_diagnose_report(res, args.report)

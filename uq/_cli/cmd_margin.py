@@ -28,27 +28,55 @@ def configure_margin(p) -> None:
     add_json(p)
     p.add_argument("--height-mm", type=positive_float, help="height x of the element, mm")
     p.add_argument("--load-N", type=positive_float, help="load the element has to carry, N")
-    p.add_argument("--prob", type=probability, default=0.95, help="probability of carrying at least the load (default 0.95)")
-    p.add_argument("--pressure-bar", type=positive_float, help="also give the force band at this overpressure")
-    p.add_argument("--tolerance-pct", type=positive_float,
-                   help="with --pressure-bar: usable stroke where the force stays within this %% of the load")
-    p.add_argument("--model", choices=MODEL_CHOICES, default=None,
-                   help="which model answers: auto (default) fits the surface model and the per-pressure cubics and "
-                        "takes the one PSIS-LOO prefers by more than 2 SE (the surface when indistinguishable); "
-                        "surface or cubics skip the comparison")
-    p.add_argument("--save-fit", metavar="FIT.nc",
-                   help="after fitting, save the answering model's posterior draws to FIT.nc (NetCDF) for --fit")
-    p.add_argument("--fit", metavar="FIT.nc",
-                   help="answer from a saved fit (uq margin --save-fit, uq surface --out) instead of FILE.csv: no refit")
-    p.add_argument("--queries", metavar="Q.csv",
-                   help="many queries: a CSV with columns height_mm, load_N and optional prob, pressure_bar, "
-                        "tolerance_pct (empty cells take the options' values); the JSON is a list, one result a row")
+    p.add_argument(
+        "--prob",
+        type=probability,
+        default=0.95,
+        help="probability of carrying at least the load (default 0.95)",
+    )
+    p.add_argument(
+        "--pressure-bar", type=positive_float, help="also give the force band at this overpressure"
+    )
+    p.add_argument(
+        "--tolerance-pct",
+        type=positive_float,
+        help="with --pressure-bar: usable stroke where the force stays within this %% of the load",
+    )
+    p.add_argument(
+        "--model",
+        choices=MODEL_CHOICES,
+        default=None,
+        help="which model answers: auto (default) fits the surface model and the per-pressure cubics and "
+        "takes the one PSIS-LOO prefers by more than 2 SE (the surface when indistinguishable); "
+        "surface or cubics skip the comparison",
+    )
+    p.add_argument(
+        "--save-fit",
+        metavar="FIT.nc",
+        help="after fitting, save the answering model's posterior draws to FIT.nc (NetCDF) for --fit",
+    )
+    p.add_argument(
+        "--fit",
+        metavar="FIT.nc",
+        help="answer from a saved fit (uq margin --save-fit, uq surface --out) instead of FILE.csv: no refit",
+    )
+    p.add_argument(
+        "--queries",
+        metavar="Q.csv",
+        help="many queries: a CSV with columns height_mm, load_N and optional prob, pressure_bar, "
+        "tolerance_pct (empty cells take the options' values); the JSON is a list, one result a row",
+    )
     add_stand(p)
 
 
 QUERY_COLUMNS = ("height_mm", "load_N", "prob", "pressure_bar", "tolerance_pct")
-_OPTION_OF = {"height_mm": "--height-mm", "load_N": "--load-N", "prob": "--prob", "pressure_bar": "--pressure-bar",
-              "tolerance_pct": "--tolerance-pct"}
+_OPTION_OF = {
+    "height_mm": "--height-mm",
+    "load_N": "--load-N",
+    "prob": "--prob",
+    "pressure_bar": "--pressure-bar",
+    "tolerance_pct": "--tolerance-pct",
+}
 _COLUMN_OF = {v: k for k, v in _OPTION_OF.items()}
 
 
@@ -56,7 +84,9 @@ def _place(q: dict, column: str) -> str:
     """Where a query's value came from: ``option --x`` on the command line, or ``Q.csv, row N, column 'c'``."""
     from uq._io.errors import where
 
-    return f"option {_OPTION_OF[column]}" if q["row"] is None else where(q["file"], q["row"], column)
+    return (
+        f"option {_OPTION_OF[column]}" if q["row"] is None else where(q["file"], q["row"], column)
+    )
 
 
 def _check_query(q: dict) -> None:
@@ -66,11 +96,15 @@ def _check_query(q: dict) -> None:
         if v is not None and not (np.isfinite(v) and v > 0):
             raise InputError(f"{_place(q, col)}: expected a positive number, got {v:g}")
     if not (np.isfinite(q["prob"]) and 0.0 < q["prob"] < 1.0):
-        raise InputError(f"{_place(q, 'prob')}: expected a probability strictly between 0 and 1, got {q['prob']:g}")
+        raise InputError(
+            f"{_place(q, 'prob')}: expected a probability strictly between 0 and 1, got {q['prob']:g}"
+        )
     if q["tolerance_pct"] is not None and q["pressure_bar"] is None:
-        raise InputError(f"{_place(q, 'tolerance_pct')}: needs --pressure-bar (the stroke is taken at one pressure)"
-                         if q["row"] is None else
-                         f"{_place(q, 'tolerance_pct')}: needs a pressure_bar on the row (the stroke is taken at one pressure)")
+        raise InputError(
+            f"{_place(q, 'tolerance_pct')}: needs --pressure-bar (the stroke is taken at one pressure)"
+            if q["row"] is None
+            else f"{_place(q, 'tolerance_pct')}: needs a pressure_bar on the row (the stroke is taken at one pressure)"
+        )
 
 
 def read_queries(path: str, defaults: dict) -> list[dict]:
@@ -86,25 +120,36 @@ def read_queries(path: str, defaults: dict) -> list[dict]:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             lines = fh.read().splitlines()
     except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file (option --queries names a CSV file)") from None
+        raise InputError(
+            f"{path}: not a UTF-8 text file (option --queries names a CSV file)"
+        ) from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read: {exc.strerror or exc} (option --queries)") from None
-    rows = [(i + 1, cells) for i, cells in enumerate(csv.reader(lines))
-            if cells and any(c.strip() for c in cells) and not cells[0].lstrip().startswith("#")]
+    rows = [
+        (i + 1, cells)
+        for i, cells in enumerate(csv.reader(lines))
+        if cells and any(c.strip() for c in cells) and not cells[0].lstrip().startswith("#")
+    ]
     if not rows:
-        raise InputError(f"{path}: no header row (expected columns height_mm, load_N and optionally prob, pressure_bar, tolerance_pct)")
+        raise InputError(
+            f"{path}: no header row (expected columns height_mm, load_N and optionally prob, pressure_bar, tolerance_pct)"
+        )
     head_row, header = rows[0]
     header = [h.strip() for h in header]
     for j, h in enumerate(header):
         if h not in QUERY_COLUMNS:
-            raise InputError(f"{where(path, head_row, h or f'#{j + 1}')}: unknown column; expected height_mm, load_N "
-                             "and optionally prob, pressure_bar, tolerance_pct")
+            raise InputError(
+                f"{where(path, head_row, h or f'#{j + 1}')}: unknown column; expected height_mm, load_N "
+                "and optionally prob, pressure_bar, tolerance_pct"
+            )
         if header.count(h) > 1:
             raise InputError(f"{where(path, head_row, h)}: duplicated column")
     for need in ("height_mm", "load_N"):
         if need not in header:
-            raise InputError(f"{path}: missing column '{need}' (expected height_mm, load_N and optionally prob, "
-                             "pressure_bar, tolerance_pct)")
+            raise InputError(
+                f"{path}: missing column '{need}' (expected height_mm, load_N and optionally prob, "
+                "pressure_bar, tolerance_pct)"
+            )
     if len(rows) == 1:
         raise InputError(f"{path}: no queries below the header row")
     out = []
@@ -116,12 +161,16 @@ def read_queries(path: str, defaults: dict) -> list[dict]:
             text = text.strip()
             if not text:
                 if col in ("height_mm", "load_N"):
-                    raise InputError(f"{where(path, row, col)}: empty; every query needs a height and a load")
+                    raise InputError(
+                        f"{where(path, row, col)}: empty; every query needs a height and a load"
+                    )
                 continue
             try:
                 q[col] = float(text)
             except ValueError:
-                raise InputError(f"{where(path, row, col)}: expected a number, got '{text}'") from None
+                raise InputError(
+                    f"{where(path, row, col)}: expected a number, got '{text}'"
+                ) from None
         _check_query(q)
         out.append(q)
     return out
@@ -133,35 +182,57 @@ def _queries_from(args) -> list[dict]:
     if args.queries:
         for c in ("height_mm", "load_N"):
             if given[c] is not None:
-                raise InputError(f"option {_OPTION_OF[c]}: not with --queries (the queries file gives each row's {c})")
+                raise InputError(
+                    f"option {_OPTION_OF[c]}: not with --queries (the queries file gives each row's {c})"
+                )
         return read_queries(args.queries, given)
-    if given["height_mm"] is None and given["load_N"] is None and args.save_fit and args.json is None:
+    if (
+        given["height_mm"] is None
+        and given["load_N"] is None
+        and args.save_fit
+        and args.json is None
+    ):
         return []  # only fit and save
     for c in ("height_mm", "load_N"):
         if given[c] is None:
-            raise InputError(f"option {_OPTION_OF[c]}: required (or give the queries in a CSV with --queries)")
+            raise InputError(
+                f"option {_OPTION_OF[c]}: required (or give the queries in a CSV with --queries)"
+            )
     q = {"file": None, "row": None} | given
     _check_query(q)
     return [q]
 
 
-def _check_ranges(q: dict, height_range_m, pressure_range_bar, model_word: str = "the surface model") -> None:
+def _check_ranges(
+    q: dict, height_range_m, pressure_range_bar, model_word: str = "the surface model"
+) -> None:
     """Heights and pressures outside the tested ranges, refused before any fitting or answering (no extrapolation)."""
     lo, hi = height_range_m
     h = q["height_mm"] * 1e-3
     if not lo - 1e-9 <= h <= hi + 1e-9:
-        raise InputError(f"{_place(q, 'height_mm')}: {q['height_mm']:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm")
+        raise InputError(
+            f"{_place(q, 'height_mm')}: {q['height_mm']:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
+        )
     plo, phi = pressure_range_bar
     if q["pressure_bar"] is not None and not plo - 1e-9 <= q["pressure_bar"] <= phi + 1e-9:
-        raise InputError(f"{_place(q, 'pressure_bar')}: overpressure {q['pressure_bar']:g} bar is outside the tested pressures "
-                         f"{plo:g}..{phi:g} bar; {model_word} does not extrapolate")
+        raise InputError(
+            f"{_place(q, 'pressure_bar')}: overpressure {q['pressure_bar']:g} bar is outside the tested pressures "
+            f"{plo:g}..{phi:g} bar; {model_word} does not extrapolate"
+        )
 
 
 def answer_query(ans, info: dict, q: dict) -> dict:
     """One query's margin result; a refusal of a --queries row names the file, row and column."""
     try:
-        return margin(ans, q["height_mm"] * 1e-3, q["load_N"], q["prob"], pressure_bar=q["pressure_bar"],
-                      tolerance_pct=q["tolerance_pct"], model_info=info)
+        return margin(
+            ans,
+            q["height_mm"] * 1e-3,
+            q["load_N"],
+            q["prob"],
+            pressure_bar=q["pressure_bar"],
+            tolerance_pct=q["tolerance_pct"],
+            model_info=info,
+        )
     except InputError as exc:
         text = str(exc)
         if q["row"] is None or not text.startswith("option --"):
@@ -176,18 +247,26 @@ def _check_usage(args) -> None:
     from uq._cli.common import check_output_path
 
     if (args.file is None) == (args.fit is None):
-        raise InputError("give exactly one of FILE.csv (fit the recordings) and --fit FIT.nc (answer from a saved fit)"
-                         if args.file is None else
-                         "option --fit: not with FILE.csv; give either the recordings (to fit) or a saved fit")
+        raise InputError(
+            "give exactly one of FILE.csv (fit the recordings) and --fit FIT.nc (answer from a saved fit)"
+            if args.file is None
+            else "option --fit: not with FILE.csv; give either the recordings (to fit) or a saved fit"
+        )
     if args.save_fit is not None:
         if args.fit is not None:
-            raise InputError("option --save-fit: not with --fit (the saved fit is already saved); give FILE.csv to fit and save")
+            raise InputError(
+                "option --save-fit: not with --fit (the saved fit is already saved); give FILE.csv to fit and save"
+            )
         if args.save_fit == "-":
-            raise InputError("option --save-fit: needs a file name (NetCDF is not written to stdout)")
+            raise InputError(
+                "option --save-fit: needs a file name (NetCDF is not written to stdout)"
+            )
         check_output_path(args.save_fit, "--save-fit")
     if args.queries is not None and args.json is not None and args.json != "-":
         if Path(args.queries).resolve() == Path(args.json).resolve():
-            raise InputError(f"option --json {args.json}: is the queries file; refusing to overwrite it")
+            raise InputError(
+                f"option --json {args.json}: is the queries file; refusing to overwrite it"
+            )
 
 
 def command_margin(args) -> int:
@@ -199,15 +278,19 @@ def command_margin(args) -> int:
     if args.fit is not None:
         ans, info, meta = load_answer(args.fit)
         if args.model not in (None, "auto") and _ANSWER_NAMES[ans.name] != args.model:
-            raise InputError(f"option --model {args.model}: {args.fit} holds the {ans.label}; "
-                             f"fit again with FILE.csv --model {args.model} --save-fit")
+            raise InputError(
+                f"option --model {args.model}: {args.fit} holds the {ans.label}; "
+                f"fit again with FILE.csv --model {args.model} --save-fit"
+            )
         for q in queries:
             _check_ranges(q, ans.height_range_m, ans.pressure_range_bar, "the model")
         diagnostics = {"warnings": meta["warnings"], "converged": meta["converged"]}
         source, rec = args.fit, None
     else:
         args.model = args.model or "auto"
-        stand = stand_from(args)  # a bad --stand file or --walkers is refused before the recordings are read
+        stand = stand_from(
+            args
+        )  # a bad --stand file or --walkers is refused before the recordings are read
         if args.model in ("auto", "surface"):
             from uq._cli.common import settings_from
             from uq._models.surface import NOISE_NAMES
@@ -219,17 +302,32 @@ def command_margin(args) -> int:
             _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
         ans, info, diagnostics = _fit_and_choose(args, rec, stand)
         source = rec.path
-    results = [answer_query(ans, info, q) for q in queries]  # every answer before anything is written
+    results = [
+        answer_query(ans, info, q) for q in queries
+    ]  # every answer before anything is written
     if args.fit is not None:
-        print(f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
-              f"seed {meta['seed']}, uq {meta['uq_version']}); no refit")
+        print(
+            f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
+            f"seed {meta['seed']}, uq {meta['uq_version']}); no refit"
+        )
         _warn_if_recordings_changed(meta)
     if args.save_fit is not None:
         from uq._cli.common import settings_from
 
-        save_answer(args.save_fit, ans, info, recordings=rec, seed=args.seed, written_by="uq margin --save-fit",
-                    settings=settings_from(args), stand=stand, diagnostics=diagnostics)
-        print(f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})")
+        save_answer(
+            args.save_fit,
+            ans,
+            info,
+            recordings=rec,
+            seed=args.seed,
+            written_by="uq margin --save-fit",
+            settings=settings_from(args),
+            stand=stand,
+            diagnostics=diagnostics,
+        )
+        print(
+            f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"
+        )
     if args.queries:
         _print_table(source, ans, info, queries, results)
     elif queries:
@@ -244,8 +342,10 @@ def command_margin(args) -> int:
 def _warn_if_recordings_changed(meta: dict) -> None:
     p = Path(meta["recordings_path"])
     if p.is_file() and sha256_of(p) != meta["recordings_sha256"]:
-        print(f"  warning: {p} has changed since the fit was saved (sha256 differs); the answer is for the recordings "
-              "as they were then")
+        print(
+            f"  warning: {p} has changed since the fit was saved (sha256 differs); the answer is for the recordings "
+            "as they were then"
+        )
 
 
 def _print_one(source, ans, info, q, res) -> None:
@@ -254,30 +354,46 @@ def _print_one(source, ans, info, q, res) -> None:
     print(f"  why: {info['why']}")
     c = info.get("comparison")
     if c:
-        print(f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} (max Pareto k {c['surface']['max_pareto_k']:.2f}), "
-              f"cubics {c['cubics']['elpd_loo']:.1f} (max Pareto k {c['cubics']['max_pareto_k']:.2f}), "
-              f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f}")
-    print(f"  pressure needed: {e['mean']:.3f} bar (sd {e['sd']:.3f}; 90 % interval {e['q05']:.3f}..{e['q95']:.3f})")
-    print(f"  carries at least the load with probability {q['prob']:g} from {res['pressure_bar_for_prob']:.3f} bar")
+        print(
+            f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} (max Pareto k {c['surface']['max_pareto_k']:.2f}), "
+            f"cubics {c['cubics']['elpd_loo']:.1f} (max Pareto k {c['cubics']['max_pareto_k']:.2f}), "
+            f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f}"
+        )
+    print(
+        f"  pressure needed: {e['mean']:.3f} bar (sd {e['sd']:.3f}; 90 % interval {e['q05']:.3f}..{e['q95']:.3f})"
+    )
+    print(
+        f"  carries at least the load with probability {q['prob']:g} from {res['pressure_bar_for_prob']:.3f} bar"
+    )
     if "force_at_pressure" in res:
         f = res["force_at_pressure"]["force_N"]
-        print(f"  force at {q['pressure_bar']:g} bar: {f['mean']:.0f} N (90 % {f['q05']:.0f}..{f['q95']:.0f}), "
-              f"P(force >= load) = {res['force_at_pressure']['prob_carries_load']:.3f}")
+        print(
+            f"  force at {q['pressure_bar']:g} bar: {f['mean']:.0f} N (90 % {f['q05']:.0f}..{f['q95']:.0f}), "
+            f"P(force >= load) = {res['force_at_pressure']['prob_carries_load']:.3f}"
+        )
     if "usable_stroke" in res:
         s = res["usable_stroke"]
         c = s["stroke_credible"]
         if c:
-            print(f"  usable stroke (within {q['tolerance_pct']:g} % with prob >= {q['prob']:g} at each height): "
-                  f"{c['from_m'] * 1e3:.1f}..{c['to_m'] * 1e3:.1f} mm, whole range within with prob {c['prob_whole_range_within']:.3f}")
+            print(
+                f"  usable stroke (within {q['tolerance_pct']:g} % with prob >= {q['prob']:g} at each height): "
+                f"{c['from_m'] * 1e3:.1f}..{c['to_m'] * 1e3:.1f} mm, whole range within with prob {c['prob_whole_range_within']:.3f}"
+            )
         else:
-            print(f"  usable stroke: none; force within {q['tolerance_pct']:g} % at {q['height_mm']:g} mm with prob "
-                  f"{s['prob_within_at_height']:.3f} < {q['prob']:g}")
+            print(
+                f"  usable stroke: none; force within {q['tolerance_pct']:g} % at {q['height_mm']:g} mm with prob "
+                f"{s['prob_within_at_height']:.3f} < {q['prob']:g}"
+            )
 
 
 def _print_table(source, ans, info, queries, results) -> None:
-    print(f"{source}: {len(queries)} queries from {queries[0]['file']}, answered by the {ans.label}")
+    print(
+        f"{source}: {len(queries)} queries from {queries[0]['file']}, answered by the {ans.label}"
+    )
     print(f"  why: {info['why']}")
-    print("   row  height_mm    load_N  prob  p_needed_bar (90 %)        p_for_prob  force at p_bar (90 %)      stroke_mm")
+    print(
+        "   row  height_mm    load_N  prob  p_needed_bar (90 %)        p_for_prob  force at p_bar (90 %)      stroke_mm"
+    )
     for q, r in zip(queries, results, strict=True):
         e = r["pressure_bar_needed"]
         force = stroke = ""
@@ -287,12 +403,16 @@ def _print_table(source, ans, info, queries, results) -> None:
         if "usable_stroke" in r:
             c = r["usable_stroke"]["stroke_credible"]
             stroke = f"{c['from_m'] * 1e3:.1f}..{c['to_m'] * 1e3:.1f}" if c else "none"
-        print(f"  {q['row']:>4}  {q['height_mm']:9g}  {q['load_N']:8g}  {q['prob']:4g}  "
-              f"{e['mean']:6.3f} ({e['q05']:.3f}..{e['q95']:.3f})  {r['pressure_bar_for_prob']:10.3f}  {force:<25}  {stroke}".rstrip())
+        print(
+            f"  {q['row']:>4}  {q['height_mm']:9g}  {q['load_N']:8g}  {q['prob']:4g}  "
+            f"{e['mean']:6.3f} ({e['q05']:.3f}..{e['q95']:.3f})  {r['pressure_bar_for_prob']:10.3f}  {force:<25}  {stroke}".rstrip()
+        )
 
 
 def _fit_and_choose(args, rec, stand):
     """Fit what ``--model`` needs (``uq._derived.margin.fit_and_choose``)."""
     from uq._cli.common import settings_from
 
-    return fit_and_choose(rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand)
+    return fit_and_choose(
+        rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand
+    )

@@ -15,11 +15,25 @@ from uq._report.campaign import MIN_DRAWS, read_comments, write_report
 def configure_report(p) -> None:
     add_recordings(p)
     add_sampling(p)
-    p.add_argument("--out", required=True, metavar="DIR", help="folder for report.html and its PNG figures")
-    p.add_argument("--json", metavar="PATH", help="also write the fit's JSON (as uq fit --json, plus the derived bands' summary)")
-    p.add_argument("--draws", type=positive_int, default=2000, help="joint posterior draws used for the bands (default 2000)")
-    p.add_argument("--surface", action="store_true",
-                   help="also fit the surface model and write surface.html beside the report (adds about 30 s)")
+    p.add_argument(
+        "--out", required=True, metavar="DIR", help="folder for report.html and its PNG figures"
+    )
+    p.add_argument(
+        "--json",
+        metavar="PATH",
+        help="also write the fit's JSON (as uq fit --json, plus the derived bands' summary)",
+    )
+    p.add_argument(
+        "--draws",
+        type=positive_int,
+        default=2000,
+        help="joint posterior draws used for the bands (default 2000)",
+    )
+    p.add_argument(
+        "--surface",
+        action="store_true",
+        help="also fit the surface model and write surface.html beside the report (adds about 30 s)",
+    )
 
 
 def command_report(args) -> int:
@@ -35,19 +49,34 @@ def command_report(args) -> int:
     cf = fit_campaign(rec, seed=args.seed, settings=settings)
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
-    path = write_report(cf, args.out, bands=cb, seed=args.seed, comments=read_comments(args.file),
-                        surface=args.surface, settings=settings)
+    path = write_report(
+        cf,
+        args.out,
+        bands=cb,
+        seed=args.seed,
+        comments=read_comments(args.file),
+        surface=args.surface,
+        settings=settings,
+    )
     t_all = time.perf_counter() - t0
-    print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; fit {t_fit:.1f} s, report {t_all - t_fit:.1f} s")
+    print(
+        f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; fit {t_fit:.1f} s, report {t_all - t_fit:.1f} s"
+    )
     sc = cb.scatter_at
     if sc:
-        parts = ", ".join(f"{k} {v['mean']:.2f} % [{v['q05']:.2f}, {v['q95']:.2f}]" for k, v in sc.items())
-        print(f"F_eff scatter across {', '.join(f'{p:g}' for p in cb.scatter_pressures_bar)} bar (half range / mean): {parts}")
+        parts = ", ".join(
+            f"{k} {v['mean']:.2f} % [{v['q05']:.2f}, {v['q95']:.2f}]" for k, v in sc.items()
+        )
+        print(
+            f"F_eff scatter across {', '.join(f'{p:g}' for p in cb.scatter_pressures_bar)} bar (half range / mean): {parts}"
+        )
     print(f"traditional force from {cb.reference_note}")
     for t in cb.tests:
         a = t.at_x0
-        print(f"  {t.pressure_bar:>5g} bar at x0: P = {a['force_N']['mean']:9.1f} N, F_eff = {a['feff_m2']['mean']:.5f} m^2, "
-              f"traditional {a['spread_ref_pct']['mean']:+6.1f} % (own volume curve {a['spread_own_pct']['mean']:+6.1f} %)")
+        print(
+            f"  {t.pressure_bar:>5g} bar at x0: P = {a['force_N']['mean']:9.1f} N, F_eff = {a['feff_m2']['mean']:.5f} m^2, "
+            f"traditional {a['spread_ref_pct']['mean']:+6.1f} % (own volume curve {a['spread_own_pct']['mean']:+6.1f} %)"
+        )
     warnings = [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in t.diagnostics["warnings"]]
     for w in warnings:
         print(f"WARNING: {w}", file=sys.stderr)
@@ -57,6 +86,8 @@ def command_report(args) -> int:
     if args.json:
         emit_json(fit_json(cf) | {"bands": cb.summary(), "report": str(path)}, args.json)
     if not cf.converged and args.strict:
-        print("WARNING: sampling did not converge for every test; --strict: exit 1", file=sys.stderr)
+        print(
+            "WARNING: sampling did not converge for every test; --strict: exit 1", file=sys.stderr
+        )
         return 1
     return 0

@@ -16,20 +16,38 @@ def configure_surface(p) -> None:
     add_recordings(p)
     add_sampling(p)
     add_json(p)
-    p.add_argument("--select", action="store_true",
-                   help="rank the candidate polynomial orders by PSIS-LOO and keep the best (slower)")
-    p.add_argument("--no-compare", action="store_true",
-                   help="skip the PSIS-LOO comparison with the per-pressure cubics")
-    p.add_argument("--report", metavar="DIR", help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR")
-    p.add_argument("--out", metavar="DIR",
-                   help="the folder to write: surface.nc, the surface posterior as a saved answer for uq margin --fit (docs/formats.md)")
+    p.add_argument(
+        "--select",
+        action="store_true",
+        help="rank the candidate polynomial orders by PSIS-LOO and keep the best (slower)",
+    )
+    p.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="skip the PSIS-LOO comparison with the per-pressure cubics",
+    )
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        help="the folder to write: surface.nc, the surface posterior as a saved answer for uq margin --fit (docs/formats.md)",
+    )
     add_stand(p)
 
 
 def fast_cubic_settings(settings: Settings) -> Settings:
     """Shorter chains for the per-pressure cubics used only in the LOO comparison."""
-    return Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles, tau_multiple=20.0,
-                    min_steps=300, max_steps=settings.max_steps)
+    return Settings(
+        n_walkers=settings.n_walkers,
+        n_ensembles=settings.n_ensembles,
+        tau_multiple=20.0,
+        min_steps=300,
+        max_steps=settings.max_steps,
+    )
 
 
 def command_surface(args) -> int:
@@ -38,7 +56,9 @@ def command_surface(args) -> int:
     from uq._models.cubic import fit_campaign
 
     t0 = time.perf_counter()
-    stand = stand_from(args)  # a bad --stand file or --walkers is refused before the recordings are read
+    stand = stand_from(
+        args
+    )  # a bad --stand file or --walkers is refused before the recordings are read
     settings = settings_from(args)
     settings.require_walkers(len(NOISE_NAMES))
     rec = load(args)
@@ -49,28 +69,44 @@ def command_surface(args) -> int:
     comparison = None
     if not args.no_compare:
         cub = fit_campaign(rec, seed=args.seed, settings=fast_cubic_settings(settings))
-        comparison = _surface.compare_with_cubics(fit, cub, seed=args.seed, settings=fast_cubic_settings(settings))
+        comparison = _surface.compare_with_cubics(
+            fit, cub, seed=args.seed, settings=fast_cubic_settings(settings)
+        )
     res = summary(fit, comparison)
-    seconds_total = time.perf_counter() - t0  # printed, not in the JSON: reruns give identical bytes
-    print(f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
-          f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)")
+    seconds_total = (
+        time.perf_counter() - t0
+    )  # printed, not in the JSON: reruns give identical bytes
+    print(
+        f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
+        f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)"
+    )
     for row in fit.selection:
-        print(f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}")
+        print(
+            f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}"
+        )
     for pb, r in res["at_x0"].items():
         f, s = r["force_N"], r["spread_N"]
-        print(f"  x0, {pb} bar: F_p {r['pressure_area_m2']['mean'] * 1e4:.2f} cm^2, F_eff = P/p_u {r['feff_m2']['mean'] * 1e4:.2f} cm^2, "
-              f"force {f['mean']:.0f} N "
-              f"[{f['q05']:.0f}, {f['q95']:.0f}], traditional - measured {s['mean']:.0f} N [{s['q05']:.0f}, {s['q95']:.0f}]")
+        print(
+            f"  x0, {pb} bar: F_p {r['pressure_area_m2']['mean'] * 1e4:.2f} cm^2, F_eff = P/p_u {r['feff_m2']['mean'] * 1e4:.2f} cm^2, "
+            f"force {f['mean']:.0f} N "
+            f"[{f['q05']:.0f}, {f['q95']:.0f}], traditional - measured {s['mean']:.0f} N [{s['q05']:.0f}, {s['q95']:.0f}]"
+        )
     nz = res["noise"]
-    print(f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
-          f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm")
-    print(f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range")
+    print(
+        f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
+        f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
+    )
+    print(
+        f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range"
+    )
     if comparison:
         c = comparison
-        print(f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} ({c['surface']['n_coefficients']} coef., "
-              f"max Pareto k {c['surface']['max_pareto_k']:.2f}), cubics {c['cubics']['elpd_loo']:.1f} "
-              f"({c['cubics']['n_coefficients']} coef., max Pareto k {c['cubics']['max_pareto_k']:.2f}): "
-              f"{comparison_words(c)}")
+        print(
+            f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} ({c['surface']['n_coefficients']} coef., "
+            f"max Pareto k {c['surface']['max_pareto_k']:.2f}), cubics {c['cubics']['elpd_loo']:.1f} "
+            f"({c['cubics']['n_coefficients']} coef., max Pareto k {c['cubics']['max_pareto_k']:.2f}): "
+            f"{comparison_words(c)}"
+        )
     for w in res["warnings"]:
         print(f"  warning: {w}")
     if args.report:
@@ -80,8 +116,10 @@ def command_surface(args) -> int:
     if args.out:
         from uq._derived.margin import save_surface_answer
 
-        print(f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
-              "(uq margin --fit answers from it)")
+        print(
+            f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
+            "(uq margin --fit answers from it)"
+        )
     print(f"  {seconds_total:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(res, args.json)
     return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0

@@ -55,7 +55,9 @@ seed = _option_type(values.seed)
 def probability(text: str) -> float:
     value = finite_float(text)
     if not 0.0 < value < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a probability strictly between 0 and 1, got '{text}'")
+        raise argparse.ArgumentTypeError(
+            f"expected a probability strictly between 0 and 1, got '{text}'"
+        )
     return value
 
 
@@ -67,7 +69,8 @@ def choice_list(*allowed: str):
         bad = [n for n in names if n not in allowed]
         if not names or bad:
             raise argparse.ArgumentTypeError(
-                f"expected a comma-separated list of {', '.join(allowed)}, got '{text}'")
+                f"expected a comma-separated list of {', '.join(allowed)}, got '{text}'"
+            )
         return ",".join(names)
 
     parse.__name__ = "list"
@@ -78,20 +81,48 @@ def choice_list(*allowed: str):
 
 
 def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> None:
-    p.add_argument("file", nargs="?" if file_optional else None,
-                   help="recordings CSV (format: docs/formats.md)")
-    p.add_argument("--piston-area-cm2", type=positive_float, default=DEFAULT_PISTON_AREA_CM2,
-                   help="area S of the hydraulic cylinder's piston cavity, cm^2 (the paper's value)")
-    p.add_argument("--x0-mm", type=positive_float, default=DEFAULT_X0_MM,
-                   help="reference height x0 of the polynomial basis, mm (the paper's value)")
+    p.add_argument(
+        "file",
+        nargs="?" if file_optional else None,
+        help="recordings CSV (format: docs/formats.md)",
+    )
+    p.add_argument(
+        "--piston-area-cm2",
+        type=positive_float,
+        default=DEFAULT_PISTON_AREA_CM2,
+        help="area S of the hydraulic cylinder's piston cavity, cm^2 (the paper's value)",
+    )
+    p.add_argument(
+        "--x0-mm",
+        type=positive_float,
+        default=DEFAULT_X0_MM,
+        help="reference height x0 of the polynomial basis, mm (the paper's value)",
+    )
 
 
 def add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
-    p.add_argument("--walkers", type=walkers, default=DEFAULT_WALKERS, help="emcee walkers per ensemble (a multiple of 4)")
-    p.add_argument("--ensembles", type=positive_int, default=DEFAULT_ENSEMBLES, help="independent ensembles (>= 2, for R-hat)")
-    p.add_argument("--max-steps", type=positive_int, default=DEFAULT_MAX_STEPS, help="cap on emcee steps per ensemble")
-    p.add_argument("--strict", action="store_true", help="exit status 1 when sampling did not converge")
+    p.add_argument(
+        "--walkers",
+        type=walkers,
+        default=DEFAULT_WALKERS,
+        help="emcee walkers per ensemble (a multiple of 4)",
+    )
+    p.add_argument(
+        "--ensembles",
+        type=positive_int,
+        default=DEFAULT_ENSEMBLES,
+        help="independent ensembles (>= 2, for R-hat)",
+    )
+    p.add_argument(
+        "--max-steps",
+        type=positive_int,
+        default=DEFAULT_MAX_STEPS,
+        help="cap on emcee steps per ensemble",
+    )
+    p.add_argument(
+        "--strict", action="store_true", help="exit status 1 when sampling did not converge"
+    )
 
 
 def settings_from(args):
@@ -103,13 +134,17 @@ def settings_from(args):
 
 
 def add_json(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)")
+    p.add_argument(
+        "--json", metavar="PATH", help="write the machine-readable result to PATH ('-' for stdout)"
+    )
 
 
 def load(args, min_points: int = 6):
     from uq._data.recordings import read_recordings
 
-    return read_recordings(args.file, piston_area_cm2=args.piston_area_cm2, x0_mm=args.x0_mm, min_points=min_points)
+    return read_recordings(
+        args.file, piston_area_cm2=args.piston_area_cm2, x0_mm=args.x0_mm, min_points=min_points
+    )
 
 
 def positive(name: str, value: float) -> float:
@@ -131,7 +166,9 @@ def _probe_writable(folder: Path, option: str, path) -> None:
     try:
         fd, tmp = tempfile.mkstemp(prefix=".uq-probe-", dir=folder)
     except OSError as exc:
-        raise InputError(f"option {option} {path}: cannot write in {folder}: {exc.strerror}") from None
+        raise InputError(
+            f"option {option} {path}: cannot write in {folder}: {exc.strerror}"
+        ) from None
     os.close(fd)
     os.unlink(tmp)
 
@@ -151,14 +188,20 @@ def check_output_path(path, option: str, kind: str = "file") -> None:
     p = Path(path)
     what = "file" if kind == "file" else "folder"
     if kind == "file" and p.is_symlink():
-        raise InputError(f"option {option} {path}: is a symbolic link; refusing to replace it (give the real path)")
+        raise InputError(
+            f"option {option} {path}: is a symbolic link; refusing to replace it (give the real path)"
+        )
     if p.exists():
         if kind == "dir":
             if not p.is_dir():
-                raise InputError(f"option {option} {path}: is an existing file; {option} names the folder to write into")
+                raise InputError(
+                    f"option {option} {path}: is an existing file; {option} names the folder to write into"
+                )
             _probe_writable(p, option, path)
         elif p.is_dir():
-            raise InputError(f"option {option} {path}: is a folder; {option} names the {what} to write")
+            raise InputError(
+                f"option {option} {path}: is a folder; {option} names the {what} to write"
+            )
         elif p.is_file():
             _probe_writable(p.absolute().parent, option, path)
         elif not os.access(p, os.W_OK):  # a device or pipe is written to in place
@@ -172,8 +215,10 @@ def check_output_path(path, option: str, kind: str = "file") -> None:
     _probe_writable(ancestor, option, path)
 
 
-STAND_HELP = ("the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
-              "p_atm (TOML, keys of uq._data.stand_description.StandDescription; default the paper's stand)")
+STAND_HELP = (
+    "the stand the recordings were taken on: load-cell accuracy, pressure holding, gas volume, "
+    "p_atm (TOML, keys of uq._data.stand_description.StandDescription; default the paper's stand)"
+)
 
 
 def add_stand(p: argparse.ArgumentParser, help: str = STAND_HELP) -> None:
@@ -190,8 +235,9 @@ def stand_from(args, model: bool = True):
 
     stand = stand_or_paper(getattr(args, "stand", None))
     if model and stand.noise_form_fields():
-        sys.stderr.write(f"note: --stand {args.stand}: {', '.join(stand.noise_form_fields())} describe the noise's "
-                         "form for the virtual stand; the models assume independent Gaussian errors and do not use "
-                         "them\n")
+        sys.stderr.write(
+            f"note: --stand {args.stand}: {', '.join(stand.noise_form_fields())} describe the noise's "
+            "form for the virtual stand; the models assume independent Gaussian errors and do not use "
+            "them\n"
+        )
     return stand
-

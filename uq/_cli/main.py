@@ -34,16 +34,48 @@ from uq._io.version import __version__
 
 #: (command, module, one-line help). Modules are imported only when their command runs.
 COMMANDS = [
-    ("simulate", "uq._cli.cmd_basic", "virtual test stand: write recordings following the paper's procedure and error budget"),
-    ("fit", "uq._cli.cmd_basic", "per-pressure Bayesian cubic fits of force and piston coordinate (eqs. 8, 9)"),
-    ("report", "uq._cli.cmd_report", "posterior report: one self-contained HTML page (+ PNG figures) per campaign"),
-    ("check", "uq._cli.cmd_check", "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)"),
-    ("bench", "uq._cli.cmd_bench", "effective samples per second of the project's sampler against a plain emcee baseline"),
+    (
+        "simulate",
+        "uq._cli.cmd_basic",
+        "virtual test stand: write recordings following the paper's procedure and error budget",
+    ),
+    (
+        "fit",
+        "uq._cli.cmd_basic",
+        "per-pressure Bayesian cubic fits of force and piston coordinate (eqs. 8, 9)",
+    ),
+    (
+        "report",
+        "uq._cli.cmd_report",
+        "posterior report: one self-contained HTML page (+ PNG figures) per campaign",
+    ),
+    (
+        "check",
+        "uq._cli.cmd_check",
+        "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)",
+    ),
+    (
+        "bench",
+        "uq._cli.cmd_bench",
+        "effective samples per second of the project's sampler against a plain emcee baseline",
+    ),
     ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
     ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
-    ("diagnose", "uq._cli.cmd_diagnose", "locate the mismatch with the traditional model, name and model the missing physics"),
-    ("calibrate", "uq._cli.cmd_calibrate", "coverage of the credible intervals on simulated campaigns with known truth"),
-    ("batch", "uq._cli.cmd_batch", "a catalogue of campaigns (fit, report, surface, diagnose) on Dask: summary table, reruns skip finished ones"),
+    (
+        "diagnose",
+        "uq._cli.cmd_diagnose",
+        "locate the mismatch with the traditional model, name and model the missing physics",
+    ),
+    (
+        "calibrate",
+        "uq._cli.cmd_calibrate",
+        "coverage of the credible intervals on simulated campaigns with known truth",
+    ),
+    (
+        "batch",
+        "uq._cli.cmd_batch",
+        "a catalogue of campaigns (fit, report, surface, diagnose) on Dask: summary table, reruns skip finished ones",
+    ),
 ]
 
 #: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"
@@ -52,11 +84,20 @@ COMMANDS = [
 OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir"}
 OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
 
-EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 0, 1, 2, 3, 130, 141
+EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (
+    0,
+    1,
+    2,
+    3,
+    130,
+    141,
+)
 
-EPILOG = ("exit status: 0 done, 1 check disagrees or not converged under --strict, 2 bad input or usage, "
-          "3 internal error, 130 interrupted. --out is where a command writes: the CSV file for simulate, "
-          "the folder for the others. --json - prints the JSON alone on stdout.")
+EPILOG = (
+    "exit status: 0 done, 1 check disagrees or not converged under --strict, 2 bad input or usage, "
+    "3 internal error, 130 interrupted. --out is where a command writes: the CSV file for simulate, "
+    "the folder for the others. --json - prints the JSON alone on stdout."
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -71,7 +112,11 @@ class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
 
     def _get_help_string(self, action):
         text = action.help or ""
-        if "default" in text.lower() or action.default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+        if (
+            "default" in text.lower()
+            or action.default in (None, False, argparse.SUPPRESS)
+            or not action.option_strings
+        ):
             return text
         return super()._get_help_string(action)
 
@@ -82,21 +127,35 @@ def _available() -> list[tuple[str, str, str]]:
 
 def _add_general(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("general")
-    g.add_argument("--quiet", action="store_true", help="no progress display (it is also off when stderr is not a terminal)")
-    g.add_argument("--debug", action="store_true", help="on an internal error, print the traceback (or set UQ_DEBUG=1)")
+    g.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress display (it is also off when stderr is not a terminal)",
+    )
+    g.add_argument(
+        "--debug",
+        action="store_true",
+        help="on an internal error, print the traceback (or set UQ_DEBUG=1)",
+    )
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The ``uq`` parser. Only the command named in ``argv`` is configured (its module imported);
     the others are listed with their one-line help, which is all ``uq --help`` shows."""
     wanted = _command_in(argv or [])
-    parser = _Parser(prog="uq", description="Bayesian uncertainty quantification of air-spring test-stand recordings",
-                     epilog=EPILOG, formatter_class=_Formatter)
+    parser = _Parser(
+        prog="uq",
+        description="Bayesian uncertainty quantification of air-spring test-stand recordings",
+        epilog=EPILOG,
+        formatter_class=_Formatter,
+    )
     parser.add_argument("--version", action="version", version=f"uq {__version__}")
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND", parser_class=_Parser)
     parser._uq_commands = {}
     for name, module, help_ in _available():
-        p = sub.add_parser(name, help=help_, description=help_, epilog=EPILOG, formatter_class=_Formatter)
+        p = sub.add_parser(
+            name, help=help_, description=help_, epilog=EPILOG, formatter_class=_Formatter
+        )
         p.set_defaults(_module=module, _name=name)
         if name == wanted:
             getattr(importlib.import_module(module), f"configure_{name}")(p)
@@ -170,7 +229,11 @@ def _compile_cache() -> None:
     turns it off. Only environment variables are set (JAX reads them when first imported), so
     commands that never import JAX stay fast; a cache location set by the user wins."""
     where = os.environ.get("UQ_CACHE_DIR", "")
-    if where.lower() in ("off", "0", "none") or "JAX_COMPILATION_CACHE_DIR" in os.environ or "jax" in sys.modules:
+    if (
+        where.lower() in ("off", "0", "none")
+        or "JAX_COMPILATION_CACHE_DIR" in os.environ
+        or "jax" in sys.modules
+    ):
         return
     if not where:
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
@@ -198,7 +261,9 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(name, f"error: {exc}", EXIT_INPUT)
     except KeyboardInterrupt:
         return _fail(name, "interrupted", EXIT_INTERRUPTED)
-    except BrokenPipeError:  # the reader of stdout went away (`| head`): the shell's status for SIGPIPE
+    except (
+        BrokenPipeError
+    ):  # the reader of stdout went away (`| head`): the shell's status for SIGPIPE
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
@@ -212,7 +277,11 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         first = (str(exc).splitlines() or [""])[0]
         hint = "" if debug else "; rerun with --debug (or UQ_DEBUG=1) for the traceback"
-        return _fail(name, f"internal error: {type(exc).__name__}: {first} (a bug, please report it{hint})", EXIT_INTERNAL)
+        return _fail(
+            name,
+            f"internal error: {type(exc).__name__}: {first} (a bug, please report it{hint})",
+            EXIT_INTERNAL,
+        )
 
 
 if __name__ == "__main__":

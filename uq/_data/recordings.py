@@ -95,9 +95,13 @@ class Recordings:
 def check_stand_options(piston_area_cm2: float, x0_mm: float) -> None:
     """Validate the stand constants given as options (names the option on failure)."""
     if not (math.isfinite(piston_area_cm2) and piston_area_cm2 > 0):
-        raise InputError(f"option --piston-area-cm2: expected a positive area in cm^2, got {piston_area_cm2}")
+        raise InputError(
+            f"option --piston-area-cm2: expected a positive area in cm^2, got {piston_area_cm2}"
+        )
     if not (math.isfinite(x0_mm) and 1.0 <= x0_mm <= 5000.0):
-        raise InputError(f"option --x0-mm: expected a reference height in mm (1..5000), got {x0_mm}")
+        raise InputError(
+            f"option --x0-mm: expected a reference height in mm (1..5000), got {x0_mm}"
+        )
 
 
 # ----------------------------------------------------------------------------- plausibility
@@ -125,7 +129,9 @@ def _number(text, path: str, row: int, column: str, decimal_comma: bool = False)
             f"{where(path, row, column)}: '{shown}' is not a number (a decimal comma? in a comma-separated file write a decimal point)"
         )
     if decimal_comma:
-        if "." in text:  # in a file of decimal commas a point can only be a thousands separator or a slip
+        if (
+            "." in text
+        ):  # in a file of decimal commas a point can only be a thousands separator or a slip
             raise InputError(
                 f"{where(path, row, column)}: '{shown}' has a '.' in a file that writes decimal commas (a thousands separator?); write plain numbers"
             )
@@ -197,17 +203,32 @@ def _table(path: str, numbered: list[tuple[int, str]], sep: str) -> list[tuple[i
     text = "\n".join(f"{n}{sep}{line}" for n, line in numbered)
     extra: list[list[str]] = []
     try:
-        df = pd.read_csv(io.StringIO(text), sep=sep, header=None, dtype=str, keep_default_na=False,
-                         na_filter=False, engine="python", skip_blank_lines=False, quoting=csv.QUOTE_MINIMAL,
-                         on_bad_lines=lambda fields: extra.append(fields) or None)
+        df = pd.read_csv(
+            io.StringIO(text),
+            sep=sep,
+            header=None,
+            dtype=str,
+            keep_default_na=False,
+            na_filter=False,
+            engine="python",
+            skip_blank_lines=False,
+            quoting=csv.QUOTE_MINIMAL,
+            on_bad_lines=lambda fields: extra.append(fields) or None,
+        )
     except (pd.errors.ParserError, csv.Error) as exc:
-        raise InputError(f"{path}: cannot split the rows into columns ({' '.join(str(exc).split())})") from None
-    rows = [(r[0], list(r[1:])) for r in df.itertuples(index=False, name=None)] + [(r[0], list(r[1:])) for r in extra]
+        raise InputError(
+            f"{path}: cannot split the rows into columns ({' '.join(str(exc).split())})"
+        ) from None
+    rows = [(r[0], list(r[1:])) for r in df.itertuples(index=False, name=None)] + [
+        (r[0], list(r[1:])) for r in extra
+    ]
     out = []
     for line, fields in rows:
         if not str(line).isdigit() or any("\n" in str(f) for f in fields if isinstance(f, str)):
             first = next((n for n, ln in numbered if ln.count('"') % 2), numbered[0][0])
-            raise InputError(f"{where(path, first)}: a quote (\") opened on this line is not closed on it")
+            raise InputError(
+                f'{where(path, first)}: a quote (") opened on this line is not closed on it'
+            )
         out.append((int(line), fields))
     return sorted(out, key=lambda r: r[0])
 
@@ -242,8 +263,9 @@ def read_recordings(
     """
     check_stand_options(piston_area_cm2, x0_mm)
     path = str(path)
-    return recordings_from_text(_decode(path), path, piston_area_cm2=piston_area_cm2, x0_mm=x0_mm,
-                                min_points=min_points)
+    return recordings_from_text(
+        _decode(path), path, piston_area_cm2=piston_area_cm2, x0_mm=x0_mm, min_points=min_points
+    )
 
 
 def recordings_from_text(
@@ -260,20 +282,31 @@ def recordings_from_text(
     path = str(name)
     lines = text.splitlines()
     numbered = [
-        (i + 1, line) for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")
+        (i + 1, line)
+        for i, line in enumerate(lines)
+        if line.strip() and not line.lstrip().startswith("#")
     ]
     if not numbered:
-        raise InputError(f"{path}: empty file, expected a header row with columns {', '.join(REQUIRED_COLUMNS)}")
+        raise InputError(
+            f"{path}: empty file, expected a header row with columns {', '.join(REQUIRED_COLUMNS)}"
+        )
     sep = _delimiter(numbered[0][1])
     table = _table(path, numbered, sep)
     (header_row, header_fields), body = table[0], table[1:]
     header = [str(h).strip() for h in header_fields if isinstance(h, str)]
     seen = _header_index(path, header_row, header, sep)
-    body = [(row, fields) for row, fields in body if any(isinstance(f, str) and f.strip() for f in fields)]
+    body = [
+        (row, fields)
+        for row, fields in body
+        if any(isinstance(f, str) and f.strip() for f in fields)
+    ]
     if not body:
         raise InputError(f"{path}: no data rows after the header")
     decimal_comma = sep != "," and any(
-        "," in str(fields[seen[c]]) for _, fields in body for c in REQUIRED_COLUMNS if c != "branch" and seen[c] < len(fields)
+        "," in str(fields[seen[c]])
+        for _, fields in body
+        for c in REQUIRED_COLUMNS
+        if c != "branch" and seen[c] < len(fields)
     )
     groups: dict[float, list[tuple]] = {}
     for row, fields in body:
@@ -288,9 +321,10 @@ def recordings_from_text(
         )
 
     tests = [
-        _make_test(path, p, rows, min_points) for p, rows in sorted(groups.items(), key=lambda kv: kv[0])
+        _make_test(path, p, rows, min_points)
+        for p, rows in sorted(groups.items(), key=lambda kv: kv[0])
     ]
-    _check_x0(tests, x0_mm)
+    _check_x0(path, tests, x0_mm)
     _check_units(path, tests, piston_area_cm2 * 1e-4)
     for t in tests:
         _check_outliers(path, t)
@@ -340,7 +374,11 @@ def _header_index(path: str, header_row: int, header: list[str], sep: str) -> di
 def _parse_row(path, row, fields, header, idx, sep, decimal_comma) -> tuple[float, tuple]:
     found = _fields_found(fields)
     if found != len(header):
-        hint = " (a decimal comma? use decimal points, or separate the columns by ';')" if sep == "," and found > len(header) else ""
+        hint = (
+            " (a decimal comma? use decimal points, or separate the columns by ';')"
+            if sep == "," and found > len(header)
+            else ""
+        )
         raise InputError(
             f"{where(path, row)}: expected {len(header)} fields as in the header (separated by {DELIMITERS[sep]}), found {found}{hint}"
         )
@@ -465,12 +503,12 @@ def _odd_one(h: np.ndarray, k: int) -> int:
     return k if misfit(k) > misfit(k + 1) else k + 1
 
 
-def _check_x0(tests: list[PressureTest], x0_mm: float) -> None:
+def _check_x0(path: str, tests: list[PressureTest], x0_mm: float) -> None:
     lo = min(float(t.height_m.min()) for t in tests) * 1e3
     hi = max(float(t.height_m.max()) for t in tests) * 1e3
     if not lo - 1e-9 <= x0_mm <= hi + 1e-9:
         raise InputError(
-            f"option --x0-mm: the reference height {x0_mm:g} mm lies outside the recorded heights {lo:g}..{hi:g} mm; "
+            f"{path}: option --x0-mm: the reference height {x0_mm:g} mm lies outside the recorded heights {lo:g}..{hi:g} mm; "
             f"the coefficients would describe the element where it was never measured (try --x0-mm {0.5 * (lo + hi):g})"
         )
 
@@ -506,7 +544,11 @@ def _check_units(path: str, tests: list[PressureTest], piston_area_m2: float) ->
             f"{first}, column 'piston_mm': the {t.label} test's piston travel gives a volume-derived effective area S|dL/dx| of "
             f"{a_volume * 1e4:.3g} cm^2, outside any air spring's ({rng}): piston coordinate in m instead of mm, or a wrong --piston-area-cm2?"
         )
-    if a_force > 0 and a_volume > 0 and not 1 / AREA_RATIO_MAX <= a_force / a_volume <= AREA_RATIO_MAX:
+    if (
+        a_force > 0
+        and a_volume > 0
+        and not 1 / AREA_RATIO_MAX <= a_force / a_volume <= AREA_RATIO_MAX
+    ):
         raise InputError(
             f"{first}: the {t.label} test's force gives an effective area P/p_u of {a_force * 1e4:.3g} cm^2 but its piston travel "
             f"S|dL/dx| {a_volume * 1e4:.3g} cm^2; eqs. 1 and 5 make them nearly equal: a unit slip in force_N, pressure_bar "
@@ -568,7 +610,9 @@ def write_recordings_csv(tests: list[dict], header_comment: str = "") -> str:
         out.append(f"# {line}".rstrip())
     out.append(",".join(REQUIRED_COLUMNS))
     for t in tests:
-        for x, f, L, c, s in zip(t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"], strict=True):
+        for x, f, L, c, s in zip(
+            t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"], strict=True
+        ):
             out.append(
                 f"{t['pressure_bar']:g},{x * 1e3:.3f},{f:.2f},{L * 1e3:.3f},{'compression' if c else 'rebound'},{int(s)}"
             )

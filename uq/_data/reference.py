@@ -26,7 +26,13 @@ _FORCE_SCALE = np.array([1e3, 1e3, 1e3, 1e6])
 
 
 def _rows(name: str) -> list[dict[str, str]]:
-    text = resources.files("uq").joinpath("_data").joinpath("tables").joinpath(name).read_text(encoding="utf-8")
+    text = (
+        resources.files("uq")
+        .joinpath("_data")
+        .joinpath("tables")
+        .joinpath(name)
+        .read_text(encoding="utf-8")
+    )
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
     return list(csv.DictReader(lines))
 
@@ -57,17 +63,31 @@ def table1() -> Table1:
     """
     rows = _rows("table1_regression_coefficients.csv")
     p = np.array([float(r["pressure_bar"]) for r in rows])
-    force = np.array(
-        [[float(r[k]) for k in ("a_P_kN", "b_P_kN_per_m", "c_P_kN_per_m2", "d_P_1e3kN_per_m3")] for r in rows]
-    ) * _FORCE_SCALE
-    piston = np.array([[float(r[k]) for k in ("a_L_m", "b_L", "c_L_per_m", "d_L_per_m2")] for r in rows])
+    force = (
+        np.array(
+            [
+                [
+                    float(r[k])
+                    for k in ("a_P_kN", "b_P_kN_per_m", "c_P_kN_per_m2", "d_P_1e3kN_per_m3")
+                ]
+                for r in rows
+            ]
+        )
+        * _FORCE_SCALE
+    )
+    piston = np.array(
+        [[float(r[k]) for k in ("a_L_m", "b_L", "c_L_per_m", "d_L_per_m2")] for r in rows]
+    )
     return Table1(p, force, piston)
 
 
 @cache
 def table2() -> dict[float, tuple[float, float]]:
     """Table 2: pressure_bar -> (s_P in N, eps_P in %)."""
-    return {float(r["pressure_bar"]): (float(r["s_P_N"]), float(r["eps_P_pct"])) for r in _rows("table2_force_deviations.csv")}
+    return {
+        float(r["pressure_bar"]): (float(r["s_P_N"]), float(r["eps_P_pct"]))
+        for r in _rows("table2_force_deviations.csv")
+    }
 
 
 def cubic(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -85,4 +105,8 @@ def cubic_slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
     u = np.asarray(u)
     if coef.ndim == 1:
         return coef[1] + 2 * coef[2] * u + 3 * coef[3] * u**2
-    return coef[:, 1, None] + 2 * coef[:, 2, None] * u[None, :] + 3 * coef[:, 3, None] * u[None, :] ** 2
+    return (
+        coef[:, 1, None]
+        + 2 * coef[:, 2, None] * u[None, :]
+        + 3 * coef[:, 3, None] * u[None, :] ** 2
+    )

@@ -32,35 +32,35 @@ from uq._io.errors import InputError
 class StandDescription:
     """Error budget and gas volumes of a stand, SI units except where a field says bar.
 
-    load_cell_rel_sd            relative sd of the force reading (0.5 % in the paper)
-    pressure_holding_bar        sd of the held overpressure from 1 bar up (0.01 bar)
-    pressure_holding_floor_bar  sd at the lowest pressures (0.001 bar at 0.1 bar); between the
-                                floor and 1 bar the sd is proportional to p_u
-    displacement_sd_m           sd of the true height about the commanded one (0.02 mm)
-    caliper_sd_m                sd of the piston reading (0.01 mm)
-    receiver_air_m3             air outside the element: receiver, pipes, cylinder (assumed 2 L)
-    element_volume_at_xmax_m3   element's own air volume at the highest height (assumed 4.2 L)
-    p_atm_bar                   atmospheric pressure
-    error_df                    0: every reading error is Gaussian (the models' assumption);
-                                > 2: Student t with that many degrees of freedom, scaled to the
-                                same sd (a stand with occasional larger disturbances)
-    pressure_error_corr         0: the pressure-holding errors of successive readings are
-                                independent (the models' assumption); in (0, 1): their lag-one
-                                correlation in recording order (AR(1), same sd), as a slow
-                                pressure controller leaves them
+        load_cell_rel_sd            relative sd of the force reading (0.5 % in the paper)
+        pressure_holding_bar        sd of the held overpressure from 1 bar up (0.01 bar)
+        pressure_holding_floor_bar  sd at the lowest pressures (0.001 bar at 0.1 bar); between the
+                                    floor and 1 bar the sd is proportional to p_u
+        displacement_sd_m           sd of the true height about the commanded one (0.02 mm)
+        caliper_sd_m                sd of the piston reading (0.01 mm)
+        receiver_air_m3             air outside the element: receiver, pipes, cylinder (assumed 2 L)
+        element_volume_at_xmax_m3   element's own air volume at the highest height (assumed 4.2 L)
+        p_atm_bar                   atmospheric pressure
+        error_df                    0: every reading error is Gaussian (the models' assumption);
+                                    > 2: Student t with that many degrees of freedom, scaled to the
+                                    same sd (a stand with occasional larger disturbances)
+        pressure_error_corr         0: the pressure-holding errors of successive readings are
+                                    independent (the models' assumption); in (0, 1): their lag-one
+                                    correlation in recording order (AR(1), same sd), as a slow
+                                    pressure controller leaves them
 
-The last two describe stands whose noise differs in *form* from what every model's likelihood
-assumes (independent Gaussian errors): the stand uses them, the models ignore them, so the
-tests can check the models' intervals against noise that the models do not share.
+    The last two describe stands whose noise differs in *form* from what every model's likelihood
+    assumes (independent Gaussian errors): the stand uses them, the models ignore them, so the
+    tests can check the models' intervals against noise that the models do not share.
 
-    ``PAPER_STAND`` is the default; :meth:`replace` or :func:`read_stand` give another stand, which
-    ``uq.simulate(..., stand=)`` makes noise with and ``uq.fit_surface``/``uq.diagnose`` model:
+        ``PAPER_STAND`` is the default; :meth:`replace` or :func:`read_stand` give another stand, which
+        ``uq.simulate(..., stand=)`` makes noise with and ``uq.fit_surface``/``uq.diagnose`` model:
 
-    >>> import uq
-    >>> uq.PAPER_STAND.load_cell_rel_sd, uq.PAPER_STAND.gas_volume_at_xmax_m3
-    (0.005, 0.0062)
-    >>> float(uq.PAPER_STAND.replace(pressure_holding_bar=0.02).pressure_sd_bar(5.0))
-    0.02
+        >>> import uq
+        >>> uq.PAPER_STAND.load_cell_rel_sd, uq.PAPER_STAND.gas_volume_at_xmax_m3
+        (0.005, 0.0062)
+        >>> float(uq.PAPER_STAND.replace(pressure_holding_bar=0.02).pressure_sd_bar(5.0))
+        0.02
     """
 
     load_cell_rel_sd: float = 0.005
@@ -76,9 +76,13 @@ tests can check the models' intervals against noise that the models do not share
 
     def __post_init__(self):
         if self.error_df != 0 and not self.error_df > 2:
-            raise ValueError(f"error_df must be 0 (Gaussian) or above 2 (finite variance), got {self.error_df!r}")
+            raise ValueError(
+                f"error_df must be 0 (Gaussian) or above 2 (finite variance), got {self.error_df!r}"
+            )
         if not 0 <= self.pressure_error_corr < 1:
-            raise ValueError(f"pressure_error_corr must lie in 0 <= corr < 1, got {self.pressure_error_corr!r}")
+            raise ValueError(
+                f"pressure_error_corr must lie in 0 <= corr < 1, got {self.pressure_error_corr!r}"
+            )
 
     @property
     def gas_volume_at_xmax_m3(self) -> float:
@@ -89,15 +93,20 @@ tests can check the models' intervals against noise that the models do not share
         """sd of the pressure holding at overpressure p_u (bar): ``pressure_holding_bar`` from
         1 bar up, proportional to p_u below, never under ``pressure_holding_floor_bar``."""
         p = np.asarray(pressure_bar, float)
-        return np.maximum(self.pressure_holding_bar * np.minimum(1.0, p), self.pressure_holding_floor_bar)
+        return np.maximum(
+            self.pressure_holding_bar * np.minimum(1.0, p), self.pressure_holding_floor_bar
+        )
 
     def replace(self, **changes) -> StandDescription:
         return dataclasses.replace(self, **changes)
 
     def changes(self) -> dict[str, float]:
         """The fields whose values differ from the paper's stand (empty for ``PAPER_STAND``)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
-                if getattr(self, f.name) != f.default}
+        return {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if getattr(self, f.name) != f.default
+        }
 
     def noise_form_fields(self) -> list[str]:
         """The fields set here that make the noise differ in form from the models' independent
@@ -108,8 +117,16 @@ tests can check the models' intervals against noise that the models do not share
 
 PAPER_STAND = StandDescription()
 
-_ALLOW_ZERO = {"load_cell_rel_sd", "pressure_holding_bar", "pressure_holding_floor_bar",
-               "displacement_sd_m", "caliper_sd_m", "receiver_air_m3", "error_df", "pressure_error_corr"}
+_ALLOW_ZERO = {
+    "load_cell_rel_sd",
+    "pressure_holding_bar",
+    "pressure_holding_floor_bar",
+    "displacement_sd_m",
+    "caliper_sd_m",
+    "receiver_air_m3",
+    "error_df",
+    "pressure_error_corr",
+}
 
 
 def stand_or_paper(path: str | Path | None) -> StandDescription:
@@ -144,11 +161,19 @@ def read_stand(path: str | Path) -> StandDescription:
     values = {}
     for key, value in raw.items():
         if key not in fields:
-            raise InputError(f"{path}: unknown key '{key}'; expected some of {', '.join(sorted(fields))}")
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise InputError(
+                f"{path}: unknown key '{key}'; expected some of {', '.join(sorted(fields))}"
+            )
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+        ):
             raise InputError(f"{path}: key '{key}' must be a finite number, got {value!r}")
         if value < 0 or (value == 0 and key not in _ALLOW_ZERO):
-            raise InputError(f"{path}: key '{key}' must be {'non-negative' if key in _ALLOW_ZERO else 'positive'}, got {value!r}")
+            raise InputError(
+                f"{path}: key '{key}' must be {'non-negative' if key in _ALLOW_ZERO else 'positive'}, got {value!r}"
+            )
         values[key] = float(value)
     try:
         return StandDescription(**values)

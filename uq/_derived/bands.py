@@ -97,8 +97,13 @@ class SimultaneousBand(Band):
 
 
 #: Quantities that also get a simultaneous band, and their JSON names.
-SIMULTANEOUS = {"feff": "feff_m2", "spread_own": "spread_own_N", "spread_ref": "spread_ref_N",
-                "spread_own_pct": "spread_own_pct", "spread_ref_pct": "spread_ref_pct"}
+SIMULTANEOUS = {
+    "feff": "feff_m2",
+    "spread_own": "spread_own_N",
+    "spread_ref": "spread_ref_N",
+    "spread_own_pct": "spread_own_pct",
+    "spread_ref_pct": "spread_ref_pct",
+}
 
 
 @dataclass(eq=False, frozen=True)
@@ -173,18 +178,23 @@ class CampaignBands:
             row = {"pressure_bar": t.pressure_bar}
             for name, key in SIMULTANEOUS.items():
                 pw, sim = getattr(t, name), t.simultaneous[name]
-                row[key] = {"mean": pw.mean[idx], "pointwise_q05": pw.lo[idx], "pointwise_q95": pw.hi[idx],
-                            "simultaneous_lo": sim.lo[idx], "simultaneous_hi": sim.hi[idx],
-                            "simultaneous_critical_sd": sim.critical}
+                row[key] = {
+                    "mean": pw.mean[idx],
+                    "pointwise_q05": pw.lo[idx],
+                    "pointwise_q95": pw.hi[idx],
+                    "simultaneous_lo": sim.lo[idx],
+                    "simultaneous_hi": sim.hi[idx],
+                    "simultaneous_critical_sd": sim.critical,
+                }
             tests.append(row)
         return {
             "height_m": self.x_m[idx],
             "level": self.tests[0].simultaneous["feff"].level if self.tests else LEVEL,
             "pointwise": "pointwise_q05/q95: at each height separately, the curve's value lies inside with 90 % "
-                         "posterior probability; the whole curve leaves such a band much more often",
+            "posterior probability; the whole curve leaves such a band much more often",
             "simultaneous": f"simultaneous_lo/hi = mean +/- c sd over all {self.x_m.size} grid heights, c the 90 % "
-                            "quantile of the draws' largest |f(x) - mean(x)| / sd(x): the whole curve lies inside "
-                            "with 90 % posterior probability (values here at a subset of the heights)",
+            "quantile of the draws' largest |f(x) - mean(x)| / sd(x): the whole curve lies inside "
+            "with 90 % posterior probability (values here at a subset of the heights)",
             "tests": tests,
         }
 
@@ -219,8 +229,10 @@ def choose_reference(pressures_bar, preferred: float = REFERENCE_BAR) -> tuple[i
         return int(hit[0]), f"the {preferred:g}-bar test's volume curve, as in the paper's Figure 5"
     mid = 0.5 * (p.min() + p.max())
     i = int(np.argmin(np.abs(p - mid)))
-    return i, (f"no {preferred:g}-bar test in the data: the {p[i]:g}-bar test's volume curve is used "
-               f"(the test nearest to the middle of the pressure range, {mid:g} bar)")
+    return i, (
+        f"no {preferred:g}-bar test in the data: the {p[i]:g}-bar test's volume curve is used "
+        f"(the test nearest to the middle of the pressure range, {mid:g} bar)"
+    )
 
 
 def feff_scatter(feff: np.ndarray) -> np.ndarray:
@@ -263,8 +275,18 @@ def bands_from_coefficients(
     S = float(piston_area_m2)
     x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
     ref, note = choose_reference(p_bar, reference_bar)
-    quantities = _curve_quantities(p_bar, force, piston, x - x0_m, x_max - x0_m, S, ref, noise, noise_ref_force,
-                                   np.random.default_rng(seed))
+    quantities = _curve_quantities(
+        p_bar,
+        force,
+        piston,
+        x - x0_m,
+        x_max - x0_m,
+        S,
+        ref,
+        noise,
+        noise_ref_force,
+        np.random.default_rng(seed),
+    )
     a = (1.0 - level) / 2.0
     summaries = {}
     for name, arr in quantities.items():  # one batched quantile per quantity: (2, T, G)
@@ -274,14 +296,34 @@ def bands_from_coefficients(
         B = {name: Band(m[t], q[0, t], q[1, t]) for name, (m, q) in summaries.items()}
         sim = {name: SimultaneousBand.of(quantities[name][t], level) for name in SIMULTANEOUS}
         at0 = _at_x0(p_bar[t], force[t], piston[t, :, 1], piston[ref, :, 1], S)
-        tests.append(PressureBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B))
-    heights = {"x0": x0_m, "x_max": float(x.max()), "x_min": float(x.min()), "75 mm": EXTRA_HEIGHT_M}
+        tests.append(
+            PressureBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B)
+        )
+    heights = {
+        "x0": x0_m,
+        "x_max": float(x.max()),
+        "x_min": float(x.min()),
+        "75 mm": EXTRA_HEIGHT_M,
+    }
     if extra_heights is not None:
         heights = dict(extra_heights)
     sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
-    scatter, scatter_at = _scatter(p_bar[sel], force[sel], quantities["feff"][sel], heights, x0_m, level)
-    return CampaignBands(x, float(x0_m), S, tests, float(p_bar[ref]), note,
-                         [float(v) for v in p_bar[sel]], scatter, scatter_at, int(force.shape[1]), int(seed))
+    scatter, scatter_at = _scatter(
+        p_bar[sel], force[sel], quantities["feff"][sel], heights, x0_m, level
+    )
+    return CampaignBands(
+        x,
+        float(x0_m),
+        S,
+        tests,
+        float(p_bar[ref]),
+        note,
+        [float(v) for v in p_bar[sel]],
+        scatter,
+        scatter_at,
+        int(force.shape[1]),
+        int(seed),
+    )
 
 
 def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_force, rng) -> dict:
@@ -298,7 +340,9 @@ def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_f
     trad_ref = p_pa * feff_vol[ref][None]
     if noise is not None:
         nz = np.asarray(noise, float)
-        f_ref = np.abs(P) if noise_ref_force is None else np.asarray(noise_ref_force, float)[:, None, :]
+        f_ref = (
+            np.abs(P) if noise_ref_force is None else np.asarray(noise_ref_force, float)[:, None, :]
+        )
         sd_f = np.sqrt(force_noise_var(nz[..., 0:1], nz[..., 1:2], f_ref))
         P_pred = P + sd_f * rng.standard_normal(P.shape)
         L_pred = L + nz[..., 2:3] * rng.standard_normal(L.shape)
@@ -308,9 +352,18 @@ def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_f
         pct_own = 100.0 * (trad_own - P) / P
         pct_ref = 100.0 * (trad_ref - P) / P
     return {
-        "force": P, "force_pred": P_pred, "piston": L, "piston_pred": L_pred, "dV": S * (L - L_top),
-        "feff": P / p_pa, "feff_volume": feff_vol, "trad_own": trad_own, "trad_ref": trad_ref,
-        "spread_own": trad_own - P, "spread_own_pct": pct_own, "spread_ref": trad_ref - P,
+        "force": P,
+        "force_pred": P_pred,
+        "piston": L,
+        "piston_pred": L_pred,
+        "dV": S * (L - L_top),
+        "feff": P / p_pa,
+        "feff_volume": feff_vol,
+        "trad_own": trad_own,
+        "trad_ref": trad_ref,
+        "spread_own": trad_own - P,
+        "spread_own_pct": pct_own,
+        "spread_ref": trad_ref - P,
         "spread_ref_pct": pct_ref,
     }
 
@@ -339,7 +392,10 @@ def _scatter(p_bar, force, feff, heights: dict, x0_m: float, level: float):
     hx = np.array(list(heights.values()), float)
     fh = _poly(force, hx - x0_m) / (p_bar * BAR_PA)[:, None, None]  # (T', D, H)
     sh = feff_scatter(fh)  # (D, H)
-    return scatter, {label: {"height_m": float(h)} | estimate(sh[:, k]) for k, (label, h) in enumerate(heights.items())}
+    return scatter, {
+        label: {"height_m": float(h)} | estimate(sh[:, k])
+        for k, (label, h) in enumerate(heights.items())
+    }
 
 
 def subsample(n_total: int, n_draws: int, rng: np.random.Generator) -> np.ndarray:
@@ -354,8 +410,15 @@ def height_grid(recordings, n_grid: int = 181) -> np.ndarray:
     return np.linspace(lo, hi, n_grid)
 
 
-def campaign_bands(cf, *, n_grid: int = 181, n_draws: int = 2000, seed: int = 0, x_grid=None,
-                   reference_bar: float = REFERENCE_BAR) -> CampaignBands:
+def campaign_bands(
+    cf,
+    *,
+    n_grid: int = 181,
+    n_draws: int = 2000,
+    seed: int = 0,
+    x_grid=None,
+    reference_bar: float = REFERENCE_BAR,
+) -> CampaignBands:
     """Bands of a fitted campaign (:class:`uq._models.cubic.CampaignFit`, or anything with ``.recordings``
     and ``.tests`` holding ``pressure_bar``, ``test.height_m`` and ``flat(name)``).
 
@@ -383,11 +446,17 @@ def campaign_bands(cf, *, n_grid: int = 181, n_draws: int = 2000, seed: int = 0,
         L.append(t.flat("piston")[idx])
         N.append(t.flat("noise")[idx])
     cb = bands_from_coefficients(
-        [t.pressure_bar for t in cf.tests], np.stack(F), np.stack(L),
-        x_grid=x, x0_m=rec.x0_m, piston_area_m2=rec.piston_area_m2,
-        x_max_m=[float(t.test.height_m.max()) for t in cf.tests], noise=np.stack(N),
+        [t.pressure_bar for t in cf.tests],
+        np.stack(F),
+        np.stack(L),
+        x_grid=x,
+        x0_m=rec.x0_m,
+        piston_area_m2=rec.piston_area_m2,
+        x_max_m=[float(t.test.height_m.max()) for t in cf.tests],
+        noise=np.stack(N),
         noise_ref_force=_noise_reference(cf.tests, x),
-        reference_bar=reference_bar, seed=int(rng.integers(2**31)),
+        reference_bar=reference_bar,
+        seed=int(rng.integers(2**31)),
     )
     return dataclasses.replace(cb, seed=int(seed))
 
@@ -398,4 +467,3 @@ def _noise_reference(tests, x) -> np.ndarray | None:
     if not all(hasattr(t, "ref_force_at") for t in tests):
         return None
     return np.stack([t.ref_force_at(x) for t in tests])
-

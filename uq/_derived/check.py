@@ -70,9 +70,13 @@ def load_json(path: str | Path, what: str) -> dict:
     except UnicodeDecodeError:
         raise InputError(f"{path}: {what} is not UTF-8 text (expected JSON)") from None
     except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+        raise InputError(
+            f"{path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+        ) from None
     if not isinstance(doc, dict):
-        raise InputError(f"{path}: expected a JSON object at the top level, got {type(doc).__name__}")
+        raise InputError(
+            f"{path}: expected a JSON object at the top level, got {type(doc).__name__}"
+        )
     return doc
 
 
@@ -91,7 +95,9 @@ def _get(obj, name: str, path: str, key: str, kind=dict, hint: str = ""):
         raise InputError(f"{path}: {key}: missing{hint}")
     val = obj[name]
     if not isinstance(val, kind) or isinstance(val, bool):
-        raise InputError(f"{path}: {key}: expected {'an object' if kind is dict else 'a list'}, got {type(val).__name__}")
+        raise InputError(
+            f"{path}: {key}: expected {'an object' if kind is dict else 'a list'}, got {type(val).__name__}"
+        )
     return val
 
 
@@ -101,7 +107,11 @@ def _tests(doc: dict, path: str) -> list[tuple[float, dict, str]]:
     for i, t in enumerate(tests):
         if not isinstance(t, dict):
             raise InputError(f"{path}: tests[{i}]: expected an object, got {type(t).__name__}")
-        p = _number(t.get("pressure_bar"), path, f"tests[{i}].pressure_bar") if "pressure_bar" in t else None
+        p = (
+            _number(t.get("pressure_bar"), path, f"tests[{i}].pressure_bar")
+            if "pressure_bar" in t
+            else None
+        )
         if p is None:
             raise InputError(f"{path}: tests[{i}].pressure_bar: missing")
         label = f"tests[{i}] ({p:g} bar)"
@@ -127,8 +137,13 @@ def read_points(doc: dict, path: str) -> list[dict]:
         for block, names in BLOCKS.items():
             b = _get(t, block, path, f"{label}.{block}")
             row[block] = np.array(
-                [_number(b[n], path, f"{label}.{block}.{n}") if n in b else _missing(path, f"{label}.{block}.{n}")
-                 for n in names])
+                [
+                    _number(b[n], path, f"{label}.{block}.{n}")
+                    if n in b
+                    else _missing(path, f"{label}.{block}.{n}")
+                    for n in names
+                ]
+            )
         if "covariance" in t:
             cov = _get(t, "covariance", path, f"{label}.covariance")
             for block in BLOCKS:
@@ -143,7 +158,9 @@ def _matrix(cov: dict, block: str, path: str, key: str) -> np.ndarray:
     c = _get(cov, block, path, key, list)
     if len(c) != 4 or not all(isinstance(r, list) and len(r) == 4 for r in c):
         raise InputError(f"{path}: {key}: expected a 4x4 matrix (a list of 4 lists of 4 numbers)")
-    m = np.array([[_number(v, path, f"{key}[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(c)])
+    m = np.array(
+        [[_number(v, path, f"{key}[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(c)]
+    )
     _check_cov(m, path, key)
     return m
 
@@ -157,9 +174,16 @@ def read_result(doc: dict, path: str) -> dict[float, dict]:
     out = {}
     for p, t, label in _tests(doc, path):
         row = {"label": label}
-        cov = _get(t, "covariance", path, f"{label}.covariance", hint=(
-            " (uq check needs the posterior covariance of each coefficient block, "
-            "which `uq fit --json` writes; rerun the fit with this version)"))
+        cov = _get(
+            t,
+            "covariance",
+            path,
+            f"{label}.covariance",
+            hint=(
+                " (uq check needs the posterior covariance of each coefficient block, "
+                "which `uq fit --json` writes; rerun the fit with this version)"
+            ),
+        )
         for block, names in BLOCKS.items():
             b = _get(t, block, path, f"{label}.{block}")
             est = {k: np.empty(4) for k in ("mean", "sd", "q05", "q95")}
@@ -184,7 +208,9 @@ def _check_cov(cov: np.ndarray, path: str, key: str) -> None:
         raise InputError(f"{path}: {key}: covariance is not symmetric")
     w = np.linalg.eigvalsh(0.5 * (corr + corr.T))
     if np.any(np.diag(cov) < 0) or w[0] <= 1e-12 * max(w[-1], 1.0):
-        raise InputError(f"{path}: {key}: singular covariance (not positive definite; smallest correlation eigenvalue {w[0]:.3g})")
+        raise InputError(
+            f"{path}: {key}: singular covariance (not positive definite; smallest correlation eigenvalue {w[0]:.3g})"
+        )
 
 
 # --------------------------------------------------------------------------- the rule
@@ -205,8 +231,14 @@ def mahalanobis2(x: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:
     return float(y @ y)
 
 
-def check(result: dict[float, dict], points: list[dict], *, alpha: float = DEFAULT_ALPHA,
-          result_path: str = "RESULT", points_path: str = "POINTS") -> dict:
+def check(
+    result: dict[float, dict],
+    points: list[dict],
+    *,
+    alpha: float = DEFAULT_ALPHA,
+    result_path: str = "RESULT",
+    points_path: str = "POINTS",
+) -> dict:
     """Apply the rule of the module docstring; returns the machine-readable verdict."""
     if not 0.0 < alpha < 1.0:
         raise InputError(f"option --alpha: expected a probability in (0, 1), got {alpha:g}")
@@ -216,18 +248,24 @@ def check(result: dict[float, dict], points: list[dict], *, alpha: float = DEFAU
         if not hit:
             have = ", ".join(f"{p:g}" for p in sorted(result)) or "none"
             raise InputError(
-                f"{points_path}: {pt['label']}: no test at {pt['pressure_bar']:g} bar in {result_path} (it has: {have} bar)")
+                f"{points_path}: {pt['label']}: no test at {pt['pressure_bar']:g} bar in {result_path} (it has: {have} bar)"
+            )
         matched.append((pt, result[hit[0]]))
     n_blocks = len(matched) * len(BLOCKS)
     thr = threshold(alpha, n_blocks)
     blocks = [_block(pt, res[block], block, thr) for pt, res in matched for block in BLOCKS]
     exact = [f"{b['pressure_bar']:g} bar {b['block']}" for b in blocks if not b["point_covariance"]]
     return {
-        "result": str(result_path), "against": str(points_path),
+        "result": str(result_path),
+        "against": str(points_path),
         "rule": "squared Mahalanobis distance of the point estimates from the posterior mean under the sum of "
-                "the posterior covariance and the point estimates' own covariance (when POINTS gives one), "
-                "per test and block, against the chi-square(4) quantile at 1 - alpha/K",
-        "alpha": alpha, "n_blocks": n_blocks, "df": 4, "threshold2": thr, "threshold": math.sqrt(thr),
+        "the posterior covariance and the point estimates' own covariance (when POINTS gives one), "
+        "per test and block, against the chi-square(4) quantile at 1 - alpha/K",
+        "alpha": alpha,
+        "n_blocks": n_blocks,
+        "df": 4,
+        "threshold2": thr,
+        "threshold": math.sqrt(thr),
         "point_uncertainty": _assumption(exact, n_blocks),
         "blocks_treated_as_exact": exact,
         "agree": all(b["agree"] for b in blocks),
@@ -240,8 +278,10 @@ def _assumption(exact: list[str], n_blocks: int) -> str:
     if not exact:
         return "included: every block's distance uses posterior covariance + the stored estimate's covariance"
     what = "all blocks" if len(exact) == n_blocks else ", ".join(exact)
-    return (f"stored estimates treated as exact for {what} (POINTS gives no covariance): the false-failure "
-            "rate is then larger than alpha when the stored estimates carry sampling error")
+    return (
+        f"stored estimates treated as exact for {what} (POINTS gives no covariance): the false-failure "
+        "rate is then larger than alpha when the stored estimates carry sampling error"
+    )
 
 
 def _block(pt: dict, r: dict, block: str, thr: float) -> dict:
@@ -251,15 +291,28 @@ def _block(pt: dict, r: dict, block: str, thr: float) -> dict:
     d2 = mahalanobis2(pt[block], r["mean"], total)
     point_sd = np.sqrt(np.diag(c)) if c is not None else np.zeros(4)
     coefs = {
-        n: {"point": float(pt[block][j]), "point_sd": float(point_sd[j]), "mean": float(r["mean"][j]),
-            "sd": float(r["sd"][j]), "q05": float(r["q05"][j]), "q95": float(r["q95"][j]),
-            "z": float((pt[block][j] - r["mean"][j]) / math.sqrt(total[j, j]))}
+        n: {
+            "point": float(pt[block][j]),
+            "point_sd": float(point_sd[j]),
+            "mean": float(r["mean"][j]),
+            "sd": float(r["sd"][j]),
+            "q05": float(r["q05"][j]),
+            "q95": float(r["q95"][j]),
+            "z": float((pt[block][j] - r["mean"][j]) / math.sqrt(total[j, j])),
+        }
         for j, n in enumerate(BLOCKS[block])
     }
     return {
-        "pressure_bar": pt["pressure_bar"], "block": block, "point_covariance": c is not None,
-        "mahalanobis": math.sqrt(d2), "mahalanobis2": d2, "threshold2": thr, "threshold": math.sqrt(thr),
-        "p_value": float(chi2.sf(d2, 4)), "agree": bool(d2 <= thr), "coefficients": coefs,
+        "pressure_bar": pt["pressure_bar"],
+        "block": block,
+        "point_covariance": c is not None,
+        "mahalanobis": math.sqrt(d2),
+        "mahalanobis2": d2,
+        "threshold2": thr,
+        "threshold": math.sqrt(thr),
+        "p_value": float(chi2.sf(d2, 4)),
+        "agree": bool(d2 <= thr),
+        "coefficients": coefs,
     }
 
 
@@ -281,8 +334,14 @@ def lsq_covariance(u_m, sd) -> np.ndarray:
     return D @ cov @ D
 
 
-def check_documents(result: dict, points: dict, *, alpha: float = DEFAULT_ALPHA, result_name: str = "RESULT",
-                    points_name: str = "POINTS") -> dict:
+def check_documents(
+    result: dict,
+    points: dict,
+    *,
+    alpha: float = DEFAULT_ALPHA,
+    result_name: str = "RESULT",
+    points_name: str = "POINTS",
+) -> dict:
     """``uq check`` on documents in memory: the verdict of the module docstring's rule, as a dict.
 
     ``result``: :func:`uq.fit_json` of a fit (or that JSON read back); ``points``: point estimates
@@ -302,14 +361,21 @@ def check_documents(result: dict, points: dict, *, alpha: float = DEFAULT_ALPHA,
     """
     from uq._io.files import _plain  # the values a JSON file of the same documents would hold
 
-    return check(read_result(_plain(result), result_name), read_points(_plain(points), points_name), alpha=alpha,
-                 result_path=result_name, points_path=points_name)
+    return check(
+        read_result(_plain(result), result_name),
+        read_points(_plain(points), points_name),
+        alpha=alpha,
+        result_path=result_name,
+        points_path=points_name,
+    )
 
 
 def check_files(result_path: str, points_path: str, alpha: float = DEFAULT_ALPHA) -> dict:
     result = read_result(load_json(result_path, "RESULT"), str(result_path))
     points = read_points(load_json(points_path, "POINTS"), str(points_path))
-    return check(result, points, alpha=alpha, result_path=str(result_path), points_path=str(points_path))
+    return check(
+        result, points, alpha=alpha, result_path=str(result_path), points_path=str(points_path)
+    )
 
 
 # --------------------------------------------------------------------------- output
@@ -326,20 +392,27 @@ def summary(verdict: dict) -> str:
             continue
         lines.append(
             f"DISAGREE {b['pressure_bar']:g} bar {b['block']}: Mahalanobis distance {b['mahalanobis']:.2f} "
-            f"> threshold {b['threshold']:.2f} (d^2 {b['mahalanobis2']:.1f} > {b['threshold2']:.1f}, p = {b['p_value']:.2g})")
+            f"> threshold {b['threshold']:.2f} (d^2 {b['mahalanobis2']:.1f} > {b['threshold2']:.1f}, p = {b['p_value']:.2g})"
+        )
         for n, c in b["coefficients"].items():
             flag = "  <- outside" if not c["q05"] <= c["point"] <= c["q95"] else ""
             own = f" +/- {c['point_sd']:.3g}" if b["point_covariance"] else " (exact)"
             lines.append(
                 f"    {n}: point {_fmt(c['point'])}{own}, posterior {_fmt(c['mean'])} "
-                f"[90% {_fmt(c['q05'])}, {_fmt(c['q95'])}], {c['z']:+.1f} sd{flag}")
+                f"[90% {_fmt(c['q05'])}, {_fmt(c['q95'])}], {c['z']:+.1f} sd{flag}"
+            )
     worst = max(verdict["blocks"], key=lambda b: b["mahalanobis2"])
     n_tests = verdict["n_blocks"] // len(BLOCKS)
-    head = (f"uq check: {verdict['against']} against {verdict['result']}: {n_tests} tests x 2 blocks, "
-            f"alpha {verdict['alpha']:g}, threshold d^2 <= {verdict['threshold2']:.2f} "
-            f"(chi2_4 at 1 - {verdict['alpha']:g}/{verdict['n_blocks']})")
-    state = "OK: all agree" if verdict["agree"] else (
-        f"FAIL: {verdict['n_disagree']} of {verdict['n_blocks']} blocks disagree")
+    head = (
+        f"uq check: {verdict['against']} against {verdict['result']}: {n_tests} tests x 2 blocks, "
+        f"alpha {verdict['alpha']:g}, threshold d^2 <= {verdict['threshold2']:.2f} "
+        f"(chi2_4 at 1 - {verdict['alpha']:g}/{verdict['n_blocks']})"
+    )
+    state = (
+        "OK: all agree"
+        if verdict["agree"]
+        else (f"FAIL: {verdict['n_disagree']} of {verdict['n_blocks']} blocks disagree")
+    )
     tail = f"{state}; largest d^2 {worst['mahalanobis2']:.2f} ({worst['pressure_bar']:g} bar {worst['block']})"
     note = f"point-estimate uncertainty: {verdict['point_uncertainty']}"
     return "\n".join([head, note, *lines, tail])

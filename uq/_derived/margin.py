@@ -53,12 +53,17 @@ class _Ranges:
     def __init__(self, recordings=None, *, height_range_m=None, pressure_range_bar=None):
         if recordings is not None:
             p = recordings.pressures_bar
-            pressure_range_bar, height_range_m = (float(p.min()), float(p.max())), recordings.height_range_m
+            pressure_range_bar, height_range_m = (
+                (float(p.min()), float(p.max())),
+                recordings.height_range_m,
+            )
         self.pressure_range_bar = tuple(float(v) for v in pressure_range_bar)
         self.height_range_m = tuple(float(v) for v in height_range_m)
 
     def check_range(self, height_m, p_bar, what="") -> None:
-        refuse_extrapolation(height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the model")
+        refuse_extrapolation(
+            height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the model"
+        )
 
 
 def _flat_draws(beta, max_draws):
@@ -81,7 +86,9 @@ class SurfaceAnswer(_Ranges):
     def __init__(self, fit: SurfaceFit, max_draws: int = 4000):
         super().__init__(fit.recordings)
         noise = {n: np.asarray(fit.idata.posterior[n]) for n in SURFACE_NOISE}
-        self._setup(fit.orders, fit.geometry, fit.recordings.pressures_bar, fit.beta, max_draws, noise)
+        self._setup(
+            fit.orders, fit.geometry, fit.recordings.pressures_bar, fit.beta, max_draws, noise
+        )
         self.fit = fit
 
     def _setup(self, orders, geometry, test_pressures_bar, beta, max_draws, noise):
@@ -89,7 +96,10 @@ class SurfaceAnswer(_Ranges):
 
         self.orders, self.geometry, self.max_draws = orders, geometry, max_draws
         self.test_pressures_bar = np.asarray(test_pressures_bar, float)
-        self.posterior_beta, self.noise = np.asarray(beta, float), noise  # (C, D, k): what a saved file holds
+        self.posterior_beta, self.noise = (
+            np.asarray(beta, float),
+            noise,
+        )  # (C, D, k): what a saved file holds
         self.beta = _flat_draws(self.posterior_beta, max_draws)
         nc, ne, _, _ = _sizes(orders, self.test_pressures_bar.size)
         self._c, self._e = self.beta[:, :nc] * SCALE_C, self.beta[:, nc : nc + ne] * SCALE_E
@@ -129,12 +139,16 @@ class CubicInterpolation(_Ranges):
         self.x0_m = rec.x0_m
         self.p = np.array([t.pressure_bar for t in tests])
         coefs = []
-        for t in tests:  # independent tests: each test's draws thinned and shuffled, so pairs are random
+        for t in (
+            tests
+        ):  # independent tests: each test's draws thinned and shuffled, so pairs are random
             f = t.flat("force")
             f = f[np.linspace(0, f.shape[0] - 1, n_draws).astype(int)]
             coefs.append(f[rng.permutation(n_draws)])
         self.coef = np.stack(coefs, axis=1)  # (S, T, 4), paper basis in u = x - x0, SI
-        self.z = rng.standard_normal((n_draws, max(len(tests) - 1, 1)))  # interpolation error per interval
+        self.z = rng.standard_normal(
+            (n_draws, max(len(tests) - 1, 1))
+        )  # interpolation error per interval
 
     @classmethod
     def from_draws(cls, coef, z, pressures_bar, x0_m, *, height_range_m, pressure_range_bar):
@@ -146,7 +160,9 @@ class CubicInterpolation(_Ranges):
         return self
 
     def _feff(self, coef, u, p):
-        return (coef[..., 0] + coef[..., 1] * u + coef[..., 2] * u**2 + coef[..., 3] * u**3) / (p * BAR_PA)
+        return (coef[..., 0] + coef[..., 1] * u + coef[..., 2] * u**2 + coef[..., 3] * u**3) / (
+            p * BAR_PA
+        )
 
     def curvature_sd(self, height_m, interval):
         """sd of d^2 F_eff / dp^2 (m^2/bar^2) on ``interval`` from its end tests' neighbours."""
@@ -159,8 +175,12 @@ class CubicInterpolation(_Ranges):
             a, b, c = self.p[j - 1], self.p[j], self.p[j + 1]
             line = (F[j - 1] * (c - b) + F[j + 1] * (b - a)) / (c - a)
             kap[j] = 2.0 * (F[j] - line) / ((b - a) * (b - c))
-        ends = np.stack([kap[np.clip(interval, 0, T - 1), np.arange(u.size)],
-                         kap[np.clip(interval + 1, 0, T - 1), np.arange(u.size)]])
+        ends = np.stack(
+            [
+                kap[np.clip(interval, 0, T - 1), np.arange(u.size)],
+                kap[np.clip(interval + 1, 0, T - 1), np.arange(u.size)],
+            ]
+        )
         with np.errstate(invalid="ignore"):
             return np.sqrt(np.nanmean(ends**2, axis=0)) if T > 2 else np.zeros(u.size)
 
@@ -171,7 +191,9 @@ class CubicInterpolation(_Ranges):
         i = np.clip(np.searchsorted(self.p, p, side="right") - 1, 0, max(T - 2, 0))
         u = h - self.x0_m
         if T == 1:
-            return (p * BAR_PA * self._feff(self.coef[:, 0][:, None, :], u, self.p[0])).reshape(-1, *shape)
+            return (p * BAR_PA * self._feff(self.coef[:, 0][:, None, :], u, self.p[0])).reshape(
+                -1, *shape
+            )
         pa, pb = self.p[i], self.p[i + 1]
         w = (p - pa) / (pb - pa)
         Fa = self._feff(self.coef[:, i], u, pa)  # (S, n)
@@ -194,13 +216,16 @@ def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
     if np.any(np.diff(P, axis=1) < 0):
         frac = float(np.mean(np.any(np.diff(P, axis=1) < 0, axis=1)))
         if frac > 0.01:
-            raise InputError(f"option --height-mm: at {height_m * 1e3:g} mm the force does not rise with pressure in "
-                             f"{100 * frac:.0f} % of the posterior draws; no unique required pressure")
+            raise InputError(
+                f"option --height-mm: at {height_m * 1e3:g} mm the force does not rise with pressure in "
+                f"{100 * frac:.0f} % of the posterior draws; no unique required pressure"
+            )
     lo_load, hi_load = band(P[:, 0])[2], band(P[:, -1])[1]
     if not lo_load <= load_N <= hi_load:
         raise InputError(
             f"option --load-N: {load_N:g} N at {height_m * 1e3:g} mm is outside what the tested pressures "
-            f"{plo:g}..{phi:g} bar support there (about {lo_load:.0f}..{hi_load:.0f} N); the model does not extrapolate")
+            f"{plo:g}..{phi:g} bar support there (about {lo_load:.0f}..{hi_load:.0f} N); the model does not extrapolate"
+        )
     above = P >= load_N
     first = np.argmax(above, axis=1)
     ok = above.any(axis=1) & ~above[:, 0]
@@ -218,8 +243,10 @@ def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
 def _finite_estimate(d):
     d = np.asarray(d, float)
     if not np.all(np.isfinite(d)):
-        raise InputError("option --load-N: the load lies at the edge of the tested pressure range for part of the "
-                         "posterior; choose a load further inside the supported range")
+        raise InputError(
+            "option --load-N: the load lies at the edge of the tested pressure range for part of the "
+            "posterior; choose a load further inside the supported range"
+        )
     return estimate(d)
 
 
@@ -227,13 +254,29 @@ def _run_around(ok: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
     """First and last index of each row's run of True through column ``j`` (rows (S, n); meaningful where ok[:, j])."""
     n = ok.shape[1]
     left, right = ~ok[:, :j][:, ::-1], ~ok[:, j + 1 :]  # left: column j-1 first
-    a = np.where(left.any(axis=1), j - np.argmax(left, axis=1), 0) if j > 0 else np.zeros(ok.shape[0], int)
-    b = np.where(right.any(axis=1), j + np.argmax(right, axis=1), n - 1) if j < n - 1 else np.full(ok.shape[0], n - 1)
+    a = (
+        np.where(left.any(axis=1), j - np.argmax(left, axis=1), 0)
+        if j > 0
+        else np.zeros(ok.shape[0], int)
+    )
+    b = (
+        np.where(right.any(axis=1), j + np.argmax(right, axis=1), n - 1)
+        if j < n - 1
+        else np.full(ok.shape[0], n - 1)
+    )
     return a, b
 
 
-def usable_stroke(model, height_m: float, pressure_bar: float, target_N: float, tolerance_pct: float,
-                  prob: float, *, n_x: int = 361) -> dict:
+def usable_stroke(
+    model,
+    height_m: float,
+    pressure_bar: float,
+    target_N: float,
+    tolerance_pct: float,
+    prob: float,
+    *,
+    n_x: int = 361,
+) -> dict:
     """Height range around ``height_m`` over which the force at ``pressure_bar`` stays within tolerance."""
     model = as_answer(model)
     lo, hi = model.height_range_m
@@ -251,40 +294,61 @@ def usable_stroke(model, height_m: float, pressure_bar: float, target_N: float, 
         while b < n_x - 1 and p_in[b + 1] >= prob:
             b += 1
         joint = float(np.mean(np.all(ok[:, a : b + 1], axis=1)))
-        credible = {"from_m": float(xs[a]), "to_m": float(xs[b]), "length_m": float(xs[b] - xs[a]),
-                    "prob_whole_range_within": joint}
+        credible = {
+            "from_m": float(xs[a]),
+            "to_m": float(xs[b]),
+            "length_m": float(xs[b] - xs[a]),
+            "prob_whole_range_within": joint,
+        }
     else:
         credible = None
     return {
-        "pressure_bar": pressure_bar, "target_N": target_N, "tolerance_pct": tolerance_pct,
+        "pressure_bar": pressure_bar,
+        "target_N": target_N,
+        "tolerance_pct": tolerance_pct,
         "prob_within_at_height": float(p_in[j]),
         "stroke_length_m": estimate(lengths),
         "stroke_credible": credible,
-        "at_edge_of_tested_heights": bool(credible and (credible["from_m"] <= lo + 1e-9 or credible["to_m"] >= hi - 1e-9)),
+        "at_edge_of_tested_heights": bool(
+            credible and (credible["from_m"] <= lo + 1e-9 or credible["to_m"] >= hi - 1e-9)
+        ),
     }
 
 
-COVERAGE_NOTE = ("the fallback when the data do not decide; its coverage for truths inside the default orders' class "
-                 "is checked by tests/models/test_surface.py (reports/surface-coverage/coverage.json: 100 replications "
-                 "on the paper's layout)")
+COVERAGE_NOTE = (
+    "the fallback when the data do not decide; its coverage for truths inside the default orders' class "
+    "is checked by tests/models/test_surface.py (reports/surface-coverage/coverage.json: 100 replications "
+    "on the paper's layout)"
+)
 
 
-def choose_model(fit: SurfaceFit | None, cubic_fit=None, comparison: dict | None = None, forced: str = "auto"):
+def choose_model(
+    fit: SurfaceFit | None, cubic_fit=None, comparison: dict | None = None, forced: str = "auto"
+):
     """(answer, model description) from the PSIS-LOO comparison, or the user's ``--model``."""
     info = {"comparison": comparison}
-    if forced == "cubics" or (forced == "auto" and comparison and comparison["better"] == "per-pressure cubics"):
+    if forced == "cubics" or (
+        forced == "auto" and comparison and comparison["better"] == "per-pressure cubics"
+    ):
         ans = CubicInterpolation(cubic_fit)
-        info["why"] = ("chosen by the user (--model cubics)" if forced == "cubics" else
-                       f"the data prefer the per-pressure cubics: {comparison['reason']}")
-        info["interpolation"] = ("F_eff = P/p_u linear in p_u between neighbouring tested pressures; uncertainty: "
-                                 "both tests' posteriors plus an interpolation error from the curvature in pressure "
-                                 "at the neighbouring tested pressures (zero at tested pressures)")
+        info["why"] = (
+            "chosen by the user (--model cubics)"
+            if forced == "cubics"
+            else f"the data prefer the per-pressure cubics: {comparison['reason']}"
+        )
+        info["interpolation"] = (
+            "F_eff = P/p_u linear in p_u between neighbouring tested pressures; uncertainty: "
+            "both tests' posteriors plus an interpolation error from the curvature in pressure "
+            "at the neighbouring tested pressures (zero at tested pressures)"
+        )
     else:
         return surface_answer(fit, comparison, forced=forced)
     return ans, {"name": ans.name, "label": ans.label, **info}
 
 
-def surface_answer(fit: SurfaceFit, comparison: dict | None = None, *, forced: str = "auto", why: str | None = None):
+def surface_answer(
+    fit: SurfaceFit, comparison: dict | None = None, *, forced: str = "auto", why: str | None = None
+):
     """(SurfaceAnswer, model description) for a surface fit; ``why`` overrides the stated reason."""
     ans = SurfaceAnswer(fit)
     info = {"comparison": comparison, "orders": fit.orders.label}
@@ -295,7 +359,9 @@ def surface_answer(fit: SurfaceFit, comparison: dict | None = None, *, forced: s
     elif comparison is None:
         info["why"] = "surface model given; no comparison with the per-pressure cubics made"
     else:
-        info["why"] = f"PSIS-LOO verdict '{comparison['better']}': {comparison['reason']}; the surface answers ({COVERAGE_NOTE})"
+        info["why"] = (
+            f"PSIS-LOO verdict '{comparison['better']}': {comparison['reason']}; the surface answers ({COVERAGE_NOTE})"
+        )
     return ans, {"name": ans.name, "label": ans.label, **info}
 
 
@@ -317,8 +383,17 @@ def sha256_of(path) -> str:
     return h.hexdigest()
 
 
-def answer_idata(ans, info: dict, *, recordings, seed: int, written_by: str, settings=None, stand=None,
-                 diagnostics: dict | None = None):
+def answer_idata(
+    ans,
+    info: dict,
+    *,
+    recordings,
+    seed: int,
+    written_by: str,
+    settings=None,
+    stand=None,
+    diagnostics: dict | None = None,
+):
     """The answer as an ArviZ InferenceData: posterior draws, constant data, provenance in the root attributes."""
     import json
     from dataclasses import asdict
@@ -330,8 +405,10 @@ def answer_idata(ans, info: dict, *, recordings, seed: int, written_by: str, set
     from uq._io.version import __version__
 
     bounds = {"bound": ["min", "max"]}
-    const = {"tested_height_range_m": ("bound", list(ans.height_range_m)),
-             "tested_pressure_range_bar": ("bound", list(ans.pressure_range_bar))}
+    const = {
+        "tested_height_range_m": ("bound", list(ans.height_range_m)),
+        "tested_pressure_range_bar": ("bound", list(ans.pressure_range_bar)),
+    }
     if isinstance(ans, SurfaceAnswer):
         from uq._models.surface import SCALE_C, SCALE_D, SCALE_E, SCALE_R, _sizes
 
@@ -339,23 +416,36 @@ def answer_idata(ans, info: dict, *, recordings, seed: int, written_by: str, set
         C, D, k = ans.posterior_beta.shape
         names = ans.coefficient_names()
         nc, ne, nd, nr = _sizes(o, ans.test_pressures_bar.size)
-        scale = np.concatenate([np.full(nc, SCALE_C), np.full(ne, SCALE_E), np.full(nd, SCALE_D), np.full(nr, SCALE_R)])
+        scale = np.concatenate(
+            [np.full(nc, SCALE_C), np.full(ne, SCALE_E), np.full(nd, SCALE_D), np.full(nr, SCALE_R)]
+        )
         coords = {"chain": np.arange(C), "draw": np.arange(D), "coefficient": names}
         post = {"surface_coefficient": (("chain", "draw", "coefficient"), ans.posterior_beta)}
         post |= {n: (("chain", "draw"), np.asarray(v, float)) for n, v in (ans.noise or {}).items()}
-        const |= {"coefficient_scale": ("coefficient", scale),
-                  "orders": ("order", np.array([o.K, o.Lp, o.Ke, o.Dk, o.Dl], np.int64)),
-                  "x0_m": ((), g.x0_m), "piston_area_m2": ((), g.area_m2),
-                  "p_mid_bar": ((), g.p_mid), "p_half_bar": ((), g.p_half),
-                  "test_pressure_bar": ("test", ans.test_pressures_bar)}
+        const |= {
+            "coefficient_scale": ("coefficient", scale),
+            "orders": ("order", np.array([o.K, o.Lp, o.Ke, o.Dk, o.Dl], np.int64)),
+            "x0_m": ((), g.x0_m),
+            "piston_area_m2": ((), g.area_m2),
+            "p_mid_bar": ((), g.p_mid),
+            "p_half_bar": ((), g.p_half),
+            "test_pressure_bar": ("test", ans.test_pressures_bar),
+        }
         const_coords = bounds | {"coefficient": names, "order": ["K", "Lp", "Ke", "Dk", "Dl"]}
         extra = {"max_draws": int(ans.max_draws)}
     else:
         S, T, _ = ans.coef.shape
-        coords = {"chain": [0], "draw": np.arange(S), "test": np.arange(T), "coefficient": ["a_P", "b_P", "c_P", "d_P"],
-                  "interval": np.arange(ans.z.shape[1])}
-        post = {"force_coefficient": (("chain", "draw", "test", "coefficient"), ans.coef[None]),
-                "interpolation_z": (("chain", "draw", "interval"), ans.z[None])}
+        coords = {
+            "chain": [0],
+            "draw": np.arange(S),
+            "test": np.arange(T),
+            "coefficient": ["a_P", "b_P", "c_P", "d_P"],
+            "interval": np.arange(ans.z.shape[1]),
+        }
+        post = {
+            "force_coefficient": (("chain", "draw", "test", "coefficient"), ans.coef[None]),
+            "interpolation_z": (("chain", "draw", "interval"), ans.z[None]),
+        }
         const |= {"x0_m": ((), ans.x0_m), "test_pressure_bar": ("test", ans.p)}
         const_coords = bounds
         extra = {}
@@ -363,13 +453,18 @@ def answer_idata(ans, info: dict, *, recordings, seed: int, written_by: str, set
     constant = xr.Dataset(const, coords=const_coords)
     diagnostics = diagnostics or {"warnings": [], "converged": True}
     attrs = {
-        "uq_file_kind": ANSWER_KIND, "uq_format_version": ANSWER_FORMAT_VERSION,
-        "answer": _ANSWER_NAMES[ans.name], "label": ans.label,
+        "uq_file_kind": ANSWER_KIND,
+        "uq_format_version": ANSWER_FORMAT_VERSION,
+        "answer": _ANSWER_NAMES[ans.name],
+        "label": ans.label,
         "model_info_json": dumps_json(info),
         "recordings_path": str(Path(recordings.path).resolve()),
         "recordings_sha256": sha256_of(recordings.path),
-        "x0_mm": recordings.x0_m * 1e3, "piston_area_cm2": recordings.piston_area_m2 * 1e4,
-        "uq_version": __version__, "seed": int(seed), "written_by": written_by,
+        "x0_mm": recordings.x0_m * 1e3,
+        "piston_area_cm2": recordings.piston_area_m2 * 1e4,
+        "uq_version": __version__,
+        "seed": int(seed),
+        "written_by": written_by,
         "settings_json": json.dumps(asdict(settings) if settings is not None else None),
         "stand_json": json.dumps(asdict(stand) if stand is not None else None),
         "sampler_converged": int(bool(diagnostics["converged"])),
@@ -387,14 +482,25 @@ def save_answer(path, ans, info: dict, **provenance) -> Path:
     return write_file_atomic(path, lambda tmp: idata.to_netcdf(str(tmp), engine="h5netcdf"))
 
 
-def save_surface_answer(fit: SurfaceFit, comparison: dict | None, out_dir, *, seed: int, settings=None, stand=None) -> Path:
+def save_surface_answer(
+    fit: SurfaceFit, comparison: dict | None, out_dir, *, seed: int, settings=None, stand=None
+) -> Path:
     """``uq surface --out DIR``: DIR/surface.nc, the surface model as a saved answer (whatever the comparison says)."""
     why = "saved by uq surface --out: the surface model answers (uq margin FILE.csv --save-fit chooses between the models)"
     if comparison is not None:
         why += f"; PSIS-LOO verdict '{comparison['better']}': {comparison['reason']}"
     ans, info = surface_answer(fit, comparison, why=why)
-    return save_answer(Path(out_dir) / "surface.nc", ans, info, recordings=fit.recordings, seed=seed,
-                       written_by="uq surface --out", settings=settings, stand=stand, diagnostics=fit.diagnostics)
+    return save_answer(
+        Path(out_dir) / "surface.nc",
+        ans,
+        info,
+        recordings=fit.recordings,
+        seed=seed,
+        written_by="uq surface --out",
+        settings=settings,
+        stand=stand,
+        diagnostics=fit.diagnostics,
+    )
 
 
 def load_answer(path):
@@ -407,18 +513,28 @@ def load_answer(path):
 
     path = str(path)
     if not Path(path).is_file():
-        raise InputError(f"{path}: no such file (option --fit names a file written by uq margin --save-fit or uq surface --out)")
+        raise InputError(
+            f"{path}: no such file (option --fit names a file written by uq margin --save-fit or uq surface --out)"
+        )
     try:
         with xr.open_dataset(path, engine="h5netcdf") as root:
             attrs = dict(root.attrs)
-    except Exception as exc:  # h5py/h5netcdf raise OSError, ValueError, KeyError... on a file that is not NetCDF-4
-        raise InputError(f"{path}: not a readable NetCDF file ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+    except (
+        Exception
+    ) as exc:  # h5py/h5netcdf raise OSError, ValueError, KeyError... on a file that is not NetCDF-4
+        raise InputError(
+            f"{path}: not a readable NetCDF file ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
     if attrs.get("uq_file_kind") != ANSWER_KIND:
-        raise InputError(f"{path}: not a saved margin answer (no uq_file_kind = '{ANSWER_KIND}'); "
-                         "write one with uq margin --save-fit or uq surface --out")
+        raise InputError(
+            f"{path}: not a saved margin answer (no uq_file_kind = '{ANSWER_KIND}'); "
+            "write one with uq margin --save-fit or uq surface --out"
+        )
     version = int(attrs.get("uq_format_version", -1))
     if version != ANSWER_FORMAT_VERSION:
-        raise InputError(f"{path}: saved-answer format version {version}; this uq reads version {ANSWER_FORMAT_VERSION}")
+        raise InputError(
+            f"{path}: saved-answer format version {version}; this uq reads version {ANSWER_FORMAT_VERSION}"
+        )
     try:
         groups = {}
         for g in ("posterior", "constant_data"):
@@ -426,49 +542,93 @@ def load_answer(path):
                 groups[g] = ds.load()
         post, const = groups["posterior"], groups["constant_data"]
         info = json.loads(attrs["model_info_json"])
-        ranges = {"height_range_m": const["tested_height_range_m"].values,
-                  "pressure_range_bar": const["tested_pressure_range_bar"].values}
+        ranges = {
+            "height_range_m": const["tested_height_range_m"].values,
+            "pressure_range_bar": const["tested_pressure_range_bar"].values,
+        }
         if attrs["answer"] == "surface":
             from uq._models.surface import Geometry, Orders
 
             ans = SurfaceAnswer.__new__(SurfaceAnswer)
             _Ranges.__init__(ans, **ranges)
             noise = {n: post[n].values for n in SURFACE_NOISE if n in post}
-            g = Geometry(float(const["x0_m"]), float(const["piston_area_m2"]), float(const["p_mid_bar"]),
-                         float(const["p_half_bar"]))
-            ans._setup(Orders(*(int(v) for v in const["orders"].values)), g, const["test_pressure_bar"].values,
-                       post["surface_coefficient"].values, int(attrs["max_draws"]), noise)
+            g = Geometry(
+                float(const["x0_m"]),
+                float(const["piston_area_m2"]),
+                float(const["p_mid_bar"]),
+                float(const["p_half_bar"]),
+            )
+            ans._setup(
+                Orders(*(int(v) for v in const["orders"].values)),
+                g,
+                const["test_pressure_bar"].values,
+                post["surface_coefficient"].values,
+                int(attrs["max_draws"]),
+                noise,
+            )
             ans.fit = None
         elif attrs["answer"] == "cubics":
-            ans = CubicInterpolation.from_draws(post["force_coefficient"].values[0], post["interpolation_z"].values[0],
-                                                const["test_pressure_bar"].values, float(const["x0_m"]), **ranges)
+            ans = CubicInterpolation.from_draws(
+                post["force_coefficient"].values[0],
+                post["interpolation_z"].values[0],
+                const["test_pressure_bar"].values,
+                float(const["x0_m"]),
+                **ranges,
+            )
         else:
             raise KeyError(f"answer = {attrs['answer']!r}")
     except Exception as exc:  # a damaged or hand-edited file: say so in one line
-        raise InputError(f"{path}: damaged saved margin answer ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
-    meta = {k: attrs[k] for k in ("answer", "recordings_path", "recordings_sha256", "uq_version", "seed", "written_by")}
+        raise InputError(
+            f"{path}: damaged saved margin answer ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
+    meta = {
+        k: attrs[k]
+        for k in (
+            "answer",
+            "recordings_path",
+            "recordings_sha256",
+            "uq_version",
+            "seed",
+            "written_by",
+        )
+    }
     meta["converged"] = bool(int(attrs.get("sampler_converged", 1)))
     meta["warnings"] = json.loads(attrs.get("sampler_warnings_json", "[]"))
     return ans, info, meta
 
 
-def margin(model, height_m: float, load_N: float, prob: float = 0.95, *, pressure_bar: float | None = None,
-           tolerance_pct: float | None = None, model_info: dict | None = None) -> dict:
+def margin(
+    model,
+    height_m: float,
+    load_N: float,
+    prob: float = 0.95,
+    *,
+    pressure_bar: float | None = None,
+    tolerance_pct: float | None = None,
+    model_info: dict | None = None,
+) -> dict:
     """The margin query on ``model`` (a SurfaceFit, SurfaceAnswer or CubicInterpolation)."""
     if not 0.0 < prob < 1.0:
         raise InputError(f"option --prob: expected a probability between 0 and 1, got {prob:g}")
     if not load_N > 0:
         raise InputError(f"option --load-N: expected a positive load in N, got {load_N:g}")
     if tolerance_pct is not None and pressure_bar is None:
-        raise InputError("option --tolerance-pct: needs --pressure-bar (the stroke is taken at one pressure)")
+        raise InputError(
+            "option --tolerance-pct: needs --pressure-bar (the stroke is taken at one pressure)"
+        )
     if model_info is None:
-        model, model_info = choose_model(model) if isinstance(model, SurfaceFit) else (
-            model, {"name": model.name, "label": model.label, "why": "given by the caller"})
+        model, model_info = (
+            choose_model(model)
+            if isinstance(model, SurfaceFit)
+            else (model, {"name": model.name, "label": model.label, "why": "given by the caller"})
+        )
     need = pressure_needed(model, height_m, load_N)
     est = _finite_estimate(need)
     plo, phi = model.pressure_range_bar
     res = {
-        "height_m": height_m, "load_N": load_N, "prob": prob,
+        "height_m": height_m,
+        "load_N": load_N,
+        "prob": prob,
         "pressure_bar_needed": est,
         "pressure_bar_for_prob": float(np.quantile(need, prob)),
         "model": model_info,
@@ -479,12 +639,19 @@ def margin(model, height_m: float, load_N: float, prob: float = 0.95, *, pressur
     if pressure_bar is not None:
         model.check_range(height_m, pressure_bar, "option --pressure-bar: ")
         P = model.force_draws(np.array(height_m), pressure_bar)
-        res["force_at_pressure"] = {"pressure_bar": pressure_bar, "force_N": estimate(P),
-                                    "prob_carries_load": float(np.mean(P >= load_N))}
+        res["force_at_pressure"] = {
+            "pressure_bar": pressure_bar,
+            "force_N": estimate(P),
+            "prob_carries_load": float(np.mean(P >= load_N)),
+        }
         if tolerance_pct is not None:
             if not tolerance_pct > 0:
-                raise InputError(f"option --tolerance-pct: expected a positive tolerance, got {tolerance_pct:g}")
-            res["usable_stroke"] = usable_stroke(model, height_m, pressure_bar, load_N, tolerance_pct, prob)
+                raise InputError(
+                    f"option --tolerance-pct: expected a positive tolerance, got {tolerance_pct:g}"
+                )
+            res["usable_stroke"] = usable_stroke(
+                model, height_m, pressure_bar, load_N, tolerance_pct, prob
+            )
     return res
 
 
@@ -500,12 +667,20 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
     fit = cub = comparison = None
     warnings, converged = [], True
     if model in ("auto", "surface"):
-        fit = fit_surface(rec, seed=seed, settings=settings, stand=PAPER_STAND if stand is None else stand)
+        fit = fit_surface(
+            rec, seed=seed, settings=settings, stand=PAPER_STAND if stand is None else stand
+        )
         warnings += fit.diagnostics["warnings"]
         converged &= fit.diagnostics["converged"]
     if model in ("auto", "cubics"):
-        cub = fit_campaign(rec, seed=seed, settings=settings)  # full settings: the cubics may answer
-        warnings += [f"{t.pressure_bar:g} bar cubic: {w}" for t in cub.tests for w in t.diagnostics["warnings"]]
+        cub = fit_campaign(
+            rec, seed=seed, settings=settings
+        )  # full settings: the cubics may answer
+        warnings += [
+            f"{t.pressure_bar:g} bar cubic: {w}"
+            for t in cub.tests
+            for w in t.diagnostics["warnings"]
+        ]
         converged &= cub.converged
     if model == "auto":
         comparison = compare_with_cubics(fit, cub, seed=seed, settings=settings)

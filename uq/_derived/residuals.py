@@ -34,8 +34,9 @@ ALPHA = 1e-3  # per block: 22 blocks in a campaign like data/n50 give a false wa
 N_NULL = 10000
 
 
-def lag_one_check(residuals: np.ndarray, sd: np.ndarray, u_m: np.ndarray, *, n_null: int = N_NULL,
-                  seed: int = 0) -> dict:
+def lag_one_check(
+    residuals: np.ndarray, sd: np.ndarray, u_m: np.ndarray, *, n_null: int = N_NULL, seed: int = 0
+) -> dict:
     """Lag-one autocorrelation of standardised residuals in the given (recording) order and its
     one-sided p-value under independent errors after a weighted cubic fit in ``u_m``.
 
@@ -65,20 +66,29 @@ def order_check(fit: PressureFit) -> dict:
     if fit not in _CHECKS:
         u = fit.test.height_m - fit.x0_m
         noise = fit.flat("noise").mean(axis=0)
-        sd = {"force": np.sqrt(force_noise_var(noise[0], noise[1], fit.ref_force())),
-              "piston": np.full(u.shape, noise[2])}
-        _CHECKS[fit] = {b: lag_one_check(fit.mean_residuals(b), sd[b], u) for b in ("force", "piston")} | {"alpha": ALPHA}
+        sd = {
+            "force": np.sqrt(force_noise_var(noise[0], noise[1], fit.ref_force())),
+            "piston": np.full(u.shape, noise[2]),
+        }
+        _CHECKS[fit] = {
+            b: lag_one_check(fit.mean_residuals(b), sd[b], u) for b in ("force", "piston")
+        } | {"alpha": ALPHA}
     return _CHECKS[fit]
 
 
 def campaign_order_warnings(cf: CampaignFit) -> list[str]:
     """The warning lines of every test of a campaign, each prefixed with its pressure."""
-    return [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in order_warnings(order_check(t))]
+    return [
+        f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in order_warnings(order_check(t))
+    ]
 
 
 def order_warnings(check: dict) -> list[str]:
     """The warning lines of one test's :func:`order_check` (none when every block passes)."""
-    return [f"{block} residuals are correlated in recording order (lag-one r = {c['lag1']:.2f}, p = {c['p']:.1g} "
-            f"< {check['alpha']:g}): the intervals assume independent readings and are likely too narrow "
-            "(a slowly corrected pressure, a drift, or a shape the cubic misses)"
-            for block, c in check.items() if block != "alpha" and c["p"] < check["alpha"]]
+    return [
+        f"{block} residuals are correlated in recording order (lag-one r = {c['lag1']:.2f}, p = {c['p']:.1g} "
+        f"< {check['alpha']:g}): the intervals assume independent readings and are likely too narrow "
+        "(a slowly corrected pressure, a drift, or a shape the cubic misses)"
+        for block, c in check.items()
+        if block != "alpha" and c["p"] < check["alpha"]
+    ]

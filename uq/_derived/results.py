@@ -24,7 +24,12 @@ def _coef_block(draws: np.ndarray, names, diag: dict) -> dict:
     for i, n in enumerate(names):
         e = estimate(draws[..., i])
         v = diag["variables"][n]
-        e |= {"r_hat": v["r_hat"], "ess_bulk": v["ess_bulk"], "ess_tail": v["ess_tail"], "mcse_mean": v["mcse_mean"]}
+        e |= {
+            "r_hat": v["r_hat"],
+            "ess_bulk": v["ess_bulk"],
+            "ess_tail": v["ess_tail"],
+            "mcse_mean": v["mcse_mean"],
+        }
         out[n] = e
     return out
 
@@ -40,8 +45,11 @@ def test_json(fit: PressureFit) -> dict:
         "piston": _coef_block(fit.piston, PISTON_NAMES, d),
         "s_P_N": s_P,
         "eps_P_pct": eps_P,
-        "noise": {n: estimate(fit.noise[..., i]) | {"r_hat": d["variables"][n]["r_hat"], "ess_bulk": d["variables"][n]["ess_bulk"]}
-                  for i, n in enumerate(NOISE_NAMES)},
+        "noise": {
+            n: estimate(fit.noise[..., i])
+            | {"r_hat": d["variables"][n]["r_hat"], "ess_bulk": d["variables"][n]["ess_bulk"]}
+            for i, n in enumerate(NOISE_NAMES)
+        },
         "least_squares": {
             "force": dict(zip(FORCE_NAMES, fit.lsq_force.tolist(), strict=True)),
             "piston": dict(zip(PISTON_NAMES, fit.lsq_piston.tolist(), strict=True)),

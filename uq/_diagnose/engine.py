@@ -58,13 +58,16 @@ NOISE_EXCESS = 2.0  # noise scale this many times the error budget counts as a m
 
 # ----------------------------------------------------------------------------- fitting
 
+
 class Fit:
     """One candidate model: MAP, Laplace/emcee draws, pointwise log-likelihood, LOO.
 
     ``loo=False`` skips PSIS-LOO (a K-fold training fit, whose held-out rows are scored apart).
     """
 
-    def __init__(self, names, order, d, seed, samples=None, *, loo: bool = True, n_draws: int = N_DRAWS):
+    def __init__(
+        self, names, order, d, seed, samples=None, *, loo: bool = True, n_draws: int = N_DRAWS
+    ):
         self.names = tuple(names)
         self.order = order
         self.mask = M.mask_of(self.names, order)
@@ -72,14 +75,22 @@ class Fit:
         self.theta_map, self.lp_map, self.cov = M.fit_map(self.names, order, d)
         rng = np.random.default_rng(seed)
         if samples is None:
-            sub = rng.multivariate_normal(self.theta_map[dims], self.cov, size=n_draws, method="cholesky")
+            sub = rng.multivariate_normal(
+                self.theta_map[dims], self.cov, size=n_draws, method="cholesky"
+            )
             self.theta = M.expand(sub, self.names)
         else:
             self.theta = samples
         key = jax.random.PRNGKey(int(rng.integers(2**31)))
         ll, muF, muL, beta, sigma = M.draw_rows(self.theta, key, self.mask, d)
         ok = np.all(np.isfinite(ll), axis=1)
-        self.ll, self.muF, self.muL, self.beta, self.sigma = ll[ok], muF[ok], muL[ok], beta[ok], sigma[ok]
+        self.ll, self.muF, self.muL, self.beta, self.sigma = (
+            ll[ok],
+            muF[ok],
+            muL[ok],
+            beta[ok],
+            sigma[ok],
+        )
         self.theta = self.theta[ok]
         self.n_params = sum(M.N_PARAMS[m] for m in self.names)
         _SCREEN_BAR.update(1)
@@ -92,8 +103,11 @@ class Fit:
 
     def pareto(self) -> dict:
         """PSIS reliability: the largest Pareto k and how many of the 2n terms exceed 0.7."""
-        return {"max": float(np.max(self.pareto_k)), "n_over_0.7": int(np.sum(self.pareto_k > K_BAD)),
-                "n_terms": int(self.pareto_k.size)}
+        return {
+            "max": float(np.max(self.pareto_k)),
+            "n_over_0.7": int(np.sum(self.pareto_k > K_BAD)),
+            "n_terms": int(self.pareto_k.size),
+        }
 
     @property
     def psis_ok(self) -> bool:
@@ -148,13 +162,18 @@ class KFold:
             out = np.empty(2 * n)
             for k in range(self.n_folds):
                 held = self.fold == k
-                f = Fit(names, self.order, M.hold_out(self.d, held), self.seed + 7919 * (k + 1), loo=False,
-                        n_draws=KFOLD_DRAWS)
+                f = Fit(
+                    names,
+                    self.order,
+                    M.hold_out(self.d, held),
+                    self.seed + 7919 * (k + 1),
+                    loo=False,
+                    n_draws=KFOLD_DRAWS,
+                )
                 rows = np.concatenate([held, held])
                 out[rows] = _logmeanexp(f.ll[:, rows])
             self._cache[key] = out
         return self._cache[key]
-
 
     def exact_loo_i(self, fit: Fit) -> np.ndarray:
         """PSIS-LOO terms of ``fit`` with every term of Pareto k > 0.7 replaced by an exact
@@ -165,9 +184,15 @@ class KFold:
             if key not in self._cache:
                 held = np.zeros(2 * self.fold.size, bool)
                 held[i] = True
-                f = Fit(fit.names, self.order, M.hold_out(self.d, held), self.seed + 104729 + int(i), loo=False,
-                        n_draws=KFOLD_DRAWS)
-                self._cache[key] = float(_logmeanexp(f.ll[:, i:i + 1])[0])
+                f = Fit(
+                    fit.names,
+                    self.order,
+                    M.hold_out(self.d, held),
+                    self.seed + 104729 + int(i),
+                    loo=False,
+                    n_draws=KFOLD_DRAWS,
+                )
+                self._cache[key] = float(_logmeanexp(f.ll[:, i : i + 1])[0])
             out[i] = self._cache[key]
         return out
 
@@ -181,14 +206,31 @@ def _compare(new: Fit, old: Fit, kfold: KFold) -> dict:
         g, se = _gain(new, old)
         return out | {"delta_elpd": g, "delta_elpd_se": se, "method": "psis-loo"}
     g_psis, se_psis = _gain(new, old)
-    refused = {"psis_loo_refused": {"delta_elpd": g_psis, "delta_elpd_se": se_psis,
-                                    "reason": "Pareto k > 0.7: PSIS-LOO unreliable"}}
+    refused = {
+        "psis_loo_refused": {
+            "delta_elpd": g_psis,
+            "delta_elpd_se": se_psis,
+            "reason": "Pareto k > 0.7: PSIS-LOO unreliable",
+        }
+    }
     n_bad = max(new.pareto()["n_over_0.7"], old.pareto()["n_over_0.7"])
     if n_bad <= MAX_RELOO:
         g, se = _gain_of(kfold.exact_loo_i(new) - kfold.exact_loo_i(old))
-        return out | {"delta_elpd": g, "delta_elpd_se": se, "method": "psis-loo, k > 0.7 terms refitted exactly"} | refused
+        return (
+            out
+            | {
+                "delta_elpd": g,
+                "delta_elpd_se": se,
+                "method": "psis-loo, k > 0.7 terms refitted exactly",
+            }
+            | refused
+        )
     g, se = _gain_of(kfold.elpd_i(new.names) - kfold.elpd_i(old.names))
-    return out | {"delta_elpd": g, "delta_elpd_se": se, "method": f"{kfold.n_folds}-fold cross-validation"} | refused
+    return (
+        out
+        | {"delta_elpd": g, "delta_elpd_se": se, "method": f"{kfold.n_folds}-fold cross-validation"}
+        | refused
+    )
 
 
 def z_required(n_candidates: int, gain_se: float) -> float:
@@ -203,6 +245,7 @@ def z_required(n_candidates: int, gain_se: float) -> float:
 
 
 # ----------------------------------------------------------------------------- where
+
 
 def _residuals(fit: Fit, meta: dict, d) -> dict:
     """Posterior-mean residuals and standardised residuals of force (N) and volume (m^3)."""
@@ -245,19 +288,35 @@ def where(fit: Fit, meta: dict, d) -> dict:
     n_steps = np.array([step[meta["test"] == i].max() + 1 for i in meta["test"]])
     third = np.minimum((3 * step) // n_steps, 2)
     units = {"force": ("N", 1.0), "volume": ("cm^3", 1e6)}
-    out = {"units": {"force": "N", "volume": "cm^3"}, "flag_rule": (
-        f"a group is flagged when |mean standardised residual| x sqrt(n) > {FLAG_Z:g} or the chi-square "
-        "of its standardised residuals has p < 1e-6")}
+    out = {
+        "units": {"force": "N", "volume": "cm^3"},
+        "flag_rule": (
+            f"a group is flagged when |mean standardised residual| x sqrt(n) > {FLAG_Z:g} or the chi-square "
+            "of its standardised residuals has p < 1e-6"
+        ),
+    }
     for q, (r, z) in res.items():
         scale = units[q][1]
         g = {
-            "by_pressure": [{"pressure_bar": float(pb), **_group_stats(r, z, p == pb, scale)} for pb in np.unique(p)],
-            "by_height": [{"height_mm": [round(edges[i] * 1e3, 2), round(edges[i + 1] * 1e3, 2)],
-                           **_group_stats(r, z, (x >= edges[i]) & (x < edges[i + 1]), scale)} for i in range(6)],
-            "by_branch": [{"branch": b, **_group_stats(r, z, comp == (b == "compression"), scale)}
-                          for b in ("compression", "rebound")],
-            "by_recording_order": [{"part": name, **_group_stats(r, z, third == i, scale)}
-                                   for i, name in enumerate(("first third", "middle third", "last third"))],
+            "by_pressure": [
+                {"pressure_bar": float(pb), **_group_stats(r, z, p == pb, scale)}
+                for pb in np.unique(p)
+            ],
+            "by_height": [
+                {
+                    "height_mm": [round(edges[i] * 1e3, 2), round(edges[i + 1] * 1e3, 2)],
+                    **_group_stats(r, z, (x >= edges[i]) & (x < edges[i + 1]), scale),
+                }
+                for i in range(6)
+            ],
+            "by_branch": [
+                {"branch": b, **_group_stats(r, z, comp == (b == "compression"), scale)}
+                for b in ("compression", "rebound")
+            ],
+            "by_recording_order": [
+                {"part": name, **_group_stats(r, z, third == i, scale)}
+                for i, name in enumerate(("first third", "middle third", "last third"))
+            ],
         }
         g["rms"] = float(np.sqrt(np.mean(r**2)) * scale)
         out[q] = g
@@ -278,16 +337,26 @@ def _regions(res, meta, min_run: int = 4) -> list[dict]:
             out = np.abs(z[idx]) > 1.645
             start = None
             for j in range(idx.size + 1):
-                if j < idx.size and out[j] and (start is None or np.sign(z[idx[j]]) == np.sign(z[idx[start]])):
+                if (
+                    j < idx.size
+                    and out[j]
+                    and (start is None or np.sign(z[idx[j]]) == np.sign(z[idx[start]]))
+                ):
                     start = j if start is None else start
                     continue
                 if start is not None and j - start >= min_run:
                     sel = idx[start:j]
                     h = meta["height_m"][sel] * 1e3
-                    regions.append({"quantity": q, "pressure_bar": float(meta["pressure_bar"][sel[0]]),
-                                    "branch": "compression" if meta["compression"][sel[0]] else "rebound",
-                                    "height_mm": [float(h.min()), float(h.max())], "n_points": int(sel.size),
-                                    "mean_residual": float(r[sel].mean() * (1e6 if q == "volume" else 1.0))})
+                    regions.append(
+                        {
+                            "quantity": q,
+                            "pressure_bar": float(meta["pressure_bar"][sel[0]]),
+                            "branch": "compression" if meta["compression"][sel[0]] else "rebound",
+                            "height_mm": [float(h.min()), float(h.max())],
+                            "n_points": int(sel.size),
+                            "mean_residual": float(r[sel].mean() * (1e6 if q == "volume" else 1.0)),
+                        }
+                    )
                 start = j if (j < idx.size and out[j]) else None
     regions.sort(key=lambda g: -g["n_points"])
     return regions[:30]
@@ -299,11 +368,18 @@ def _flagged(w: dict) -> list[str]:
         for key in ("by_pressure", "by_height", "by_branch", "by_recording_order"):
             for g in w[q][key]:
                 if g["flagged"]:
-                    lab = next(g[k] for k in ("pressure_bar", "height_mm", "branch", "part") if k in g)
-                    lab = f"{lab:g} bar" if isinstance(lab, float) else (
-                        f"{lab[0]:g}-{lab[1]:g} mm" if isinstance(lab, list) else lab)
-                    out.append(f"{q} by {key[3:].replace('_', ' ')}: {lab} (mean residual {g['mean']:.3g} "
-                               f"{'N' if q == 'force' else 'cm^3'}, {g['outside_90_pct']:.0f}% outside the 90% band)")
+                    lab = next(
+                        g[k] for k in ("pressure_bar", "height_mm", "branch", "part") if k in g
+                    )
+                    lab = (
+                        f"{lab:g} bar"
+                        if isinstance(lab, float)
+                        else (f"{lab[0]:g}-{lab[1]:g} mm" if isinstance(lab, list) else lab)
+                    )
+                    out.append(
+                        f"{q} by {key[3:].replace('_', ' ')}: {lab} (mean residual {g['mean']:.3g} "
+                        f"{'N' if q == 'force' else 'cm^3'}, {g['outside_90_pct']:.0f}% outside the 90% band)"
+                    )
     for q in ("force", "piston"):
         if w["noise_scale_vs_budget"][q]["q05"] > NOISE_EXCESS:
             out.append(f"{q} noise {w['noise_scale_vs_budget'][q]['mean']:.1f} x the error budget")
@@ -311,6 +387,7 @@ def _flagged(w: dict) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- engine
+
 
 def choose_order(d) -> tuple[int, dict]:
     lps = {k: M.fit_map((), k, d)[1] for k in (3, 4, 5)}
@@ -321,7 +398,9 @@ def choose_order(d) -> tuple[int, dict]:
     return best, lps
 
 
-def _elimination_step(current: Fit, fits: dict, order: int, d, rng, kfold: KFold, gain_se: float) -> dict:
+def _elimination_step(
+    current: Fit, fits: dict, order: int, d, rng, kfold: KFold, gain_se: float
+) -> dict:
     """What each mechanism of ``current`` is worth: the ELPD lost by leaving it out (Bonferroni over them)."""
     table = {}
     z_req = z_required(len(current.names), gain_se)
@@ -360,7 +439,11 @@ def _select(base: Fit, order: int, d, rng, kfold: KFold, gain_se: float, max_mec
         step = _elimination_step(current, fits, order, d, rng, kfold, gain_se)
         steps.append(step)
         table = step["candidates"]
-        removable = [m for m in current.names if not table[m]["passes"] or len(current.names) > max_mechanisms]
+        removable = [
+            m
+            for m in current.names
+            if not table[m]["passes"] or len(current.names) > max_mechanisms
+        ]
         if not removable:
             break
         drop = _to_remove(removable, table)
@@ -374,11 +457,16 @@ def noise_check(w: dict) -> dict:
     """The model's own noise-scale check: its learned noise scales against the stand's budget."""
     ns = w["noise_scale_vs_budget"]
     fails = {q: ns[q]["q05"] > NOISE_EXCESS for q in ("force", "piston")}
-    return {"passes": not any(fails.values()),
-            "rule": (f"force and piston noise scale factors (residual scatter over the stand's error budget) must not "
-                     f"exceed {NOISE_EXCESS:g} with 95 % posterior probability"),
-            "force_scale": ns["force"]["mean"], "piston_scale": ns["piston"]["mean"],
-            "failing": [q for q, bad in fails.items() if bad]}
+    return {
+        "passes": not any(fails.values()),
+        "rule": (
+            f"force and piston noise scale factors (residual scatter over the stand's error budget) must not "
+            f"exceed {NOISE_EXCESS:g} with 95 % posterior probability"
+        ),
+        "force_scale": ns["force"]["mean"],
+        "piston_scale": ns["piston"]["mean"],
+        "failing": [q for q, bad in fails.items() if bad],
+    }
 
 
 def _plain(v):
@@ -392,7 +480,11 @@ def _where_text(label: str, v) -> str:
     if label == "pressure_bar":
         return f"{float(v):g} bar"
     if label == "height_mm":
-        return f"{float(v[0]):g}-{float(v[1]):g} mm" if isinstance(v, list | tuple) else f"{float(v):g} mm"
+        return (
+            f"{float(v[0]):g}-{float(v[1]):g} mm"
+            if isinstance(v, list | tuple)
+            else f"{float(v):g} mm"
+        )
     return str(v)
 
 
@@ -401,16 +493,39 @@ def _left(w: dict, top: int = 6) -> list[dict]:
     out = []
     for q, unit in (("force", "N"), ("volume", "cm^3")):
         groups = []
-        for key, lab in (("by_pressure", "pressure_bar"), ("by_height", "height_mm"), ("by_branch", "branch")):
-            groups += [{"quantity": q, "group": key[3:], "at": _plain(g[lab]), "where": _where_text(lab, g[lab]),
-                        "mean_residual": g["mean"], "rms": g["rms"], "unit": unit} for g in w[q][key] if g["flagged"]]
+        for key, lab in (
+            ("by_pressure", "pressure_bar"),
+            ("by_height", "height_mm"),
+            ("by_branch", "branch"),
+        ):
+            groups += [
+                {
+                    "quantity": q,
+                    "group": key[3:],
+                    "at": _plain(g[lab]),
+                    "where": _where_text(lab, g[lab]),
+                    "mean_residual": g["mean"],
+                    "rms": g["rms"],
+                    "unit": unit,
+                }
+                for g in w[q][key]
+                if g["flagged"]
+            ]
         groups.sort(key=lambda g: -abs(g["mean_residual"]))
         out += groups[:top]
     return out
 
 
-def diagnose(rec, *, seed: int = 0, settings: Settings | None = None, max_mechanisms: int = len(M.MECHS),
-             gain_se: float = GAIN_SE, sample_final: bool = True, stand: StandDescription = PAPER_STAND) -> dict:
+def diagnose(
+    rec,
+    *,
+    seed: int = 0,
+    settings: Settings | None = None,
+    max_mechanisms: int = len(M.MECHS),
+    gain_se: float = GAIN_SE,
+    sample_final: bool = True,
+    stand: StandDescription = PAPER_STAND,
+) -> dict:
     """Run the engine on recordings; returns the JSON-ready result plus private ``_fits``.
 
     ``stand`` gives the error budget and gas volumes the noise model is built from."""
@@ -440,40 +555,68 @@ def diagnose(rec, *, seed: int = 0, settings: Settings | None = None, max_mechan
     mechanisms = []
     for name, c in chosen:
         mag = final.magnitude(name, n_tests)
-        entry = {"name": name, "magnitude": estimate(mag), "unit": MECHANISMS[name].unit,
-                 "delta_elpd": c["delta_elpd"], "delta_elpd_se": c["delta_elpd_se"], "comparison": c["method"],
-                 "status": "found" if check["passes"] else "provisional",
-                 "physics": MECHANISMS[name].physics, "meaning": MECHANISMS[name].meaning}
+        entry = {
+            "name": name,
+            "magnitude": estimate(mag),
+            "unit": MECHANISMS[name].unit,
+            "delta_elpd": c["delta_elpd"],
+            "delta_elpd_se": c["delta_elpd_se"],
+            "comparison": c["method"],
+            "status": "found" if check["passes"] else "provisional",
+            "physics": MECHANISMS[name].physics,
+            "meaning": MECHANISMS[name].meaning,
+        }
         if diagnostics and name in diagnostics:
             entry["magnitude"] |= diagnostics[name]
         mechanisms.append(entry)
     mechanisms.sort(key=lambda e: -e["delta_elpd"])
-    rms = {f: float(np.sqrt(np.mean((meta["force_N"] - f.muF.mean(0)) ** 2))) for f in {base, final}}
+    rms = {
+        f: float(np.sqrt(np.mean((meta["force_N"] - f.muF.mean(0)) ** 2))) for f in {base, final}
+    }
     result = {
         "mismatch_detected": bool(chosen or flags_base),
         "provisional": bool(chosen) and not check["passes"],
-        "baseline": {"name": "traditional", "rms_N": rms[base], "elpd_loo": base.elpd,
-                     "elpd_loo_se": float(base.loo.se), "volume_rms_cm3": w_base["volume"]["rms"],
-                     "feff_order": order, "pareto_k": base.pareto(), "noise_check": noise_check(w_base)},
+        "baseline": {
+            "name": "traditional",
+            "rms_N": rms[base],
+            "elpd_loo": base.elpd,
+            "elpd_loo_se": float(base.loo.se),
+            "volume_rms_cm3": w_base["volume"]["rms"],
+            "feff_order": order,
+            "pareto_k": base.pareto(),
+            "noise_check": noise_check(w_base),
+        },
         "where": w_base | {"flagged": flags_base},
         "mechanisms": mechanisms,
-        "final": {"rms_N": rms[final], "elpd_loo": final.elpd, "elpd_loo_se": float(final.loo.se),
-                  "volume_rms_cm3": w_final["volume"]["rms"], "model": ["traditional", *final.names],
-                  "pareto_k": final.pareto(), "noise_check": check, "left": _left(w_final),
-                  "remaining_flags": _flagged(w_final), "where": w_final},
+        "final": {
+            "rms_N": rms[final],
+            "elpd_loo": final.elpd,
+            "elpd_loo_se": float(final.loo.se),
+            "volume_rms_cm3": w_final["volume"]["rms"],
+            "model": ["traditional", *final.names],
+            "pareto_k": final.pareto(),
+            "noise_check": check,
+            "left": _left(w_final),
+            "remaining_flags": _flagged(w_final),
+            "where": w_final,
+        },
         "selection": {
-            "rule": (f"backward elimination from the model with all {len(M.MECHS)} mechanisms: a mechanism stays "
-                     f"only if leaving it out loses more than {GAIN_MIN:g} nats of ELPD and z = loss / SE exceeds "
-                     f"z_required, the Bonferroni-adjusted one-sided threshold (a single mechanism would need "
-                     f"{gain_se:g} SE; the tail probability is shared over the mechanisms tested at the step); at "
-                     f"each step the one whose absence costs least is removed (of those within {GAIN_MIN:g} nats of "
-                     f"it, the one with most parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {K_BAD:g}; otherwise "
-                     f"the terms with k > {K_BAD:g} are refitted exactly (leave that row out), or, with more than "
-                     f"{MAX_RELOO} of them in a model, both models are scored by exact {N_FOLDS}-fold "
-                     "cross-validation. Mechanisms are 'provisional' while the final model "
-                     "fails its noise-scale check"),
-            "steps": steps, "feff_order_log_marginal": {str(k): v for k, v in order_lps.items()},
-            "n_points": int(meta["force_N"].size), "n_tests": n_tests,
+            "rule": (
+                f"backward elimination from the model with all {len(M.MECHS)} mechanisms: a mechanism stays "
+                f"only if leaving it out loses more than {GAIN_MIN:g} nats of ELPD and z = loss / SE exceeds "
+                f"z_required, the Bonferroni-adjusted one-sided threshold (a single mechanism would need "
+                f"{gain_se:g} SE; the tail probability is shared over the mechanisms tested at the step); at "
+                f"each step the one whose absence costs least is removed (of those within {GAIN_MIN:g} nats of "
+                f"it, the one with most parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {K_BAD:g}; otherwise "
+                f"the terms with k > {K_BAD:g} are refitted exactly (leave that row out), or, with more than "
+                f"{MAX_RELOO} of them in a model, both models are scored by exact {N_FOLDS}-fold "
+                "cross-validation. Mechanisms are 'provisional' while the final model "
+                "fails its noise-scale check"
+            ),
+            "steps": steps,
+            "feff_order_log_marginal": {str(k): v for k, v in order_lps.items()},
+            "n_points": int(meta["force_N"].size),
+            "n_tests": n_tests,
         },
         "sampling": diagnostics["_summary"] if diagnostics else None,
         # wall times are private (not in the JSON), so reruns with one seed give identical bytes
@@ -492,8 +635,15 @@ def _sample(fit: Fit, d, seed: int, settings: Settings):
         return M.log_post(M.expand(np.asarray(sub), fit.names), fit.mask, d)
 
     scale = np.sqrt(np.diag(fit.cov)) / settings.init_scale
-    full = run_ensembles(lp, fit.theta_map[dims], scale, names, seed=seed, settings=settings,
-                         desc="diagnose sampling")
+    full = run_ensembles(
+        lp,
+        fit.theta_map[dims],
+        scale,
+        names,
+        seed=seed,
+        settings=settings,
+        desc="diagnose sampling",
+    )
     chains = thin(full, N_DRAWS)
     C, D, _ = chains.samples.shape
     theta = M.expand(chains.samples.reshape(C * D, -1), fit.names)
@@ -505,20 +655,29 @@ def _sample(fit: Fit, d, seed: int, settings: Settings):
             warnings.simplefilter("ignore")
             diag[n] = chain_diagnostics(full.samples[..., i], full.n_walkers)
     out = {m: diag[M.THETA_NAMES[i]] for m, i in M.NONLINEAR.items() if m in fit.names}
-    out["_summary"] = {"sampler": "emcee (independence-t and DE moves) on noise scales and nonlinear magnitudes; coefficients drawn exactly",
-                       "n_steps": chains.n_steps, "burn_in": chains.burn, "parameters": diag,
-                       "warnings": chains.warnings}
+    out["_summary"] = {
+        "sampler": "emcee (independence-t and DE moves) on noise scales and nonlinear magnitudes; coefficients drawn exactly",
+        "n_steps": chains.n_steps,
+        "burn_in": chains.burn,
+        "parameters": diag,
+        "warnings": chains.warnings,
+    }
     return final, out
 
 
 # ----------------------------------------------------------------------------- output
 
+
 def summary_text(res: dict) -> str:
     b, f = res["baseline"], res["final"]
-    lines = [f"traditional model (F_eff polynomial of order {b['feff_order']}): force rms {b['rms_N']:.1f} N, "
-             f"volume rms {b['volume_rms_cm3']:.1f} cm^3, ELPD-LOO {b['elpd_loo']:.1f}"]
+    lines = [
+        f"traditional model (F_eff polynomial of order {b['feff_order']}): force rms {b['rms_N']:.1f} N, "
+        f"volume rms {b['volume_rms_cm3']:.1f} cm^3, ELPD-LOO {b['elpd_loo']:.1f}"
+    ]
     if not res["mismatch_detected"]:
-        lines.append("no mismatch: the traditional model explains the recordings to within the noise")
+        lines.append(
+            "no mismatch: the traditional model explains the recordings to within the noise"
+        )
         return "\n".join(lines) + "\n"
     lines.append("mismatch detected; where the baseline's residuals sit:")
     for fl in res["where"]["flagged"][:12] or ["(no single group stands out; see the selection)"]:
@@ -526,33 +685,51 @@ def summary_text(res: dict) -> str:
     for m in res["mechanisms"]:
         mg = m["magnitude"]
         word = "found" if m["status"] == "found" else "PROVISIONAL"
-        lines.append(f"{word} {m['name']}: magnitude {mg['mean']:.4g} {m['unit']} (90% {mg['q05']:.4g} .. {mg['q95']:.4g}), "
-                     f"ELPD gain {m['delta_elpd']:.1f} +- {m['delta_elpd_se']:.1f} ({m['comparison']})")
+        lines.append(
+            f"{word} {m['name']}: magnitude {mg['mean']:.4g} {m['unit']} (90% {mg['q05']:.4g} .. {mg['q95']:.4g}), "
+            f"ELPD gain {m['delta_elpd']:.1f} +- {m['delta_elpd_se']:.1f} ({m['comparison']})"
+        )
         lines.append(f"    meaning: {m['meaning']}")
     if not res["mechanisms"]:
         lines.append(f"none of the {len(M.MECHS)} mechanisms explains the mismatch")
     nc = f["noise_check"]
     pk = f["pareto_k"]
-    lines.append(f"final model ({' + '.join(f['model'])}): force rms {f['rms_N']:.1f} N, volume rms "
-                 f"{f['volume_rms_cm3']:.1f} cm^3, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {pk['max']:.2f}, "
-                 f"{pk['n_over_0.7']} of {pk['n_terms']} over 0.7)")
-    lines.append(f"noise-scale check of the final model: force scatter {nc['force_scale']:.1f} x, piston "
-                 f"{nc['piston_scale']:.1f} x the stand's error budget: " + ("passes" if nc["passes"] else "FAILS"))
+    lines.append(
+        f"final model ({' + '.join(f['model'])}): force rms {f['rms_N']:.1f} N, volume rms "
+        f"{f['volume_rms_cm3']:.1f} cm^3, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {pk['max']:.2f}, "
+        f"{pk['n_over_0.7']} of {pk['n_terms']} over 0.7)"
+    )
+    lines.append(
+        f"noise-scale check of the final model: force scatter {nc['force_scale']:.1f} x, piston "
+        f"{nc['piston_scale']:.1f} x the stand's error budget: "
+        + ("passes" if nc["passes"] else "FAILS")
+    )
     if res.get("provisional"):
-        lines.append("the mechanisms above are PROVISIONAL: the final model does not explain the recordings to "
-                     "within the stand's noise, so a missing mechanism may be standing in for another; the remaining "
-                     "misfit sits at:")
-        lines += [f"  - {g['quantity']} by {g['group']} {g['where']}: mean residual {g['mean_residual']:.3g} {g['unit']}, "
-                  f"rms {g['rms']:.3g} {g['unit']}" for g in f["left"]]
+        lines.append(
+            "the mechanisms above are PROVISIONAL: the final model does not explain the recordings to "
+            "within the stand's noise, so a missing mechanism may be standing in for another; the remaining "
+            "misfit sits at:"
+        )
+        lines += [
+            f"  - {g['quantity']} by {g['group']} {g['where']}: mean residual {g['mean_residual']:.3g} {g['unit']}, "
+            f"rms {g['rms']:.3g} {g['unit']}"
+            for g in f["left"]
+        ]
     ratios = [a["volume_over_force"] for a in res["where"]["area_force_vs_volume_at_x0"]]
     if max(abs(r - 1.0) for r in ratios) > 0.05:
-        lines.append("effective area at x0 from the volume (-S dL/dx) over that from the force (P/p_u), by pressure: "
-                     + ", ".join(f"{a['pressure_bar']:g} bar {a['volume_over_force']:.3f}"
-                                 for a in res["where"]["area_force_vs_volume_at_x0"]))
-        lines.append("  (eq. 1, 2 make this ratio 1; pressure_dependent_area scales force and volume alike; casing_force "
-                     "and force_offset move P/p_u by an amount falling as 1/p_u; hysteresis averages out over the branches; "
-                     "thermal_drift tilts L with recording order; volume_excess makes the volume-derived area exceed "
-                     "the force-derived one by the same fraction at every pressure)")
+        lines.append(
+            "effective area at x0 from the volume (-S dL/dx) over that from the force (P/p_u), by pressure: "
+            + ", ".join(
+                f"{a['pressure_bar']:g} bar {a['volume_over_force']:.3f}"
+                for a in res["where"]["area_force_vs_volume_at_x0"]
+            )
+        )
+        lines.append(
+            "  (eq. 1, 2 make this ratio 1; pressure_dependent_area scales force and volume alike; casing_force "
+            "and force_offset move P/p_u by an amount falling as 1/p_u; hysteresis averages out over the branches; "
+            "thermal_drift tilts L with recording order; volume_excess makes the volume-derived area exceed "
+            "the force-derived one by the same fraction at every pressure)"
+        )
     if f["remaining_flags"]:
         lines.append("left unexplained: " + "; ".join(f["remaining_flags"][:10]))
     else:

@@ -36,12 +36,32 @@ from uq._io.values import positive_float, positive_int, seed, walkers
 
 TASKS = ("fit", "report", "surface", "diagnose")
 #: Per-campaign options: name -> parser (the same checks as the single-campaign commands' options).
-OPTIONS = {"seed": seed, "walkers": walkers, "ensembles": positive_int, "max_steps": positive_int,
-           "x0_mm": positive_float, "piston_area_cm2": positive_float, "draws": positive_int, "stand": str}
+OPTIONS = {
+    "seed": seed,
+    "walkers": walkers,
+    "ensembles": positive_int,
+    "max_steps": positive_int,
+    "x0_mm": positive_float,
+    "piston_area_cm2": positive_float,
+    "draws": positive_int,
+    "stand": str,
+}
 DEFAULT_SEED = 20201  # as every command's --seed
 STAMP = "batch.json"
-SUMMARY_COLUMNS = ("campaign", "task", "status", "seconds", "converged", "result", "output", "error", "file")
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")  # becomes a folder name: no separators, no dot-files
+SUMMARY_COLUMNS = (
+    "campaign",
+    "task",
+    "status",
+    "seconds",
+    "converged",
+    "result",
+    "output",
+    "error",
+    "file",
+)
+_NAME = re.compile(
+    r"[A-Za-z0-9][A-Za-z0-9._-]*\Z"
+)  # becomes a folder name: no separators, no dot-files
 
 
 # ----------------------------------------------------------------------------- catalogue
@@ -72,13 +92,17 @@ def _split_tasks(value, loc: str) -> tuple[str, ...]:
 def _campaign(entry: dict, folder: Path, loc: str) -> Campaign:
     """One catalogue entry (keys already known to be allowed) -> a checked Campaign."""
     if not str(entry.get("file", "")).strip():
-        raise InputError(f"{loc}: no 'file' given (the recordings CSV, relative to the catalogue's folder)")
+        raise InputError(
+            f"{loc}: no 'file' given (the recordings CSV, relative to the catalogue's folder)"
+        )
     path = (folder / str(entry["file"]).strip()).resolve()
     if not path.is_file():
         raise InputError(f"{where(loc, column='file')}: no such file {path}")
     name = str(entry.get("name") or "").strip() or path.stem
     if not _NAME.match(name):
-        raise InputError(f"{where(loc, column='name')}: '{name}' cannot name a folder; use letters, digits, '.', '_', '-'")
+        raise InputError(
+            f"{where(loc, column='name')}: '{name}' cannot name a folder; use letters, digits, '.', '_', '-'"
+        )
     if "tasks" not in entry:
         raise InputError(f"{loc}: no 'tasks' given; expected one or more of {', '.join(TASKS)}")
     tasks = _split_tasks(entry["tasks"], where(loc, column="tasks"))
@@ -112,19 +136,29 @@ ENTRY_KEYS = ("name", "file", "tasks", *OPTIONS)
 def _read_csv(path: Path) -> list[Campaign]:
     """CSV: a header row (name, file, tasks, option columns), one row per campaign; '#' lines are comments."""
     text = _text(path)
-    lines = [(i, line) for i, line in enumerate(text.splitlines(), start=1) if line.strip() and not line.lstrip().startswith("#")]
+    lines = [
+        (i, line)
+        for i, line in enumerate(text.splitlines(), start=1)
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
     if not lines:
-        raise InputError(f"{path}: empty catalogue; expected a header row (name,file,tasks,...) and one row per campaign")
+        raise InputError(
+            f"{path}: empty catalogue; expected a header row (name,file,tasks,...) and one row per campaign"
+        )
     head_row, head_line = lines[0]
     header = [h.strip() for h in next(csv.reader([head_line]))]
     _check_keys(header, where(str(path), head_row), ENTRY_KEYS)
     if "file" not in header or "tasks" not in header:
-        raise InputError(f"{where(str(path), head_row)}: the header needs the columns 'file' and 'tasks'")
+        raise InputError(
+            f"{where(str(path), head_row)}: the header needs the columns 'file' and 'tasks'"
+        )
     out = []
     for row, line in lines[1:]:
         cells = next(csv.reader([line]))
         if len(cells) > len(header):
-            raise InputError(f"{where(str(path), row)}: {len(cells)} cells for {len(header)} columns")
+            raise InputError(
+                f"{where(str(path), row)}: {len(cells)} cells for {len(header)} columns"
+            )
         entry = dict(zip(header, (c.strip() for c in cells), strict=False))
         out.append(_campaign(entry, path.parent, where(str(path), row)))
     return out
@@ -138,10 +172,16 @@ def _read_toml(path: Path) -> list[Campaign]:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
     for key in raw:
         if key not in ("defaults", "campaign"):
-            raise InputError(f"{path}: unknown key '{key}'; expected [defaults] and [[campaign]] tables")
+            raise InputError(
+                f"{path}: unknown key '{key}'; expected [defaults] and [[campaign]] tables"
+            )
     defaults = raw.get("defaults", {})
     entries = raw.get("campaign", [])
-    if not isinstance(defaults, dict) or not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+    if (
+        not isinstance(defaults, dict)
+        or not isinstance(entries, list)
+        or not all(isinstance(e, dict) for e in entries)
+    ):
         raise InputError(f"{path}: expected a [defaults] table and [[campaign]] tables")
     _check_keys(defaults, f"{path}, [defaults]", ENTRY_KEYS)
     if not entries:
@@ -177,7 +217,9 @@ def read_catalogue(path) -> list[Campaign]:
     seen: dict[str, str] = {}
     for c in campaigns:
         if c.name.lower() in seen:  # folders: case-insensitive file systems would merge them
-            raise InputError(f"{c.where}: duplicate campaign name '{c.name}' (also {seen[c.name.lower()]})")
+            raise InputError(
+                f"{c.where}: duplicate campaign name '{c.name}' (also {seen[c.name.lower()]})"
+            )
         seen[c.name.lower()] = c.where
     return campaigns
 
@@ -198,15 +240,27 @@ def job_hash(c: Campaign, task: str) -> str:
     if "stand" in c.options:
         h.update(Path(c.options["stand"]).read_bytes())
     opts = {k: v for k, v in c.options.items() if k != "stand"}
-    h.update(json.dumps({"task": task, "options": opts, "version": _version()}, sort_keys=True).encode())
+    h.update(
+        json.dumps({"task": task, "options": opts, "version": _version()}, sort_keys=True).encode()
+    )
     return h.hexdigest()
 
 
 def jobs_of(campaigns: list[Campaign], out_dir) -> list[dict]:
     """One plain dict per (campaign, task): all a worker needs, picklable, no live objects."""
     out = Path(out_dir).resolve()
-    return [{"campaign": c.name, "task": t, "file": str(c.file), "options": dict(c.options),
-             "out": str(out / c.name / t), "hash": job_hash(c, t)} for c in campaigns for t in c.tasks]
+    return [
+        {
+            "campaign": c.name,
+            "task": t,
+            "file": str(c.file),
+            "options": dict(c.options),
+            "out": str(out / c.name / t),
+            "hash": job_hash(c, t),
+        }
+        for c in campaigns
+        for t in c.tasks
+    ]
 
 
 def _stamp(job: dict) -> dict | None:
@@ -230,11 +284,22 @@ def run_job(job: dict) -> dict:
     import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
 
     out = Path(job["out"])
-    row = {"campaign": job["campaign"], "task": job["task"], "file": job["file"], "status": "failed",
-           "seconds": 0.0, "converged": None, "result": "", "output": "", "error": ""}
+    row = {
+        "campaign": job["campaign"],
+        "task": job["task"],
+        "file": job["file"],
+        "status": "failed",
+        "seconds": 0.0,
+        "converged": None,
+        "result": "",
+        "output": "",
+        "error": "",
+    }
     t0 = time.perf_counter()
     try:
-        (out / STAMP).unlink(missing_ok=True)  # stale stamp of other inputs: gone before new outputs appear
+        (out / STAMP).unlink(
+            missing_ok=True
+        )  # stale stamp of other inputs: gone before new outputs appear
         out.mkdir(parents=True, exist_ok=True)
         row |= TASK_RUNNERS[job["task"]](job, out) | {"status": "done"}
     except Exception as exc:  # the batch goes on: the error is this row's, one line
@@ -243,8 +308,19 @@ def run_job(job: dict) -> dict:
     if row["status"] == "done":
         from uq._io.files import dumps_json, write_text_atomic
 
-        write_text_atomic(out / STAMP, dumps_json({"hash": job["hash"], "version": _version(), "task": job["task"],
-                                                   "options": job["options"], "file": job["file"], "row": row}))
+        write_text_atomic(
+            out / STAMP,
+            dumps_json(
+                {
+                    "hash": job["hash"],
+                    "version": _version(),
+                    "task": job["task"],
+                    "options": job["options"],
+                    "file": job["file"],
+                    "row": row,
+                }
+            ),
+        )
     return row
 
 
@@ -263,7 +339,11 @@ def _settings(job: dict):
     from uq._inference.sampler import Settings
 
     o = job["options"]
-    kw = {"n_walkers": o.get("walkers"), "n_ensembles": o.get("ensembles"), "max_steps": o.get("max_steps")}
+    kw = {
+        "n_walkers": o.get("walkers"),
+        "n_ensembles": o.get("ensembles"),
+        "max_steps": o.get("max_steps"),
+    }
     s = Settings(**{k: v for k, v in kw.items() if v is not None})
     s.validate()
     return s
@@ -288,8 +368,11 @@ def _task_fit(job: dict, out: Path) -> dict:
     cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
     save_posteriors(cf, out)
     emit_json(fit_json(cf), str(out / "fit.json"))
-    return {"converged": cf.converged, "output": "fit.json",
-            "result": f"{len(rec.tests)} tests, {rec.n_points} points"}
+    return {
+        "converged": cf.converged,
+        "output": "fit.json",
+        "result": f"{len(rec.tests)} tests, {rec.n_points} points",
+    }
 
 
 def _task_report(job: dict, out: Path) -> dict:
@@ -304,7 +387,11 @@ def _task_report(job: dict, out: Path) -> dict:
     cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
     page = write_report(cf, out, bands=cb)
     emit_json(fit_json(cf) | {"bands": cb.summary(), "report": page.name}, str(out / "fit.json"))
-    return {"converged": cf.converged, "output": page.name, "result": f"{len(rec.tests)} tests, {rec.n_points} points"}
+    return {
+        "converged": cf.converged,
+        "output": page.name,
+        "result": f"{len(rec.tests)} tests, {rec.n_points} points",
+    }
 
 
 def _task_surface(job: dict, out: Path) -> dict:
@@ -316,8 +403,11 @@ def _task_surface(job: dict, out: Path) -> dict:
     res = summary(fit)
     page = write_surface_report(fit, res, out)
     emit_json(res, str(out / "surface.json"))
-    return {"converged": bool(res["converged"]), "output": page.name,
-            "result": f"{fit.orders.label}, {fit.beta.shape[-1]} coefficients"}
+    return {
+        "converged": bool(res["converged"]),
+        "output": page.name,
+        "result": f"{fit.orders.label}, {fit.beta.shape[-1]} coefficients",
+    }
 
 
 def _task_diagnose(job: dict, out: Path) -> dict:
@@ -333,11 +423,19 @@ def _task_diagnose(job: dict, out: Path) -> dict:
     page = write_diagnose_report(res, out)
     names = ", ".join(m["name"] for m in res["mechanisms"]) or "none"
     warn = (res.get("sampling") or {}).get("warnings") or []
-    return {"converged": not warn, "output": Path(page).name if page else "diagnose.json",
-            "result": f"mismatch {'yes' if res['mismatch_detected'] else 'no'}; mechanisms: {names}"}
+    return {
+        "converged": not warn,
+        "output": Path(page).name if page else "diagnose.json",
+        "result": f"mismatch {'yes' if res['mismatch_detected'] else 'no'}; mechanisms: {names}",
+    }
 
 
-TASK_RUNNERS = {"fit": _task_fit, "report": _task_report, "surface": _task_surface, "diagnose": _task_diagnose}
+TASK_RUNNERS = {
+    "fit": _task_fit,
+    "report": _task_report,
+    "surface": _task_surface,
+    "diagnose": _task_diagnose,
+}
 
 
 # ----------------------------------------------------------------------------- running
@@ -350,8 +448,12 @@ def worker_env(threads: int = 1) -> dict:
         return {}
     flags = os.environ.get("XLA_FLAGS", "")
     extra = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
-    return {"XLA_FLAGS": f"{flags} {extra}".strip(), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-            "MKL_NUM_THREADS": "1"}
+    return {
+        "XLA_FLAGS": f"{flags} {extra}".strip(),
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+    }
 
 
 def _client(scheduler: str | None, workers: int):
@@ -363,28 +465,53 @@ def _client(scheduler: str | None, workers: int):
         try:
             return Client(scheduler, timeout="20s")
         except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(f"option --scheduler {scheduler}: cannot connect: {_one_line(exc)}") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR, env=worker_env())
+            raise InputError(
+                f"option --scheduler {scheduler}: cannot connect: {_one_line(exc)}"
+            ) from None
+    cluster = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+        env=worker_env(),
+    )
     return Client(cluster)
 
 
-def run_dask(jobs: list[dict], *, scheduler: str | None = None, workers: int = 2, on_row=None) -> list[dict]:
+def run_dask(
+    jobs: list[dict], *, scheduler: str | None = None, workers: int = 2, on_row=None
+) -> list[dict]:
     """Run ``jobs`` on Dask (a new LocalCluster, or the cluster at ``scheduler``); rows as they finish."""
     from distributed import as_completed
 
     rows = []
     client = _client(scheduler, workers)
     try:
-        futures = {client.submit(run_job, j, key=f"uq-batch-{j['campaign']}-{j['task']}-{j['hash'][:12]}", pure=False): j
-                   for j in jobs}
+        futures = {
+            client.submit(
+                run_job, j, key=f"uq-batch-{j['campaign']}-{j['task']}-{j['hash'][:12]}", pure=False
+            ): j
+            for j in jobs
+        }
         for fut in as_completed(futures):
             try:
                 row = fut.result()
-            except Exception as exc:  # the worker itself died (KilledWorker, out of memory): this row fails
+            except (
+                Exception
+            ) as exc:  # the worker itself died (KilledWorker, out of memory): this row fails
                 j = futures[fut]
-                row = {"campaign": j["campaign"], "task": j["task"], "file": j["file"], "status": "failed",
-                       "seconds": None, "converged": None, "result": "", "output": "", "error": _one_line(exc)}
+                row = {
+                    "campaign": j["campaign"],
+                    "task": j["task"],
+                    "file": j["file"],
+                    "status": "failed",
+                    "seconds": None,
+                    "converged": None,
+                    "result": "",
+                    "output": "",
+                    "error": _one_line(exc),
+                }
             rows.append(row)
             if on_row:
                 on_row(row)
@@ -421,7 +548,12 @@ def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
 
     out = Path(out_dir)
     counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "skipped", "failed")}
-    result = {"catalogue": str(catalogue), "version": _version(), "counts": counts, "campaigns": rows}
+    result = {
+        "catalogue": str(catalogue),
+        "version": _version(),
+        "counts": counts,
+        "campaigns": rows,
+    }
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
@@ -436,14 +568,28 @@ def _index_html(rows: list[dict], catalogue, counts: dict) -> str:
     """index.html: the template ``batch_index.html`` of ``uq._report`` (autoescaped)."""
     from uq._report.html import render
 
-    return render("batch_index.html", rows=rows, catalogue=Path(catalogue).name, counts=counts, version=_version())
+    return render(
+        "batch_index.html",
+        rows=rows,
+        catalogue=Path(catalogue).name,
+        counts=counts,
+        version=_version(),
+    )
 
 
 # ----------------------------------------------------------------------------- command
 
 
-def run_batch(catalogue, out_dir, *, scheduler: str | None = None, workers: int = 2, serial: bool = False,
-              force: bool = False, on_row=None) -> dict:
+def run_batch(
+    catalogue,
+    out_dir,
+    *,
+    scheduler: str | None = None,
+    workers: int = 2,
+    serial: bool = False,
+    force: bool = False,
+    on_row=None,
+) -> dict:
     """Validate ``catalogue``, skip finished pairs, run the rest, write the summary; return it."""
     campaigns = read_catalogue(catalogue)
     jobs = jobs_of(campaigns, out_dir)
@@ -455,14 +601,20 @@ def run_batch(catalogue, out_dir, *, scheduler: str | None = None, workers: int 
         else:
             todo.append(j)
     if todo:
-        rows += run_serial(todo, on_row) if serial else run_dask(todo, scheduler=scheduler, workers=workers, on_row=on_row)
+        rows += (
+            run_serial(todo, on_row)
+            if serial
+            else run_dask(todo, scheduler=scheduler, workers=workers, on_row=on_row)
+        )
     return write_summary(_ordered(rows, jobs), out_dir, catalogue)
 
 
 # ----------------------------------------------------------------------------- benchmark
 
 
-def bench_catalogue(folder, n: int, *, seed: int = 20201, pressures: str = "2,5", step_mm: float = 5.0) -> Path:
+def bench_catalogue(
+    folder, n: int, *, seed: int = 20201, pressures: str = "2,5", step_mm: float = 5.0
+) -> Path:
     """``n`` simulated campaigns (virtual stand, seeds seed+i) and a catalogue running ``fit`` on each."""
     from uq._data.recordings import write_recordings_csv
     from uq._io.files import write_text_atomic
@@ -473,6 +625,9 @@ def bench_catalogue(folder, n: int, *, seed: int = 20201, pressures: str = "2,5"
     rows = ["name,file,tasks,seed"]
     for i in range(n):
         tests = simulate("n50", seed=seed + i, layout=layout)
-        write_text_atomic(folder / f"c{i:02d}.csv", write_recordings_csv(tests, f"benchmark campaign {i}, seed {seed + i}"))
+        write_text_atomic(
+            folder / f"c{i:02d}.csv",
+            write_recordings_csv(tests, f"benchmark campaign {i}, seed {seed + i}"),
+        )
         rows.append(f"c{i:02d},c{i:02d}.csv,fit,{seed + i}")
     return write_text_atomic(folder / "catalogue.csv", "\n".join(rows) + "\n")

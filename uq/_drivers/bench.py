@@ -42,7 +42,9 @@ BENCH_PRESSURE_BAR = 5.0
 BASELINE_WALKERS = 32
 
 
-def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = BENCH_PRESSURE_BAR) -> tuple[PressureTest, float, str]:
+def bench_test(
+    seed: int, recordings: str | None = None, pressure_bar: float = BENCH_PRESSURE_BAR
+) -> tuple[PressureTest, float, str]:
     """The workload: (test, x0_m, description)."""
     if recordings:
         from uq._data.recordings import read_recordings
@@ -52,13 +54,22 @@ def bench_test(seed: int, recordings: str | None = None, pressure_bar: float = B
             return rec.test_at(pressure_bar), rec.x0_m, f"{pressure_bar:g} bar test of {recordings}"
         except KeyError:
             have = ", ".join(f"{p:g}" for p in rec.pressures_bar)
-            raise InputError(f"{recordings}: no test at {pressure_bar:g} bar (option --pressure-bar); it has {have} bar") from None
+            raise InputError(
+                f"{recordings}: no test at {pressure_bar:g} bar (option --pressure-bar); it has {have} bar"
+            ) from None
     from uq._data.reference import PAPER_X0_M
     from uq._stand.simulator import Layout, simulate
 
     t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
-    test = PressureTest(t["pressure_bar"], t["height_m"], t["force_N"], t["piston_m"], t["compression"], t["step"],
-                np.arange(t["step"].size))
+    test = PressureTest(
+        t["pressure_bar"],
+        t["height_m"],
+        t["force_N"],
+        t["piston_m"],
+        t["compression"],
+        t["step"],
+        np.arange(t["step"].size),
+    )
     return test, PAPER_X0_M, f"{pressure_bar:g} bar test of the virtual stand (n50, seed {seed})"
 
 
@@ -70,7 +81,9 @@ QUANTITIES = (*FORCE_NAMES, "sigma0_N", "rel_force")
 # --------------------------------------------------------------------------- (a) project
 
 
-def run_project(test: PressureTest, x0_m: float, *, seed: int, seconds: float, settings: Settings) -> dict:
+def run_project(
+    test: PressureTest, x0_m: float, *, seed: int, seconds: float, settings: Settings
+) -> dict:
     from uq._models.cubic import fit_test
 
     # JIT warm-up, not timed: a whole fit, so the draw programs of the timed runs' bucket are compiled too
@@ -87,10 +100,16 @@ def run_project(test: PressureTest, x0_m: float, *, seed: int, seconds: float, s
             each[n] += float(fit.diagnostics["variables"][n]["ess_bulk"])
         runs += 1
     total_ess = min(each[n] for n in FORCE_NAMES)
-    return {"name": "project: uq._models.cubic.fit_test (collapsed: emcee DE and independence-t moves on the noise, exact coefficient draws)",
-            "runs": runs, "wall_s": total_time, "ess_bulk_min": total_ess, "ess_per_s": total_ess / total_time,
-            "ess_per_s_each": {n: e / total_time for n, e in each.items()},
-            "n_steps_last": fit.diagnostics["n_steps"], "n_chains": fit.diagnostics["n_chains"]}
+    return {
+        "name": "project: uq._models.cubic.fit_test (collapsed: emcee DE and independence-t moves on the noise, exact coefficient draws)",
+        "runs": runs,
+        "wall_s": total_time,
+        "ess_bulk_min": total_ess,
+        "ess_per_s": total_ess / total_time,
+        "ess_per_s_each": {n: e / total_time for n, e in each.items()},
+        "n_steps_last": fit.diagnostics["n_steps"],
+        "n_chains": fit.diagnostics["n_chains"],
+    }
 
 
 # --------------------------------------------------------------------------- (b) baseline
@@ -119,7 +138,9 @@ class PlainForcePosterior:
         res = self.y - self.U @ coef
         ll = -0.5 * float(np.sum(res * res / var + np.log(var)))
         lp = -0.5 * float(np.sum((coef / self.prior_sd) ** 2))
-        lp -= 0.5 * float(np.sum(((np.array([log_s0, log_r]) - self.noise_mean) / self.noise_sd) ** 2))
+        lp -= 0.5 * float(
+            np.sum(((np.array([log_s0, log_r]) - self.noise_mean) / self.noise_sd) ** 2)
+        )
         out = ll + lp
         return out if math.isfinite(out) else -math.inf
 
@@ -127,13 +148,22 @@ class PlainForcePosterior:
         res = self.y - self.U @ self.lsq
         s2 = float(res @ res) / (self.n - 4)
         se = np.sqrt(np.diag(s2 * np.linalg.inv(self.U.T @ self.U)))
-        center = np.concatenate([self.lsq, [math.log(math.sqrt(s2) / math.sqrt(2.0)), math.log(0.005)]])
+        center = np.concatenate(
+            [self.lsq, [math.log(math.sqrt(s2) / math.sqrt(2.0)), math.log(0.005)]]
+        )
         spread = np.concatenate([0.1 * se, [0.05, 0.05]])
         return center + spread * rng.standard_normal((n_walkers, 6))
 
 
-def run_baseline(test: PressureTest, x0_m: float, *, seed: int, seconds: float, n_walkers: int = BASELINE_WALKERS,
-                 chunk: int = 100) -> dict:
+def run_baseline(
+    test: PressureTest,
+    x0_m: float,
+    *,
+    seed: int,
+    seconds: float,
+    n_walkers: int = BASELINE_WALKERS,
+    chunk: int = 100,
+) -> dict:
     post = PlainForcePosterior(test, x0_m)
     rng = np.random.default_rng(seed)
     sampler = emcee.EnsembleSampler(n_walkers, 6, post, vectorize=False)  # default: stretch move
@@ -146,7 +176,7 @@ def run_baseline(test: PressureTest, x0_m: float, *, seed: int, seconds: float, 
     wall = time.perf_counter() - t0
     chain = sampler.get_chain()  # (steps, walkers, 6)
     n = chain.shape[0]
-    tau = emcee.autocorr.integrated_time(chain[n // 5:], tol=0, quiet=True)
+    tau = emcee.autocorr.integrated_time(chain[n // 5 :], tol=0, quiet=True)
     tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else float(n)
     burn = min(max(int(math.ceil(5.0 * tau_max)), 20), n // 2)
     draws = np.swapaxes(chain[burn:], 0, 1)  # (walkers, draws, 6): a, b, c, d, log sigma0, log r
@@ -158,26 +188,41 @@ def run_baseline(test: PressureTest, x0_m: float, *, seed: int, seconds: float, 
         e = bulk_ess(stored[..., j], n_walkers)
         each[name] = e if np.isfinite(e) else 0.0
     ess = min(each[n] for n in FORCE_NAMES)
-    return {"name": "baseline: plain emcee, stretch move, per-walker numpy log-prob over 6 parameters",
-            "runs": 1, "wall_s": wall, "ess_bulk_min": ess, "ess_per_s": ess / wall,
-            "ess_per_s_each": {n: e / wall for n, e in each.items()}, "n_steps": n, "burn_in": burn,
-            "n_walkers": n_walkers, "tau_max": tau_max, "acceptance": float(np.mean(sampler.acceptance_fraction)),
-            "posterior_mean_force": dict(zip(FORCE_NAMES, draws[..., :4].reshape(-1, 4).mean(0).tolist(), strict=True))}
+    return {
+        "name": "baseline: plain emcee, stretch move, per-walker numpy log-prob over 6 parameters",
+        "runs": 1,
+        "wall_s": wall,
+        "ess_bulk_min": ess,
+        "ess_per_s": ess / wall,
+        "ess_per_s_each": {n: e / wall for n, e in each.items()},
+        "n_steps": n,
+        "burn_in": burn,
+        "n_walkers": n_walkers,
+        "tau_max": tau_max,
+        "acceptance": float(np.mean(sampler.acceptance_fraction)),
+        "posterior_mean_force": dict(
+            zip(FORCE_NAMES, draws[..., :4].reshape(-1, 4).mean(0).tolist(), strict=True)
+        ),
+    }
 
 
 # --------------------------------------------------------------------------- memory and scale
 
 MB = 1024.0  # ru_maxrss is in KiB on Linux
 SCALING_FACTORS = (1, 4, 16)
-SCALING_BASE_STEP_MM = 5.0  # the paper's step: 37 points per test; 1.25 and 0.3125 mm give 4x and 16x
+SCALING_BASE_STEP_MM = (
+    5.0  # the paper's step: 37 points per test; 1.25 and 0.3125 mm give 4x and 16x
+)
 # Run in a child: the uq command, then its own peak RSS and that of its reaped children (Dask workers).
-_CHILD = ("import json, resource, sys\n"
-          "from uq._cli.main import main\n"
-          "rc = main(sys.argv[2:])\n"
-          "ru = lambda who: resource.getrusage(who).ru_maxrss / 1024.0\n"
-          "open(sys.argv[1], 'w').write(json.dumps({'rc': rc, 'self_mb': ru(resource.RUSAGE_SELF), "
-          "'children_mb': ru(resource.RUSAGE_CHILDREN)}))\n"
-          "sys.exit(rc)\n")
+_CHILD = (
+    "import json, resource, sys\n"
+    "from uq._cli.main import main\n"
+    "rc = main(sys.argv[2:])\n"
+    "ru = lambda who: resource.getrusage(who).ru_maxrss / 1024.0\n"
+    "open(sys.argv[1], 'w').write(json.dumps({'rc': rc, 'self_mb': ru(resource.RUSAGE_SELF), "
+    "'children_mb': ru(resource.RUSAGE_CHILDREN)}))\n"
+    "sys.exit(rc)\n"
+)
 
 
 def run_child(argv: list[str]) -> dict:
@@ -195,16 +240,27 @@ def run_child(argv: list[str]) -> dict:
     os.close(fd)
     try:
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-c", _CHILD, out, *map(str, argv), "--quiet"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.run(
+            [sys.executable, "-c", _CHILD, out, *map(str, argv), "--quiet"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         wall = time.perf_counter() - t0
         r = json.loads(open(out).read() or "{}")
     finally:
         os.unlink(out)
     if proc.returncode not in (0, 1) or not r:
-        raise RuntimeError(f"uq {argv[0]} failed in the bench (exit {proc.returncode}): {proc.stderr.strip()[-300:]}")
-    return {"command": "uq " + " ".join(map(str, argv)), "exit": proc.returncode, "wall_s": wall,
-            "peak_rss_mb": r["self_mb"], "children_peak_rss_mb": r["children_mb"]}
+        raise RuntimeError(
+            f"uq {argv[0]} failed in the bench (exit {proc.returncode}): {proc.stderr.strip()[-300:]}"
+        )
+    return {
+        "command": "uq " + " ".join(map(str, argv)),
+        "exit": proc.returncode,
+        "wall_s": wall,
+        "peak_rss_mb": r["self_mb"],
+        "children_peak_rss_mb": r["children_mb"],
+    }
 
 
 class PeakRSS:
@@ -247,8 +303,13 @@ def _scaled_campaign(folder, factor: int, seed: int, pressures: tuple[float, ...
     return read_recordings(path), step
 
 
-def scaling(*, seed: int, settings: Settings, pressures: tuple[float, ...] = (2.0, 5.0),
-            factors=SCALING_FACTORS) -> dict:
+def scaling(
+    *,
+    seed: int,
+    settings: Settings,
+    pressures: tuple[float, ...] = (2.0, 5.0),
+    factors=SCALING_FACTORS,
+) -> dict:
     """``fit_campaign`` at 1x, 4x, 16x the points per test, one process; ratios against 1x.
 
     Each size is fitted once untimed with a 20-step chain first (JAX compiles per array shape),
@@ -262,27 +323,50 @@ def scaling(*, seed: int, settings: Settings, pressures: tuple[float, ...] = (2.
     with tempfile.TemporaryDirectory(prefix="uq-bench-scaling-") as tmp:
         for f in factors:
             rec, step = _scaled_campaign(tmp, f, seed, pressures)
-            fit_campaign(rec, seed=seed, settings=Settings(n_walkers=settings.n_walkers, n_ensembles=settings.n_ensembles,
-                                                           max_steps=20, min_steps=20))
+            fit_campaign(
+                rec,
+                seed=seed,
+                settings=Settings(
+                    n_walkers=settings.n_walkers,
+                    n_ensembles=settings.n_ensembles,
+                    max_steps=20,
+                    min_steps=20,
+                ),
+            )
             with PeakRSS() as mem:
                 t0 = time.perf_counter()
                 cf = fit_campaign(rec, seed=seed, settings=settings)
                 wall = time.perf_counter() - t0
             steps = sum(int(t.diagnostics["n_steps"]) for t in cf.tests)
-            rows.append({"factor": f, "step_mm": step, "points_per_test": rec.n_points / len(rec.tests),
-                         "n_points": rec.n_points, "wall_s": wall, "sampler_steps": steps, "ms_per_step": 1e3 * wall / steps,
-                         "peak_rss_mb": mem.peak_mb, "added_rss_mb": mem.added_mb})
+            rows.append(
+                {
+                    "factor": f,
+                    "step_mm": step,
+                    "points_per_test": rec.n_points / len(rec.tests),
+                    "n_points": rec.n_points,
+                    "wall_s": wall,
+                    "sampler_steps": steps,
+                    "ms_per_step": 1e3 * wall / steps,
+                    "peak_rss_mb": mem.peak_mb,
+                    "added_rss_mb": mem.added_mb,
+                }
+            )
     one = rows[0]
     for r in rows:
         r["points_ratio"] = r["n_points"] / one["n_points"]
         r["time_ratio"] = r["wall_s"] / one["wall_s"]
         r["per_step_time_ratio"] = r["ms_per_step"] / one["ms_per_step"]
         r["peak_rss_ratio"] = r["peak_rss_mb"] / one["peak_rss_mb"]
-        r["added_rss_ratio"] = r["added_rss_mb"] / one["added_rss_mb"] if one["added_rss_mb"] > 0 else math.nan
-    return {"workload": f"uq fit of a simulated n50 campaign at {', '.join(f'{p:g}' for p in pressures)} bar, "
-                        f"steps {', '.join(format(r['step_mm'], 'g') for r in rows)} mm, seed {seed}",
-            "measure": "wall time after a JIT warm-up of the same shape; peak RSS of this process during the fit "
-                       "(psutil, 10 ms) and the part the fit added", "runs": rows}
+        r["added_rss_ratio"] = (
+            r["added_rss_mb"] / one["added_rss_mb"] if one["added_rss_mb"] > 0 else math.nan
+        )
+    return {
+        "workload": f"uq fit of a simulated n50 campaign at {', '.join(f'{p:g}' for p in pressures)} bar, "
+        f"steps {', '.join(format(r['step_mm'], 'g') for r in rows)} mm, seed {seed}",
+        "measure": "wall time after a JIT warm-up of the same shape; peak RSS of this process during the fit "
+        "(psutil, 10 ms) and the part the fit added",
+        "runs": rows,
+    }
 
 
 def report_memory(seed: int) -> dict:
@@ -294,9 +378,12 @@ def report_memory(seed: int) -> dict:
 
     with tempfile.TemporaryDirectory(prefix="uq-bench-report-") as tmp:
         csv = Path(tmp) / "n50.csv"
-        csv.write_text(write_recordings_csv(simulate("n50", seed=seed), "bench: the paper's campaign"))
+        csv.write_text(
+            write_recordings_csv(simulate("n50", seed=seed), "bench: the paper's campaign")
+        )
         return run_child(["report", csv, "--out", Path(tmp) / "report", "--seed", seed]) | {
-            "workload": f"uq report of the paper's campaign from the virtual stand (11 tests, seed {seed}), cold process"}
+            "workload": f"uq report of the paper's campaign from the virtual stand (11 tests, seed {seed}), cold process"
+        }
 
 
 def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
@@ -310,30 +397,58 @@ def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
         cat = bench_catalogue(tmp, n, seed=seed)
         serial = run_child(["batch", cat, "--out", Path(tmp) / "serial", "--serial"])
         dask = run_child(["batch", cat, "--out", Path(tmp) / "dask", "--workers", workers])
-        means = [[_means(json.loads((Path(tmp) / run / f"c{i:02d}" / "fit" / "fit.json").read_text())["tests"])
-                  for i in range(n)] for run in ("serial", "dask")]
+        means = [
+            [
+                _means(
+                    json.loads((Path(tmp) / run / f"c{i:02d}" / "fit" / "fit.json").read_text())[
+                        "tests"
+                    ]
+                )
+                for i in range(n)
+            ]
+            for run in ("serial", "dask")
+        ]
     # observed not bit-identical (probably the workers' single-threaded XLA rounding sums differently,
     # after which the chains part ways), so the two runs are compared to Monte Carlo error
-    diff = max(abs(a - b) / sd for ms, md in zip(*means, strict=True) for (a, sd), (b, _) in zip(ms, md, strict=True))
-    return {"workload": f"{n} simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, seeds {seed}..{seed + n - 1}",
-            "cores": cores(), "workers": workers, "serial": serial, "dask": dask,
-            "speedup": serial["wall_s"] / dask["wall_s"], "max_mean_difference_in_sd": diff,
-            "note": f"end-to-end wall time of each command in a fresh process (imports, JIT, cluster start included); "
-                    f"the ideal speed-up is below {workers} on {workers} cores"}
+    diff = max(
+        abs(a - b) / sd
+        for ms, md in zip(*means, strict=True)
+        for (a, sd), (b, _) in zip(ms, md, strict=True)
+    )
+    return {
+        "workload": f"{n} simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, seeds {seed}..{seed + n - 1}",
+        "cores": cores(),
+        "workers": workers,
+        "serial": serial,
+        "dask": dask,
+        "speedup": serial["wall_s"] / dask["wall_s"],
+        "max_mean_difference_in_sd": diff,
+        "note": f"end-to-end wall time of each command in a fresh process (imports, JIT, cluster start included); "
+        f"the ideal speed-up is below {workers} on {workers} cores",
+    }
 
 
 def _means(tests: list[dict]) -> list[tuple[float, float]]:
     """(mean, sd) of every coefficient of every test of a fit.json."""
-    return [(v["mean"], v["sd"]) for t in tests for block in ("force", "piston") for v in t[block].values()]
+    return [
+        (v["mean"], v["sd"])
+        for t in tests
+        for block in ("force", "piston")
+        for v in t[block].values()
+    ]
 
 
 def cores() -> int:
     import os
 
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return (
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    )
 
 
-def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None, n_queries: int = 100) -> dict:
+def margin_speed(
+    *, seed: int, settings: Settings, recordings: str | None = None, n_queries: int = 100
+) -> dict:
     """``uq margin``: one full query (fit + choice + answer) against the same query from the saved file.
 
     All in this process, in the order a user meets them: the full query first (JAX compilation
@@ -353,13 +468,21 @@ def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None
     with tempfile.TemporaryDirectory(prefix="uq-bench-margin-") as tmp:
         if recordings is None:
             csv = Path(tmp) / "n50.csv"
-            csv.write_text(write_recordings_csv(simulate("n50", seed=seed), "bench --margin: the paper's campaign"))
-            what = f"the paper's campaign from the virtual stand (11 tests, seed {seed}), as data/n50"
+            csv.write_text(
+                write_recordings_csv(
+                    simulate("n50", seed=seed), "bench --margin: the paper's campaign"
+                )
+            )
+            what = (
+                f"the paper's campaign from the virtual stand (11 tests, seed {seed}), as data/n50"
+            )
         else:
             csv, what = Path(recordings), f"{recordings}"
         t0 = time.perf_counter()
         rec = read_recordings(csv)
-        ans, info, diagnostics = fit_and_choose(rec, model="auto", seed=seed, settings=settings, stand=PAPER_STAND)
+        ans, info, diagnostics = fit_and_choose(
+            rec, model="auto", seed=seed, settings=settings, stand=PAPER_STAND
+        )
         t_fit = time.perf_counter() - t0
         plo, phi = ans.pressure_range_bar
         if recordings is None:
@@ -367,19 +490,41 @@ def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None
         else:
             h, pb = rec.x0_m, (plo + phi) / 2
             load = float(ans.force_draws(h, pb).mean())
-        query = {"height_m": h, "load_N": load, "prob": 0.95, "pressure_bar": pb, "tolerance_pct": 10.0}
+        query = {
+            "height_m": h,
+            "load_N": load,
+            "prob": 0.95,
+            "pressure_bar": pb,
+            "tolerance_pct": 10.0,
+        }
 
         def ask(a, i, q=query):
-            return margin(a, q["height_m"], q["load_N"], q["prob"], pressure_bar=q["pressure_bar"],
-                          tolerance_pct=q["tolerance_pct"], model_info=i)
+            return margin(
+                a,
+                q["height_m"],
+                q["load_N"],
+                q["prob"],
+                pressure_bar=q["pressure_bar"],
+                tolerance_pct=q["tolerance_pct"],
+                model_info=i,
+            )
 
         t0 = time.perf_counter()
         full = ask(ans, info)
         t_answer = time.perf_counter() - t0
         path = Path(tmp) / "fit.nc"
         t0 = time.perf_counter()
-        save_answer(path, ans, info, recordings=rec, seed=seed, written_by="uq bench --margin", settings=settings,
-                    stand=PAPER_STAND, diagnostics=diagnostics)
+        save_answer(
+            path,
+            ans,
+            info,
+            recordings=rec,
+            seed=seed,
+            written_by="uq bench --margin",
+            settings=settings,
+            stand=PAPER_STAND,
+            diagnostics=diagnostics,
+        )
         t_save = time.perf_counter() - t0
         t0 = time.perf_counter()
         ans2, info2, _ = load_answer(path)
@@ -394,22 +539,48 @@ def margin_speed(*, seed: int, settings: Settings, recordings: str | None = None
         for q in queries:
             ask(many_ans, many_info, q)
         t_many = time.perf_counter() - t0
-        cold = run_child(["margin", "--fit", path, "--height-mm", h * 1e3, "--load-N", load, "--pressure-bar", pb,
-                          "--tolerance-pct", 10])
+        cold = run_child(
+            [
+                "margin",
+                "--fit",
+                path,
+                "--height-mm",
+                h * 1e3,
+                "--load-N",
+                load,
+                "--pressure-bar",
+                pb,
+                "--tolerance-pct",
+                10,
+            ]
+        )
         size = path.stat().st_size
     full_s, saved_s = t_fit + t_answer, t_load + t_again
     return {
         "workload": f"uq margin on {what}: {load:g} N at {h * 1e3:g} mm, force band at {pb:g} bar, stroke within 10 %",
-        "answered_by": info["name"], "settings": {"walkers": settings.n_walkers, "ensembles": settings.n_ensembles,
-                                                  "max_steps": settings.max_steps},
-        "full_query": {"wall_s": full_s, "fit_and_choice_s": t_fit, "answer_s": t_answer,
-                       "note": "read, fit both models, PSIS-LOO comparison, answer; JAX compilation included"},
-        "save_s": t_save, "saved_file_bytes": size,
+        "answered_by": info["name"],
+        "settings": {
+            "walkers": settings.n_walkers,
+            "ensembles": settings.n_ensembles,
+            "max_steps": settings.max_steps,
+        },
+        "full_query": {
+            "wall_s": full_s,
+            "fit_and_choice_s": t_fit,
+            "answer_s": t_answer,
+            "note": "read, fit both models, PSIS-LOO comparison, answer; JAX compilation included",
+        },
+        "save_s": t_save,
+        "saved_file_bytes": size,
         "from_saved_file": {"wall_s": saved_s, "load_s": t_load, "answer_s": t_again},
         "identical_answer": dumps_json(full) == dumps_json(again),
         "ratio_full_to_saved": full_s / saved_s,
-        "queries_from_saved_file": {"n": n_queries, "wall_s": t_many, "per_query_s": t_many / n_queries,
-                                    "note": "one load of the file, then each query with a force band and a usable stroke"},
+        "queries_from_saved_file": {
+            "n": n_queries,
+            "wall_s": t_many,
+            "per_query_s": t_many / n_queries,
+            "note": "one load of the file, then each query with a force band and a usable stroke",
+        },
         "cold_cli_from_saved_file": cold,
         "measure": "wall time in this process (perf_counter) unless named cold: a fresh interpreter, imports included",
     }
@@ -424,27 +595,49 @@ def _spread_queries(ans, n: int, seed: int) -> list[dict]:
     for _ in range(n):
         x = float(rng.uniform(lo + 0.15 * (hi - lo), hi - 0.15 * (hi - lo)))
         p = float(rng.uniform(plo + 0.15 * (phi - plo), phi - 0.15 * (phi - plo)))
-        queries.append({"height_m": x, "pressure_bar": p, "prob": 0.95, "tolerance_pct": 10.0,
-                        "load_N": float(ans.force_draws(x, p).mean())})
+        queries.append(
+            {
+                "height_m": x,
+                "pressure_bar": p,
+                "prob": 0.95,
+                "tolerance_pct": 10.0,
+                "load_N": float(ans.force_draws(x, p).mean()),
+            }
+        )
     return queries
 
 
-def bench(*, seconds: float, seed: int, settings: Settings | None = None, recordings: str | None = None,
-          pressure_bar: float = BENCH_PRESSURE_BAR, baseline_walkers: int = BASELINE_WALKERS) -> dict:
+def bench(
+    *,
+    seconds: float,
+    seed: int,
+    settings: Settings | None = None,
+    recordings: str | None = None,
+    pressure_bar: float = BENCH_PRESSURE_BAR,
+    baseline_walkers: int = BASELINE_WALKERS,
+) -> dict:
     settings = settings or Settings()
     test, x0_m, what = bench_test(seed, recordings, pressure_bar)
     project = run_project(test, x0_m, seed=seed, seconds=seconds, settings=settings)
-    baseline = run_baseline(test, x0_m, seed=seed, seconds=max(seconds, project["wall_s"]), n_walkers=baseline_walkers)
+    baseline = run_baseline(
+        test, x0_m, seed=seed, seconds=max(seconds, project["wall_s"]), n_walkers=baseline_walkers
+    )
+
     def ratio_of(p, b):
         return p / b if b > 0 else math.inf
 
-    each = {n: ratio_of(project["ess_per_s_each"][n], baseline["ess_per_s_each"][n]) for n in QUANTITIES}
-    return {
-        "workload": what, "n_points": test.n_points, "seed": seed,
-        "measure": "min over a_P, b_P, c_P, d_P of ArviZ bulk ESS / wall time (s), after JIT warm-up; "
-                   "ratio_each: the ratio of ESS/s of every reported quantity of the force posterior",
-        "project": project, "baseline": baseline, "ratio": ratio_of(project["ess_per_s"], baseline["ess_per_s"]),
-        "ratio_each": each, "ratio_min_all": min(each.values()),
+    each = {
+        n: ratio_of(project["ess_per_s_each"][n], baseline["ess_per_s_each"][n]) for n in QUANTITIES
     }
-
-
+    return {
+        "workload": what,
+        "n_points": test.n_points,
+        "seed": seed,
+        "measure": "min over a_P, b_P, c_P, d_P of ArviZ bulk ESS / wall time (s), after JIT warm-up; "
+        "ratio_each: the ratio of ESS/s of every reported quantity of the force posterior",
+        "project": project,
+        "baseline": baseline,
+        "ratio": ratio_of(project["ess_per_s"], baseline["ess_per_s"]),
+        "ratio_each": each,
+        "ratio_min_all": min(each.values()),
+    }

@@ -51,7 +51,9 @@ QUANTITIES = FORCE_NAMES + PISTON_NAMES
 N_RANKS = 99  # draws per replication for SBC ranks -> ranks 0..99, 10 bins of 10
 
 
-def _test_from_model(rng, pressure_bar: float, x0_m: float) -> tuple[PressureTest, np.ndarray, np.ndarray]:
+def _test_from_model(
+    rng, pressure_bar: float, x0_m: float
+) -> tuple[PressureTest, np.ndarray, np.ndarray]:
     """A test drawn from the per-pressure model's priors; returns (test, truth (8,), noise (3,))."""
     heights, comp = Layout(pressures_bar=(pressure_bar,)).heights()
     u = heights - x0_m
@@ -65,15 +67,23 @@ def _test_from_model(rng, pressure_bar: float, x0_m: float) -> tuple[PressureTes
     piston = mu_l + sL * rng.standard_normal(u.size)
     truth = np.concatenate([to_paper_basis(alpha_f), to_paper_basis(alpha_l)])
     steps = np.arange(u.size)
-    return PressureTest(pressure_bar, heights, force, piston, comp, steps, steps + 2), truth, np.array([s0, rel, sL])
+    return (
+        PressureTest(pressure_bar, heights, force, piston, comp, steps, steps + 2),
+        truth,
+        np.array([s0, rel, sL]),
+    )
 
 
-def _test_from_stand(seed: int, pressure_bar: float, stand: StandDescription) -> tuple[PressureTest, np.ndarray]:
+def _test_from_stand(
+    seed: int, pressure_bar: float, stand: StandDescription
+) -> tuple[PressureTest, np.ndarray]:
     t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)), stand=stand)[0]
     t1 = table1()
     i = t1.index(pressure_bar)
     steps = t["step"]
-    test = PressureTest(pressure_bar, t["height_m"], t["force_N"], t["piston_m"], t["compression"], steps, steps + 2)
+    test = PressureTest(
+        pressure_bar, t["height_m"], t["force_N"], t["piston_m"], t["compression"], steps, steps + 2
+    )
     return test, np.concatenate([t1.force[i], t1.piston[i]])
 
 
@@ -97,12 +107,21 @@ class CalibrationResult:
         n = self.inside90.shape[0]
         p_sbc = [_sbc_p(self.ranks[:, j]) for j in range(len(self.names))]
         p_holm = _holm(p_sbc)
-        out = {"truth": self.truth_kind, "noise_model": self.noise, "replications": n, "stand": self.stand.changes(),
-               "converged_fraction": float(self.converged.mean()),
-               "predictive_coverage90": None if self.predictive is None else {
-                   "low_force_third": float(self.predictive[:, 0].mean()),
-                   "high_force_third": float(self.predictive[:, 1].mean())},
-               "acceptance_region_99pct": {"50": _region(n, 0.5), "90": _region(n, 0.9)}, "quantities": {}}
+        out = {
+            "truth": self.truth_kind,
+            "noise_model": self.noise,
+            "replications": n,
+            "stand": self.stand.changes(),
+            "converged_fraction": float(self.converged.mean()),
+            "predictive_coverage90": None
+            if self.predictive is None
+            else {
+                "low_force_third": float(self.predictive[:, 0].mean()),
+                "high_force_third": float(self.predictive[:, 1].mean()),
+            },
+            "acceptance_region_99pct": {"50": _region(n, 0.5), "90": _region(n, 0.9)},
+            "quantities": {},
+        }
         for j, name in enumerate(self.names):
             hist = np.histogram(self.ranks[:, j], bins=10, range=(0, N_RANKS + 1))[0]
             out["quantities"][name] = {
@@ -110,8 +129,12 @@ class CalibrationResult:
                 "coverage90": float(self.inside90[:, j].mean()),
                 "covered50": int(self.inside50[:, j].sum()),
                 "covered90": int(self.inside90[:, j].sum()),
-                "in_region50": _region(n, 0.5)[0] <= int(self.inside50[:, j].sum()) <= _region(n, 0.5)[1],
-                "in_region90": _region(n, 0.9)[0] <= int(self.inside90[:, j].sum()) <= _region(n, 0.9)[1],
+                "in_region50": _region(n, 0.5)[0]
+                <= int(self.inside50[:, j].sum())
+                <= _region(n, 0.5)[1],
+                "in_region90": _region(n, 0.9)[0]
+                <= int(self.inside90[:, j].sum())
+                <= _region(n, 0.9)[1],
                 "sbc_rank_histogram": hist.tolist(),
                 "sbc_uniformity_p": p_sbc[j],
                 "sbc_uniformity_p_holm": p_holm[j],
@@ -146,9 +169,16 @@ def _region(n: int, p: float) -> tuple[int, int]:
     return int(stats.binom.ppf(0.005, n, p)), int(stats.binom.isf(0.005, n, p))
 
 
-def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: int = 0,
-              settings: Settings | None = None, pressures=(1.0, 5.0, 10.0),
-              stand: StandDescription = PAPER_STAND) -> CalibrationResult:
+def calibrate(
+    reps: int,
+    *,
+    truth: str = "prior",
+    noise: str = "budget",
+    seed: int = 0,
+    settings: Settings | None = None,
+    pressures=(1.0, 5.0, 10.0),
+    stand: StandDescription = PAPER_STAND,
+) -> CalibrationResult:
     """``reps`` replications of one setting; ``stand`` is the virtual stand of the n50 truth."""
     if truth not in ("prior", "n50"):
         raise InputError(f"option --truth: expected 'prior' or 'n50', got '{truth}'")
@@ -157,7 +187,9 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
     if reps < 1:
         raise InputError(f"option --reps: at least 1 replication, got {reps}")
     if truth == "prior" and stand != PAPER_STAND:
-        raise InputError("option --stand: only the n50 truth runs on a stand; the prior truth draws its data from the model")
+        raise InputError(
+            "option --stand: only the n50 truth runs on a stand; the prior truth draws its data from the model"
+        )
     settings = settings or Settings(min_steps=300, chunk=150)
     rng = np.random.default_rng(seed)
     names = list(QUANTITIES) + (list(NOISE_NAMES) if truth == "prior" and noise == "budget" else [])
@@ -171,7 +203,11 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
         else:
             test, true = _test_from_stand(int(rng.integers(2**31)), p, stand)
         fit = fit_test(test, 0.112, seed=int(rng.integers(2**31)), settings=settings, noise=noise)
-        draws = np.concatenate([fit.flat("force"), fit.flat("piston")] + ([fit.flat("noise")] if len(names) > 8 else []), axis=1)
+        draws = np.concatenate(
+            [fit.flat("force"), fit.flat("piston")]
+            + ([fit.flat("noise")] if len(names) > 8 else []),
+            axis=1,
+        )
         q = np.quantile(draws, [0.05, 0.25, 0.75, 0.95], axis=0)
         in50.append((q[1] <= true) & (true <= q[2]))
         in90.append((q[0] <= true) & (true <= q[3]))
@@ -180,9 +216,24 @@ def calibrate(reps: int, *, truth: str = "prior", noise: str = "budget", seed: i
         conv.append(fit.diagnostics["converged"])
         ps.append(p)
         if truth == "n50":
-            pred.append(_predictive_coverage(fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng))
-    return CalibrationResult(truth, noise, names, np.array(in50), np.array(in90), np.array(ranks), np.array(ps),
-                             np.array(conv), time.perf_counter() - t0, np.array(pred) if pred else None, stand)
+            pred.append(
+                _predictive_coverage(
+                    fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng
+                )
+            )
+    return CalibrationResult(
+        truth,
+        noise,
+        names,
+        np.array(in50),
+        np.array(in90),
+        np.array(ranks),
+        np.array(ps),
+        np.array(conv),
+        time.perf_counter() - t0,
+        np.array(pred) if pred else None,
+        stand,
+    )
 
 
 def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> np.ndarray:
@@ -202,35 +253,56 @@ def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> 
 
 
 def markdown(results: list[CalibrationResult], command: str) -> str:
-    lines = ["# Calibration of the per-pressure posteriors", "",
-             "Generated by `" + command + "` (uq/_drivers/calibrate.py). Coverage = share of replications whose "
-             "central interval contains the truth; the 99 % binomial acceptance region is given per setting. "
-             "SBC p = chi-square test of uniform ranks (10 bins); Holm p = the same adjusted for testing every "
-             "quantity of a setting (only Holm p < 0.01 is evidence of miscalibration).", ""]
+    lines = [
+        "# Calibration of the per-pressure posteriors",
+        "",
+        "Generated by `"
+        + command
+        + "` (uq/_drivers/calibrate.py). Coverage = share of replications whose "
+        "central interval contains the truth; the 99 % binomial acceptance region is given per setting. "
+        "SBC p = chi-square test of uniform ranks (10 bins); Holm p = the same adjusted for testing every "
+        "quantity of a setting (only Holm p < 0.01 is evidence of miscalibration).",
+        "",
+    ]
     for res in results:
         s = res.summary()
         n = s["replications"]
         r50, r90 = s["acceptance_region_99pct"]["50"], s["acceptance_region_99pct"]["90"]
-        on = (" on a stand with " + ", ".join(f"{k} = {v:g}" for k, v in s["stand"].items())) if s["stand"] else ""
-        lines += [f"## truth = {s['truth']}{on}, noise model = {s['noise_model']} ({n} replications, "
-                  f"{100 * s['converged_fraction']:.0f} % converged, {res.seconds:.0f} s)", ""]
+        on = (
+            (" on a stand with " + ", ".join(f"{k} = {v:g}" for k, v in s["stand"].items()))
+            if s["stand"]
+            else ""
+        )
+        lines += [
+            f"## truth = {s['truth']}{on}, noise model = {s['noise_model']} ({n} replications, "
+            f"{100 * s['converged_fraction']:.0f} % converged, {res.seconds:.0f} s)",
+            "",
+        ]
         if s["predictive_coverage90"]:
             pc = s["predictive_coverage90"]
-            lines += [f"90 % predictive intervals of a fresh replicate's force readings cover "
-                      f"{100 * pc['low_force_third']:.1f} % of the lowest-force third and "
-                      f"{100 * pc['high_force_third']:.1f} % of the highest-force third of each test.", ""]
+            lines += [
+                f"90 % predictive intervals of a fresh replicate's force readings cover "
+                f"{100 * pc['low_force_third']:.1f} % of the lowest-force third and "
+                f"{100 * pc['high_force_third']:.1f} % of the highest-force third of each test.",
+                "",
+            ]
         lines += [
-                  f"| quantity | covered of {n} at 50 % (region {r50[0]}-{r50[1]}) | at 90 % (region {r90[0]}-{r90[1]}) "
-                  "| SBC p | Holm p |",
-                  "|---|---|---|---|---|"]
+            f"| quantity | covered of {n} at 50 % (region {r50[0]}-{r50[1]}) | at 90 % (region {r90[0]}-{r90[1]}) "
+            "| SBC p | Holm p |",
+            "|---|---|---|---|---|",
+        ]
         for name, q in s["quantities"].items():
             mark50 = "" if q["in_region50"] else " **outside**"
             mark90 = "" if q["in_region90"] else " **outside**"
             p = "-" if q["sbc_uniformity_p"] is None else f"{q['sbc_uniformity_p']:.3f}"
             ph = "-" if q["sbc_uniformity_p_holm"] is None else f"{q['sbc_uniformity_p_holm']:.3f}"
-            ph += " **low**" if q["sbc_uniformity_p_holm"] is not None and q["sbc_uniformity_p_holm"] < 0.01 else ""
-            lines.append(f"| {name} | {q['covered50']}{mark50} | {q['covered90']}{mark90} | {p} | {ph} |")
+            ph += (
+                " **low**"
+                if q["sbc_uniformity_p_holm"] is not None and q["sbc_uniformity_p_holm"] < 0.01
+                else ""
+            )
+            lines.append(
+                f"| {name} | {q['covered50']}{mark50} | {q['covered90']}{mark90} | {p} | {ph} |"
+            )
         lines.append("")
     return "\n".join(lines) + "\n"
-
-

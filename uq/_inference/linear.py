@@ -34,8 +34,14 @@ class LinearPosterior(NamedTuple):
 def linear_posterior(X, y, sigma, prior_sd) -> LinearPosterior:
     """Posterior of beta given noise scales. X (n, k), y (n,), sigma (n,), prior_sd (k,)."""
     w = 1.0 / sigma**2
-    return posterior_from_moments(X.T @ (w[:, None] * X), X.T @ (w * y), jnp.sum(w * y**2), y.size,
-                                  jnp.sum(jnp.log(sigma**2)), prior_sd)
+    return posterior_from_moments(
+        X.T @ (w[:, None] * X),
+        X.T @ (w * y),
+        jnp.sum(w * y**2),
+        y.size,
+        jnp.sum(jnp.log(sigma**2)),
+        prior_sd,
+    )
 
 
 def posterior_from_moments(gram, rhs, yy, n, log_noise_det, prior_sd) -> LinearPosterior:
@@ -48,7 +54,9 @@ def posterior_from_moments(gram, rhs, yy, n, log_noise_det, prior_sd) -> LinearP
     mean = jax.scipy.linalg.cho_solve((chol, True), rhs)
     quad = yy - rhs @ mean
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
-    log_marginal = -0.5 * (quad + log_noise_det + jnp.sum(jnp.log(prior_sd**2)) + logdet + n * LOG_2PI)
+    log_marginal = -0.5 * (
+        quad + log_noise_det + jnp.sum(jnp.log(prior_sd**2)) + logdet + n * LOG_2PI
+    )
     return LinearPosterior(mean, chol, log_marginal)
 
 
@@ -80,7 +88,7 @@ def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
         for A, B in pairs:
             A, B = np.asarray(A, float), np.asarray(B, float)
             for j in range(k):
-                cols = A[:, j:j + 1] * B
+                cols = A[:, j : j + 1] * B
                 norms = np.linalg.norm(cols, axis=0)
                 for kk in np.flatnonzero(norms > 0):
                     v = cols[:, kk] / norms[kk]
@@ -96,7 +104,9 @@ def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
                     ref = unique[u][1]
                     scale = (cols[:, kk] @ ref) / (ref @ ref)
                     entries[j * k + kk].append((offset + u, scale))
-        products.append(np.stack([col for _, col in unique], axis=1) if unique else np.zeros((A.shape[0], 0)))
+        products.append(
+            np.stack([col for _, col in unique], axis=1) if unique else np.zeros((A.shape[0], 0))
+        )
         offset += len(unique)
     width = max(1, max(len(e) for e in entries))
     index = np.full((k * k, width), offset, dtype=np.int32)  # ``offset``: the zero moment
@@ -109,7 +119,9 @@ def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
 
 def weighted_gram(plan: GramPlan, weights):
     """``sum_g sum_(A, B) A^T diag(weights[g]) B`` (k, k) from the plan; weights one (n,) per group."""
-    moments = jnp.concatenate([w @ Q for w, Q in zip(weights, plan.products, strict=True)] + [jnp.zeros(1)])
+    moments = jnp.concatenate(
+        [w @ Q for w, Q in zip(weights, plan.products, strict=True)] + [jnp.zeros(1)]
+    )
     k = int(round(np.sqrt(plan.index.shape[0])))
     return jnp.sum(moments[plan.index] * plan.coef, axis=-1).reshape(k, k)
 
@@ -153,7 +165,11 @@ def bucket(n: int, size: int = DRAW_BATCH) -> int:
 def pad_rows(a, size: int) -> np.ndarray:
     """``a`` (N, ...) with its last row repeated up to ``size`` rows (as numpy)."""
     a = np.asarray(a)
-    return np.concatenate([a, np.repeat(a[-1:], size - a.shape[0], axis=0)]) if size > a.shape[0] else a
+    return (
+        np.concatenate([a, np.repeat(a[-1:], size - a.shape[0], axis=0)])
+        if size > a.shape[0]
+        else a
+    )
 
 
 def row_keys(key, n: int) -> np.ndarray:
@@ -176,8 +192,10 @@ def map_rows(fn, rows, args=(), *, batch_size: int = DRAW_BATCH, chunk: int = DR
     n = int(np.shape(rows[0])[0])
     padded = tuple(pad_rows(r, n + (-n % chunk)) for r in rows)
     args = tuple(args)
-    parts = [_map_rows(fn, tuple(r[i:i + chunk] for r in padded), args, batch_size)
-             for i in range(0, padded[0].shape[0], chunk)]
+    parts = [
+        _map_rows(fn, tuple(r[i : i + chunk] for r in padded), args, batch_size)
+        for i in range(0, padded[0].shape[0], chunk)
+    ]
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a])[:n], *parts)
 
 

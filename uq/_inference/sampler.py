@@ -84,10 +84,14 @@ class Settings:
         from uq._io.errors import InputError
 
         if self.n_ensembles < 2:
-            raise InputError("option --ensembles: at least 2 independent ensembles are needed for R-hat (4 recommended)")
+            raise InputError(
+                "option --ensembles: at least 2 independent ensembles are needed for R-hat (4 recommended)"
+            )
         if self.n_walkers < 4 or self.n_walkers % 4:
-            raise InputError("option --walkers: a multiple of 4 walkers, at least 4, is needed (emcee's snooker "
-                             "move splits each ensemble in four)")
+            raise InputError(
+                "option --walkers: a multiple of 4 walkers, at least 4, is needed (emcee's snooker "
+                "move splits each ensemble in four)"
+            )
         if self.max_steps < 10:
             raise InputError("option --max-steps: at least 10 steps")
 
@@ -97,8 +101,10 @@ class Settings:
 
         if self.n_walkers < 2 * ndim:
             need = 4 * math.ceil(2 * ndim / 4)
-            raise InputError(f"option --walkers: {self.n_walkers} walkers are fewer than twice the {ndim} sampled "
-                             f"parameters of this model; use at least {need}")
+            raise InputError(
+                f"option --walkers: {self.n_walkers} walkers are fewer than twice the {ndim} sampled "
+                f"parameters of this model; use at least {need}"
+            )
 
 
 @dataclass(frozen=True)
@@ -196,14 +202,18 @@ class _GroupedSnooker(_Grouped, emcee.moves.DESnookerMove):
         G, ns, ndim = sg.shape
         rows = np.arange(G)[:, None]
         # one walker from each of the three complement sets, in random order
-        w = np.stack([cj[rows, random.randint(cj.shape[1], size=(G, ns))] for cj in cg], axis=2)  # (G, ns, 3, D)
+        w = np.stack(
+            [cj[rows, random.randint(cj.shape[1], size=(G, ns))] for cj in cg], axis=2
+        )  # (G, ns, 3, D)
         order = np.argsort(random.rand(G, ns, 3), axis=2)
         w = np.take_along_axis(w, order[..., None], axis=2)
         z, z1, z2 = w[:, :, 0], w[:, :, 1], w[:, :, 2]
         delta = sg - z
         norm = np.linalg.norm(delta, axis=-1, keepdims=True)
         u = delta / np.sqrt(norm)
-        q = sg + u * self.gammas * (np.sum(u * z1, -1, keepdims=True) - np.sum(u * z2, -1, keepdims=True))
+        q = sg + u * self.gammas * (
+            np.sum(u * z1, -1, keepdims=True) - np.sum(u * z2, -1, keepdims=True)
+        )
         metropolis = np.log(np.linalg.norm(q - z, axis=-1)) - np.log(norm[..., 0])
         return q.reshape(G * ns, ndim), (0.5 * (ndim - 1.0) * metropolis).reshape(-1)
 
@@ -277,7 +287,9 @@ def min_walkers_for_independence(ndim: int) -> int:
     return 4 * (ndim + 1)
 
 
-def effective_mix(mix: tuple[float, float, float], group_size: int, ndim: int) -> tuple[float, float, float]:
+def effective_mix(
+    mix: tuple[float, float, float], group_size: int, ndim: int
+) -> tuple[float, float, float]:
     """``mix`` as it is used for ensembles of ``group_size`` walkers in ``ndim`` dimensions."""
     de, snooker, ind = mix
     if ind > 0 and group_size < min_walkers_for_independence(ndim):
@@ -327,8 +339,17 @@ def _starts(log_prob, centers, widths, n_walkers: int, rng, tries: int = 20) -> 
     return np.where(bad[..., None], draw(1e-6, p0.shape), p0)
 
 
-def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settings = Settings(),
-                  desc: str | None = None, mix: tuple[float, float, float] = INDEPENDENCE_MIX) -> Chains:
+def run_ensembles(
+    log_prob,
+    center,
+    scale,
+    names,
+    *,
+    seed: int,
+    settings: Settings = Settings(),
+    desc: str | None = None,
+    mix: tuple[float, float, float] = INDEPENDENCE_MIX,
+) -> Chains:
     """Sample ``log_prob`` (vectorised: (W, D) -> (W,)) with emcee until the rules pass.
 
     ``center`` is the optimiser's solution and ``settings.init_scale * scale`` an estimate of
@@ -340,12 +361,29 @@ def run_ensembles(log_prob, center, scale, names, *, seed: int, settings: Settin
     def many(thetas):  # (1, m, D) -> (1, m)
         return np.asarray(log_prob(thetas[0]))[None]
 
-    return run_many(many, np.asarray(center, float)[None], np.asarray(scale, float)[None], names,
-                    seed=seed, settings=settings, desc=desc, mix=mix)[0]
+    return run_many(
+        many,
+        np.asarray(center, float)[None],
+        np.asarray(scale, float)[None],
+        names,
+        seed=seed,
+        settings=settings,
+        desc=desc,
+        mix=mix,
+    )[0]
 
 
-def run_many(log_prob, centers, scales, names, *, seed: int, settings: Settings = Settings(),
-             desc: str | None = None, mix: tuple[float, float, float] = INDEPENDENCE_MIX) -> list[Chains]:
+def run_many(
+    log_prob,
+    centers,
+    scales,
+    names,
+    *,
+    seed: int,
+    settings: Settings = Settings(),
+    desc: str | None = None,
+    mix: tuple[float, float, float] = INDEPENDENCE_MIX,
+) -> list[Chains]:
     """Sample K problems of the same dimension D at once: one emcee sampler, one call per move.
 
     ``log_prob`` maps (K, m, D) -> (K, m): row k of the walkers is evaluated under problem k
@@ -357,26 +395,38 @@ def run_many(log_prob, centers, scales, names, *, seed: int, settings: Settings 
     """
     from uq._io.progress import _Silent, progress
 
-    with progress(total=settings.max_steps, desc=desc, unit="step") if desc else _Silent(None) as bar:
+    with (
+        progress(total=settings.max_steps, desc=desc, unit="step") if desc else _Silent(None) as bar
+    ):
         return _run_many(log_prob, centers, scales, names, seed, settings, bar, mix)
 
 
-def _run_many(log_prob, centers, scales, names, seed: int, settings: Settings, bar, mix) -> list[Chains]:
+def _run_many(
+    log_prob, centers, scales, names, seed: int, settings: Settings, bar, mix
+) -> list[Chains]:
     settings.validate()
     centers = np.atleast_2d(np.asarray(centers, float))
     K, ndim = centers.shape
     settings.require_walkers(ndim)
-    widths = settings.init_spread * settings.init_scale * np.broadcast_to(np.asarray(scales, float), centers.shape)
+    widths = (
+        settings.init_spread
+        * settings.init_scale
+        * np.broadcast_to(np.asarray(scales, float), centers.shape)
+    )
     E, W = settings.n_ensembles, settings.n_walkers
     rng = np.random.default_rng(seed)
     # Walker order: problem, ensemble, walker; each ensemble's start is drawn afresh.
-    start = np.stack([_starts(log_prob, centers, widths, W, rng) for _ in range(E)], axis=1)  # (K, E, W, D)
+    start = np.stack(
+        [_starts(log_prob, centers, widths, W, rng) for _ in range(E)], axis=1
+    )  # (K, E, W, D)
 
     def flat_log_prob(q):  # emcee's (rows, D), rows in walker order -> (rows,)
         return np.asarray(log_prob(q.reshape(K, -1, ndim)), float).reshape(-1)
 
     mix = effective_mix(mix, W, ndim)
-    sampler = emcee.EnsembleSampler(K * E * W, ndim, flat_log_prob, vectorize=True, moves=_moves(W, mix))
+    sampler = emcee.EnsembleSampler(
+        K * E * W, ndim, flat_log_prob, vectorize=True, moves=_moves(W, mix)
+    )
     accept_range = (ACCEPT_RANGE[0], 1.0) if mix[2] > 0 else ACCEPT_RANGE
     sampler.random_state = np.random.RandomState(rng.integers(2**31)).get_state()
     state = start.reshape(-1, ndim)
@@ -388,7 +438,9 @@ def _run_many(log_prob, centers, scales, names, seed: int, settings: Settings, b
             state = sampler.run_mcmc(state, step, progress=False)
         n_steps += step
         bar.update(step)
-        chains = [_collect(sampler, k, names, settings, n_steps, start[k], accept_range) for k in range(K)]
+        chains = [
+            _collect(sampler, k, names, settings, n_steps, start[k], accept_range) for k in range(K)
+        ]
         verdicts = [_failed_rules(c, settings, full=False) for c in chains]
         n_failed = sum(bool(f) for f, _ in verdicts)
         bar.set_postfix_str(f"{n_failed} problem(s) not yet converged" if n_failed else "converged")
@@ -397,11 +449,16 @@ def _run_many(log_prob, centers, scales, names, seed: int, settings: Settings, b
         want = max(w for f, w in verdicts if f)
         if n_steps >= settings.max_steps or want <= n_steps:
             verdicts = [_failed_rules(c, settings) for c in chains]
-            return [dataclasses.replace(c, warnings=tuple(f)) for c, (f, _) in zip(chains, verdicts, strict=True)]
+            return [
+                dataclasses.replace(c, warnings=tuple(f))
+                for c, (f, _) in zip(chains, verdicts, strict=True)
+            ]
         target = max(want, n_steps + settings.chunk // 4)
 
 
-def _collect(sampler, k: int, names, settings: Settings, n_steps: int, start, accept_range) -> Chains:
+def _collect(
+    sampler, k: int, names, settings: Settings, n_steps: int, start, accept_range
+) -> Chains:
     """Problem k's burn-in from its current tau, its post-burn chains in storage order, its tau."""
     E, W = settings.n_ensembles, settings.n_walkers
     cols = slice(k * E * W, (k + 1) * E * W)
@@ -416,7 +473,9 @@ def _collect(sampler, k: int, names, settings: Settings, n_steps: int, start, ac
     samples = np.stack([c[burn:].reshape(-1, c.shape[-1]) for c in raw])
     lp = np.stack([logp[burn:, e * W : (e + 1) * W].reshape(-1) for e in range(E)])
     accept = sampler.acceptance_fraction[cols]
-    return Chains(tuple(names), samples, lp, accept, tau, n_steps, burn, E, (), W, start, accept_range)
+    return Chains(
+        tuple(names), samples, lp, accept, tau, n_steps, burn, E, (), W, start, accept_range
+    )
 
 
 def _failed_rules(chains: Chains, settings: Settings, full: bool = True) -> tuple[list[str], int]:
@@ -429,14 +488,19 @@ def _failed_rules(chains: Chains, settings: Settings, full: bool = True) -> tupl
     need = settings.burn_tau + settings.tau_multiple
     msgs, want = [], n
     if not math.isfinite(tau) or n - chains.burn < settings.tau_multiple * tau:
-        msgs.append(f"chain of {n} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation times "
-                    f"(tau = {tau:.1f}): raise --max-steps or use more walkers")
+        msgs.append(
+            f"chain of {n} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation times "
+            f"(tau = {tau:.1f}): raise --max-steps or use more walkers"
+        )
         want = int(math.ceil(1.1 * need * (tau if math.isfinite(tau) else n)))
         if not full:
             return msgs, want
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "more chains than draws" on very short runs: judged below
-        diag = {nm: chain_diagnostics(chains.samples[..., i], chains.n_walkers) for i, nm in enumerate(chains.names)}
+        diag = {
+            nm: chain_diagnostics(chains.samples[..., i], chains.n_walkers)
+            for i, nm in enumerate(chains.names)
+        }
     msgs += _rule_warnings(diag)
     rh = _worst([d["r_hat"] for d in diag.values()], max)
     ess = _worst([min(d["ess_bulk"], d["ess_tail"]) for d in diag.values()], min)
@@ -489,7 +553,12 @@ def chain_diagnostics(x: np.ndarray, n_walkers: int) -> dict:
         ind = (x <= np.quantile(x, q)).astype(float)
         tail.append(_ess_of_summary(ind, ind.reshape(xw.shape).mean(axis=2)))
     mcse = float(az.mcse(np.ascontiguousarray(xw.mean(axis=2)), method="mean"))
-    return {"r_hat": r_hat, "ess_bulk": ess_bulk, "ess_tail": float(np.min(tail)), "mcse_mean": mcse}
+    return {
+        "r_hat": r_hat,
+        "ess_bulk": ess_bulk,
+        "ess_tail": float(np.min(tail)),
+        "mcse_mean": mcse,
+    }
 
 
 def _rule_warnings(diag: dict) -> list[str]:
@@ -497,10 +566,14 @@ def _rule_warnings(diag: dict) -> list[str]:
     for n, d in diag.items():
         r = d["r_hat"]
         if not (r <= RHAT_MAX):
-            warns.append(f"{n}: R-hat {r:.3f} > {RHAT_MAX}: chains disagree; run longer (--max-steps) or use more walkers")
+            warns.append(
+                f"{n}: R-hat {r:.3f} > {RHAT_MAX}: chains disagree; run longer (--max-steps) or use more walkers"
+            )
         e = min(d["ess_bulk"], d["ess_tail"])
         if not (e >= ESS_MIN):
-            warns.append(f"{n}: effective sample size {e:.0f} < {ESS_MIN:.0f}: run longer (--max-steps) or use more walkers")
+            warns.append(
+                f"{n}: effective sample size {e:.0f} < {ESS_MIN:.0f}: run longer (--max-steps) or use more walkers"
+            )
     return warns
 
 
@@ -508,11 +581,15 @@ def _acceptance_warnings(acc: np.ndarray, accept_range: tuple[float, float]) -> 
     lo, hi = accept_range
     if lo <= acc.mean() <= hi:
         return []
-    return [f"acceptance fraction {acc.mean():.2f} outside {lo:g}-{hi:g}: the sampler is stuck or the posterior is "
-            "badly scaled; check the model and start"]
+    return [
+        f"acceptance fraction {acc.mean():.2f} outside {lo:g}-{hi:g}: the sampler is stuck or the posterior is "
+        "badly scaled; check the model and start"
+    ]
 
 
-def convergence(idata: az.InferenceData, chains: Chains, var_names: list[str] | None = None) -> dict:
+def convergence(
+    idata: az.InferenceData, chains: Chains, var_names: list[str] | None = None
+) -> dict:
     """ArviZ diagnostics and the project's convergence rules for the stored variables.
 
     Returns a dict with per-variable r_hat, ess_bulk, ess_tail, mcse_mean; the sampler's
@@ -526,12 +603,20 @@ def convergence(idata: az.InferenceData, chains: Chains, var_names: list[str] | 
         arr = np.asarray(post[n])  # (chains, draws, ...)
         flat = arr.reshape(arr.shape[0], arr.shape[1], -1)
         ds = [chain_diagnostics(flat[..., j], chains.n_walkers) for j in range(flat.shape[-1])]
-        per_var[n] = {k: (float(ds[0][k]) if len(ds) == 1 else [float(d[k]) for d in ds]) for k in ds[0]}
-        diag[n] = {"r_hat": _worst([d["r_hat"] for d in ds], max),
-                   "ess_bulk": _worst([d["ess_bulk"] for d in ds], min),
-                   "ess_tail": _worst([d["ess_tail"] for d in ds], min)}
+        per_var[n] = {
+            k: (float(ds[0][k]) if len(ds) == 1 else [float(d[k]) for d in ds]) for k in ds[0]
+        }
+        diag[n] = {
+            "r_hat": _worst([d["r_hat"] for d in ds], max),
+            "ess_bulk": _worst([d["ess_bulk"] for d in ds], min),
+            "ess_tail": _worst([d["ess_tail"] for d in ds], min),
+        }
     warns = list(chains.warnings)
-    warns += [w for w in _rule_warnings(diag) + _acceptance_warnings(chains.acceptance, chains.accept_range) if w not in warns]
+    warns += [
+        w
+        for w in _rule_warnings(diag) + _acceptance_warnings(chains.acceptance, chains.accept_range)
+        if w not in warns
+    ]
     acc = chains.acceptance
     return {
         "converged": not warns,
@@ -542,6 +627,10 @@ def convergence(idata: az.InferenceData, chains: Chains, var_names: list[str] | 
         "n_walkers": int(chains.n_walkers),
         "n_draws": int(chains.samples.shape[1]),
         "tau": {n: float(t) for n, t in zip(chains.names, chains.tau, strict=True)},
-        "acceptance_fraction": {"mean": float(acc.mean()), "min": float(acc.min()), "max": float(acc.max())},
+        "acceptance_fraction": {
+            "mean": float(acc.mean()),
+            "min": float(acc.min()),
+            "max": float(acc.max()),
+        },
         "variables": per_var,
     }

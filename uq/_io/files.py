@@ -66,11 +66,15 @@ def _open_tmp_beside(path: Path) -> tuple[int, Path]:
     for _ in range(100):
         tmp = path.parent / f".{path.name[:200]}.{os.urandom(4).hex()}.tmp"
         try:
-            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666), tmp
+            return os.open(
+                tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666
+            ), tmp
         except FileExistsError:
             continue
         except OSError as exc:
-            raise _refuse(path, f"cannot create a file in {path.parent}: {exc.strerror or exc}") from None
+            raise _refuse(
+                path, f"cannot create a file in {path.parent}: {exc.strerror or exc}"
+            ) from None
     raise _refuse(path, f"cannot create a temporary file in {path.parent}")
 
 

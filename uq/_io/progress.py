@@ -64,7 +64,9 @@ class _Silent:
         return None
 
 
-def progress(iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", unit: str = "it"):
+def progress(
+    iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", unit: str = "it"
+):
     """A tqdm bar on stderr over ``iterable`` (or a counter to ``total``), or a silent stand-in."""
     if not active():
         return _Silent(iterable)
@@ -72,4 +74,12 @@ def progress(iterable: Iterable | None = None, *, total: int | None = None, desc
 
     if total is None and iterable is not None and hasattr(iterable, "__len__"):
         total = len(iterable)
-    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
+    return tqdm(
+        iterable,
+        total=total,
+        desc=desc,
+        unit=unit,
+        file=sys.stderr,
+        leave=False,
+        dynamic_ncols=True,
+    )

@@ -10,7 +10,9 @@ def _number(text: str, kind=float):
     try:
         value = kind(text)
     except ValueError:
-        raise ValueError(f"expected {'an integer' if kind is int else 'a number'}, got '{text}'") from None
+        raise ValueError(
+            f"expected {'an integer' if kind is int else 'a number'}, got '{text}'"
+        ) from None
     if kind is float and not math.isfinite(value):
         raise ValueError(f"expected a finite number, got '{text}'")
     return value

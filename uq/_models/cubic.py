@@ -66,8 +66,14 @@ def _scaled_residuals(alpha, args):
 def _lm(X, y):
     y_scale = jnp.maximum(jnp.max(jnp.abs(y)), 1e-300)
     solver = optx.LevenbergMarquardt(rtol=1e-13, atol=1e-13)
-    sol = optx.least_squares(_scaled_residuals, solver, jnp.zeros(X.shape[1]), args=(X, y, y_scale),
-                             max_steps=200, throw=False)
+    sol = optx.least_squares(
+        _scaled_residuals,
+        solver,
+        jnp.zeros(X.shape[1]),
+        args=(X, y, y_scale),
+        max_steps=200,
+        throw=False,
+    )
     return sol.value, sol.result
 
 
@@ -95,8 +101,9 @@ def natural_noise(theta, ref_mean):
     psi, eta = theta[..., 0], theta[..., 1]
     log_phi = -jnp.logaddexp(0.0, -eta)
     log_1mphi = -jnp.logaddexp(0.0, eta)
-    return jnp.stack([psi + 0.5 * log_phi, psi + 0.5 * log_1mphi - jnp.log(ref_mean), theta[..., 2]], axis=-1)
-
+    return jnp.stack(
+        [psi + 0.5 * log_phi, psi + 0.5 * log_1mphi - jnp.log(ref_mean), theta[..., 2]], axis=-1
+    )
 
 
 def _noise(theta, ref_force):
@@ -115,7 +122,9 @@ def _posteriors(theta, X, force, piston, ref_force):
     sigma_f, sigma_L, _ = _noise(theta, ref_force)
     k = X.shape[1]
     pf = linear_posterior(X, force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N))
-    pl = linear_posterior(X, piston, jnp.full(piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M))
+    pl = linear_posterior(
+        X, piston, jnp.full(piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M)
+    )
     return pf, pl
 
 
@@ -175,7 +184,9 @@ class PressureFit:
     def deviation_measures(self) -> tuple[float, float]:
         """The paper's s_P (N) and eps_P (%) of the posterior-mean curve (section 5)."""
         res = self.mean_residuals("force")
-        return float(np.sqrt(np.mean(res**2))), float(100.0 * np.mean(np.abs(res / self.test.force_N)))
+        return float(np.sqrt(np.mean(res**2))), float(
+            100.0 * np.mean(np.abs(res / self.test.force_N))
+        )
 
     def pointwise_loglik(self, max_draws: int = 2000, seed: int = 0) -> dict[str, np.ndarray]:
         """Pointwise log-likelihood (chains, draws', n) of force and piston, for PSIS-LOO."""
@@ -203,7 +214,9 @@ def _start(X, force, piston, ref_force, lsq_f, lsq_l, u):
     s_f = np.sqrt(np.sum(res_f**2) / max(n - 4, 1)) + 1e-9
     s_l = np.sqrt(np.sum(res_l**2) / max(n - 4, 1)) + 1e-12
     theta0 = jnp.array([np.log(s_f), 0.0, np.log(s_l)])
-    theta, result = _bfgs(theta0, X, jnp.asarray(force), jnp.asarray(piston), jnp.asarray(ref_force))
+    theta, result = _bfgs(
+        theta0, X, jnp.asarray(force), jnp.asarray(piston), jnp.asarray(ref_force)
+    )
     theta = np.asarray(theta)
     if not np.all(np.isfinite(theta)) or result != optx.RESULTS.successful:
         theta = np.asarray(theta0)
@@ -216,13 +229,25 @@ def _neg_log_prob(theta, args):
 
 @jax.jit
 def _bfgs(theta0, X, force, piston, ref_force):
-    sol = optx.minimise(_neg_log_prob, optx.BFGS(rtol=1e-8, atol=1e-8), theta0,
-                        args=(X, force, piston, ref_force), max_steps=500, throw=False)
+    sol = optx.minimise(
+        _neg_log_prob,
+        optx.BFGS(rtol=1e-8, atol=1e-8),
+        theta0,
+        args=(X, force, piston, ref_force),
+        max_steps=500,
+        throw=False,
+    )
     return sol.value, sol.result
 
 
-def fit_test(test: PressureTest, x0_m: float, *, seed: int, settings: Settings = Settings(),
-             noise: str = "budget") -> PressureFit:
+def fit_test(
+    test: PressureTest,
+    x0_m: float,
+    *,
+    seed: int,
+    settings: Settings = Settings(),
+    noise: str = "budget",
+) -> PressureFit:
     """Least squares, then the emcee posterior with exact coefficient draws, then diagnostics.
 
     ``noise="budget"`` (default): force sd grows with the force (load cell) over a floor.
@@ -268,7 +293,9 @@ def _prepare(test: PressureTest, x0_m: float, settings: Settings, noise: str) ->
     return _Prepared(test, X, lsq_f, lsq_l, ref_force, center, scale, noise)
 
 
-_log_prob_tests = jax.jit(jax.vmap(log_prob))  # (K, W, 3) thetas of K tests of equal length -> (K, W)
+_log_prob_tests = jax.jit(
+    jax.vmap(log_prob)
+)  # (K, W, 3) thetas of K tests of equal length -> (K, W)
 
 
 def _campaign_log_prob(preps: list[_Prepared]):
@@ -279,32 +306,58 @@ def _campaign_log_prob(preps: list[_Prepared]):
         by_len.setdefault(pr.test.n_points, []).append(i)
     groups = []
     for idx in by_len.values():
-        args = tuple(jnp.asarray(np.stack(a)) for a in zip(*[
-            (preps[i].X, preps[i].test.force_N, preps[i].test.piston_m, preps[i].ref_force) for i in idx], strict=True))
+        args = tuple(
+            jnp.asarray(np.stack(a))
+            for a in zip(
+                *[
+                    (preps[i].X, preps[i].test.force_N, preps[i].test.piston_m, preps[i].ref_force)
+                    for i in idx
+                ],
+                strict=True,
+            )
+        )
         groups.append((np.array(idx), args))
 
     def lp(thetas):
         thetas = np.asarray(thetas, float)
         out = np.empty(thetas.shape[:2])
         for idx, args in groups:
-            out[idx] = np.asarray(_log_prob_tests(thetas[idx], *args))  # numpy in: jit's fast dispatch path
+            out[idx] = np.asarray(
+                _log_prob_tests(thetas[idx], *args)
+            )  # numpy in: jit's fast dispatch path
         return out
 
     return lp
 
 
-def fit_tests(tests, x0_m: float, *, seed: int, settings: Settings = Settings(), noise: str = "budget",
-              desc: str | None = None) -> list[PressureFit]:
+def fit_tests(
+    tests,
+    x0_m: float,
+    *,
+    seed: int,
+    settings: Settings = Settings(),
+    noise: str = "budget",
+    desc: str | None = None,
+) -> list[PressureFit]:
     """Fit several tests at once: one emcee sampler runs every test's ensembles in lockstep
     (``uq._inference.sampler.run_many``), each test with its own independent ensembles, burn-in and
     convergence verdict; the run lasts until every test passes every rule. The exact
     coefficient draws of test i use the i-th seed derived from ``seed`` (:func:`test_seeds`).
     """
     preps = [_prepare(t, x0_m, settings, noise) for t in tests]
-    runs = run_many(_campaign_log_prob(preps), np.stack([p.center for p in preps]),
-                    np.stack([p.scale for p in preps]), SAMPLER_NAMES, seed=seed, settings=settings, desc=desc)
-    return [_posterior(pr, thin(ch, MAX_DRAWS), x0_m, s)
-            for pr, ch, s in zip(preps, runs, test_seeds(seed, len(preps)), strict=True)]
+    runs = run_many(
+        _campaign_log_prob(preps),
+        np.stack([p.center for p in preps]),
+        np.stack([p.scale for p in preps]),
+        SAMPLER_NAMES,
+        seed=seed,
+        settings=settings,
+        desc=desc,
+    )
+    return [
+        _posterior(pr, thin(ch, MAX_DRAWS), x0_m, s)
+        for pr, ch, s in zip(preps, runs, test_seeds(seed, len(preps)), strict=True)
+    ]
 
 
 def _draw(sigma, key, X, y, prior_sd):
@@ -322,10 +375,16 @@ def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> Pressur
     sigma_f = np.sqrt(force_noise_var(noise_flat[:, :1], noise_flat[:, 1:2], ref_force))
     sigma_l = np.ascontiguousarray(np.broadcast_to(noise_flat[:, 2:3], sigma_f.shape))
     key_f, key_l = jax.random.split(jax.random.PRNGKey(seed))
-    alpha_f = map_rows(_draw, (jnp.asarray(sigma_f), row_keys(key_f, C * D)),
-                       (jnp.asarray(pr.X), jnp.asarray(test.force_N), jnp.full(4, FORCE_PRIOR_SD_N)))
-    alpha_l = map_rows(_draw, (jnp.asarray(sigma_l), row_keys(key_l, C * D)),
-                       (jnp.asarray(pr.X), jnp.asarray(test.piston_m), jnp.full(4, PISTON_PRIOR_SD_M)))
+    alpha_f = map_rows(
+        _draw,
+        (jnp.asarray(sigma_f), row_keys(key_f, C * D)),
+        (jnp.asarray(pr.X), jnp.asarray(test.force_N), jnp.full(4, FORCE_PRIOR_SD_N)),
+    )
+    alpha_l = map_rows(
+        _draw,
+        (jnp.asarray(sigma_l), row_keys(key_l, C * D)),
+        (jnp.asarray(pr.X), jnp.asarray(test.piston_m), jnp.full(4, PISTON_PRIOR_SD_M)),
+    )
     force = to_paper_basis(np.asarray(alpha_f)).reshape(C, D, 4)
     piston = to_paper_basis(np.asarray(alpha_l)).reshape(C, D, 4)
     noise_draws = noise_flat.reshape(C, D, 3)
@@ -337,19 +396,38 @@ def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> Pressur
         warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
         idata = _idata(posterior, test, x0_m, chains)
         diagnostics = convergence(idata, chains, list(posterior))
-    return PressureFit(test, x0_m, pr.lsq_f, pr.lsq_l, force, piston, noise_draws, chains, idata, diagnostics,
-                       ref_force, pr.noise)
+    return PressureFit(
+        test,
+        x0_m,
+        pr.lsq_f,
+        pr.lsq_l,
+        force,
+        piston,
+        noise_draws,
+        chains,
+        idata,
+        diagnostics,
+        ref_force,
+        pr.noise,
+    )
 
 
 def _idata(posterior, test, x0_m, chains):
     return az.from_dict(
         posterior=posterior,
         observed_data={"force_N": test.force_N, "piston_m": test.piston_m},
-        constant_data={"height_m": test.height_m, "pressure_bar": np.array(test.pressure_bar), "x0_m": np.array(x0_m)},
+        constant_data={
+            "height_m": test.height_m,
+            "pressure_bar": np.array(test.pressure_bar),
+            "x0_m": np.array(x0_m),
+        },
         sample_stats={"lp": chains.log_prob},
-        attrs={"n_ensembles": chains.n_ensembles, "n_walkers": chains.n_walkers,
-               "draw_order": "each chain is one emcee ensemble; draw = step * n_walkers + walker",
-               "sampler": "emcee (DE, DE-snooker and independence-t moves), coefficients drawn exactly"},
+        attrs={
+            "n_ensembles": chains.n_ensembles,
+            "n_walkers": chains.n_walkers,
+            "draw_order": "each chain is one emcee ensemble; draw = step * n_walkers + walker",
+            "sampler": "emcee (DE, DE-snooker and independence-t moves), coefficients drawn exactly",
+        },
     )
 
 
@@ -375,7 +453,9 @@ def test_seeds(seed: int, n: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
-def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = Settings()) -> CampaignFit:
+def fit_campaign(
+    recordings: Recordings, *, seed: int = 0, settings: Settings = Settings()
+) -> CampaignFit:
     """Fit every test of a campaign: one emcee run samples all tests in lockstep, each with its
     own ensembles and convergence checks (:func:`fit_tests`). ``uq fit`` is this plus
     :func:`uq.fit_json`.
@@ -389,5 +469,7 @@ def fit_campaign(recordings: Recordings, *, seed: int = 0, settings: Settings = 
     >>> bool(12e3 < a_P.mean() < 14e3)
     True
     """
-    fits = fit_tests(recordings.tests, recordings.x0_m, seed=seed, settings=settings, desc="sampling all tests")
+    fits = fit_tests(
+        recordings.tests, recordings.x0_m, seed=seed, settings=settings, desc="sampling all tests"
+    )
     return CampaignFit(recordings, fits, seed)

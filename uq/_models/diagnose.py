@@ -54,14 +54,34 @@ from uq._inference.linear import (
 )
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
-MECHS = ("pressure_dependent_area", "casing_force", "hysteresis", "force_offset", "thermal_drift", "volume_excess")
+MECHS = (
+    "pressure_dependent_area",
+    "casing_force",
+    "hysteresis",
+    "force_offset",
+    "thermal_drift",
+    "volume_excess",
+)
 N_MECH = len(MECHS)
 K_MAX = 5  # highest power of t in F_eff
 CASING_DEG = 3
 #: Number of parameters each mechanism adds (parsimony order: fewer is simpler).
-N_PARAMS = {"force_offset": 1, "thermal_drift": 1, "hysteresis": 1, "pressure_dependent_area": 1,
-            "volume_excess": 1, "casing_force": CASING_DEG + 1}
-SIMPLICITY = ("force_offset", "thermal_drift", "hysteresis", "volume_excess", "pressure_dependent_area", "casing_force")
+N_PARAMS = {
+    "force_offset": 1,
+    "thermal_drift": 1,
+    "hysteresis": 1,
+    "pressure_dependent_area": 1,
+    "volume_excess": 1,
+    "casing_force": CASING_DEG + 1,
+}
+SIMPLICITY = (
+    "force_offset",
+    "thermal_drift",
+    "hysteresis",
+    "volume_excess",
+    "pressure_dependent_area",
+    "casing_force",
+)
 THETA_NAMES = ("log_k_force", "log_k_piston", "m_area_per_bar", "m_hysteresis", "m_volume_excess")
 #: Prior sds of the sampled parameters; volume_excess is a fraction of F_eff (0.12 on Table 1).
 THETA_PRIOR_SD = np.array([2.0, 2.0, 0.1, 0.1, 0.3])
@@ -115,7 +135,9 @@ class Data(NamedTuple):
     moments_E: tuple
 
 
-def _expanded(p_bar, t, sgn, step, R, c, area) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _expanded(
+    p_bar, t, sgn, step, R, c, area
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The fixed expanded design (module docstring, ``Data``): z-row and L-row columns, the model
     column of each, the mask entry switching it and the magnitudes in its factor."""
     pw = np.arange(K_MAX + 1)
@@ -159,8 +181,19 @@ def _moments(E_z, E_L, y_z, y_L, sd_z, sd_L, fit_w) -> tuple:
     out = []
     for E, y, sd, w in ((E_z, y_z, sd_z, fit_w[:n]), (E_L, y_L, sd_L, fit_w[n:])):
         wt = w / sd**2
-        out.append((E.T @ (wt[:, None] * E), E.T @ (wt * y), float(wt @ y**2), float(w @ np.log(sd**2)), float(w.sum())))
-    return tuple(jnp.asarray(np.stack([a, b]) if np.ndim(a) else np.array([a, b])) for a, b in zip(*out, strict=True))
+        out.append(
+            (
+                E.T @ (wt[:, None] * E),
+                E.T @ (wt * y),
+                float(wt @ y**2),
+                float(w @ np.log(sd**2)),
+                float(w.sum()),
+            )
+        )
+    return tuple(
+        jnp.asarray(np.stack([a, b]) if np.ndim(a) else np.array([a, b]))
+        for a, b in zip(*out, strict=True)
+    )
 
 
 def hold_out(d: Data, held: np.ndarray) -> Data:
@@ -170,7 +203,10 @@ def hold_out(d: Data, held: np.ndarray) -> Data:
     if held.size == np.asarray(d.force).size:
         held = np.concatenate([held, held])
     fit_w = np.where(held, 0.0, 1.0)
-    moments = _moments(*(np.asarray(a) for a in (d.E_z, d.E_L, decorrelated_force(d), d.piston, d.sd_z, d.sd_L)), fit_w)
+    moments = _moments(
+        *(np.asarray(a) for a in (d.E_z, d.E_L, decorrelated_force(d), d.piston, d.sd_z, d.sd_L)),
+        fit_w,
+    )
     return d._replace(fit_w=jnp.asarray(fit_w), moments_E=moments)
 
 
@@ -185,7 +221,9 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
     Noise formulas from ``stand`` (its error budget and gas volumes)."""
     S = rec.piston_area_m2
     area_check = []
-    cols = {k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")}
+    cols = {
+        k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")
+    }
     for i, test in enumerate(rec.tests):
         u = test.height_m - rec.x0_m
         t = u / BASIS_SCALE_M
@@ -201,18 +239,32 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         feff = np.abs(P_hat) / p_pa
         L_hat = V @ cl
         # The piston is lowest at x_max, where the element holds element_volume_at_xmax_m3.
-        v_gas = stand.receiver_air_m3 + np.maximum(stand.element_volume_at_xmax_m3 - S * (L_hat - L_hat.min()), 1e-4)
+        v_gas = stand.receiver_air_m3 + np.maximum(
+            stand.element_volume_at_xmax_m3 - S * (L_hat - L_hat.min()), 1e-4
+        )
         p_abs_bar = test.pressure_bar + stand.p_atm_bar
         sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
         c = feff * p_abs_bar * BAR_PA * S / v_gas
-        sdz = np.sqrt((stand.load_cell_rel_sd * P_hat) ** 2 + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
-                      + (dPdx * stand.displacement_sd_m) ** 2 + FLOOR_N**2)
-        sdL = np.sqrt((v_gas * sdp_bar / p_abs_bar / S) ** 2 + (slope * stand.displacement_sd_m) ** 2
-                      + stand.caliper_sd_m**2)
+        sdz = np.sqrt(
+            (stand.load_cell_rel_sd * P_hat) ** 2
+            + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
+            + (dPdx * stand.displacement_sd_m) ** 2
+            + FLOOR_N**2
+        )
+        sdL = np.sqrt(
+            (v_gas * sdp_bar / p_abs_bar / S) ** 2
+            + (slope * stand.displacement_sd_m) ** 2
+            + stand.caliper_sd_m**2
+        )
         i0 = np.argmin(np.abs(u))
-        area_check.append({"pressure_bar": test.pressure_bar, "from_force_m2": float(P_hat[i0] / p_pa),
-                           "from_volume_m2": float(-S * slope[i0]),
-                           "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa))})
+        area_check.append(
+            {
+                "pressure_bar": test.pressure_bar,
+                "from_force_m2": float(P_hat[i0] / p_pa),
+                "from_volume_m2": float(-S * slope[i0]),
+                "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa)),
+            }
+        )
         n = test.n_points
         cols["p"].append(np.full(n, test.pressure_bar))
         cols["t"].append(t)
@@ -228,18 +280,58 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         cols["comp"].append(test.compression)
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     R = np.eye(len(rec.tests))[cat["ti"].astype(int)]
-    E_z, E_L, onehot, mask_idx, uses = _expanded(cat["p"], cat["t"], cat["sgn"], cat["step"], R, cat["c"], S)
+    E_z, E_L, onehot, mask_idx, uses = _expanded(
+        cat["p"], cat["t"], cat["sgn"], cat["step"], R, cat["c"], S
+    )
     fit_w = np.ones(2 * cat["F"].size)
-    prior_sd = np.concatenate([np.full(K_MAX + 1, FEFF_PRIOR_SD), np.full(R.shape[1], REF_PRIOR_SD),
-                               np.full(CASING_DEG + 1, CASING_PRIOR_SD), [OFFSET_PRIOR_SD, DRIFT_PRIOR_SD]])
-    moments = _moments(E_z, E_L, cat["F"] + cat["c"] * cat["L"], cat["L"], cat["sdz"], cat["sdL"], fit_w)
-    data = Data(*(jnp.asarray(a, dtype=float) for a in (cat["p"], cat["t"], cat["sgn"], cat["step"], R, cat["c"],
-                                                           cat["F"], cat["L"], cat["sdz"], cat["sdL"], S, fit_w,
-                                                           E_z, E_L, onehot)),
-                jnp.asarray(mask_idx), jnp.asarray(uses), jnp.asarray(prior_sd), moments)
-    meta = {"pressure_bar": cat["p"], "height_m": cat["x"], "compression": cat["comp"].astype(bool),
-            "step": cat["step"].astype(int), "test": cat["ti"].astype(int), "force_N": cat["F"],
-            "piston_m": cat["L"], "area": S, "area_check": area_check}
+    prior_sd = np.concatenate(
+        [
+            np.full(K_MAX + 1, FEFF_PRIOR_SD),
+            np.full(R.shape[1], REF_PRIOR_SD),
+            np.full(CASING_DEG + 1, CASING_PRIOR_SD),
+            [OFFSET_PRIOR_SD, DRIFT_PRIOR_SD],
+        ]
+    )
+    moments = _moments(
+        E_z, E_L, cat["F"] + cat["c"] * cat["L"], cat["L"], cat["sdz"], cat["sdL"], fit_w
+    )
+    data = Data(
+        *(
+            jnp.asarray(a, dtype=float)
+            for a in (
+                cat["p"],
+                cat["t"],
+                cat["sgn"],
+                cat["step"],
+                R,
+                cat["c"],
+                cat["F"],
+                cat["L"],
+                cat["sdz"],
+                cat["sdL"],
+                S,
+                fit_w,
+                E_z,
+                E_L,
+                onehot,
+            )
+        ),
+        jnp.asarray(mask_idx),
+        jnp.asarray(uses),
+        jnp.asarray(prior_sd),
+        moments,
+    )
+    meta = {
+        "pressure_bar": cat["p"],
+        "height_m": cat["x"],
+        "compression": cat["comp"].astype(bool),
+        "step": cat["step"].astype(int),
+        "test": cat["ti"].astype(int),
+        "force_N": cat["F"],
+        "piston_m": cat["L"],
+        "area": S,
+        "area_check": area_check,
+    }
     return data, meta
 
 
@@ -279,8 +371,14 @@ def _posterior(theta, mask, d: Data):
     s = jnp.sqrt(jnp.diagonal(gram) / n_rows)
     s = jax.lax.stop_gradient(jnp.where(s > 0, s, 1.0))
     log_noise_det = ld[0] + ld[1] + 2.0 * (cnt[0] * theta[0] + cnt[1] * theta[1])
-    post = posterior_from_moments(gram / jnp.outer(s, s), rhs / s, yy[0] / k_z2 + yy[1] / k_L2, n_rows,
-                                  log_noise_det, d.prior_sd * s)
+    post = posterior_from_moments(
+        gram / jnp.outer(s, s),
+        rhs / s,
+        yy[0] / k_z2 + yy[1] / k_L2,
+        n_rows,
+        log_noise_det,
+        d.prior_sd * s,
+    )
     return post, s, coef
 
 
@@ -298,8 +396,13 @@ def log_post(thetas: np.ndarray, mask, d: Data) -> np.ndarray:
     """Log posterior of full thetas (m, N_THETA). A sequential map (``batch_size=1``), not vmap:
     XLA CPU can deadlock on batched (vmapped) Cholesky factorisations, as seen here with batches
     of 1000 under load; a sequential map over small factorisations is only slightly slower."""
-    return map_rows(_log_post, (np.atleast_2d(np.asarray(thetas, float)),), (mask, d), batch_size=1,
-                    chunk=LOG_POST_CHUNK)
+    return map_rows(
+        _log_post,
+        (np.atleast_2d(np.asarray(thetas, float)),),
+        (mask, d),
+        batch_size=1,
+        chunk=LOG_POST_CHUNK,
+    )
 
 
 def draw_row(theta, key, mask, d: Data):
@@ -312,7 +415,9 @@ def draw_row(theta, key, mask, d: Data):
     muL = d.E_L @ beta_E
     mu_z = d.E_z @ beta_E
     sigma = jnp.concatenate([jnp.exp(theta[0]) * d.sd_z, jnp.exp(theta[1]) * d.sd_L])
-    ll = gaussian_loglik(jnp.concatenate([decorrelated_force(d), d.piston]), jnp.concatenate([mu_z, muL]), sigma)
+    ll = gaussian_loglik(
+        jnp.concatenate([decorrelated_force(d), d.piston]), jnp.concatenate([mu_z, muL]), sigma
+    )
     return ll, mu_z - d.c * muL, muL, beta, sigma
 
 
@@ -320,7 +425,9 @@ def draw_rows(theta: np.ndarray, key, mask, d: Data) -> tuple[np.ndarray, ...]:
     """``draw_row`` for every row of ``theta`` (m, N_THETA), row i with key ``jax.random.split(key, m)[i]``,
     as numpy arrays (ll, muF, muL, beta, sigma). Laplace draws, K-fold draws and the sampler's draws
     share one compiled program whatever their number (``map_rows``)."""
-    return map_rows(draw_row, (np.asarray(theta, float), row_keys(key, theta.shape[0])), (mask, d), chunk=256)
+    return map_rows(
+        draw_row, (np.asarray(theta, float), row_keys(key, theta.shape[0])), (mask, d), chunk=256
+    )
 
 
 def active_dims(names) -> list[int]:
@@ -353,9 +460,14 @@ def _neg_log_post(x, args):
 def _minimise(x0, active, mask, d: Data):
     """One BFGS run from ``x0``: theta, objective there, whether optimistix reports success."""
     solver = optx.BFGS(rtol=MAP_RTOL, atol=MAP_ATOL)
-    sol = optx.minimise(_neg_log_post, solver, x0, args=(active, mask, d), max_steps=MAP_MAX_STEPS,
-                        throw=False)
-    return sol.value, _neg_log_post(sol.value, (active, mask, d)), sol.result == optx.RESULTS.successful
+    sol = optx.minimise(
+        _neg_log_post, solver, x0, args=(active, mask, d), max_steps=MAP_MAX_STEPS, throw=False
+    )
+    return (
+        sol.value,
+        _neg_log_post(sol.value, (active, mask, d)),
+        sol.result == optx.RESULTS.successful,
+    )
 
 
 @jax.jit
@@ -390,14 +502,18 @@ def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
     flags[dims] = 1.0
     active = jnp.asarray(flags)
     nonlin = flags * (np.arange(N_THETA) >= 2)
-    starts = [np.zeros(N_THETA)] + ([MAP_START * nonlin, -MAP_START * nonlin] if nonlin.any() else [])
+    starts = [np.zeros(N_THETA)] + (
+        [MAP_START * nonlin, -MAP_START * nonlin] if nonlin.any() else []
+    )
     best = _best_start(starts, active, mask, d)
     if best is not None and not best[2]:  # restart once, with a fresh BFGS, from where it stopped
         again = _best_start([best[0]], active, mask, d)
         if again is not None and again[1] <= best[1]:
             best = again
     if best is None:
-        raise FloatingPointError(f"diagnose: the log posterior of model {names!r} is not finite at any start")
+        raise FloatingPointError(
+            f"diagnose: the log posterior of model {names!r} is not finite at any start"
+        )
     x, f, converged = best
     g, Hm = (np.asarray(a) for a in _gradient_hessian(jnp.asarray(x), active, mask, d))
     g, Hm = g[dims], Hm[np.ix_(dims, dims)]
@@ -407,8 +523,10 @@ def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
     except np.linalg.LinAlgError:
         cov = None
     if not converged and (cov is None or 0.5 * g @ cov @ g > MAP_DECREMENT):
-        raise FloatingPointError(f"diagnose: the MAP of model {names!r} did not converge (BFGS, "
-                                 f"{MAP_MAX_STEPS} steps, restarted once)")
+        raise FloatingPointError(
+            f"diagnose: the MAP of model {names!r} did not converge (BFGS, "
+            f"{MAP_MAX_STEPS} steps, restarted once)"
+        )
     if cov is None:
         cov = np.diag(1.0 / np.maximum(np.abs(np.diag(Hm)), 1e-12))
     return expand(x[dims], names), -f, cov

@@ -77,7 +77,9 @@ def noise_prior_mean(stand: StandDescription = PAPER_STAND) -> np.ndarray:
     """Prior centres of the five noise logs from the stand's description (a stand declaring a
     perfect load cell still gets a 0.01 % floor: log 0 has no prior)."""
     rel = max(stand.load_cell_rel_sd, 1e-4)
-    return np.array([np.log(10.0), np.log(rel), 0.0, np.log(1e-4), np.log(stand.gas_volume_at_xmax_m3)])
+    return np.array(
+        [np.log(10.0), np.log(rel), 0.0, np.log(1e-4), np.log(stand.gas_volume_at_xmax_m3)]
+    )
 
 
 NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
@@ -223,7 +225,9 @@ def _posterior(theta, Xf, Xl, F, L, c):
     gram = weighted_gram(c["gram"], (1.0 / L11**2 + s**2, 1.0 / L22**2, -s / L22))
     rhs = Xf.T @ (yf / L11 - s * yl) + Xl.T @ (yl / L22)
     log_det = 2.0 * jnp.sum(jnp.log(L11) + jnp.log(L22))
-    return posterior_from_moments(gram, rhs, jnp.sum(yf**2 + yl**2), 2 * F.size, log_det, jnp.ones(Xf.shape[1]))
+    return posterior_from_moments(
+        gram, rhs, jnp.sum(yf**2 + yl**2), 2 * F.size, log_det, jnp.ones(Xf.shape[1])
+    )
 
 
 def _log_prior(theta, mean):
@@ -248,8 +252,14 @@ def _neg(theta, args):
 
 @jax.jit
 def _bfgs(theta0, Xf, Xl, F, L, c):
-    sol = optx.minimise(_neg, optx.BFGS(rtol=1e-8, atol=1e-8), theta0, args=(Xf, Xl, F, L, c),
-                        max_steps=400, throw=False)
+    sol = optx.minimise(
+        _neg,
+        optx.BFGS(rtol=1e-8, atol=1e-8),
+        theta0,
+        args=(Xf, Xl, F, L, c),
+        max_steps=400,
+        throw=False,
+    )
     return sol.value, sol.result
 
 
@@ -300,17 +310,22 @@ def _pointwise_loo(theta, Xf, Xl, F, L, c):
 # ----------------------------------------------------------------------------- fit
 
 
-def refuse_extrapolation(height_m, p_bar, height_range_m, pressure_range_bar, what: str, model: str) -> None:
+def refuse_extrapolation(
+    height_m, p_bar, height_range_m, pressure_range_bar, what: str, model: str
+) -> None:
     """InputError naming the first height or overpressure outside the tested ranges: models of the
     stand's recordings answer only where it measured."""
     for values, (lo, hi), scale, unit, name, tested in (
-            (height_m, height_range_m, 1e3, "mm", "height", "heights"),
-            (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures")):
+        (height_m, height_range_m, 1e3, "mm", "height", "heights"),
+        (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures"),
+    ):
         v = np.atleast_1d(np.asarray(values, float))
         out = (v < lo - 1e-9) | (v > hi + 1e-9)
         if np.any(out):
-            raise InputError(f"{what}{name} {v[out][0] * scale:g} {unit} is outside the tested {tested} "
-                             f"{lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate")
+            raise InputError(
+                f"{what}{name} {v[out][0] * scale:g} {unit} is outside the tested {tested} "
+                f"{lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate"
+            )
 
 
 @dataclass(eq=False, frozen=True)
@@ -344,7 +359,9 @@ class SurfaceFit:
 
     def check_range(self, height_m, p_bar, what="") -> None:
         """Refuse heights/pressures outside the tested ranges (no extrapolation)."""
-        refuse_extrapolation(height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the surface model")
+        refuse_extrapolation(
+            height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the surface model"
+        )
 
     # ---- coefficient blocks (physical units, flattened draws)
     def flat_beta(self, max_draws: int | None = None) -> np.ndarray:
@@ -379,7 +396,9 @@ class SurfaceFit:
 
     def feff_draws(self, height_m, p_bar, *, check=True, beta=None):
         """The paper's effective area F_eff = P / p_u (eq. 1) of the mean force, m^2."""
-        p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
+        p = np.broadcast_to(
+            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
+        )
         return self.force_draws(height_m, p_bar, check=check, beta=beta) / (p * BAR_PA)
 
     def _casing(self, shape, t, beta):
@@ -392,7 +411,9 @@ class SurfaceFit:
 
     def force_draws(self, height_m, p_bar, *, check=True, beta=None):
         """Force P(x, p_u) = p_u F_p + E draws (mean curve, no reading noise), N."""
-        p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
+        p = np.broadcast_to(
+            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
+        )
         fe = self.pressure_area_draws(height_m, p_bar, check=check, beta=beta)
         shape, t, _, _ = self._grid(height_m, p_bar, False)
         E = self._casing(shape, t, beta)
@@ -409,7 +430,9 @@ class SurfaceFit:
 
     def spread_draws(self, height_m, p_bar, *, check=True, beta=None):
         """Traditional characteristic p_u (-dV/dx) minus the experimental force: p_u D - E, N."""
-        p = np.broadcast_to(np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape)
+        p = np.broadcast_to(
+            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
+        )
         D = self.volume_excess_draws(height_m, p_bar, check=check, beta=beta)
         shape, t, _, _ = self._grid(height_m, p_bar, False)
         E = self._casing(shape, t, beta)
@@ -418,8 +441,12 @@ class SurfaceFit:
     def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
         """Pointwise 90 % bands of F_p, the paper's F_eff, force and spread (refuses extrapolation)."""
         out = {}
-        for name, fn in (("pressure_area_m2", self.pressure_area_draws), ("feff_m2", self.feff_draws),
-                         ("force_N", self.force_draws), ("spread_N", self.spread_draws)):
+        for name, fn in (
+            ("pressure_area_m2", self.pressure_area_draws),
+            ("feff_m2", self.feff_draws),
+            ("force_N", self.force_draws),
+            ("spread_N", self.spread_draws),
+        ):
             m, lo, hi = band(fn(height_m, p_bar), axis=0, level=level)
             out[name] = {"mean": m, "lower": lo, "upper": hi}
         return out
@@ -477,9 +504,15 @@ def _consts(x, p, phat, feff, dv, area, stand: StandDescription):
     }
 
 
-def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int = 0,
-                settings: Settings = Settings(), max_draws: int = MAX_DRAWS,
-                stand: StandDescription = PAPER_STAND) -> SurfaceFit:
+def fit_surface(
+    rec: Recordings,
+    orders: Orders = DEFAULT_ORDERS,
+    *,
+    seed: int = 0,
+    settings: Settings = Settings(),
+    max_draws: int = MAX_DRAWS,
+    stand: StandDescription = PAPER_STAND,
+) -> SurfaceFit:
     """optimistix MAP of the noise, emcee over it, exact coefficient draws, ArviZ diagnostics.
 
     ``stand`` is the stand the recordings were taken on: its pressure holding and p_atm enter
@@ -487,8 +520,10 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     t0 = time.perf_counter()
     n_tests = len(rec.tests)
     if n_tests < orders.Lp + 1:
-        raise InputError(f"{rec.path}: {n_tests} tests at different pressures cannot fix an effective area of "
-                         f"degree {orders.Lp} in pressure; the surface model needs at least {orders.Lp + 1}")
+        raise InputError(
+            f"{rec.path}: {n_tests} tests at different pressures cannot fix an effective area of "
+            f"degree {orders.Lp} in pressure; the surface model needs at least {orders.Lp + 1}"
+        )
     g = geometry_of(rec)
     x, p, F, L, idx = _arrays(rec)
     _, phat, feff, dv, Xf, Xl = _reference(orders, g, x, p, F, L, idx, n_tests)
@@ -497,15 +532,21 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     theta0 = jnp.asarray(noise_prior_mean(stand))
     theta, result = _bfgs(theta0, *args)
     theta = np.asarray(theta)
-    if not np.all(np.isfinite(theta)) or not np.isfinite(float(log_prob(jnp.asarray(theta)[None], *args)[0])):
+    if not np.all(np.isfinite(theta)) or not np.isfinite(
+        float(log_prob(jnp.asarray(theta)[None], *args)[0])
+    ):
         theta = np.asarray(theta0)
     scale = np.full(5, 1.0 / np.sqrt(2.0 * x.size)) / settings.init_scale * 0.5
 
     def lp(th):
         return np.asarray(log_prob(np.asarray(th, float), *args))
 
-    chains = thin(run_ensembles(lp, theta, scale, NOISE_NAMES, seed=seed, settings=settings,
-                                 desc="surface sampling"), max_draws)
+    chains = thin(
+        run_ensembles(
+            lp, theta, scale, NOISE_NAMES, seed=seed, settings=settings, desc="surface sampling"
+        ),
+        max_draws,
+    )
     C, D, _ = chains.samples.shape
     flat = jnp.asarray(chains.samples.reshape(C * D, 5))
     keys = row_keys(jax.random.PRNGKey(seed), C * D)
@@ -515,36 +556,73 @@ def fit_surface(rec: Recordings, orders: Orders = DEFAULT_ORDERS, *, seed: int =
     th_s, b_s = chains.samples[:, ::step], beta[:, ::step]
     Cs, Ds = th_s.shape[:2]
     th_rows = jnp.asarray(th_s.reshape(Cs * Ds, 5))
-    ll = np.asarray(map_rows(_pointwise, (th_rows, jnp.asarray(b_s.reshape(Cs * Ds, -1))), args)).reshape(Cs, Ds, -1)
+    ll = np.asarray(
+        map_rows(_pointwise, (th_rows, jnp.asarray(b_s.reshape(Cs * Ds, -1))), args)
+    ).reshape(Cs, Ds, -1)
     ll_loo = np.asarray(map_rows(_pointwise_loo, (th_rows,), args)).reshape(Cs, Ds, -1)
     noise = _natural(chains.samples)
-    posterior = {n: noise[..., i] for i, n in enumerate(("s0_N", "rel_load", "k_p", "sL_m", "V0_m3"))}
-    idata = az.from_dict(posterior=posterior, sample_stats={"lp": chains.log_prob},
-                         attrs={"sampler": "emcee on the noise, coefficients drawn exactly", "orders": orders.label})
+    posterior = {
+        n: noise[..., i] for i, n in enumerate(("s0_N", "rel_load", "k_p", "sL_m", "V0_m3"))
+    }
+    idata = az.from_dict(
+        posterior=posterior,
+        sample_stats={"lp": chains.log_prob},
+        attrs={"sampler": "emcee on the noise, coefficients drawn exactly", "orders": orders.label},
+    )
     t_diag = time.perf_counter()
     diagnostics = convergence(idata, chains, list(posterior))
     diagnostics["seconds"] = time.perf_counter() - t_diag
-    return SurfaceFit(rec, orders, g, chains.samples, beta, chains, idata, diagnostics, ll, theta,
-                      seconds=time.perf_counter() - t0, stand=stand, loglik_loo=ll_loo)
+    return SurfaceFit(
+        rec,
+        orders,
+        g,
+        chains.samples,
+        beta,
+        chains,
+        idata,
+        diagnostics,
+        ll,
+        theta,
+        seconds=time.perf_counter() - t0,
+        stand=stand,
+        loglik_loo=ll_loo,
+    )
 
 
 def _natural(theta):
     return np.exp(np.asarray(theta))
 
 
-def select_orders(rec: Recordings, candidates=CANDIDATES, *, seed: int = 0, settings: Settings | None = None,
-                  stand: StandDescription = PAPER_STAND):
+def select_orders(
+    rec: Recordings,
+    candidates=CANDIDATES,
+    *,
+    seed: int = 0,
+    settings: Settings | None = None,
+    stand: StandDescription = PAPER_STAND,
+):
     """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows)."""
     settings = settings or Settings()
-    fits = {o.label: fit_surface(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates}
+    fits = {
+        o.label: fit_surface(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates
+    }
     import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         cmp = az.compare({k: loglik_idata(f.loglik_loo) for k, f in fits.items()}, ic="loo")
-    rows = [{"orders": k, "elpd_loo": float(r["elpd_loo"]), "p_loo": float(r["p_loo"]),
-             "elpd_diff": float(r["elpd_diff"]), "dse": float(r["dse"]), "rank": int(r["rank"]),
-             "warning": bool(r["warning"])} for k, r in cmp.iterrows()]
+    rows = [
+        {
+            "orders": k,
+            "elpd_loo": float(r["elpd_loo"]),
+            "p_loo": float(r["p_loo"]),
+            "elpd_diff": float(r["elpd_diff"]),
+            "dse": float(r["dse"]),
+            "rank": int(r["rank"]),
+            "warning": bool(r["warning"]),
+        }
+        for k, r in cmp.iterrows()
+    ]
     return dataclasses.replace(fits[cmp.index[0]], selection=tuple(rows)), rows
 
 
@@ -563,9 +641,14 @@ def _loo_part(loo, n_coefficients, loglik) -> dict:
     ll = np.asarray(loglik).reshape(-1, np.shape(loglik)[-1])
     lppd = float(np.sum(logsumexp(ll, axis=0) - np.log(ll.shape[0])))
     k = np.asarray(loo.pareto_k)
-    return {"elpd_loo": float(loo.elpd_loo), "se": float(loo.se), "p_loo": lppd - float(loo.elpd_loo),
-            "max_pareto_k": float(np.max(k)), "n_pareto_k_above_0.7": int(np.sum(k > PARETO_K_MAX)),
-            "n_coefficients": int(n_coefficients)}
+    return {
+        "elpd_loo": float(loo.elpd_loo),
+        "se": float(loo.se),
+        "p_loo": lppd - float(loo.elpd_loo),
+        "max_pareto_k": float(np.max(k)),
+        "n_pareto_k_above_0.7": int(np.sum(k > PARETO_K_MAX)),
+        "n_coefficients": int(n_coefficients),
+    }
 
 
 def loo_verdict(loo_a, loo_b, names=("surface", "per-pressure cubics")) -> dict:
@@ -578,19 +661,32 @@ def loo_verdict(loo_a, loo_b, names=("surface", "per-pressure cubics")) -> dict:
     diff = np.asarray(loo_a.loo_i) - np.asarray(loo_b.loo_i)
     n = diff.size
     d, se = float(diff.sum()), float(np.sqrt(n * np.var(diff, ddof=1)))
-    k_bad = {nm: int(np.sum(np.asarray(lo.pareto_k) > PARETO_K_MAX)) for nm, lo in zip(names, (loo_a, loo_b), strict=True)}
+    k_bad = {
+        nm: int(np.sum(np.asarray(lo.pareto_k) > PARETO_K_MAX))
+        for nm, lo in zip(names, (loo_a, loo_b), strict=True)
+    }
     if any(k_bad.values()):
         which = ", ".join(f"{nm}: {c}" for nm, c in k_bad.items() if c)
-        verdict, why = "refused", (f"PSIS-LOO not reliable: readings with Pareto k > {PARETO_K_MAX:g} ({which}); "
-                                   "no verdict (K-fold cross-validation would be needed)")
+        verdict, why = (
+            "refused",
+            (
+                f"PSIS-LOO not reliable: readings with Pareto k > {PARETO_K_MAX:g} ({which}); "
+                "no verdict (K-fold cross-validation would be needed)"
+            ),
+        )
     elif abs(d) > SE_MULTIPLE * se and abs(d) > ELPD_MIN:
         verdict = names[0] if d > 0 else names[1]
         why = f"ELPD difference {d:.1f} +- {se:.1f} exceeds {SE_MULTIPLE:g} SE"
     else:
         verdict = "indistinguishable"
         why = f"ELPD difference {d:.1f} +- {se:.1f} is within {SE_MULTIPLE:g} SE (or below {ELPD_MIN:g})"
-    return {"elpd_diff": d, "elpd_diff_se": se, "better": verdict, "reason": why,
-            "rule": f"better only if |diff| > {SE_MULTIPLE:g} SE and > {ELPD_MIN:g}, and every Pareto k <= {PARETO_K_MAX:g}"}
+    return {
+        "elpd_diff": d,
+        "elpd_diff_se": se,
+        "better": verdict,
+        "reason": why,
+        "rule": f"better only if |diff| > {SE_MULTIPLE:g} SE and > {ELPD_MIN:g}, and every Pareto k <= {PARETO_K_MAX:g}",
+    }
 
 
 def _concat_tests(parts):
@@ -638,8 +734,15 @@ def cubic_loglik_loo(cubic_fit, max_draws: int = 2000) -> np.ndarray:
         k = X.shape[1]
         sf = np.sqrt(nz[:, :1] ** 2 + (nz[:, 1:2] * tf.ref_force()[None, :]) ** 2)
         sl = np.broadcast_to(nz[:, 2:3], sf.shape)
-        ll = (np.asarray(_diag_loo(X, jnp.asarray(tf.test.force_N), jnp.asarray(sf), jnp.full(k, FORCE_PRIOR_SD_N)))
-              + np.asarray(_diag_loo(X, jnp.asarray(tf.test.piston_m), jnp.asarray(sl), jnp.full(k, PISTON_PRIOR_SD_M))))
+        ll = np.asarray(
+            _diag_loo(
+                X, jnp.asarray(tf.test.force_N), jnp.asarray(sf), jnp.full(k, FORCE_PRIOR_SD_N)
+            )
+        ) + np.asarray(
+            _diag_loo(
+                X, jnp.asarray(tf.test.piston_m), jnp.asarray(sl), jnp.full(k, PISTON_PRIOR_SD_M)
+            )
+        )
         parts.append(ll.reshape(C, -1, ll.shape[-1]))
     return _concat_tests(parts)
 
@@ -669,7 +772,13 @@ def _exact_cubic_loo(tf, i: int, seed: int, settings: Settings) -> float:
 
     t = tf.test
     keep = np.arange(t.n_points) != i
-    sub = replace(t, **{k: getattr(t, k)[keep] for k in ("height_m", "force_N", "piston_m", "compression", "step", "rows")})
+    sub = replace(
+        t,
+        **{
+            k: getattr(t, k)[keep]
+            for k in ("height_m", "force_N", "piston_m", "compression", "step", "rows")
+        },
+    )
     refit = fit_test(sub, tf.x0_m, seed=seed, settings=settings)
     nz = refit.noise.reshape(-1, 3)[:: max(1, refit.noise[..., 0].size // 2000)]
     X, xi = basis(sub.height_m - tf.x0_m), basis(np.array([t.height_m[i] - tf.x0_m]))[0]
@@ -677,10 +786,27 @@ def _exact_cubic_loo(tf, i: int, seed: int, settings: Settings) -> float:
     sf = np.sqrt(nz[:, :1] ** 2 + (nz[:, 1:2] * refit.ref_force()[None, :]) ** 2)
     sf_i = np.sqrt(nz[:, 0] ** 2 + (nz[:, 1] * ref_i) ** 2)
     k = X.shape[1]
-    ll = (np.asarray(_diag_predictive(X, jnp.asarray(sub.force_N), jnp.asarray(sf), jnp.full(k, FORCE_PRIOR_SD_N),
-                                      xi, t.force_N[i], jnp.asarray(sf_i)))
-          + np.asarray(_diag_predictive(X, jnp.asarray(sub.piston_m), jnp.asarray(np.broadcast_to(nz[:, 2:3], sf.shape)),
-                                        jnp.full(k, PISTON_PRIOR_SD_M), xi, t.piston_m[i], jnp.asarray(nz[:, 2]))))
+    ll = np.asarray(
+        _diag_predictive(
+            X,
+            jnp.asarray(sub.force_N),
+            jnp.asarray(sf),
+            jnp.full(k, FORCE_PRIOR_SD_N),
+            xi,
+            t.force_N[i],
+            jnp.asarray(sf_i),
+        )
+    ) + np.asarray(
+        _diag_predictive(
+            X,
+            jnp.asarray(sub.piston_m),
+            jnp.asarray(np.broadcast_to(nz[:, 2:3], sf.shape)),
+            jnp.full(k, PISTON_PRIOR_SD_M),
+            xi,
+            t.piston_m[i],
+            jnp.asarray(nz[:, 2]),
+        )
+    )
     from scipy.special import logsumexp
 
     return float(logsumexp(ll) - np.log(ll.size))
@@ -695,7 +821,10 @@ class _ExactLoo:
         for j, v in replaced.items():
             self.loo_i[j], self.pareto_k[j] = v, 0.0
         n = self.loo_i.size
-        self.elpd_loo, self.se = float(self.loo_i.sum()), float(np.sqrt(n * np.var(self.loo_i, ddof=1)))
+        self.elpd_loo, self.se = (
+            float(self.loo_i.sum()),
+            float(np.sqrt(n * np.var(self.loo_i, ddof=1))),
+        )
         self.p_loo = float("nan")
         self.n_refits = len(replaced)
 
@@ -709,11 +838,15 @@ def _reloo_cubics(cubic_fit, loo, seed: int, settings: Settings):
     replaced = {}
     for j in bad:
         ti = int(np.searchsorted(offsets, j, side="right") - 1)
-        replaced[int(j)] = _exact_cubic_loo(cubic_fit.tests[ti], int(j - offsets[ti]), seed + int(j), settings)
+        replaced[int(j)] = _exact_cubic_loo(
+            cubic_fit.tests[ti], int(j - offsets[ti]), seed + int(j), settings
+        )
     return _ExactLoo(loo, replaced)
 
 
-def compare_with_cubics(fit: SurfaceFit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
+def compare_with_cubics(
+    fit: SurfaceFit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()
+) -> dict:
     """PSIS-LOO of the surface model against the per-pressure cubics, per (force, piston) reading.
 
     Both models are linear in their coefficients given the noise, so each reading's leave-one-out
@@ -725,17 +858,24 @@ def compare_with_cubics(fit: SurfaceFit, cubic_fit, *, seed: int = 0, settings: 
     plain_s, plain_c = psis_loo(fit.loglik), psis_loo(cub_ll)
     k_c = _loo_part(loo_c, n_c, cub_ll)  # Pareto k before the refits
     loo_c = _reloo_cubics(cubic_fit, loo_c, seed, settings)
-    cubics = _loo_part(loo_c, n_c, cub_ll) | {"max_pareto_k_psis": k_c["max_pareto_k"],
-                                               "n_exact_refits": getattr(loo_c, "n_refits", 0)}
+    cubics = _loo_part(loo_c, n_c, cub_ll) | {
+        "max_pareto_k_psis": k_c["max_pareto_k"],
+        "n_exact_refits": getattr(loo_c, "n_refits", 0),
+    }
     return {
         "surface": _loo_part(loo_s, n_s, fit.loglik),
         "cubics": cubics,
         **loo_verdict(loo_s, loo_c),
-        "method": ("PSIS-LOO over the noise draws with the coefficients integrated out exactly per left-out reading; "
-                   f"cubic readings still at Pareto k > {PARETO_K_MAX:g} (up to {RELOO_MAX}) replaced by exact refits "
-                   "of their test without the reading"),
-        "plain_psis_loo": {"surface": _loo_part(plain_s, n_s, fit.loglik), "cubics": _loo_part(plain_c, n_c, cub_ll),
-                           **loo_verdict(plain_s, plain_c)},
+        "method": (
+            "PSIS-LOO over the noise draws with the coefficients integrated out exactly per left-out reading; "
+            f"cubic readings still at Pareto k > {PARETO_K_MAX:g} (up to {RELOO_MAX}) replaced by exact refits "
+            "of their test without the reading"
+        ),
+        "plain_psis_loo": {
+            "surface": _loo_part(plain_s, n_s, fit.loglik),
+            "cubics": _loo_part(plain_c, n_c, cub_ll),
+            **loo_verdict(plain_s, plain_c),
+        },
         "unit": "log density per (force, piston) reading, summed over readings",
     }
 
@@ -744,7 +884,7 @@ def compare_with_cubics(fit: SurfaceFit, cubic_fit, *, seed: int = 0, settings: 
 
 DEFINITIONS = {
     "pressure_area_m2": "F_p = (P - E) / p_u: the area on which the pressure acts, the casing force E removed "
-                        "(the surface model's own quantity, not the paper's F_eff)",
+    "(the surface model's own quantity, not the paper's F_eff)",
     "feff_m2": "F_eff = P / p_u: the paper's effective area (eq. 1) of the model's mean force, casing force included",
     "casing_N": "E(x): the casing's own force, the same at every pressure",
     "volume_excess_m2": "D = -dV/dx - F_p: volume-derived area beyond the pressure area (0 in the traditional theory)",
@@ -789,7 +929,14 @@ def spread_region(fit: SurfaceFit, n_x: int = 46, n_p: int = 41, level: float = 
     beta = fit.flat_beta(2000)
     m, lo_b, hi_b = band(fit.spread_draws(X, P, beta=beta), axis=0, level=level)
     nonzero = (lo_b > 0) | (hi_b < 0)
-    return {"height_m": xs, "pressure_bar": ps, "mean": m, "lower": lo_b, "upper": hi_b, "credibly_nonzero": nonzero}
+    return {
+        "height_m": xs,
+        "pressure_bar": ps,
+        "mean": m,
+        "lower": lo_b,
+        "upper": hi_b,
+        "credibly_nonzero": nonzero,
+    }
 
 
 def summary(fit: SurfaceFit, comparison: dict | None = None) -> dict:
@@ -810,7 +957,11 @@ def summary(fit: SurfaceFit, comparison: dict | None = None) -> dict:
         "piston_area_m2": g.area_m2,
         "orders": asdict(fit.orders),
         "orders_label": fit.orders.label,
-        "pressure_scaling": {"q": "(p_bar - p_mid) / p_half", "p_mid_bar": g.p_mid, "p_half_bar": g.p_half},
+        "pressure_scaling": {
+            "q": "(p_bar - p_mid) / p_half",
+            "p_mid_bar": g.p_mid,
+            "p_half_bar": g.p_half,
+        },
         "basis": "t = (x - x0) / 0.05 m; F_p = sum c_kl t^k q^l; E = sum e_m t^m; D = sum d_kl t^k q^l",
         "definitions": DEFINITIONS,
         "stand": asdict(fit.stand),
@@ -822,9 +973,15 @@ def summary(fit: SurfaceFit, comparison: dict | None = None) -> dict:
         "order_selection": list(fit.selection),
         "comparison": comparison,
         "converged": fit.diagnostics["converged"],
-        "convergence": {k: v for k, v in fit.diagnostics.items() if k not in ("variables", "seconds")}
-        | {"r_hat_max": max(np.max(v["r_hat"]) for v in fit.diagnostics["variables"].values()),
-           "ess_bulk_min": min(np.min(v["ess_bulk"]) for v in fit.diagnostics["variables"].values())},
+        "convergence": {
+            k: v for k, v in fit.diagnostics.items() if k not in ("variables", "seconds")
+        }
+        | {
+            "r_hat_max": max(np.max(v["r_hat"]) for v in fit.diagnostics["variables"].values()),
+            "ess_bulk_min": min(
+                np.min(v["ess_bulk"]) for v in fit.diagnostics["variables"].values()
+            ),
+        },
         "warnings": fit.diagnostics["warnings"],
     }
 
@@ -856,8 +1013,11 @@ def figure_pressure_area(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     fig.colorbar(im, ax=ax, label="F_p posterior mean, cm^2")
     ax.set_xlabel("height x, mm")
     ax.set_ylabel("overpressure p_u, bar")
-    ax.set_title("Pressure area F_p = (P - E)/p_u (casing force removed; not the paper's F_eff = P/p_u)\n"
-                 "(white contours: pointwise 90 % band width, % of F_p)", fontsize=8)
+    ax.set_title(
+        "Pressure area F_p = (P - E)/p_u (casing force removed; not the paper's F_eff = P/p_u)\n"
+        "(white contours: pointwise 90 % band width, % of F_p)",
+        fontsize=8,
+    )
     for t in fit.recordings.tests:
         ax.axhline(t.pressure_bar, color="k", lw=0.3, alpha=0.4)
     fig.tight_layout()
@@ -873,12 +1033,22 @@ def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     vmax = float(np.max(np.abs(reg["mean"])))
     im = ax.pcolormesh(xs, ps, reg["mean"].T, shading="auto", cmap="RdBu_r", vmin=-vmax, vmax=vmax)
     if reg["credibly_nonzero"].any() and not reg["credibly_nonzero"].all():
-        ax.contour(xs, ps, reg["credibly_nonzero"].T.astype(float), levels=[0.5], colors="k", linewidths=1.5)
+        ax.contour(
+            xs,
+            ps,
+            reg["credibly_nonzero"].T.astype(float),
+            levels=[0.5],
+            colors="k",
+            linewidths=1.5,
+        )
     fig.colorbar(im, ax=ax, label="p_u (-dV/dx) - P, N (posterior mean)")
     ax.set_xlabel("height x, mm")
     ax.set_ylabel("overpressure p_u, bar")
     share = 100 * reg["credibly_nonzero"].mean()
-    ax.set_title(f"Traditional minus measured force\noutlined: 90 % band excludes 0 ({share:.0f} % of the range)", fontsize=9)
+    ax.set_title(
+        f"Traditional minus measured force\noutlined: 90 % band excludes 0 ({share:.0f} % of the range)",
+        fontsize=9,
+    )
     fig.tight_layout()
     return fig
 
@@ -910,4 +1080,6 @@ def comparison_words(c: dict) -> str:
     """One line for a ``compare_with_cubics`` result."""
     if c["better"] in ("refused", "indistinguishable"):
         return f"{c['better']}: {c['reason']}"
-    return f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f} in favour of the {c['better']}"
+    return (
+        f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f} in favour of the {c['better']}"
+    )

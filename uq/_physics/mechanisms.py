@@ -115,7 +115,11 @@ def parse_effects(specs: list[str] | None, option: str = "--effect") -> dict[str
             raise InputError(f"option {option}: mechanism '{name}' given twice")
         out[name] = v
     if "hysteresis" in out and not -0.5 < out["hysteresis"] < 0.5:
-        raise InputError(f"option {option} hysteresis={out['hysteresis']:g}: expected |m| < 0.5 (a fraction, not per cent)")
+        raise InputError(
+            f"option {option} hysteresis={out['hysteresis']:g}: expected |m| < 0.5 (a fraction, not per cent)"
+        )
     if "volume_excess" in out and not -0.5 < out["volume_excess"] < 1.0:
-        raise InputError(f"option {option} volume_excess={out['volume_excess']:g}: expected -0.5 < m < 1 (a fraction, not per cent)")
+        raise InputError(
+            f"option {option} volume_excess={out['volume_excess']:g}: expected -0.5 < m < 1 (a fraction, not per cent)"
+        )
     return out

@@ -23,15 +23,23 @@ def _residual_figure(res: dict, path: Path) -> None:
     fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
     cmap = plt.get_cmap("viridis")
     pmax = meta["pressure_bar"].max()
-    for col, (fit, title) in enumerate(((base, "traditional"), (final, " + ".join(["traditional", *final.names])))):
+    for col, (fit, title) in enumerate(
+        ((base, "traditional"), (final, " + ".join(["traditional", *final.names])))
+    ):
         r = _residuals(fit, meta, d)
         for row, (q, scale, unit) in enumerate((("force", 1.0, "N"), ("volume", 1e6, "cm^3"))):
             ax = axes[row, col]
             for pb in np.unique(meta["pressure_bar"]):
                 for comp, mk in ((True, "v"), (False, "^")):
                     s = (meta["pressure_bar"] == pb) & (meta["compression"] == comp)
-                    ax.plot(meta["height_m"][s] * 1e3, r[q][0][s] * scale, mk, ms=3, color=cmap(pb / pmax),
-                            label=f"{pb:g} bar" if comp else None)
+                    ax.plot(
+                        meta["height_m"][s] * 1e3,
+                        r[q][0][s] * scale,
+                        mk,
+                        ms=3,
+                        color=cmap(pb / pmax),
+                        label=f"{pb:g} bar" if comp else None,
+                    )
             ax.axhline(0, color="k", lw=0.6)
             ax.set_title(f"{q} residual, {title}", fontsize=9)
             ax.set_ylabel(unit)
@@ -48,6 +56,13 @@ def write_diagnose_report(res: dict, out_dir) -> Path:
     (with its ``_fits``, as :func:`uq._diagnose.engine.diagnose` returns it); returns the page's path."""
     out = Path(out_dir)
     _residual_figure(res, out / FIGURE)
-    page = render("diagnose.html", summary=summary_text(res), mechanisms=res["mechanisms"], baseline=res["baseline"],
-                  final=res["final"], rule=res["selection"]["rule"], figure=FIGURE)
+    page = render(
+        "diagnose.html",
+        summary=summary_text(res),
+        mechanisms=res["mechanisms"],
+        baseline=res["baseline"],
+        final=res["final"],
+        rule=res["selection"]["rule"],
+        figure=FIGURE,
+    )
     return write_text_atomic(out / "diagnose.html", page)

@@ -75,8 +75,15 @@ def _escape(value):
 def _environment():
     from jinja2 import Environment, PackageLoader, StrictUndefined
 
-    env = Environment(loader=PackageLoader("uq", "_report/templates"), autoescape=True, undefined=StrictUndefined,
-                      finalize=_escape, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env = Environment(
+        loader=PackageLoader("uq", "_report/templates"),
+        autoescape=True,
+        undefined=StrictUndefined,
+        finalize=_escape,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
     env.filters["fmt"] = format  # {{ x|fmt(".1f") }} is f"{x:.1f}"
     env.filters["sig4"] = sig4
     return env

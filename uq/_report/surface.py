@@ -34,11 +34,33 @@ def figure_residual_overlay(fit: SurfaceFit):
     for ax, t in zip(axes.flat, tests, strict=False):
         m, lo_b, hi_b = band(fit.force_draws(xs, t.pressure_bar, beta=beta), axis=0)
         at_pts = fit.force_draws(t.height_m, t.pressure_bar, beta=beta).mean(axis=0)
-        ax.fill_between(xs * 1e3, lo_b - m, hi_b - m, alpha=0.35, color="tab:blue", lw=0, label="surface 90 % band")
+        ax.fill_between(
+            xs * 1e3,
+            lo_b - m,
+            hi_b - m,
+            alpha=0.35,
+            color="tab:blue",
+            lw=0,
+            label="surface 90 % band",
+        )
         ax.axhline(0, color="k", lw=0.6)
         comp = t.compression
-        ax.plot(t.height_m[comp] * 1e3, (t.force_N - at_pts)[comp], ".", ms=3, color="tab:red", label="compression")
-        ax.plot(t.height_m[~comp] * 1e3, (t.force_N - at_pts)[~comp], "x", ms=3, color="tab:green", label="rebound")
+        ax.plot(
+            t.height_m[comp] * 1e3,
+            (t.force_N - at_pts)[comp],
+            ".",
+            ms=3,
+            color="tab:red",
+            label="compression",
+        )
+        ax.plot(
+            t.height_m[~comp] * 1e3,
+            (t.force_N - at_pts)[~comp],
+            "x",
+            ms=3,
+            color="tab:green",
+            label="rebound",
+        )
         ax.set_title(f"{t.pressure_bar:g} bar", fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[n:]:
@@ -56,16 +78,28 @@ def write_surface_report(fit: SurfaceFit, result: dict, out_dir) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figs = {
-        "surface_pressure_area.png": (figure_pressure_area(fit), "pressure area F_p(x, p_u) heat map"),
+        "surface_pressure_area.png": (
+            figure_pressure_area(fit),
+            "pressure area F_p(x, p_u) heat map",
+        ),
         "surface_spread.png": (figure_spread(fit), "spread traditional minus measured"),
-        "surface_residuals.png": (figure_residual_overlay(fit), "readings against the surface band"),
+        "surface_residuals.png": (
+            figure_residual_overlay(fit),
+            "readings against the surface band",
+        ),
     }
     figures = {}
     for name, (fig, alt) in figs.items():
         figures[name] = Figure(name, _png(fig), alt)
         write_bytes_atomic(out / name, figures[name].png)
     comp = result.get("comparison")
-    page = render("surface.html", path=fit.recordings.path, result=result, comparison=comp,
-                  verdict=comparison_words(comp) if comp else None,
-                  order_selection=result.get("order_selection") or [], figures=figures)
+    page = render(
+        "surface.html",
+        path=fit.recordings.path,
+        result=result,
+        comparison=comp,
+        verdict=comparison_words(comp) if comp else None,
+        order_selection=result.get("order_selection") or [],
+        figures=figures,
+    )
     return write_text_atomic(out / "surface.html", page)

@@ -170,7 +170,9 @@ class TraditionalSpring(N50Spring):
 SPRINGS = {"n50": N50Spring, "n50-traditional": TraditionalSpring}
 
 
-MAX_STEPS_PER_BRANCH = 10_000  # readings per branch: far beyond any stand (0.009 mm steps over 90 mm)
+MAX_STEPS_PER_BRANCH = (
+    10_000  # readings per branch: far beyond any stand (0.009 mm steps over 90 mm)
+)
 MAX_TESTS = 1000
 
 
@@ -186,8 +188,14 @@ class Layout:
     def __post_init__(self) -> None:
         # Checked here, not only by the CLI, so no Layout can divide by zero or ask for 1e9 rows.
         if not (np.isfinite(self.step_m) and self.step_m > 0):
-            raise InputError(f"option --step-mm: expected a positive step in mm, got {self.step_m * 1e3:g}")
-        if not (np.isfinite(self.x_min_m) and np.isfinite(self.x_max_m) and 0 < self.x_min_m < self.x_max_m):
+            raise InputError(
+                f"option --step-mm: expected a positive step in mm, got {self.step_m * 1e3:g}"
+            )
+        if not (
+            np.isfinite(self.x_min_m)
+            and np.isfinite(self.x_max_m)
+            and 0 < self.x_min_m < self.x_max_m
+        ):
             raise InputError(
                 f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {self.x_min_m * 1e3:g}, {self.x_max_m * 1e3:g}"
             )
@@ -196,9 +204,13 @@ class Layout:
                 f"option --step-mm: {self.step_m * 1e3:g} mm cuts {self.x_min_m * 1e3:g}..{self.x_max_m * 1e3:g} mm into more than {MAX_STEPS_PER_BRANCH} steps"
             )
         if not self.pressures_bar or len(self.pressures_bar) > MAX_TESTS:
-            raise InputError(f"option --pressures: expected 1 to {MAX_TESTS} overpressures, got {len(self.pressures_bar)}")
+            raise InputError(
+                f"option --pressures: expected 1 to {MAX_TESTS} overpressures, got {len(self.pressures_bar)}"
+            )
         if not all(np.isfinite(p) and p > 0 for p in self.pressures_bar):
-            raise InputError(f"option --pressures: expected positive overpressures in bar, got {', '.join(f'{p:g}' for p in self.pressures_bar)}")
+            raise InputError(
+                f"option --pressures: expected positive overpressures in bar, got {', '.join(f'{p:g}' for p in self.pressures_bar)}"
+            )
 
     def heights(self) -> tuple[np.ndarray, np.ndarray]:
         """Commanded heights in recording order and the compression flag, shape (n,)."""
@@ -214,8 +226,15 @@ class Layout:
         return np.round(heights, 9), comp
 
 
-def true_curves(spring, effects: dict[str, float], height_m, p_bar: float, compression, step,
-                piston_area_m2: float = PAPER_PISTON_AREA_M2):
+def true_curves(
+    spring,
+    effects: dict[str, float],
+    height_m,
+    p_bar: float,
+    compression,
+    step,
+    piston_area_m2: float = PAPER_PISTON_AREA_M2,
+):
     """Noise-free force (N) and piston coordinate (m) of ``spring`` with concealed ``effects``.
 
     Mechanism definitions as CONTRACT.md section 4, applied in the order
@@ -283,9 +302,13 @@ def simulate(
     be the one a model assumes (that is how the tests check models against a different stand).
     """
     if spring_name not in SPRINGS:
-        raise InputError(f"option --spring: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}")
+        raise InputError(
+            f"option --spring: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}"
+        )
     effects = dict(effects or {})
-    spring = SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
+    spring = (
+        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
+    )
     rng = np.random.default_rng(seed)
     heights, comp = layout.heights()
     steps = np.arange(heights.size)
@@ -293,19 +316,30 @@ def simulate(
     for p in layout.pressures_bar:
         n = heights.size
         x_true = heights + reading_errors(rng, stand.displacement_sd_m, n, stand.error_df)
-        dp_bar = ar1(reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df), stand.pressure_error_corr)
+        dp_bar = ar1(
+            reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df),
+            stand.pressure_error_corr,
+        )
         e_load = reading_errors(rng, stand.load_cell_rel_sd, n, stand.error_df)
         e_cal = reading_errors(rng, stand.caliper_sd_m, n, stand.error_df)
         force, piston = true_curves(spring, effects, x_true, p, comp, steps, piston_area_m2)
-        feff = np.asarray(spring.effective_area_m2(x_true, p)) * (1.0 + effects.get("pressure_dependent_area", 0.0) * p)
+        feff = np.asarray(spring.effective_area_m2(x_true, p)) * (
+            1.0 + effects.get("pressure_dependent_area", 0.0) * p
+        )
         force_read = (force + dp_bar * BAR_PA * feff) * (1.0 + e_load)
         ref_piston = float(spring.piston_m(np.array(layout.x_max_m), p))
         v_gas = stand.gas_volume_at_xmax_m3 - piston_area_m2 * (piston - ref_piston)
         # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_gas dp / p_abs.
         piston_read = piston - v_gas * dp_bar / (p + stand.p_atm_bar) / piston_area_m2 + e_cal
         tests.append(
-            dict(pressure_bar=p, height_m=heights, force_N=force_read, piston_m=piston_read,
-                 compression=comp, step=steps)
+            dict(
+                pressure_bar=p,
+                height_m=heights,
+                force_N=force_read,
+                piston_m=piston_read,
+                compression=comp,
+                step=steps,
+            )
         )
     return tests
 
@@ -337,19 +371,35 @@ def simulate_recordings(
     'RECONSTRUCTED recordings from the virtual test stand of airspring-uq, not measured data.'
     """
     effects = dict(effects or {})
-    tests = simulate(spring, seed=seed, effects=effects, layout=layout, piston_area_m2=piston_area_cm2 * 1e-4,
-                     stand=stand)
-    call = (f"uq.simulate({spring!r}, seed={seed}, effects={effects!r}, layout={layout!r}, "
-            f"piston_area_cm2={piston_area_cm2:g}{'' if stand == PAPER_STAND else ', stand=...'})")
+    tests = simulate(
+        spring,
+        seed=seed,
+        effects=effects,
+        layout=layout,
+        piston_area_m2=piston_area_cm2 * 1e-4,
+        stand=stand,
+    )
+    call = (
+        f"uq.simulate({spring!r}, seed={seed}, effects={effects!r}, layout={layout!r}, "
+        f"piston_area_cm2={piston_area_cm2:g}{'' if stand == PAPER_STAND else ', stand=...'})"
+    )
     text = write_recordings_csv(tests, simulation_comment(spring, effects, stand, call))
-    return recordings_from_text(text, f"simulated {spring} (seed {seed})", piston_area_cm2=piston_area_cm2)
+    return recordings_from_text(
+        text, f"simulated {spring} (seed {seed})", piston_area_cm2=piston_area_cm2
+    )
 
 
-def simulation_comment(spring: str, effects: dict[str, float], stand: StandDescription, regenerate: str) -> str:
+def simulation_comment(
+    spring: str, effects: dict[str, float], stand: StandDescription, regenerate: str
+) -> str:
     """The comment lines of simulated recordings: what made them, and how to make them again."""
     differs = stand.changes()
-    noise = ("noise from its error budget (section 3.2)" if not differs else
-             "noise from its error budget (section 3.2) except " + ", ".join(f"{k} = {v:g}" for k, v in differs.items()))
+    noise = (
+        "noise from its error budget (section 3.2)"
+        if not differs
+        else "noise from its error budget (section 3.2) except "
+        + ", ".join(f"{k} = {v:g}" for k, v in differs.items())
+    )
     return (
         "RECONSTRUCTED recordings from the virtual test stand of airspring-uq, not measured data.\n"
         f"Spring: {SPRINGS[spring].description}.\n"
@@ -359,8 +409,13 @@ def simulation_comment(spring: str, effects: dict[str, float], stand: StandDescr
     )
 
 
-def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTON_AREA_M2,
-             stand: StandDescription = PAPER_STAND):
+def noise_sd(
+    spring,
+    height_m,
+    p_bar: float,
+    piston_area_m2: float = PAPER_PISTON_AREA_M2,
+    stand: StandDescription = PAPER_STAND,
+):
     """Standard deviations (force N, piston m) the error budget implies at each height.
 
     First-order propagation of the terms in the module docstring; used to check the stand
@@ -371,8 +426,11 @@ def noise_sd(spring, height_m, p_bar: float, piston_area_m2: float = PAPER_PISTO
     feff = np.asarray(spring.effective_area_m2(height_m, p_bar))
     dPdx = np.gradient(f, height_m) if height_m.size > 2 else np.zeros_like(f)
     sdp_bar = stand.pressure_sd_bar(p_bar)
-    sd_force = np.sqrt((stand.load_cell_rel_sd * f) ** 2 + (sdp_bar * BAR_PA * feff) ** 2
-                       + (dPdx * stand.displacement_sd_m) ** 2)
+    sd_force = np.sqrt(
+        (stand.load_cell_rel_sd * f) ** 2
+        + (sdp_bar * BAR_PA * feff) ** 2
+        + (dPdx * stand.displacement_sd_m) ** 2
+    )
     L = np.asarray(spring.piston_m(height_m, p_bar))
     v_gas = stand.gas_volume_at_xmax_m3 - piston_area_m2 * (L - L.min())
     slope = np.asarray(spring.piston_slope(height_m, p_bar))
@@ -395,7 +453,9 @@ class SmoothSurfaceSpring(N50Spring):
     """
 
     name = "n50-smooth"
-    description = "N-50-like spring of the surface model's own form (smooth in pressure), fitted to Table 1"
+    description = (
+        "N-50-like spring of the surface model's own form (smooth in pressure), fitted to Table 1"
+    )
     P_MID, P_HALF, H = 5.05, 4.95, BASIS_SCALE_M
 
     def __init__(self, piston_area_m2: float = PAPER_PISTON_AREA_M2) -> None:
@@ -407,10 +467,14 @@ class SmoothSurfaceSpring(N50Spring):
         for p, cf, cl in zip(t1.pressures_bar, t1.force, t1.piston, strict=True):
             t, q = u / self.H, np.full_like(u, (p - self.P_MID) / self.P_HALF)
             feff_cols = np.stack([t**k * q**m for k in range(4) for m in range(3)], axis=1)
-            rows_f.append(np.hstack([p * BAR_PA * feff_cols, np.stack([t**m for m in range(3)], axis=1)]))
+            rows_f.append(
+                np.hstack([p * BAR_PA * feff_cols, np.stack([t**m for m in range(3)], axis=1)])
+            )
             ys_f.append(cubic(cf, u))
             ys_d.append(-piston_area_m2 * cubic_slope(cl, u))
-            rows_d.append((feff_cols, np.stack([t**k * q**m for k in range(2) for m in range(2)], axis=1)))
+            rows_d.append(
+                (feff_cols, np.stack([t**k * q**m for k in range(2) for m in range(2)], axis=1))
+            )
         coef, *_ = np.linalg.lstsq(np.vstack(rows_f), np.concatenate(ys_f), rcond=None)
         self.c, self.e = coef[:12], coef[12:]
         A = np.vstack([r[1] for r in rows_d])
@@ -441,12 +505,19 @@ class SmoothSurfaceSpring(N50Spring):
     def piston_m(self, height_m, p_bar):
         a_L = float(self._coef(p_bar)[1][0])
         t, q = self._tq(height_m, p_bar)
-        integ = sum(self.c[3 * k + m] * t ** (k + 1) / (k + 1) * q**m for k in range(4) for m in range(3))
-        integ = integ + sum(self.d[2 * k + m] * t ** (k + 1) / (k + 1) * q**m for k in range(2) for m in range(2))
+        integ = sum(
+            self.c[3 * k + m] * t ** (k + 1) / (k + 1) * q**m for k in range(4) for m in range(3)
+        )
+        integ = integ + sum(
+            self.d[2 * k + m] * t ** (k + 1) / (k + 1) * q**m for k in range(2) for m in range(2)
+        )
         return a_L - self.H * integ / self._area
 
     def piston_slope(self, height_m, p_bar):
-        return -(self.effective_area_m2(height_m, p_bar) + self.volume_excess_m2(height_m, p_bar)) / self._area
+        return (
+            -(self.effective_area_m2(height_m, p_bar) + self.volume_excess_m2(height_m, p_bar))
+            / self._area
+        )
 
 
 SPRINGS["n50-smooth"] = SmoothSurfaceSpring

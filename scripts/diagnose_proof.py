@@ -101,7 +101,7 @@ def key(case: dict) -> str:
 def run_case(case: dict) -> dict:
     from uq._data.recordings import PressureTest, Recordings
     from uq._data.stand_description import PAPER_STAND
-    from uq._diagnose.engine import diagnose, public
+    from uq._diagnose.engine import diagnose
     from uq._inference.sampler import Settings
     from uq._stand.simulator import Layout, simulate
 
@@ -129,11 +129,9 @@ def run_case(case: dict) -> dict:
         ),
     )
     t0 = time.time()
-    res = public(
-        diagnose(
-            rec, seed=case["seed"], settings=Settings(min_steps=300, chunk=200, tau_multiple=30.0)
-        )
-    )
+    res = diagnose(
+        rec, seed=case["seed"], settings=Settings(min_steps=300, chunk=200, tau_multiple=30.0)
+    ).to_json()
     return {
         **case,
         "key": key(case),

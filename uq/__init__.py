@@ -10,7 +10,7 @@ Every ``uq`` command is a function here, and no step needs a file in between::
     fit = uq.fit_campaign(rec, seed=1)        # per-pressure Bayesian cubics       (uq fit)
     uq.write_report(fit, "out/")              # out/report.html and its figures     (uq report)
     bands = uq.campaign_bands(fit)            # Figures 2-5 with 90 % credible bands
-    verdict = uq.check(uq.fit_json(fit), points)  # posterior vs stored estimates   (uq check)
+    verdict = uq.check(fit.to_json(), points)  # posterior vs stored estimates       (uq check)
     surface = uq.fit_surface(rec, seed=1)     # one model over height and pressure  (uq surface)
     answer = uq.margin(surface, 0.112, 20e3)  # pressure that carries 20 kN at 112 mm (uq margin)
     found = uq.diagnose(rec, seed=1)          # the physics the traditional theory misses (uq diagnose)
@@ -80,7 +80,12 @@ _API = {
     "read_recordings": "_data.recordings",
     "table1": "_data.reference",
     "table2": "_data.reference",
-    "fit_json": "_derived.results",
+    "compare_models": ("_derived.comparison", "compare"),
+    "CollapsedModel": "_inference.collapsed",
+    "Posterior": "_inference.collapsed",
+    "fit_collapsed": "_inference.collapsed",
+    "Convergence": "_inference.convergence",
+    "Diagnosis": "_diagnose.engine",
     "Settings": "_inference.sampler",
     "Layout": "_stand.simulator",
     "simulate": ("_stand.simulator", "simulate_recordings"),

@@ -454,7 +454,7 @@ def test_campaign_fit_shows_a_step_bar(monkeypatch, restore_progress):
 
     seen = {}
 
-    def fake_fit_tests(tests, x0_m, *, seed, settings, desc):
+    def fake_fit_tests(tests, x0_m, *, seed, settings, desc, **kw):
         seen["desc"] = desc
         return list(tests)
 
@@ -463,7 +463,7 @@ def test_campaign_fit_shows_a_step_bar(monkeypatch, restore_progress):
         x0_m = 0.112
 
     monkeypatch.setattr(cubic, "fit_tests", fake_fit_tests)
-    monkeypatch.setattr(cubic, "CampaignFit", lambda rec, fits, seed: fits)
+    monkeypatch.setattr(cubic, "CampaignFit", lambda rec, fits, seed, stand: fits)
     assert cubic.fit_campaign(Rec(), seed=1) == ["t1", "t2", "t3"]
     assert seen["desc"] == "sampling all tests"
 
@@ -601,9 +601,9 @@ def test_sampling_runs_show_a_step_bar(monkeypatch, restore_progress):
     monkeypatch.setattr(sys, "stderr", tty)
     _progress.set_enabled(True)
     run_ensembles(
-        lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings, desc="surface sampling"
+        lp, np.zeros(2), np.eye(2), ("a", "b"), seed=1, settings=settings, desc="surface sampling"
     )
     assert "surface sampling" in tty.getvalue() and "step" in tty.getvalue()
     before = tty.getvalue()
-    run_ensembles(lp, np.zeros(2), np.ones(2), ("a", "b"), seed=1, settings=settings)
+    run_ensembles(lp, np.zeros(2), np.eye(2), ("a", "b"), seed=1, settings=settings)
     assert tty.getvalue() == before

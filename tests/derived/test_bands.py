@@ -210,23 +210,21 @@ def test_simultaneous_band_holds_whole_draw_curves_and_pointwise_does_not():
 def _plugin_draws(test, x0_m, n, rng):
     """Closed-form posterior of the coefficients at the noise mode (the sampler's exact
     conditional draws without the noise parameters' spread): (n, 4) force and piston draws."""
+    from uq._data.stand_description import PAPER_STAND
+    from uq._inference.collapsed import find_map
     from uq._inference.float64 import jnp
     from uq._inference.linear import posterior_cov
-    from uq._models.cubic import _cubic_eval, _posteriors, _start, basis, least_squares
+    from uq._models.cubic import MODEL, _prepare, conditional_posteriors
     from uq._physics.quantities import BASIS_SCALE_M
 
-    u = test.height_m - x0_m
-    lsq_f, lsq_l = least_squares(u, test.force_N), least_squares(u, test.piston_m)
-    ref = np.abs(_cubic_eval(lsq_f, u))
-    X = basis(u)
-    args = (X, jnp.asarray(test.force_N), jnp.asarray(test.piston_m), jnp.asarray(ref))
-    theta = jnp.asarray(_start(X, test.force_N, test.piston_m, ref, lsq_f, lsq_l, u))
+    data = _prepare(test, x0_m, "budget", PAPER_STAND)[0]
+    theta = jnp.asarray(find_map(MODEL, data).theta)
     D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))
     return [
         rng.multivariate_normal(
             D @ np.asarray(post.mean), D @ np.asarray(posterior_cov(post)) @ D, n
         )
-        for post in _posteriors(theta, *args)
+        for post in conditional_posteriors(theta, data)
     ]
 
 

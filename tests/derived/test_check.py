@@ -80,9 +80,7 @@ def points_doc(pressures=(1.0, 5.0, 10.0)) -> dict:
 
 @pytest.fixture(scope="module")
 def n50_result(n50_fit, tmp_path_factory):
-    from uq._derived.results import fit_json
-
-    return _write(tmp_path_factory.mktemp("check") / "fit.json", fit_json(n50_fit))
+    return _write(tmp_path_factory.mktemp("check") / "fit.json", n50_fit.to_json())
 
 
 def test_points_file_is_table1_in_si():
@@ -368,9 +366,7 @@ def _simulated(seed: int, pressures=(1.0, 5.0, 10.0)):
 
 
 def _check_fit(cf, tmp_path: Path, tag: str) -> bool:
-    from uq._derived.results import fit_json
-
-    r = _write(tmp_path / f"fit_{tag}.json", fit_json(cf))
+    r = _write(tmp_path / f"fit_{tag}.json", cf.to_json())
     p = _write(tmp_path / "points.json", points_doc(tuple(cf.recordings.pressures_bar)))
     rc = main(["check", str(r), "--against", str(p)])
     assert rc in (0, 1)
@@ -387,7 +383,7 @@ def test_correct_fits_pass_on_seeded_simulations(tmp_path):
     for seed in range(6):
         cf = fit_campaign(_simulated(1000 + seed), seed=seed, settings=settings)
         ess += [
-            min(t.diagnostics["variables"][n]["ess_bulk"] for n in FORCE_NAMES + PISTON_NAMES)
+            min(t.convergence.variables[n]["ess_bulk"] for n in FORCE_NAMES + PISTON_NAMES)
             for t in cf.tests
         ]
         passed.append(_check_fit(cf, tmp_path, str(seed)))
@@ -397,21 +393,19 @@ def test_correct_fits_pass_on_seeded_simulations(tmp_path):
 
 def _plugin_result(rec) -> dict:
     """Closed-form shortcut: the Gaussian coefficient posterior at the noise parameters' mode."""
+    from uq._data.stand_description import PAPER_STAND
+    from uq._inference.collapsed import find_map
     from uq._inference.float64 import jnp
     from uq._inference.linear import posterior_cov
-    from uq._models.cubic import _cubic_eval, _posteriors, _start, basis, least_squares
+    from uq._models.cubic import MODEL, _prepare, conditional_posteriors
     from uq._physics.quantities import BASIS_SCALE_M
 
     tests = []
     D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))
     for t in rec.tests:
-        u = t.height_m - rec.x0_m
-        lsq_f, lsq_l = least_squares(u, t.force_N), least_squares(u, t.piston_m)
-        ref = np.abs(_cubic_eval(lsq_f, u))
-        X = basis(u)
-        args = (X, jnp.asarray(t.force_N), jnp.asarray(t.piston_m), jnp.asarray(ref))
-        theta = jnp.asarray(_start(X, t.force_N, t.piston_m, ref, lsq_f, lsq_l, u))
-        pf, pl = _posteriors(theta, *args)
+        data = _prepare(t, rec.x0_m, "budget", PAPER_STAND)[0]
+        theta = jnp.asarray(find_map(MODEL, data).theta)
+        pf, pl = conditional_posteriors(theta, data)
         cf, cl = posterior_cov(pf), posterior_cov(pl)
         tests.append(
             _test_json(
@@ -541,7 +535,6 @@ def test_false_failure_rate_with_sampled_posteriors_from_an_independent_campaign
     """6 campaign pairs fitted by the sampler (reduced settings) x 11 tests = 66 checks at
     alpha 0.1 (at most 15 failures, P(> 15) = 0.00064), and 20 closed-form pairs = 220
     checks (at most 37, P(> 37) = 0.00063)."""
-    from uq._derived.results import fit_json
     from uq._inference.sampler import Settings
     from uq._models.cubic import fit_campaign
 
@@ -551,11 +544,9 @@ def test_false_failure_rate_with_sampled_posteriors_from_an_independent_campaign
             read_result(
                 json.loads(
                     dumps_json(
-                        fit_json(
-                            fit_campaign(
-                                _simulated(7100 + 2 * k, ALL_PRESSURES), seed=k, settings=settings
-                            )
-                        )
+                        fit_campaign(
+                            _simulated(7100 + 2 * k, ALL_PRESSURES), seed=k, settings=settings
+                        ).to_json()
                     )
                 ),
                 "r",

@@ -49,12 +49,12 @@ def _consistent(mag: dict, truth: float) -> bool:
 
 
 def _run(rec, **kw):
-    from uq._diagnose.engine import diagnose, public
+    from uq._diagnose.engine import diagnose
     from uq._inference.sampler import Settings
 
-    return public(
-        diagnose(rec, seed=1, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0), **kw)
-    )
+    return diagnose(
+        rec, seed=1, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0), **kw
+    ).to_json()
 
 
 def test_clean_control_stays_quiet():
@@ -292,41 +292,45 @@ def test_mechanism_is_provisional_while_noise_check_fails():
 
 
 def test_pareto_k_reported_and_bad_psis_comparison_replaced_by_kfold():
+    from dataclasses import replace
+
     from uq._data.stand_description import PAPER_STAND
     from uq._diagnose import engine as D
     from uq._models import diagnose as M
 
     d, _ = M.prepare(_rec_stand({"force_offset": 56.3}, PAPER_STAND), PAPER_STAND)
     old, new = D.Fit((), 3, d, 1), D.Fit(("force_offset",), 3, d, 2)
-    kfold = D.KFold(d, 3, seed=3, n_folds=5)
-    good = D._compare(new, old, kfold)
+    scoring = D.Scoring(d, 3, seed=3, n_folds=5)
+    good = D._compare(new, old, scoring)
     assert good["method"] == "psis-loo" and good["pareto_k"]["n_terms"] == 2 * d.force.size
     # exact K-fold agrees with PSIS-LOO where PSIS is reliable (a check of the refits)
     for f in (old, new):
-        assert abs(kfold.elpd_i(f.names).sum() - f.elpd) < 10.0
-    new.pareto_k = new.pareto_k.copy()
-    new.pareto_k[0] = 0.9  # one unreliable term: PSIS-LOO must not be used for it
-    bad = D._compare(new, old, kfold)
+        assert abs(scoring.kfold(f.names).elpd - f.elpd) < 10.0
+    k = new.loo.pareto_k.copy()
+    k[0] = 0.9  # one unreliable term: PSIS-LOO must not be used for it
+    new.loo = replace(new.loo, pareto_k=k)
+    bad = D._compare(new, old, scoring)
     assert bad["pareto_k"]["n_over_0.7"] == 1 and "psis_loo_refused" in bad
     assert bad["method"] == "psis-loo, k > 0.7 terms refitted exactly"
-    assert abs(kfold.exact_loo_i(new)[0] - new.loo_i[0]) < 0.5  # the exact refit of a benign term
+    # the exact refit of a benign term
+    assert abs(scoring.exact(new).loo_i[0] - new.loo.loo_i[0]) < 0.5
     assert bad["delta_elpd"] > 4 * bad["delta_elpd_se"]
-    new.pareto_k[: D.MAX_RELOO + 1] = 0.9  # many unreliable terms: K-fold for both models
-    many = D._compare(new, old, kfold)
+    k = k.copy()
+    k[: D.MAX_RELOO + 1] = 0.9  # many unreliable terms: K-fold for both models
+    new.loo = replace(new.loo, pareto_k=k)
+    many = D._compare(new, old, scoring)
     assert many["method"] == "5-fold cross-validation" and "psis_loo_refused" in many
     assert many["delta_elpd"] > 4 * many["delta_elpd_se"]
 
 
 @pytest.mark.slow
 def test_n50_no_stand_in_offset_and_force_fit_not_worse(n50_recordings):
-    from uq._diagnose.engine import diagnose, public
+    from uq._diagnose.engine import diagnose
     from uq._inference.sampler import Settings
 
-    res = public(
-        diagnose(
-            n50_recordings, seed=0, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0)
-        )
-    )
+    res = diagnose(
+        n50_recordings, seed=0, settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0)
+    ).to_json()
     names = [m["name"] for m in res["mechanisms"]]
     assert "force_offset" not in names
     assert "volume_excess" in names

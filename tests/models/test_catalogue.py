@@ -100,7 +100,7 @@ def _cubic_and_bands(problem: Problem, rec):
         for j in range(3):
             inside += _inside(piston[:, j + 1], truth_l[j])
         total += 7
-        assert t.diagnostics["converged"], (problem.name, t.pressure_bar)
+        assert t.convergence.converged, (problem.name, t.pressure_bar)
     # 21 intervals at 90 %: 13 or fewer inside has probability < 0.002 for calibrated intervals
     assert inside >= 14, f"{problem.name}: {inside}/{total} coefficient intervals hold the truth"
 

@@ -11,7 +11,6 @@ from scipy import stats
 from uq._cli.main import main
 from uq._data.recordings import write_recordings_csv
 from uq._data.reference import table1
-from uq._derived.results import fit_json
 from uq._inference.linear import linear_posterior, posterior_cov
 from uq._inference.sampler import Settings
 from uq._models.cubic import FORCE_PRIOR_SD_N, basis, fit_test, least_squares, to_paper_basis
@@ -70,7 +69,6 @@ def test_exact_draw_kernel_matches_the_closed_form():
     import jax
 
     from uq._inference.linear import map_rows
-    from uq._models.cubic import _draw
 
     rng = np.random.default_rng(1)
     u = np.linspace(-0.047, 0.043, 37)
@@ -95,6 +93,13 @@ def test_exact_draw_kernel_matches_the_closed_form():
         )
 
 
+def _draw(sigma, key, X, y, prior_sd):
+    """One exact draw given the noise sd at each point (mapped by map_rows: module level)."""
+    from uq._inference.linear import draw_exact, linear_posterior
+
+    return draw_exact(linear_posterior(X, y, sigma, prior_sd), key)
+
+
 def test_paper_basis_conversion():
     alpha = np.array([1.0, 2.0, 3.0, 4.0])
     u = np.array([-0.03, 0.01, 0.04])
@@ -104,8 +109,8 @@ def test_paper_basis_conversion():
 
 def test_posterior_contains_table1_and_converges():
     fit = fit_test(_test(5.0, seed=2), 0.112, seed=3, settings=FAST)
-    d = fit.diagnostics
-    assert d["converged"], d["warnings"]
+    d = fit.convergence
+    assert d.converged, d.warnings
     truth = table1().force[table1().index(5.0)]
     f = fit.flat("force")
     lo, hi = np.quantile(f, [0.001, 0.999], axis=0)
@@ -133,9 +138,11 @@ def test_coverage_fast_subset():
 def test_non_converged_run_is_reported():
     short = Settings(n_walkers=8, min_steps=12, chunk=4, max_steps=16)
     fit = fit_test(_test(5.0), 0.112, seed=0, settings=short)
-    d = fit.diagnostics
-    assert not d["converged"]
-    assert any("--max-steps" in w for w in d["warnings"])
+    d = fit.convergence
+    assert not d.converged
+    # the library's advice names its settings, the command line's its options
+    assert any("Settings.max_steps" in w for w in d.warnings)
+    assert any("--max-steps" in w for w in fit.to_json()["convergence"]["warnings"])
 
 
 def test_fit_cli_json_contract_strict_and_reproducible(tmp_path, capsys):
@@ -160,7 +167,7 @@ def test_fit_cli_json_contract_strict_and_reproducible(tmp_path, capsys):
         assert k in t["force"]["a_P"]
     assert {"s_P_N", "eps_P_pct", "n_points", "pressure_bar"} <= set(t)
     assert np.array(t["covariance"]["force"]).shape == (4, 4)
-    # the recording-order check of the residuals (uq/_derived/residuals.py): a p-value per block
+    # the recording-order check of the residuals (uq/_models/residual_order.py): a p-value per block
     assert (
         set(t["residual_order"]) == {"force", "piston", "alpha"}
         and 0 < t["residual_order"]["piston"]["p"] <= 1
@@ -186,7 +193,7 @@ def test_fit_out_writes_netcdf(tmp_path):
 
 
 def test_n50_fixture_fit_matches_table1(n50_fit):
-    js = fit_json(n50_fit)
+    js = n50_fit.to_json()
     assert js["converged"], js["warnings"]
     t1 = table1()
     inside = 0

@@ -79,12 +79,19 @@ def test_log_posterior_and_draws_equal_the_explicit_design(data, names, order):
         [rng.normal(1.0, 1.0, (6, 2)), rng.normal(0.0, 0.05, (6, M.N_THETA - 2))]
     )
     held = rng.random(data.force.size) < 0.1
+    from uq._inference.linear import map_rows, row_keys
+
     for d in (data, M.hold_out(data, held)):
-        got = M.log_post(thetas, mask, d)
+        d = d._replace(mask=mask)
+        got = np.array([float(M.log_prob(jnp.asarray(t), d)) for t in thetas])
         want = np.array([float(_explicit_log_post(jnp.asarray(t), mask, d)) for t in thetas])
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-6)
     # the draws' means: XF beta and XL beta of the explicit design, and every row's log-likelihood
-    ll, muF, muL, beta, sigma = M.draw_rows(thetas, jax.random.PRNGKey(0), mask, data)
+    d = data._replace(mask=mask)
+    beta = map_rows(M.draw_linear, (thetas, row_keys(jax.random.PRNGKey(0), len(thetas))), (d,))
+    muF, muL, _ = map_rows(M.means, (thetas, beta), (d,))
+    pw = map_rows(M.pointwise, (thetas, beta), (d,))
+    ll = np.concatenate([pw["z"], pw["L"]], axis=1)
     for i, t in enumerate(thetas):
         X, y, s, XF, XL = _explicit(jnp.asarray(t), mask, data)
         np.testing.assert_allclose(

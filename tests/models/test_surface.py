@@ -12,18 +12,13 @@ import pytest
 
 from uq._data.recordings import read_recordings, write_recordings_csv
 from uq._data.stand_description import PAPER_STAND
+from uq._derived.comparison import compare as compare_with_cubics
+from uq._inference.loo import Loo
+from uq._inference.loo import verdict as loo_verdict
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
-from uq._models.surface import (
-    DEFAULT_ORDERS,
-    Orders,
-    compare_with_cubics,
-    figure_pressure_area,
-    figure_spread,
-    fit_surface,
-    loo_verdict,
-    summary,
-)
+from uq._models.surface import DEFAULT_ORDERS, Orders, fit_surface, summary
+from uq._report.surface import figure_pressure_area, figure_spread
 from uq._stand.simulator import Layout, SmoothSurfaceSpring, simulate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -109,7 +104,7 @@ def coverage_run(
                     np.sum(np.ravel(need)[np.linspace(0, np.size(need) - 1, 99).astype(int)] < p)
                 ),
                 "rel_load": float(np.mean(fit.idata.posterior["rel_load"])),
-                "converged": fit.diagnostics["converged"],
+                "converged": fit.convergence.converged,
             }
         )
     return rows, {
@@ -124,7 +119,7 @@ def coverage_run(
 
 def test_bands_on_n50(n50_surface):
     fit = n50_surface
-    assert fit.diagnostics["converged"], fit.diagnostics["warnings"]
+    assert fit.convergence.converged, fit.convergence.warnings
     b = fit.bands(np.array([0.112]), 5.0)
     assert b["force_N"]["lower"][0] < b["force_N"]["upper"][0]
     assert (
@@ -187,24 +182,24 @@ def test_compare_with_cubics(n50_surface, n50_fit):
 
 
 def test_exact_refit_agrees_with_integrated_psis_where_k_is_low(n50_fit):
-    """The exact refit used for high-k cubic readings gives the same ELPD as the integrated
-    PSIS-LOO for a reading whose k is low (independent Monte Carlo, so up to ~0.05)."""
-    from uq._inference.summary import psis_loo
-    from uq._models.surface import _exact_cubic_loo, cubic_loglik_loo
+    """The exact refit used for high-k cubic readings (the test refitted with the reading held
+    out) gives the same ELPD as the integrated PSIS-LOO for a reading whose k is low
+    (independent Monte Carlo, so up to ~0.05)."""
+    from uq._derived.comparison import _cubic_refit
+    from uq._inference.loo import psis
 
     class One:
         tests = [n50_fit.at(5.0)]
 
-    loo = psis_loo(cubic_loglik_loo(One))
-    i = int(np.argmin(np.asarray(loo.pareto_k)))
-    exact = _exact_cubic_loo(One.tests[0], i, seed=1, settings=FAST)
+    loo = psis(One.tests[0].posterior.loglik_loo)
+    i = int(np.argmin(loo.pareto_k))
+    exact = _cubic_refit(One, FAST, seed=1)(i)
     assert exact == pytest.approx(float(loo.loo_i[i]), abs=0.05)
 
 
-class _Loo:
-    def __init__(self, loo_i, k=None):
-        self.loo_i = np.asarray(loo_i, float)
-        self.pareto_k = np.zeros_like(self.loo_i) if k is None else np.asarray(k, float)
+def _Loo(loo_i, k=None):
+    loo_i = np.asarray(loo_i, float)
+    return Loo(loo_i, np.zeros_like(loo_i) if k is None else np.asarray(k, float))
 
 
 def test_loo_verdict_uses_the_se_and_pareto_k():
@@ -232,8 +227,8 @@ def test_integrated_loo_equals_refitting_without_the_reading():
     explicit refit without the reading, for diagonal (cubic) and 2-row block (surface) noise."""
     import jax.numpy as jnp
 
-    from uq._inference.linear import LOG_2PI, linear_posterior, posterior_cov
-    from uq._models.surface import _block_loo, _diag_loo
+    from uq._inference.linear import LOG_2PI, linear_posterior, loo_given_noise, posterior_cov
+    from uq._models.surface import _block_loo
 
     rng = np.random.default_rng(3)
     n, k = 9, 3
@@ -241,8 +236,8 @@ def test_integrated_loo_equals_refitting_without_the_reading():
     y = X @ rng.normal(size=k) + rng.normal(0.0, 0.5, n)
     sg, pr = np.full(n, 0.5), np.full(k, 2.0)
     got = np.asarray(
-        _diag_loo(jnp.asarray(X), jnp.asarray(y), jnp.asarray(sg[None]), jnp.asarray(pr))
-    )[0]
+        loo_given_noise(jnp.asarray(X), jnp.asarray(y), jnp.asarray(sg), jnp.asarray(pr))
+    )
     for i in (0, 4):
         keep = np.arange(n) != i
         post = linear_posterior(
@@ -340,25 +335,18 @@ NOISY_STAND = PAPER_STAND.replace(load_cell_rel_sd=0.008, pressure_holding_bar=0
 
 def test_stand_description_reaches_the_likelihood_and_priors():
     """fit_surface(stand=...) takes dp, p_atm and the prior centres from the stand, not constants."""
-    import jax.numpy as jnp
+    from uq._models.surface import noise_prior_mean, surface_data
 
-    from uq._models.surface import _consts, noise_prior_mean
-
-    p = np.array([0.1, 0.5, 5.0])
-    c = _consts(
-        np.zeros(3),
-        p,
-        np.ones(3),
-        np.ones(3),
-        np.zeros(3),
-        5.482e-3,
-        NOISY_STAND.replace(p_atm_bar=0.9),
-    )
-    assert np.allclose(c["dp_pa"], [0.002e5, 0.01e5, 0.02e5])
-    assert np.allclose(c["p_abs_pa"], (p + 0.9) * 1e5)
+    rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
+    stand = NOISY_STAND.replace(p_atm_bar=0.9)
+    d = surface_data(rec, Orders(3, 2, 2, 1, 1), stand)
+    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in rec.tests])
+    assert np.allclose(d.dp_pa, stand.pressure_sd_bar(p) * 1e5)
+    assert np.allclose(d.dp_pa[p == 0.1], 0.002e5) and np.allclose(d.dp_pa[p == 5.0], 0.02e5)
+    assert np.allclose(d.p_abs_pa, (p + 0.9) * 1e5)
     m = noise_prior_mean(NOISY_STAND.replace(receiver_air_m3=1.0e-3))
     assert np.exp(m[1]) == pytest.approx(0.008) and np.exp(m[4]) == pytest.approx(5.2e-3)
-    assert np.allclose(c["prior_mean"], jnp.asarray(noise_prior_mean(NOISY_STAND)))
+    assert np.allclose(d.prior_mean, noise_prior_mean(stand))
 
 
 @pytest.mark.slow
@@ -381,24 +369,27 @@ def test_reading_covariance_has_the_gas_law_sign():
     """A pressure-holding error dp raises the force by dp F_eff and, by Boyle's law, leaves the
     piston short by V_gas dp / (p_abs S): the model's (force, piston) covariance must be
     -sd_p^2 F_eff V_gas / (p_abs S), negative, built from first principles here."""
+    from types import SimpleNamespace
+
     import jax.numpy as jnp
 
     from uq._models.surface import _cov_factors
 
-    dp, feff, V0, dv, p_abs, S = 1.0e3, 0.025, 6.2e-3, 1.0e-3, 6.0e5, 54.82e-4
-    c = {
-        k: jnp.asarray([v])
-        for k, v in dict(
-            phat=1.0e4, feff_hat=feff, dv_hat=dv, dp_pa=dp, p_abs_pa=p_abs, area=S
-        ).items()
-    }
+    dp, feff, V0, p_abs, S = 1.0e3, 0.025, 6.2e-3, 6.0e5, 54.82e-4
+    c = SimpleNamespace(
+        **{
+            k: jnp.asarray([v])
+            for k, v in dict(phat=1.0e4, feff_hat=feff, dp_pa=dp, p_abs_pa=p_abs, area=S).items()
+        }
+    )
     theta = jnp.log(jnp.asarray([10.0, 0.005, 1.0, 1.0e-5, V0]))
     L11, L21, L22 = (float(v[0]) for v in _cov_factors(theta, c))
+    # the gas volume V0 keeps its value along the stroke (eq. 4): no volume increment in it
     cov_fl = L11 * L21
-    expected = -(dp**2) * feff * (V0 - dv) / (p_abs * S)
+    expected = -(dp**2) * feff * V0 / (p_abs * S)
     assert cov_fl == pytest.approx(expected, rel=1e-12)
     var_l = L21**2 + L22**2
-    assert var_l == pytest.approx((dp * (V0 - dv) / (p_abs * S)) ** 2 + 1.0e-10, rel=1e-12)
+    assert var_l == pytest.approx((dp * V0 / (p_abs * S)) ** 2 + 1.0e-10, rel=1e-12)
 
 
 def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
@@ -407,24 +398,20 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
     across the prior (the reading covariance's determinant included)."""
     import jax.numpy as jnp
 
-    from uq._inference.linear import gram_plan, linear_posterior
+    from uq._inference.linear import linear_posterior
     from uq._models import surface as S
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
-    g = S.geometry_of(rec)
-    x, p, F, L, idx = S._arrays(rec)
-    _, phat, feff, dv, Xf, Xl = S._reference(DEFAULT_ORDERS, g, x, p, F, L, idx, len(rec.tests))
-    c = {
-        **S._consts(x, p, phat, feff, dv, g.area_m2, PAPER_STAND),
-        "gram": gram_plan(S.gram_groups(Xf, Xl)),
-    }
-    args = (jnp.asarray(Xf), jnp.asarray(Xl), jnp.asarray(F), jnp.asarray(L), c)
+    d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)
     rng = np.random.default_rng(0)
     for theta in S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((4, 5)):
-        X, y = S._whiten(theta, *args)
-        L11, _, L22 = S._cov_factors(theta, c)
+        L11, L21, L22 = S._cov_factors(theta, d)
+        yf, xf = d.F / L11, d.Xf / L11[:, None]
+        yl = (d.L - L21 * yf) / L22
+        xl = (d.Xl - L21[:, None] * xf) / L22[:, None]
+        X, y = jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])
         ref = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
-        got = S._posterior(theta, *args)
+        got = S._posterior(theta, d)
         assert float(got.log_marginal) == pytest.approx(
             float(ref.log_marginal - jnp.sum(jnp.log(L11) + jnp.log(L22))), rel=1e-9
         )

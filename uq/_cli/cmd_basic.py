@@ -141,6 +141,7 @@ def configure_fit(p) -> None:
     add_recordings(p, file_optional=True)
     add_sampling(p)
     add_json(p)
+    add_stand(p)
     p.add_argument(
         "--out",
         metavar="DIR",
@@ -211,13 +212,13 @@ def command_fit(args) -> int:
         raise InputError(
             "give the recordings CSV (uq fit FILE.csv) or a fit definition (uq fit --config FILE.toml)"
         )
-    from uq._derived.results import fit_json, save_posteriors
     from uq._io.files import emit_json
     from uq._models.cubic import fit_campaign
 
+    stand = stand_from(args)
     rec = load(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args))
-    result = fit_json(cf)
+    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args), stand=stand)
+    result = cf.to_json()
     print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {rec.x0_m * 1e3:g} mm")
     print(
         f"{'p_u bar':>8} {'a_P N':>10} {'90% interval':>23} {'b_L':>8} {'s_P N':>8} {'eps_P %':>8}  R-hat  ESS"
@@ -236,7 +237,7 @@ def command_fit(args) -> int:
     for w in result["model_warnings"]:
         print(f"WARNING (model): {w}", file=sys.stderr)
     if args.out:
-        paths = save_posteriors(cf, args.out)
+        paths = cf.save(args.out)
         emit_json(result, str(Path(args.out) / "fit.json"))
         print(f"posteriors: {len(paths)} NetCDF files and fit.json in {args.out}")
     emit_json(result, args.json)

@@ -8,7 +8,7 @@ import sys
 
 from uq._cli.common import add_json, add_recordings, add_sampling, add_stand, load, stand_from
 from uq._diagnose import engine as _diagnose
-from uq._diagnose.engine import GAIN_SE, public, summary_text
+from uq._diagnose.engine import GAIN_SE, summary_text
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 from uq._io.files import emit_json
@@ -64,11 +64,9 @@ def command_diagnose(args) -> int:
         stand=stand,
     )
     if args.json != "-":
-        sys.stdout.write(summary_text(res))
-        print(
-            f"time: {res['_timing_s']['total']:.1f} s (screening {res['_timing_s']['screening']:.1f} s)"
-        )
-    emit_json(public(res), args.json)
+        sys.stdout.write(summary_text(res.document))
+        print(f"time: {res.seconds['total']:.1f} s (screening {res.seconds['screening']:.1f} s)")
+    emit_json(res.to_json(), args.json)
     if args.report:
         write_diagnose_report(res, args.report)
     warn = (res["sampling"] or {}).get("warnings") or []

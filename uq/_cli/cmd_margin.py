@@ -77,7 +77,6 @@ _OPTION_OF = {
     "pressure_bar": "--pressure-bar",
     "tolerance_pct": "--tolerance-pct",
 }
-_COLUMN_OF = {v: k for k, v in _OPTION_OF.items()}
 
 
 def _place(q: dict, column: str) -> str:
@@ -234,11 +233,10 @@ def answer_query(ans, info: dict, q: dict) -> dict:
             model_info=info,
         )
     except InputError as exc:
-        text = str(exc)
-        if q["row"] is None or not text.startswith("option --"):
+        column = {"height_m": "height_mm"}.get(exc.param, exc.param)
+        if column not in QUERY_COLUMNS:
             raise
-        option, rest = text.split(":", 1)
-        column = _COLUMN_OF.get(option.removeprefix("option ").strip(), "height_mm")
+        rest = str(exc)[len(exc.param) + 1 :] if str(exc).startswith(f"{exc.param}:") else f" {exc}"
         raise InputError(f"{_place(q, column)}:{rest}") from None
 
 

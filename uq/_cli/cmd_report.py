@@ -5,9 +5,17 @@ from __future__ import annotations
 import sys
 import time
 
-from uq._cli.common import add_recordings, add_sampling, load, positive_int, settings_from
+from uq._cli.common import (
+    add_recordings,
+    add_sampling,
+    add_stand,
+    load,
+    positive_int,
+    settings_from,
+    stand_from,
+)
 from uq._derived.bands import campaign_bands
-from uq._derived.residuals import campaign_order_warnings
+from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
 from uq._report.campaign import MIN_DRAWS, read_comments, write_report
 
@@ -34,19 +42,27 @@ def configure_report(p) -> None:
         action="store_true",
         help="also fit the surface model and write surface.html beside the report (adds about 30 s)",
     )
+    add_stand(p)
 
 
 def command_report(args) -> int:
-    from uq._derived.results import fit_json
     from uq._io.errors import InputError
     from uq._models.cubic import fit_campaign
 
     if args.draws < MIN_DRAWS:
         raise InputError(f"option --draws: at least {MIN_DRAWS} draws, got {args.draws}")
+    stand = stand_from(args)
     rec = load(args)
     t0 = time.perf_counter()
     settings = settings_from(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings)
+    cf = fit_campaign(rec, seed=args.seed, settings=settings, stand=stand)
+    surface = comparison = None
+    if args.surface:
+        from uq._derived.comparison import fit_both
+
+        surface, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, cubic_fit=cf
+        )
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
     path = write_report(
@@ -55,8 +71,8 @@ def command_report(args) -> int:
         bands=cb,
         seed=args.seed,
         comments=read_comments(args.file),
-        surface=args.surface,
-        settings=settings,
+        surface=surface,
+        comparison=comparison,
     )
     t_all = time.perf_counter() - t0
     print(
@@ -77,14 +93,13 @@ def command_report(args) -> int:
             f"  {t.pressure_bar:>5g} bar at x0: P = {a['force_N']['mean']:9.1f} N, F_eff = {a['feff_m2']['mean']:.5f} m^2, "
             f"traditional {a['spread_ref_pct']['mean']:+6.1f} % (own volume curve {a['spread_own_pct']['mean']:+6.1f} %)"
         )
-    warnings = [f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in t.diagnostics["warnings"]]
-    for w in warnings:
+    for w in cf.warnings(CLI_ADVICE):
         print(f"WARNING: {w}", file=sys.stderr)
-    for w in campaign_order_warnings(cf):
+    for w in cf.model_warnings():
         print(f"WARNING (model): {w}", file=sys.stderr)
     print(f"report: {path}")
     if args.json:
-        emit_json(fit_json(cf) | {"bands": cb.summary(), "report": str(path)}, args.json)
+        emit_json(cf.to_json() | {"bands": cb.summary(), "report": str(path)}, args.json)
     if not cf.converged and args.strict:
         print(
             "WARNING: sampling did not converge for every test; --strict: exit 1", file=sys.stderr

@@ -5,9 +5,9 @@ from __future__ import annotations
 import time
 
 from uq._cli.common import add_stand, stand_from
-from uq._inference.sampler import Settings
+from uq._derived.comparison import words as comparison_words
 from uq._models import surface as _surface
-from uq._models.surface import NOISE_NAMES, comparison_words, summary
+from uq._models.surface import NOISE_NAMES, summary
 
 
 def configure_surface(p) -> None:
@@ -39,21 +39,10 @@ def configure_surface(p) -> None:
     add_stand(p)
 
 
-def fast_cubic_settings(settings: Settings) -> Settings:
-    """Shorter chains for the per-pressure cubics used only in the LOO comparison."""
-    return Settings(
-        n_walkers=settings.n_walkers,
-        n_ensembles=settings.n_ensembles,
-        tau_multiple=20.0,
-        min_steps=300,
-        max_steps=settings.max_steps,
-    )
-
-
 def command_surface(args) -> int:
     from uq._cli.common import load, settings_from
+    from uq._derived.comparison import fit_both
     from uq._io.files import emit_json
-    from uq._models.cubic import fit_campaign
 
     t0 = time.perf_counter()
     stand = stand_from(
@@ -68,9 +57,8 @@ def command_surface(args) -> int:
         fit = _surface.fit_surface(rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
     if not args.no_compare:
-        cub = fit_campaign(rec, seed=args.seed, settings=fast_cubic_settings(settings))
-        comparison = _surface.compare_with_cubics(
-            fit, cub, seed=args.seed, settings=fast_cubic_settings(settings)
+        _, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     res = summary(fit, comparison)
     seconds_total = (

@@ -84,6 +84,18 @@ COMMANDS = [
 OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir"}
 OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
 
+#: the library's parameter names (``InputError.param``) and the options that set them
+PARAM_OPTIONS = {
+    "n_walkers": "--walkers",
+    "n_ensembles": "--ensembles",
+    "max_steps": "--max-steps",
+    "load_N": "--load-N",
+    "height_m": "--height-mm",
+    "pressure_bar": "--pressure-bar",
+    "prob": "--prob",
+    "tolerance_pct": "--tolerance-pct",
+}
+
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (
     0,
     1,
@@ -258,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
         with _json_on_stdout(args):
             return int(getattr(importlib.import_module(args._module), f"command_{name}")(args) or 0)
     except InputError as exc:
+        if exc.param in PARAM_OPTIONS:
+            exc = exc.for_option(PARAM_OPTIONS[exc.param])
         return _fail(name, f"error: {exc}", EXIT_INPUT)
     except KeyboardInterrupt:
         return _fail(name, "interrupted", EXIT_INTERRUPTED)

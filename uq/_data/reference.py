@@ -15,6 +15,8 @@ from importlib import resources
 
 import numpy as np
 
+from uq._physics.cubic import cubic, cubic_slope  # noqa: F401  (the paper's cubic, one home)
+
 FORCE_NAMES = ("a_P", "b_P", "c_P", "d_P")
 PISTON_NAMES = ("a_L", "b_L", "c_L", "d_L")
 PAPER_X0_M = 0.112
@@ -88,25 +90,3 @@ def table2() -> dict[float, tuple[float, float]]:
         float(r["pressure_bar"]): (float(r["s_P_N"]), float(r["eps_P_pct"]))
         for r in _rows("table2_force_deviations.csv")
     }
-
-
-def cubic(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Evaluate a + b u + c u^2 + d u^3 (eqs. 8, 9); ``coef`` (4,) or (k, 4) -> (k, len(u)), u in m."""
-    coef = np.asarray(coef)
-    u = np.asarray(u)
-    if coef.ndim == 1:
-        return coef[0] + coef[1] * u + coef[2] * u**2 + coef[3] * u**3
-    return sum(coef[:, k, None] * u[None, :] ** k for k in range(4))
-
-
-def cubic_slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """d/du of the cubic: b + 2 c u + 3 d u^2."""
-    coef = np.asarray(coef)
-    u = np.asarray(u)
-    if coef.ndim == 1:
-        return coef[1] + 2 * coef[2] * u + 3 * coef[3] * u**2
-    return (
-        coef[:, 1, None]
-        + 2 * coef[:, 2, None] * u[None, :]
-        + 3 * coef[:, 3, None] * u[None, :] ** 2
-    )

@@ -41,6 +41,7 @@ import numpy as np
 
 from uq._inference.summary import band
 from uq._inference.summary import estimate as _estimate
+from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA, force_noise_var
 
 LEVEL = 0.90
@@ -209,16 +210,12 @@ def estimate(draws) -> dict:
 
 
 def _poly(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """coef (..., 4), u (G,) -> (..., G): a + b u + c u^2 + d u^3."""
-    c = np.asarray(coef, float)[..., None, :]
-    u = np.asarray(u, float)
-    return c[..., 0] + u * (c[..., 1] + u * (c[..., 2] + u * c[..., 3]))
+    """coef (..., 4), u (G,) -> (..., G): the paper's cubic at every grid height."""
+    return cubic(np.asarray(coef, float)[..., None, :], np.asarray(u, float))
 
 
 def _slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
-    c = np.asarray(coef, float)[..., None, :]
-    u = np.asarray(u, float)
-    return c[..., 1] + u * (2.0 * c[..., 2] + 3.0 * u * c[..., 3])
+    return cubic_slope(np.asarray(coef, float)[..., None, :], np.asarray(u, float))
 
 
 def choose_reference(pressures_bar, preferred: float = REFERENCE_BAR) -> tuple[int, str]:

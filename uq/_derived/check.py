@@ -344,14 +344,14 @@ def check_documents(
 ) -> dict:
     """``uq check`` on documents in memory: the verdict of the module docstring's rule, as a dict.
 
-    ``result``: :func:`uq.fit_json` of a fit (or that JSON read back); ``points``: point estimates
+    ``result``: ``fit.to_json()`` of a fit (or that JSON read back); ``points``: point estimates
     in the POINTS format (docs/check.md; e.g. ``json.load`` of fits/n50/table1_points.json). The
     verdict is what ``uq check --json`` writes: ``agree``, ``n_disagree``, ``threshold2`` and one
     entry per test and block in ``blocks``. ``result_name``/``points_name`` name them in messages.
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
-    >>> result = uq.fit_json(uq.fit_campaign(rec, seed=1, settings=uq.Settings(max_steps=200)))
+    >>> result = uq.fit_campaign(rec, seed=1, settings=uq.Settings(max_steps=200)).to_json()
     >>> means = {"tests": [{"pressure_bar": t["pressure_bar"],
     ...                     **{b: {n: e["mean"] for n, e in t[b].items()} for b in ("force", "piston")}}
     ...                    for t in result["tests"]]}

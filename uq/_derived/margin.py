@@ -4,7 +4,7 @@ Which model answers. Two descriptions of a campaign can answer "at which overpre
 the element carry W at height x": the pressure-coupled surface model (uq/_models/surface.py,
 smooth in pressure) and the per-pressure cubics (uq/_models/cubic.py, eqs. 8, 9 of the paper, one
 independent curve per tested pressure). ``uq margin`` fits both and compares them by PSIS-LOO
-(``compare_with_cubics``: the ELPD difference with its SE, Pareto k of both). The surface
+(``uq._derived.comparison``: the ELPD difference with its SE, Pareto k of both). The surface
 answers unless the cubics are better by more than 2 SE with every Pareto k <= 0.7; an
 indistinguishable or refused comparison keeps the surface, whose coverage is proven by
 simulation for truths in its class (reports/surface-coverage/, the default orders). The JSON
@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
 from uq._models.surface import SurfaceFit, refuse_extrapolation
@@ -60,9 +61,9 @@ class _Ranges:
         self.pressure_range_bar = tuple(float(v) for v in pressure_range_bar)
         self.height_range_m = tuple(float(v) for v in height_range_m)
 
-    def check_range(self, height_m, p_bar, what="") -> None:
+    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
         refuse_extrapolation(
-            height_m, p_bar, self.height_range_m, self.pressure_range_bar, what, "the model"
+            height_m, p_bar, self.height_range_m, self.pressure_range_bar, param, "the model"
         )
 
 
@@ -209,7 +210,7 @@ def as_answer(model):
 def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
     """Posterior draws of the overpressure (bar) at which the element carries ``load_N``."""
     model = as_answer(model)
-    model.check_range(height_m, model.pressure_range_bar[0], "option --height-mm: ")
+    model.check_range(height_m, model.pressure_range_bar[0], "height_m")
     plo, phi = model.pressure_range_bar
     ps = np.linspace(plo, phi, N_P_GRID)
     P = model.force_draws(np.full_like(ps, height_m), ps)  # (S, G)
@@ -217,14 +218,16 @@ def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
         frac = float(np.mean(np.any(np.diff(P, axis=1) < 0, axis=1)))
         if frac > 0.01:
             raise InputError(
-                f"option --height-mm: at {height_m * 1e3:g} mm the force does not rise with pressure in "
-                f"{100 * frac:.0f} % of the posterior draws; no unique required pressure"
+                f"height_m: at {height_m * 1e3:g} mm the force does not rise with pressure in "
+                f"{100 * frac:.0f} % of the posterior draws; no unique required pressure",
+                param="height_m",
             )
     lo_load, hi_load = band(P[:, 0])[2], band(P[:, -1])[1]
     if not lo_load <= load_N <= hi_load:
         raise InputError(
-            f"option --load-N: {load_N:g} N at {height_m * 1e3:g} mm is outside what the tested pressures "
-            f"{plo:g}..{phi:g} bar support there (about {lo_load:.0f}..{hi_load:.0f} N); the model does not extrapolate"
+            f"load_N: {load_N:g} N at {height_m * 1e3:g} mm is outside what the tested pressures "
+            f"{plo:g}..{phi:g} bar support there (about {lo_load:.0f}..{hi_load:.0f} N); the model does not extrapolate",
+            param="load_N",
         )
     above = P >= load_N
     first = np.argmax(above, axis=1)
@@ -244,8 +247,9 @@ def _finite_estimate(d):
     d = np.asarray(d, float)
     if not np.all(np.isfinite(d)):
         raise InputError(
-            "option --load-N: the load lies at the edge of the tested pressure range for part of the "
-            "posterior; choose a load further inside the supported range"
+            "load_N: the load lies at the edge of the tested pressure range for part of the "
+            "posterior; choose a load further inside the supported range",
+            param="load_N",
         )
     return estimate(d)
 
@@ -499,7 +503,10 @@ def save_surface_answer(
         written_by="uq surface --out",
         settings=settings,
         stand=stand,
-        diagnostics=fit.diagnostics,
+        diagnostics={
+            "warnings": fit.convergence.messages(CLI_ADVICE),
+            "converged": fit.convergence.converged,
+        },
     )
 
 
@@ -609,12 +616,15 @@ def margin(
 ) -> dict:
     """The margin query on ``model`` (a SurfaceFit, SurfaceAnswer or CubicInterpolation)."""
     if not 0.0 < prob < 1.0:
-        raise InputError(f"option --prob: expected a probability between 0 and 1, got {prob:g}")
+        raise InputError(
+            f"prob: expected a probability between 0 and 1, got {prob:g}", param="prob"
+        )
     if not load_N > 0:
-        raise InputError(f"option --load-N: expected a positive load in N, got {load_N:g}")
+        raise InputError(f"load_N: expected a positive load in N, got {load_N:g}", param="load_N")
     if tolerance_pct is not None and pressure_bar is None:
         raise InputError(
-            "option --tolerance-pct: needs --pressure-bar (the stroke is taken at one pressure)"
+            "tolerance_pct: needs a pressure_bar (the stroke is taken at one pressure)",
+            param="tolerance_pct",
         )
     if model_info is None:
         model, model_info = (
@@ -637,7 +647,7 @@ def margin(
         "tested_height_range_m": list(model.height_range_m),
     }
     if pressure_bar is not None:
-        model.check_range(height_m, pressure_bar, "option --pressure-bar: ")
+        model.check_range(height_m, pressure_bar, "pressure_bar")
         P = model.force_draws(np.array(height_m), pressure_bar)
         res["force_at_pressure"] = {
             "pressure_bar": pressure_bar,
@@ -647,7 +657,8 @@ def margin(
         if tolerance_pct is not None:
             if not tolerance_pct > 0:
                 raise InputError(
-                    f"option --tolerance-pct: expected a positive tolerance, got {tolerance_pct:g}"
+                    f"tolerance_pct: expected a positive tolerance, got {tolerance_pct:g}",
+                    param="tolerance_pct",
                 )
             res["usable_stroke"] = usable_stroke(
                 model, height_m, pressure_bar, load_N, tolerance_pct, prob
@@ -657,32 +668,32 @@ def margin(
 
 def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, stand=None):
     """Fit what ``model`` ("auto", "surface" or "cubics") needs and choose the answering model
-    (:func:`choose_model`); returns (answer, model description, merged sampler diagnostics)."""
+    (:func:`choose_model`); returns (answer, model description, merged sampler diagnostics).
+    With "auto" both models are fitted with the same settings and compared
+    (``uq._derived.comparison``)."""
     from uq._data.stand_description import PAPER_STAND
+    from uq._derived.comparison import fit_both
     from uq._inference.sampler import Settings
     from uq._models.cubic import fit_campaign
-    from uq._models.surface import compare_with_cubics, fit_surface
+    from uq._models.surface import fit_surface
 
     settings = Settings() if settings is None else settings
+    stand = PAPER_STAND if stand is None else stand
     fit = cub = comparison = None
+    if model == "auto":
+        fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=stand)
+    elif model == "surface":
+        fit = fit_surface(rec, seed=seed, settings=settings, stand=stand)
+    else:
+        cub = fit_campaign(rec, seed=seed, settings=settings, stand=stand)
     warnings, converged = [], True
-    if model in ("auto", "surface"):
-        fit = fit_surface(
-            rec, seed=seed, settings=settings, stand=PAPER_STAND if stand is None else stand
-        )
-        warnings += fit.diagnostics["warnings"]
-        converged &= fit.diagnostics["converged"]
-    if model in ("auto", "cubics"):
-        cub = fit_campaign(
-            rec, seed=seed, settings=settings
-        )  # full settings: the cubics may answer
+    if fit is not None:
+        warnings += fit.convergence.messages(CLI_ADVICE)
+        converged &= fit.convergence.converged
+    if cub is not None:
         warnings += [
-            f"{t.pressure_bar:g} bar cubic: {w}"
-            for t in cub.tests
-            for w in t.diagnostics["warnings"]
+            f"{w.split(': ', 1)[0]} cubic: {w.split(': ', 1)[1]}" for w in cub.warnings(CLI_ADVICE)
         ]
         converged &= cub.converged
-    if model == "auto":
-        comparison = compare_with_cubics(fit, cub, seed=seed, settings=settings)
     ans, info = choose_model(fit, cub, comparison, forced=model)
     return ans, info, {"warnings": warnings, "converged": bool(converged)}

@@ -31,21 +31,31 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.float64 import jax
-from uq._inference.sampler import Settings, chain_diagnostics, run_ensembles, thin
-from uq._inference.summary import estimate, psis_loo
-from uq._io.progress import _Silent, progress
+from uq._inference.collapsed import Posterior, find_map, fit_collapsed
+from uq._inference.convergence import CLI_ADVICE
+from uq._inference.linear import map_rows
+from uq._inference.loo import (
+    PARETO_K_MAX,
+    Loo,
+    difference,
+    held_out_density,
+    kfold,
+    psis,
+    reloo,
+    z_required,
+)
+from uq._inference.sampler import Settings
+from uq._inference.summary import estimate
+from uq._io.progress import progress
 from uq._models import diagnose as M
 from uq._physics.mechanisms import MECHANISMS
 
 N_DRAWS = 1000  # Laplace draws per candidate for PSIS-LOO
-_SCREEN_BAR = _Silent(None)  # counts model fits while diagnose() screens (a bar on a terminal)
-K_BAD = 0.7  # Pareto k above which a PSIS-LOO estimate is not trusted (Vehtari et al. 2017/2024)
 N_FOLDS = 10  # K-fold cross-validation in place of an untrustworthy PSIS-LOO comparison
 KFOLD_DRAWS = 400
 MAX_RELOO = 20  # more unreliable PSIS terms than this in a model: K-fold instead of exact refits
@@ -60,29 +70,49 @@ NOISE_EXCESS = 2.0  # noise scale this many times the error budget counts as a m
 
 
 class Fit:
-    """One candidate model: MAP, Laplace/emcee draws, pointwise log-likelihood, LOO.
+    """One candidate model: its posterior (Laplace draws while screening, emcee for the final
+    model; coefficients drawn exactly by the one driver), the means and noise of every row, LOO.
 
     ``loo=False`` skips PSIS-LOO (a K-fold training fit, whose held-out rows are scored apart).
     """
 
     def __init__(
-        self, names, order, d, seed, samples=None, *, loo: bool = True, n_draws: int = N_DRAWS
+        self,
+        names,
+        order,
+        d,
+        seed,
+        *,
+        posterior: Posterior | None = None,
+        loo: bool = True,
+        n_draws: int = N_DRAWS,
+        bar=None,
     ):
         self.names = tuple(names)
         self.order = order
-        self.mask = M.mask_of(self.names, order)
-        dims = M.active_dims(self.names)
-        self.theta_map, self.lp_map, self.cov = M.fit_map(self.names, order, d)
-        rng = np.random.default_rng(seed)
-        if samples is None:
-            sub = rng.multivariate_normal(
-                self.theta_map[dims], self.cov, size=n_draws, method="cholesky"
+        data = M.with_model(d, self.names, order)
+        if posterior is None:
+            posterior = fit_collapsed(
+                M.MODEL,
+                data,
+                seed=seed,
+                method="laplace",
+                n_laplace=n_draws,
+                active=M.active_of(self.names),
+                predictive=False,
+                seeds=[seed],
             )
-            self.theta = M.expand(sub, self.names)
-        else:
-            self.theta = samples
-        key = jax.random.PRNGKey(int(rng.integers(2**31)))
-        ll, muF, muL, beta, sigma = M.draw_rows(self.theta, key, self.mask, d)
+        self.posterior = posterior
+        theta = posterior.theta.reshape(-1, M.N_THETA)
+        beta = posterior.beta.reshape(theta.shape[0], -1)
+        muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
+        ll = np.concatenate(
+            [
+                posterior.loglik["z"].reshape(theta.shape[0], -1),
+                posterior.loglik["L"].reshape(theta.shape[0], -1),
+            ],
+            axis=1,
+        )
         ok = np.all(np.isfinite(ll), axis=1)
         self.ll, self.muF, self.muL, self.beta, self.sigma = (
             ll[ok],
@@ -91,30 +121,16 @@ class Fit:
             beta[ok],
             sigma[ok],
         )
-        self.theta = self.theta[ok]
+        self.theta = theta[ok]
         self.n_params = sum(M.N_PARAMS[m] for m in self.names)
-        _SCREEN_BAR.update(1)
-        if not loo:
-            return
-        self.loo = psis_loo(self.ll[None], reff=1.0)  # independent Laplace draws
-        self.elpd = float(self.loo.elpd_loo)
-        self.loo_i = np.asarray(self.loo.loo_i)
-        self.pareto_k = np.asarray(self.loo.pareto_k)
-
-    def pareto(self) -> dict:
-        """PSIS reliability: the largest Pareto k and how many of the 2n terms exceed 0.7."""
-        return {
-            "max": float(np.max(self.pareto_k)),
-            "n_over_0.7": int(np.sum(self.pareto_k > K_BAD)),
-            "n_terms": int(self.pareto_k.size),
-        }
-
-    @property
-    def psis_ok(self) -> bool:
-        return bool(np.all(self.pareto_k <= K_BAD))
+        if bar is not None:
+            bar.update(1)
+        if loo:
+            self.loo = psis(self.ll[None], reff=1.0)  # independent Laplace draws
+            self.elpd = self.loo.elpd
 
     def magnitude(self, name: str, n_tests: int) -> np.ndarray:
-        """Posterior draws of the mechanism's magnitude in the units of CONTRACT.md section 4."""
+        """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table."""
         base = M.K_MAX + 1 + n_tests
         if name in M.NONLINEAR:
             return self.theta[:, M.NONLINEAR[name]]
@@ -125,123 +141,81 @@ class Fit:
         return self.beta[:, base + M.CASING_DEG + 2]  # thermal_drift, cm^3 per step
 
 
-def _gain_of(diff: np.ndarray) -> tuple[float, float]:
-    return float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
+class Scoring:
+    """Exact leave-out scores for comparisons PSIS-LOO cannot be trusted with (k > 0.7), one
+    campaign's worth, kept for the run (the same model's refits are asked for at several steps).
 
-
-def _gain(new: Fit, old: Fit) -> tuple[float, float]:
-    return _gain_of(new.loo_i - old.loo_i)
-
-
-def _logmeanexp(a: np.ndarray) -> np.ndarray:
-    top = a.max(axis=0)
-    return top + np.log(np.mean(np.exp(a - top), axis=0))
-
-
-class KFold:
-    """Exact K-fold cross-validation, for comparisons PSIS-LOO cannot be trusted with (k > 0.7).
-
-    The recorded points are split at random (seeded) into K folds; each fold's points (their z
-    and L together) are held out, the model is refitted on the rest (MAP, Laplace draws, exact
-    coefficient draws) and the held-out rows are scored by their log predictive density. The
-    pointwise values are on the scale of the PSIS-LOO ones (one per row, 2n), so gains and
-    their standard errors are formed the same way. Results are cached per model.
+    * ``exact(fit)``: the PSIS terms of ``fit`` with every term of Pareto k > 0.7 replaced by an
+      exact refit with that row held out (``uq._inference.loo.reloo``);
+    * ``kfold(names)``: exact K-fold cross-validation (``uq._inference.loo.kfold``): the recorded
+      points are split at random (seeded) into folds; each fold's points (their z and L rows
+      together) are held out, the model refitted on the rest (MAP, Laplace draws, exact
+      coefficient draws) and the held-out rows scored by their log predictive density.
+    Both are on the scale of the PSIS-LOO terms (one per row, 2n), so gains and their standard
+    errors are formed the same way.
     """
 
     def __init__(self, d, order: int, seed: int, n_folds: int = N_FOLDS):
-        n = int(np.asarray(d.force).size)
-        self.d, self.order, self.seed = d, order, seed
-        self.fold = np.random.default_rng(seed).permutation(n) % n_folds
-        self.n_folds = n_folds
-        self._cache: dict[tuple, np.ndarray | float] = {}
+        self.d, self.order, self.seed, self.n_folds = d, order, seed, n_folds
+        self.n = int(np.asarray(d.force).size)
+        self._scores: dict[tuple, object] = {}
 
-    def elpd_i(self, names) -> np.ndarray:
-        key = tuple(sorted(names))
-        if key not in self._cache:
-            n = self.fold.size
-            out = np.empty(2 * n)
-            for k in range(self.n_folds):
-                held = self.fold == k
-                f = Fit(
-                    names,
-                    self.order,
-                    M.hold_out(self.d, held),
-                    self.seed + 7919 * (k + 1),
-                    loo=False,
-                    n_draws=KFOLD_DRAWS,
-                )
+    def _refit(self, names, held, seed) -> Fit:
+        return Fit(
+            names, self.order, M.hold_out(self.d, held), seed, loo=False, n_draws=KFOLD_DRAWS
+        )
+
+    def kfold(self, names) -> Loo:
+        key = ("kfold", tuple(sorted(names)))
+        if key not in self._scores:
+            counter = iter(range(1, self.n_folds + 1))
+
+            def score(held):
                 rows = np.concatenate([held, held])
-                out[rows] = _logmeanexp(f.ll[:, rows])
-            self._cache[key] = out
-        return self._cache[key]
+                f = self._refit(names, held, self.seed + 7919 * next(counter))
+                out = np.full(2 * self.n, np.nan)
+                out[rows] = held_out_density(f.ll, np.flatnonzero(rows))
+                return out
 
-    def exact_loo_i(self, fit: Fit) -> np.ndarray:
-        """PSIS-LOO terms of ``fit`` with every term of Pareto k > 0.7 replaced by an exact
-        leave-one-out refit (that row held out; ArviZ's ``reloo`` remedy), cached per model and row."""
-        out = fit.loo_i.copy()
-        for i in np.flatnonzero(fit.pareto_k > K_BAD):
-            key = (tuple(sorted(fit.names)), int(i))
-            if key not in self._cache:
-                held = np.zeros(2 * self.fold.size, bool)
+            self._scores[key] = kfold(self.n, score, n_folds=self.n_folds, seed=self.seed)
+        return self._scores[key]
+
+    def exact(self, fit: Fit) -> Loo:
+        def refit(i: int) -> float:
+            key = ("row", tuple(sorted(fit.names)), i)
+            if key not in self._scores:
+                held = np.zeros(2 * self.n, bool)
                 held[i] = True
-                f = Fit(
-                    fit.names,
-                    self.order,
-                    M.hold_out(self.d, held),
-                    self.seed + 104729 + int(i),
-                    loo=False,
-                    n_draws=KFOLD_DRAWS,
-                )
-                self._cache[key] = float(_logmeanexp(f.ll[:, i : i + 1])[0])
-            out[i] = self._cache[key]
-        return out
+                f = self._refit(fit.names, held, self.seed + 104729 + i)
+                self._scores[key] = float(held_out_density(f.ll, [i])[0])
+            return self._scores[key]
+
+        return reloo(fit.loo, refit)
 
 
-def _compare(new: Fit, old: Fit, kfold: KFold) -> dict:
+def _compare(new: Fit, old: Fit, scoring: Scoring) -> dict:
     """ELPD gain of ``new`` over ``old``: PSIS-LOO if every Pareto k of both is <= 0.7; else the
     terms with k > 0.7 are refitted exactly (up to MAX_RELOO per model), or, with more of them,
     both models are scored by exact K-fold cross-validation."""
-    out = {"pareto_k": new.pareto(), "pareto_k_from": old.pareto()}
-    if new.psis_ok and old.psis_ok:
-        g, se = _gain(new, old)
+    out = {"pareto_k": new.loo.pareto(), "pareto_k_from": old.loo.pareto()}
+    g, se = difference(new.loo, old.loo)
+    if new.loo.reliable and old.loo.reliable:
         return out | {"delta_elpd": g, "delta_elpd_se": se, "method": "psis-loo"}
-    g_psis, se_psis = _gain(new, old)
     refused = {
         "psis_loo_refused": {
-            "delta_elpd": g_psis,
-            "delta_elpd_se": se_psis,
-            "reason": "Pareto k > 0.7: PSIS-LOO unreliable",
+            "delta_elpd": g,
+            "delta_elpd_se": se,
+            "reason": f"Pareto k > {PARETO_K_MAX:g}: PSIS-LOO unreliable",
         }
     }
-    n_bad = max(new.pareto()["n_over_0.7"], old.pareto()["n_over_0.7"])
-    if n_bad <= MAX_RELOO:
-        g, se = _gain_of(kfold.exact_loo_i(new) - kfold.exact_loo_i(old))
-        return (
-            out
-            | {
-                "delta_elpd": g,
-                "delta_elpd_se": se,
-                "method": "psis-loo, k > 0.7 terms refitted exactly",
-            }
-            | refused
-        )
-    g, se = _gain_of(kfold.elpd_i(new.names) - kfold.elpd_i(old.names))
-    return (
-        out
-        | {"delta_elpd": g, "delta_elpd_se": se, "method": f"{kfold.n_folds}-fold cross-validation"}
-        | refused
-    )
-
-
-def z_required(n_candidates: int, gain_se: float) -> float:
-    """Bonferroni: the z a gain must exceed when ``n_candidates`` are tested at one forward step.
-
-    ``gain_se`` is the one-sided threshold for a single candidate; its tail probability is
-    shared out over the candidates, so the family of tests at a step keeps that error rate.
-    """
-    from scipy.stats import norm
-
-    return float(norm.isf(norm.sf(gain_se) / max(n_candidates, 1)))
+    if max(new.loo.n_bad, old.loo.n_bad) <= MAX_RELOO:
+        a, b = scoring.exact(new), scoring.exact(old)
+        method = f"psis-loo, k > {PARETO_K_MAX:g} terms refitted exactly"
+    else:
+        a, b = scoring.kfold(new.names), scoring.kfold(old.names)
+        method = f"{scoring.n_folds}-fold cross-validation"
+    g, se = difference(a, b)
+    return out | {"delta_elpd": g, "delta_elpd_se": se, "method": method} | refused
 
 
 # ----------------------------------------------------------------------------- where
@@ -390,7 +364,10 @@ def _flagged(w: dict) -> list[str]:
 
 
 def choose_order(d) -> tuple[int, dict]:
-    lps = {k: M.fit_map((), k, d)[1] for k in (3, 4, 5)}
+    """The order of the F_eff polynomial by the traditional model's collapsed marginal likelihood."""
+    lps = {
+        k: find_map(M.MODEL, M.with_model(d, (), k), M.active_of(())).log_prob for k in (3, 4, 5)
+    }
     best = 3
     for k in (4, 5):  # a higher order must earn its keep (log Bayes factor > 3)
         if lps[k] > lps[best] + 3.0:
@@ -399,7 +376,7 @@ def choose_order(d) -> tuple[int, dict]:
 
 
 def _elimination_step(
-    current: Fit, fits: dict, order: int, d, rng, kfold: KFold, gain_se: float
+    current: Fit, fits: dict, order: int, d, rng, scoring: Scoring, gain_se: float, bar
 ) -> dict:
     """What each mechanism of ``current`` is worth: the ELPD lost by leaving it out (Bonferroni over them)."""
     table = {}
@@ -407,8 +384,8 @@ def _elimination_step(
     for m in current.names:
         rest = tuple(n for n in current.names if n != m)
         if rest not in fits:
-            fits[rest] = Fit(rest, order, d, int(rng.integers(2**31)))
-        c = _compare(current, fits[rest], kfold)
+            fits[rest] = Fit(rest, order, d, int(rng.integers(2**31)), bar=bar)
+        c = _compare(current, fits[rest], scoring)
         z = c["delta_elpd"] / max(c["delta_elpd_se"], 1e-12)
         table[m] = c | {"z": z, "passes": bool(c["delta_elpd"] > GAIN_MIN and z > z_req)}
     return {"from": list(current.names), "z_required": z_req, "candidates": table, "removed": None}
@@ -425,7 +402,9 @@ def _to_remove(removable: list[str], table: dict) -> str:
     return max(near, key=lambda m: (M.N_PARAMS[m], -table[m]["delta_elpd"]))
 
 
-def _select(base: Fit, order: int, d, rng, kfold: KFold, gain_se: float, max_mechanisms: int):
+def _select(
+    base: Fit, order: int, d, rng, scoring: Scoring, gain_se: float, max_mechanisms: int, bar
+):
     """Backward elimination from the model with every mechanism (module docstring, step 3).
 
     Mechanisms interact (on Table 1, volume_excess only pays once the area may grow with
@@ -433,10 +412,10 @@ def _select(base: Fit, order: int, d, rng, kfold: KFold, gain_se: float, max_mec
     of them and removing the one whose absence costs least does not.
     """
     fits = {(): base}
-    current = Fit(M.MECHS, order, d, int(rng.integers(2**31)))
+    current = Fit(M.MECHS, order, d, int(rng.integers(2**31)), bar=bar)
     steps = []
     while current.names:
-        step = _elimination_step(current, fits, order, d, rng, kfold, gain_se)
+        step = _elimination_step(current, fits, order, d, rng, scoring, gain_se, bar)
         steps.append(step)
         table = step["candidates"]
         removable = [
@@ -516,6 +495,55 @@ def _left(w: dict, top: int = 6) -> list[dict]:
     return out
 
 
+@dataclass(frozen=True, eq=False, repr=False)
+class Diagnosis:
+    """What ``uq diagnose`` found: the JSON document (:meth:`to_json`) and the fitted models behind
+    it (``baseline``, ``final``: :class:`Fit`; ``meta``, ``data``: the campaign's arrays)."""
+
+    document: dict
+    baseline: Fit
+    final: Fit
+    meta: dict
+    data: object
+    seconds: dict
+
+    def __getitem__(self, key):
+        return self.document[key]
+
+    @property
+    def idata(self):
+        """ArviZ data of the final model's sampled parameters."""
+        return self.final.posterior.idata
+
+    def to_json(self) -> dict:
+        return self.document
+
+    def summary(self):
+        """One row per mechanism found: magnitude (mean, sd, q05, q95), unit, ELPD gain and SE,
+        status (a pandas DataFrame; empty when nothing was found)."""
+        import pandas as pd
+
+        rows = {
+            m["name"]: {
+                **m["magnitude"],
+                "unit": m["unit"],
+                "delta_elpd": m["delta_elpd"],
+                "delta_elpd_se": m["delta_elpd_se"],
+                "status": m["status"],
+            }
+            for m in self.document["mechanisms"]
+        }
+        return pd.DataFrame.from_dict(rows, orient="index")
+
+    def text(self) -> str:
+        return summary_text(self.document)
+
+    def __repr__(self) -> str:
+        found = ", ".join(m["name"] for m in self.document["mechanisms"]) or "none"
+        word = "mismatch" if self.document["mismatch_detected"] else "no mismatch"
+        return f"Diagnosis({word}; mechanisms: {found})"
+
+
 def diagnose(
     rec,
     *,
@@ -525,8 +553,8 @@ def diagnose(
     gain_se: float = GAIN_SE,
     sample_final: bool = True,
     stand: StandDescription = PAPER_STAND,
-) -> dict:
-    """Run the engine on recordings; returns the JSON-ready result plus private ``_fits``.
+) -> Diagnosis:
+    """Run the engine on recordings (module docstring); returns a :class:`Diagnosis`.
 
     ``stand`` gives the error budget and gas volumes the noise model is built from."""
     t_start = time.time()
@@ -535,13 +563,9 @@ def diagnose(
     order, order_lps = choose_order(d)
     rng = np.random.default_rng(seed)
     base = Fit((), order, d, int(rng.integers(2**31)))
-    kfold = KFold(d, order, seed)
-    global _SCREEN_BAR
-    try:
-        with progress(desc="diagnose screening", unit="model fit") as _SCREEN_BAR:
-            current, steps, chosen = _select(base, order, d, rng, kfold, gain_se, max_mechanisms)
-    finally:
-        _SCREEN_BAR = _Silent(None)
+    scoring = Scoring(d, order, seed)
+    with progress(desc="diagnose screening", unit="model fit") as bar:
+        current, steps, chosen = _select(base, order, d, rng, scoring, gain_se, max_mechanisms, bar)
     t_screen = time.time() - t_start
 
     diagnostics = None
@@ -580,10 +604,10 @@ def diagnose(
             "name": "traditional",
             "rms_N": rms[base],
             "elpd_loo": base.elpd,
-            "elpd_loo_se": float(base.loo.se),
+            "elpd_loo_se": base.loo.se,
             "volume_rms_cm3": w_base["volume"]["rms"],
             "feff_order": order,
-            "pareto_k": base.pareto(),
+            "pareto_k": base.loo.pareto(),
             "noise_check": noise_check(w_base),
         },
         "where": w_base | {"flagged": flags_base},
@@ -591,10 +615,10 @@ def diagnose(
         "final": {
             "rms_N": rms[final],
             "elpd_loo": final.elpd,
-            "elpd_loo_se": float(final.loo.se),
+            "elpd_loo_se": final.loo.se,
             "volume_rms_cm3": w_final["volume"]["rms"],
             "model": ["traditional", *final.names],
-            "pareto_k": final.pareto(),
+            "pareto_k": final.loo.pareto(),
             "noise_check": check,
             "left": _left(w_final),
             "remaining_flags": _flagged(w_final),
@@ -607,8 +631,8 @@ def diagnose(
                 f"z_required, the Bonferroni-adjusted one-sided threshold (a single mechanism would need "
                 f"{gain_se:g} SE; the tail probability is shared over the mechanisms tested at the step); at "
                 f"each step the one whose absence costs least is removed (of those within {GAIN_MIN:g} nats of "
-                f"it, the one with most parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {K_BAD:g}; otherwise "
-                f"the terms with k > {K_BAD:g} are refitted exactly (leave that row out), or, with more than "
+                f"it, the one with most parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {PARETO_K_MAX:g}; otherwise "
+                f"the terms with k > {PARETO_K_MAX:g} are refitted exactly (leave that row out), or, with more than "
                 f"{MAX_RELOO} of them in a model, both models are scored by exact {N_FOLDS}-fold "
                 "cross-validation. Mechanisms are 'provisional' while the final model "
                 "fails its noise-scale check"
@@ -619,48 +643,39 @@ def diagnose(
             "n_tests": n_tests,
         },
         "sampling": diagnostics["_summary"] if diagnostics else None,
-        # wall times are private (not in the JSON), so reruns with one seed give identical bytes
-        "_timing_s": {"screening": t_screen, "total": time.time() - t_start},
     }
-    result["_fits"] = (base, final, meta, d)
-    return result
+    # wall times are kept off the JSON, so reruns with one seed give identical bytes
+    seconds = {"screening": t_screen, "total": time.time() - t_start}
+    return Diagnosis(result, base, final, meta, d, seconds)
+
+
+#: retained draws of the final model's emcee run
+FINAL_DRAWS = 4000
 
 
 def _sample(fit: Fit, d, seed: int, settings: Settings):
-    """emcee over the final model's sampled parameters; exact coefficient draws."""
-    dims = M.active_dims(fit.names)
-    names = [M.THETA_NAMES[i] for i in dims]
-
-    def lp(sub):
-        return M.log_post(M.expand(np.asarray(sub), fit.names), fit.mask, d)
-
-    scale = np.sqrt(np.diag(fit.cov)) / settings.init_scale
-    full = run_ensembles(
-        lp,
-        fit.theta_map[dims],
-        scale,
-        names,
+    """emcee over the final model's sampled parameters (the one driver); exact coefficient draws."""
+    post = fit_collapsed(
+        M.MODEL,
+        M.with_model(d, fit.names, fit.order),
         seed=seed,
         settings=settings,
+        max_draws=FINAL_DRAWS,
+        active=M.active_of(fit.names),
+        predictive=False,
+        seeds=[seed + 1],
         desc="diagnose sampling",
     )
-    chains = thin(full, N_DRAWS)
-    C, D, _ = chains.samples.shape
-    theta = M.expand(chains.samples.reshape(C * D, -1), fit.names)
-    final = Fit(fit.names, fit.order, d, seed + 1, samples=theta)
-    diag = {}
-    for i, n in enumerate(names):
-        # the project's rules and ensemble-aware ESS (uq/_inference/sampler.py), on the unthinned chains
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            diag[n] = chain_diagnostics(full.samples[..., i], full.n_walkers)
+    final = Fit(fit.names, fit.order, d, seed + 1, posterior=post)
+    conv = post.convergence
+    diag = {n: conv.variables[n] for n in post.chains.names}
     out = {m: diag[M.THETA_NAMES[i]] for m, i in M.NONLINEAR.items() if m in fit.names}
     out["_summary"] = {
         "sampler": "emcee (independence-t and DE moves) on noise scales and nonlinear magnitudes; coefficients drawn exactly",
-        "n_steps": chains.n_steps,
-        "burn_in": chains.burn,
+        "n_steps": conv.n_steps,
+        "burn_in": conv.burn_in,
         "parameters": diag,
-        "warnings": chains.warnings,
+        "warnings": conv.messages(CLI_ADVICE),
     }
     return final, out
 
@@ -735,7 +750,3 @@ def summary_text(res: dict) -> str:
     else:
         lines.append("the final model's residuals look like the noise")
     return "\n".join(lines) + "\n"
-
-
-def public(res: dict) -> dict:
-    return {k: v for k, v in res.items() if not k.startswith("_")}

@@ -360,14 +360,13 @@ def _seed(job: dict) -> int:
 
 
 def _task_fit(job: dict, out: Path) -> dict:
-    from uq._derived.results import fit_json, save_posteriors
     from uq._io.files import emit_json
     from uq._models.cubic import fit_campaign
 
     rec = _recordings(job)
-    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
-    save_posteriors(cf, out)
-    emit_json(fit_json(cf), str(out / "fit.json"))
+    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
+    cf.save(out)
+    emit_json(cf.to_json(), str(out / "fit.json"))
     return {
         "converged": cf.converged,
         "output": "fit.json",
@@ -377,16 +376,15 @@ def _task_fit(job: dict, out: Path) -> dict:
 
 def _task_report(job: dict, out: Path) -> dict:
     from uq._derived.bands import campaign_bands
-    from uq._derived.results import fit_json
     from uq._io.files import emit_json
     from uq._models.cubic import fit_campaign
     from uq._report.campaign import write_report
 
     rec = _recordings(job)
-    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job))
+    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
     cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
     page = write_report(cf, out, bands=cb)
-    emit_json(fit_json(cf) | {"bands": cb.summary(), "report": page.name}, str(out / "fit.json"))
+    emit_json(cf.to_json() | {"bands": cb.summary(), "report": page.name}, str(out / "fit.json"))
     return {
         "converged": cf.converged,
         "output": page.name,
@@ -411,7 +409,7 @@ def _task_surface(job: dict, out: Path) -> dict:
 
 
 def _task_diagnose(job: dict, out: Path) -> dict:
-    from uq._diagnose.engine import diagnose, public
+    from uq._diagnose.engine import diagnose
     from uq._io.files import emit_json
     from uq._report.diagnose import write_diagnose_report
 
@@ -419,10 +417,10 @@ def _task_diagnose(job: dict, out: Path) -> dict:
     s = _settings(job)
     settings = dataclasses.replace(s, chunk=200, min_steps=min(300, s.max_steps))
     res = diagnose(_recordings(job), seed=_seed(job), settings=settings, stand=_stand(job))
-    emit_json(public(res), str(out / "diagnose.json"))
+    emit_json(res.to_json(), str(out / "diagnose.json"))
     page = write_diagnose_report(res, out)
     names = ", ".join(m["name"] for m in res["mechanisms"]) or "none"
-    warn = (res.get("sampling") or {}).get("warnings") or []
+    warn = (res["sampling"] or {}).get("warnings") or []
     return {
         "converged": not warn,
         "output": Path(page).name if page else "diagnose.json",
@@ -472,7 +470,7 @@ def _client(scheduler: str | None, workers: int):
         n_workers=workers,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # any free port: a fixed 8787 fails when another cluster holds it
         silence_logs=logging.ERROR,
         env=worker_env(),
     )

@@ -35,7 +35,8 @@ import numpy as np
 
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES
-from uq._inference.sampler import Settings, bulk_ess
+from uq._inference.convergence import bulk_ess
+from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 
 BENCH_PRESSURE_BAR = 5.0
@@ -97,7 +98,7 @@ def run_project(
         fit = fit_test(test, x0_m, seed=s, settings=settings)
         total_time += time.perf_counter() - t0
         for n in QUANTITIES:
-            each[n] += float(fit.diagnostics["variables"][n]["ess_bulk"])
+            each[n] += float(fit.convergence.variables[n]["ess_bulk"])
         runs += 1
     total_ess = min(each[n] for n in FORCE_NAMES)
     return {
@@ -107,8 +108,8 @@ def run_project(
         "ess_bulk_min": total_ess,
         "ess_per_s": total_ess / total_time,
         "ess_per_s_each": {n: e / total_time for n, e in each.items()},
-        "n_steps_last": fit.diagnostics["n_steps"],
-        "n_chains": fit.diagnostics["n_chains"],
+        "n_steps_last": fit.convergence.n_steps,
+        "n_chains": fit.convergence.n_chains,
     }
 
 
@@ -180,7 +181,7 @@ def run_baseline(
     tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else float(n)
     burn = min(max(int(math.ceil(5.0 * tau_max)), 20), n // 2)
     draws = np.swapaxes(chain[burn:], 0, 1)  # (walkers, draws, 6): a, b, c, d, log sigma0, log r
-    # ESS by the project's own estimator (uq._inference.sampler.chain_diagnostics: the ensemble-mean chain, so
+    # ESS by the project's own estimator (uq._inference.convergence.chain_diagnostics: the ensemble-mean chain, so
     # coupled walkers do not count as independent chains), as the project's ESS is measured
     stored = chain[burn:].reshape(1, -1, 6)  # one ensemble, storage order step x walker
     each = {}
@@ -337,7 +338,7 @@ def scaling(
                 t0 = time.perf_counter()
                 cf = fit_campaign(rec, seed=seed, settings=settings)
                 wall = time.perf_counter() - t0
-            steps = sum(int(t.diagnostics["n_steps"]) for t in cf.tests)
+            steps = sum(int(t.convergence.n_steps) for t in cf.tests)
             rows.append(
                 {
                     "factor": f,

@@ -44,6 +44,7 @@ from uq._models.cubic import (
     fit_test,
     to_paper_basis,
 )
+from uq._physics.cubic import cubic
 from uq._physics.quantities import force_noise_var
 from uq._stand.simulator import Layout, simulate
 
@@ -213,7 +214,7 @@ def calibrate(
         in90.append((q[0] <= true) & (true <= q[3]))
         thin = draws[np.linspace(0, draws.shape[0] - 1, N_RANKS).astype(int)]
         ranks.append(np.sum(thin < true, axis=0))
-        conv.append(fit.diagnostics["converged"])
+        conv.append(fit.convergence.converged)
         ps.append(p)
         if truth == "n50":
             pred.append(
@@ -242,7 +243,7 @@ def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> 
     f, nz = fit.flat("force"), fit.flat("noise")
     idx = rng.choice(f.shape[0], size=min(n_draws, f.shape[0]), replace=False)
     u = fresh.height_m - fit.x0_m
-    mu = f[idx] @ np.vander(u, 4, increasing=True).T  # (draws, n)
+    mu = cubic(f[idx][:, None, :], u)  # (draws, n)
     sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
     y = mu + sd * rng.standard_normal(mu.shape)
     lo, hi = np.quantile(y, [0.05, 0.95], axis=0)

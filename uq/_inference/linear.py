@@ -31,17 +31,29 @@ class LinearPosterior(NamedTuple):
     log_marginal: jnp.ndarray  # () log p(y | sigma)
 
 
-def linear_posterior(X, y, sigma, prior_sd) -> LinearPosterior:
-    """Posterior of beta given noise scales. X (n, k), y (n,), sigma (n,), prior_sd (k,)."""
-    w = 1.0 / sigma**2
+def linear_posterior(X, y, sigma, prior_sd, weight=None) -> LinearPosterior:
+    """Posterior of beta given noise scales. X (n, k), y (n,), sigma (n,), prior_sd (k,).
+
+    ``weight`` (n,) of 1 (fitted) and 0 (held out, e.g. for an exact leave-one-out refit): a
+    held-out reading is left out of the posterior and of the marginal likelihood."""
+    w = 1.0 / sigma**2 if weight is None else weight / sigma**2
+    n = y.size if weight is None else jnp.sum(weight)
+    log_det = jnp.sum(jnp.log(sigma**2) if weight is None else weight * jnp.log(sigma**2))
     return posterior_from_moments(
-        X.T @ (w[:, None] * X),
-        X.T @ (w * y),
-        jnp.sum(w * y**2),
-        y.size,
-        jnp.sum(jnp.log(sigma**2)),
-        prior_sd,
+        X.T @ (w[:, None] * X), X.T @ (w * y), jnp.sum(w * y**2), n, log_det, prior_sd
     )
+
+
+def loo_given_noise(X, y, sigma, prior_sd):
+    """log p(y_i | sigma, y_-i) of every reading of a linear-Gaussian model with independent noise,
+    coefficients integrated out exactly (no refit: the leave-one-out predictive follows from the
+    full posterior by the Woodbury identity), (n,)."""
+    Xw, yw = X / sigma[:, None], y / sigma
+    post = linear_posterior(Xw, yw, jnp.ones_like(yw), prior_sd)
+    Z = jax.scipy.linalg.solve_triangular(post.chol, Xw.T, lower=True)
+    m = 1.0 - jnp.sum(Z**2, 0)
+    r = yw - Xw @ post.mean
+    return -0.5 * r**2 / m + 0.5 * jnp.log(m) - 0.5 * LOG_2PI - jnp.log(sigma)
 
 
 def posterior_from_moments(gram, rhs, yy, n, log_noise_det, prior_sd) -> LinearPosterior:
@@ -179,8 +191,11 @@ def row_keys(key, n: int) -> np.ndarray:
     return np.asarray(jax.random.split(key, bucket(n)))[: int(n)]
 
 
-def map_rows(fn, rows, args=(), *, batch_size: int = DRAW_BATCH, chunk: int = DRAW_CHUNK):
-    """``fn(*row, *args)`` for every row of the arrays in ``rows`` (a tuple, leading axis N), as numpy.
+def map_rows(
+    fn, rows, args=(), *, static=(), batch_size: int = DRAW_BATCH, chunk: int = DRAW_CHUNK
+):
+    """``fn(*row, *static, *args)`` for every row of the arrays in ``rows`` (a tuple, leading axis N),
+    as numpy (a pytree of arrays if ``fn`` returns one).
 
     The one way every model maps a function over posterior samples (exact coefficient draws with
     ``draw_exact`` and keys from :func:`row_keys`, pointwise log-likelihoods, log posteriors):
@@ -188,17 +203,18 @@ def map_rows(fn, rows, args=(), *, batch_size: int = DRAW_BATCH, chunk: int = DR
     chunk goes through one jitted ``jax.lax.map`` over vmapped blocks of ``batch_size`` rows
     (``batch_size=1``: a plain sequential map). So a model compiles one program however many
     rows it maps, memory is bounded by the chunk, and the chunks' loop is the only Python loop.
-    ``fn`` must be a module-level function (it is a static argument)."""
+    ``fn`` and the entries of ``static`` (e.g. a model's functions) must be hashable module-level
+    objects: they are static arguments of the compiled program; ``args`` are arrays (traced)."""
     n = int(np.shape(rows[0])[0])
     padded = tuple(pad_rows(r, n + (-n % chunk)) for r in rows)
-    args = tuple(args)
+    args, static = tuple(args), tuple(static)
     parts = [
-        _map_rows(fn, tuple(r[i : i + chunk] for r in padded), args, batch_size)
+        _map_rows(fn, static, tuple(r[i : i + chunk] for r in padded), args, batch_size)
         for i in range(0, padded[0].shape[0], chunk)
     ]
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a])[:n], *parts)
 
 
-@functools.partial(jax.jit, static_argnames=("fn", "batch_size"))
-def _map_rows(fn, rows, args, batch_size):
-    return jax.lax.map(lambda r: fn(*r, *args), rows, batch_size=batch_size)
+@functools.partial(jax.jit, static_argnames=("fn", "static", "batch_size"))
+def _map_rows(fn, static, rows, args, batch_size):
+    return jax.lax.map(lambda r: fn(*r, *static, *args), rows, batch_size=batch_size)

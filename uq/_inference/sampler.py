@@ -1,46 +1,24 @@
-"""emcee driver and ArviZ diagnostics: the stateful edge around pure log-probabilities.
+"""emcee driver: the stateful edge around pure log-probabilities.
 
-``run_ensembles`` runs ``n_ensembles`` (default 4) independent emcee ensembles from
-overdispersed starts and extends them in chunks until every convergence rule passes on the
-sampled parameters, or ``max_steps`` is reached (then the warnings name each rule that failed).
-``run_many`` does the same for K problems at once (the tests of a campaign). All ensembles of
-all problems are walker groups of one emcee sampler whose moves never mix groups (``_Grouped``),
-so each move costs one vectorised log-probability call for everything, not one per ensemble.
-The moves (``INDEPENDENCE_MIX``): mostly independence Metropolis-Hastings from a Student t
-fitted to the other half of the walker's ensemble (``_GroupedIndependence``, the parametric
-form of emcee's KDEMove), with emcee's DE and DE-snooker moves; ensembles too small to fit that
-proposal use DE moves only (``effective_mix``). The rules, per problem:
+``run_many`` samples K problems at once (the tests of a campaign, or one model): every problem gets
+``n_ensembles`` (default 4) independent emcee ensembles from overdispersed starts, extended in
+chunks until every convergence rule (``uq._inference.convergence``) passes on the sampled
+parameters, or ``max_steps`` is reached (then the verdict names each rule that failed). All
+ensembles of all problems are walker groups of one emcee sampler whose moves never mix groups
+(``_Grouped``), so each move costs one vectorised log-probability call for everything, not one per
+ensemble. The moves (``INDEPENDENCE_MIX``): mostly independence Metropolis-Hastings from a Student
+t fitted to the other half of the walker's ensemble (``_GroupedIndependence``, the parametric form
+of emcee's KDEMove), with emcee's DE and DE-snooker moves; ensembles too small to fit that
+proposal use DE moves only (``effective_mix``).
 
-* tau:        the chain after burn-in (``burn_tau`` tau) is at least ``tau_multiple`` (50)
-              integrated autocorrelation times long (emcee's estimator, the largest over
-              ensembles and parameters);
-* R-hat:      rank-normalised split R-hat <= 1.01 (ArviZ);
-* ESS:        bulk and tail effective sample size >= 400;
-* acceptance: mean acceptance fraction in 0.15..0.6 (running longer does not change it, so a
-              failure here is reported but does not extend the run). With independence
-              proposals in the move mixture only the lower bound applies: there a high
-              acceptance means the proposal fits the posterior, not that the steps are tiny.
+Starts: each ensemble is drawn afresh from ``N(center, init_spread^2 cov)``, ``cov`` the caller's
+estimate of the posterior covariance (the Laplace approximation at the optimum), so the walkers
+start overdispersed by ``init_spread`` (3) posterior widths in every direction, the weakly
+identified ones included.
 
-How the walkers are shown to ArviZ, and why. The walkers of one emcee ensemble are coupled
-(every proposal is built from other walkers), so they are not independent chains; emcee's and
-ArviZ's authors both warn against giving walkers to R-hat/ESS as chains (emcee docs and
-dfm/emcee#279; arviz-devs/arviz#977 and #2156). What they recommend instead is several
-independently started ensembles (Buchner's autoemcee: four) compared with each other:
-
-* Storage: each ensemble is one ArviZ chain and its draws are in time order, the walkers of
-  one step next to each other (emcee's ``get_chain(flat=True)`` order): ``samples`` is
-  (n_ensembles, n_steps * n_walkers, dim). ArviZ's split R-hat therefore compares the first
-  half of the run with the second half (a drift is seen) and the ensembles with each other (a
-  stuck ensemble is seen).
-* ESS: the draw-to-draw autocorrelation of such a chain is not what limits the information
-  (neighbouring draws are different walkers), so ArviZ's ESS of it would count every draw as
-  independent. ESS is computed by ArviZ on the ensemble-mean chains m_c(t) (mean over the
-  walkers of ensemble c at step t), which carry every cross-walker correlation, and converted
-  to draws by the definition ESS = Var(x) / MCSE^2 = ESS_ArviZ(m) * Var(x) / Var(m). With
-  independent walkers this equals emcee's n_steps * n_walkers / tau; with coupled walkers it is
-  smaller, never inflated by the number of walkers. Bulk ESS does this on the rank-normalised
-  draws, tail ESS on the indicators of the 5 % and 95 % quantiles (as ArviZ defines them), and
-  the MCSE of the mean is ArviZ's MCSE of the ensemble-mean chains.
+Storage (``Chains``): each ensemble is one chain and its draws are in time order, the walkers of
+one step next to each other (emcee's ``get_chain(flat=True)`` order); why, and how R-hat and ESS
+are computed on such chains: ``uq._inference.convergence``.
 """
 
 from __future__ import annotations
@@ -51,23 +29,19 @@ import math
 import warnings
 from dataclasses import dataclass
 
-import arviz as az
 import emcee
 import numpy as np
-from scipy import stats
 
-RHAT_MAX = 1.01
-ESS_MIN = 400.0
-ACCEPT_RANGE = (0.15, 0.6)
+from uq._inference.convergence import ACCEPT_RANGE, failed_rules
 
 
 @dataclass(frozen=True)
 class Settings:
     """Sampler settings (all seeded; defaults suit 1-10 sampled parameters).
 
-    Walkers start at ``center + init_spread * init_scale * scale * N(0, 1)``: callers pass
-    ``scale`` such that ``init_scale * scale`` is about the posterior width, so the starts are
-    ``init_spread`` (3) posterior widths wide, overdispersed, and drawn afresh per ensemble.
+    Walkers start at ``center + init_spread * chol(cov) @ N(0, I)`` with ``cov`` the caller's
+    estimate of the posterior covariance: ``init_spread`` (3) posterior widths wide in every
+    direction, overdispersed, and drawn afresh per ensemble.
     """
 
     n_walkers: int = 32
@@ -77,7 +51,6 @@ class Settings:
     chunk: int = 200
     min_steps: int = 200
     max_steps: int = 20000
-    init_scale: float = 0.05
     init_spread: float = 3.0
 
     def validate(self) -> None:
@@ -85,15 +58,17 @@ class Settings:
 
         if self.n_ensembles < 2:
             raise InputError(
-                "option --ensembles: at least 2 independent ensembles are needed for R-hat (4 recommended)"
+                "n_ensembles: at least 2 independent ensembles are needed for R-hat (4 recommended)",
+                param="n_ensembles",
             )
         if self.n_walkers < 4 or self.n_walkers % 4:
             raise InputError(
-                "option --walkers: a multiple of 4 walkers, at least 4, is needed (emcee's snooker "
-                "move splits each ensemble in four)"
+                "n_walkers: a multiple of 4 walkers, at least 4, is needed (emcee's snooker "
+                "move splits each ensemble in four)",
+                param="n_walkers",
             )
         if self.max_steps < 10:
-            raise InputError("option --max-steps: at least 10 steps")
+            raise InputError("max_steps: at least 10 steps", param="max_steps")
 
     def require_walkers(self, ndim: int) -> None:
         """emcee's red-blue moves need at least two walkers per sampled dimension."""
@@ -102,8 +77,9 @@ class Settings:
         if self.n_walkers < 2 * ndim:
             need = 4 * math.ceil(2 * ndim / 4)
             raise InputError(
-                f"option --walkers: {self.n_walkers} walkers are fewer than twice the {ndim} sampled "
-                f"parameters of this model; use at least {need}"
+                f"n_walkers: {self.n_walkers} walkers are fewer than twice the {ndim} sampled "
+                f"parameters of this model; use at least {need}",
+                param="n_walkers",
             )
 
 
@@ -124,7 +100,7 @@ class Chains:
     n_steps: int
     burn: int
     n_ensembles: int
-    warnings: tuple[str, ...] = ()
+    problems: tuple = ()  # uq._inference.convergence.Problem, the rules that failed
     n_walkers: int = 1
     start: np.ndarray | None = None
     accept_range: tuple[float, float] = ACCEPT_RANGE
@@ -313,17 +289,19 @@ def _tau(chain: np.ndarray) -> np.ndarray:
         return emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
 
 
-def _starts(log_prob, centers, widths, n_walkers: int, rng, tries: int = 20) -> np.ndarray:
+def _starts(log_prob, centers, chols, n_walkers: int, rng, tries: int = 20) -> np.ndarray:
     """Overdispersed starting walkers with finite log-probability (bad draws redrawn).
 
-    ``log_prob`` maps (K, m, D) -> (K, m); centers, widths (K, D); returns (K, n_walkers, D).
-    After ``tries`` rounds the remaining bad walkers are drawn ever closer to their problem's
-    center (halving the spread), which is finite by construction of the callers (an optimum).
+    ``log_prob`` maps (K, m, D) -> (K, m); centers (K, D); chols (K, D, D) lower factors of the
+    start covariance; returns (K, n_walkers, D). After ``tries`` rounds the remaining bad walkers
+    are drawn ever closer to their problem's center (halving the spread), which is finite by
+    construction of the callers (an optimum).
     """
     K, D = centers.shape
 
     def draw(shrink, shape):
-        return centers[:, None, :] + shrink * widths[:, None, :] * rng.standard_normal(shape)
+        z = rng.standard_normal(shape)
+        return centers[:, None, :] + shrink * np.einsum("kij,kwj->kwi", chols, z)
 
     p0 = draw(1.0, (K, n_walkers, D))
     shrink = 1.0
@@ -342,7 +320,7 @@ def _starts(log_prob, centers, widths, n_walkers: int, rng, tries: int = 20) -> 
 def run_ensembles(
     log_prob,
     center,
-    scale,
+    cov,
     names,
     *,
     seed: int,
@@ -352,8 +330,8 @@ def run_ensembles(
 ) -> Chains:
     """Sample ``log_prob`` (vectorised: (W, D) -> (W,)) with emcee until the rules pass.
 
-    ``center`` is the optimiser's solution and ``settings.init_scale * scale`` an estimate of
-    the posterior width per dimension; see the module docstring for the rules and storage.
+    ``center`` is the optimiser's solution and ``cov`` (D, D) an estimate of the posterior
+    covariance there; see the module docstring for the starts and storage.
     ``desc``: show a progress bar of the steps (uq._io.progress; on a terminal only) under this name.
     ``mix``: the weights of the moves (``INDEPENDENCE_MIX``, ``DE_MIX``; see :func:`effective_mix`).
     """
@@ -364,7 +342,7 @@ def run_ensembles(
     return run_many(
         many,
         np.asarray(center, float)[None],
-        np.asarray(scale, float)[None],
+        np.asarray(cov, float)[None],
         names,
         seed=seed,
         settings=settings,
@@ -376,7 +354,7 @@ def run_ensembles(
 def run_many(
     log_prob,
     centers,
-    scales,
+    covs,
     names,
     *,
     seed: int,
@@ -387,37 +365,35 @@ def run_many(
     """Sample K problems of the same dimension D at once: one emcee sampler, one call per move.
 
     ``log_prob`` maps (K, m, D) -> (K, m): row k of the walkers is evaluated under problem k
-    (e.g. one jitted, vmapped log-probability over all tests of a campaign). centers, scales
-    (K, D). Every problem gets ``settings.n_ensembles`` independent ensembles of
+    (e.g. one jitted, vmapped log-probability over all tests of a campaign). centers (K, D),
+    covs (K, D, D) the posterior covariance estimates the starts are drawn from. Every problem gets ``settings.n_ensembles`` independent ensembles of
     ``settings.n_walkers`` walkers (see ``_Grouped``), and the run is extended until every
     problem passes every rule, or ``max_steps``. Returns one :class:`Chains` per problem, with
-    its own burn-in, tau and warnings.
+    its own burn-in, tau and failed rules.
     """
     from uq._io.progress import _Silent, progress
 
     with (
         progress(total=settings.max_steps, desc=desc, unit="step") if desc else _Silent(None) as bar
     ):
-        return _run_many(log_prob, centers, scales, names, seed, settings, bar, mix)
+        return _run_many(log_prob, centers, covs, names, seed, settings, bar, mix)
 
 
 def _run_many(
-    log_prob, centers, scales, names, seed: int, settings: Settings, bar, mix
+    log_prob, centers, covs, names, seed: int, settings: Settings, bar, mix
 ) -> list[Chains]:
     settings.validate()
     centers = np.atleast_2d(np.asarray(centers, float))
     K, ndim = centers.shape
     settings.require_walkers(ndim)
-    widths = (
-        settings.init_spread
-        * settings.init_scale
-        * np.broadcast_to(np.asarray(scales, float), centers.shape)
+    chols = settings.init_spread * np.linalg.cholesky(
+        np.asarray(covs, float).reshape(K, ndim, ndim)
     )
     E, W = settings.n_ensembles, settings.n_walkers
     rng = np.random.default_rng(seed)
     # Walker order: problem, ensemble, walker; each ensemble's start is drawn afresh.
     start = np.stack(
-        [_starts(log_prob, centers, widths, W, rng) for _ in range(E)], axis=1
+        [_starts(log_prob, centers, chols, W, rng) for _ in range(E)], axis=1
     )  # (K, E, W, D)
 
     def flat_log_prob(q):  # emcee's (rows, D), rows in walker order -> (rows,)
@@ -441,16 +417,16 @@ def _run_many(
         chains = [
             _collect(sampler, k, names, settings, n_steps, start[k], accept_range) for k in range(K)
         ]
-        verdicts = [_failed_rules(c, settings, full=False) for c in chains]
+        verdicts = [failed_rules(c, settings, full=False) for c in chains]
         n_failed = sum(bool(f) for f, _ in verdicts)
         bar.set_postfix_str(f"{n_failed} problem(s) not yet converged" if n_failed else "converged")
         if not n_failed:
             return chains
         want = max(w for f, w in verdicts if f)
         if n_steps >= settings.max_steps or want <= n_steps:
-            verdicts = [_failed_rules(c, settings) for c in chains]
+            verdicts = [failed_rules(c, settings) for c in chains]
             return [
-                dataclasses.replace(c, warnings=tuple(f))
+                dataclasses.replace(c, problems=tuple(f))
                 for c, (f, _) in zip(chains, verdicts, strict=True)
             ]
         target = max(want, n_steps + settings.chunk // 4)
@@ -476,161 +452,3 @@ def _collect(
     return Chains(
         tuple(names), samples, lp, accept, tau, n_steps, burn, E, (), W, start, accept_range
     )
-
-
-def _failed_rules(chains: Chains, settings: Settings, full: bool = True) -> tuple[list[str], int]:
-    """Messages for the rules that fail on the sampled parameters, and the length they ask for.
-
-    ``full=False``: when the (cheap) tau rule already fails, stop there; R-hat and ESS on a chain
-    that short would fail too and only cost time. Final verdicts are always full.
-    """
-    n, tau = chains.n_steps, float(np.max(chains.tau))
-    need = settings.burn_tau + settings.tau_multiple
-    msgs, want = [], n
-    if not math.isfinite(tau) or n - chains.burn < settings.tau_multiple * tau:
-        msgs.append(
-            f"chain of {n} steps is shorter than burn-in + {settings.tau_multiple:g} autocorrelation times "
-            f"(tau = {tau:.1f}): raise --max-steps or use more walkers"
-        )
-        want = int(math.ceil(1.1 * need * (tau if math.isfinite(tau) else n)))
-        if not full:
-            return msgs, want
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "more chains than draws" on very short runs: judged below
-        diag = {
-            nm: chain_diagnostics(chains.samples[..., i], chains.n_walkers)
-            for i, nm in enumerate(chains.names)
-        }
-    msgs += _rule_warnings(diag)
-    rh = _worst([d["r_hat"] for d in diag.values()], max)
-    ess = _worst([min(d["ess_bulk"], d["ess_tail"]) for d in diag.values()], min)
-    if not (rh <= RHAT_MAX):
-        want = max(want, int(1.5 * n))
-    if not (ess >= ESS_MIN):
-        # ESS grows in proportion to the post-burn length
-        factor = 1.2 * ESS_MIN / ess if ess > 0 else 2.0
-        want = max(want, chains.burn + int(math.ceil(min(factor, 4.0) * (n - chains.burn))))
-    msgs += _acceptance_warnings(chains.acceptance, chains.accept_range)
-    return msgs, want
-
-
-def _worst(values, pick):
-    """``pick`` (max or min) of the values, NaN if any is NaN (an undefined statistic fails its rule)."""
-    v = np.asarray(values, float)
-    return float("nan") if np.any(np.isnan(v)) else float(pick(v))
-
-
-def _ess_of_summary(x: np.ndarray, per_step: np.ndarray) -> float:
-    """Draw-scale ESS of the ensemble-mean chains ``per_step`` (C, T) summarising ``x``."""
-    var_m = float(np.var(per_step))
-    if not var_m > 0:
-        return float("nan")
-    ess_m = float(az.ess(np.ascontiguousarray(per_step), method="mean"))
-    return min(ess_m * float(np.var(x)) / var_m, float(x.size))
-
-
-def bulk_ess(x: np.ndarray, n_walkers: int) -> float:
-    """Bulk ESS of one scalar, x (n_ensembles, steps * walkers) in storage order (one ensemble
-    is enough): ArviZ's rank normalisation, then the ensemble-mean chains (module docstring)."""
-    x = np.asarray(x, float)
-    ranks = stats.rankdata(x, axis=None).reshape(x.shape)
-    z = stats.norm.ppf((ranks - 0.375) / (x.size + 0.25))  # ArviZ's rank normalisation
-    return _ess_of_summary(z, z.reshape(x.shape[0], -1, n_walkers).mean(axis=2))
-
-
-def chain_diagnostics(x: np.ndarray, n_walkers: int) -> dict:
-    """R-hat, bulk/tail ESS and MCSE of the mean of one scalar; x (n_ensembles, steps * walkers).
-
-    ArviZ computes each statistic; see the module docstring for what it is given and why.
-    """
-    x = np.asarray(x, float)
-    C = x.shape[0]
-    xw = x.reshape(C, -1, n_walkers)
-    r_hat = float(az.rhat(np.ascontiguousarray(x)))
-    ess_bulk = bulk_ess(x, n_walkers)
-    tail = []
-    for q in (0.05, 0.95):
-        ind = (x <= np.quantile(x, q)).astype(float)
-        tail.append(_ess_of_summary(ind, ind.reshape(xw.shape).mean(axis=2)))
-    mcse = float(az.mcse(np.ascontiguousarray(xw.mean(axis=2)), method="mean"))
-    return {
-        "r_hat": r_hat,
-        "ess_bulk": ess_bulk,
-        "ess_tail": float(np.min(tail)),
-        "mcse_mean": mcse,
-    }
-
-
-def _rule_warnings(diag: dict) -> list[str]:
-    warns = []
-    for n, d in diag.items():
-        r = d["r_hat"]
-        if not (r <= RHAT_MAX):
-            warns.append(
-                f"{n}: R-hat {r:.3f} > {RHAT_MAX}: chains disagree; run longer (--max-steps) or use more walkers"
-            )
-        e = min(d["ess_bulk"], d["ess_tail"])
-        if not (e >= ESS_MIN):
-            warns.append(
-                f"{n}: effective sample size {e:.0f} < {ESS_MIN:.0f}: run longer (--max-steps) or use more walkers"
-            )
-    return warns
-
-
-def _acceptance_warnings(acc: np.ndarray, accept_range: tuple[float, float]) -> list[str]:
-    lo, hi = accept_range
-    if lo <= acc.mean() <= hi:
-        return []
-    return [
-        f"acceptance fraction {acc.mean():.2f} outside {lo:g}-{hi:g}: the sampler is stuck or the posterior is "
-        "badly scaled; check the model and start"
-    ]
-
-
-def convergence(
-    idata: az.InferenceData, chains: Chains, var_names: list[str] | None = None
-) -> dict:
-    """ArviZ diagnostics and the project's convergence rules for the stored variables.
-
-    Returns a dict with per-variable r_hat, ess_bulk, ess_tail, mcse_mean; the sampler's
-    tau, acceptance fractions, steps and burn-in; ``converged`` and ``warnings`` (the
-    sampler's own failed rules first, then those of the derived variables).
-    """
-    post = idata.posterior
-    names = var_names or list(post.data_vars)
-    per_var, diag = {}, {}
-    for n in names:
-        arr = np.asarray(post[n])  # (chains, draws, ...)
-        flat = arr.reshape(arr.shape[0], arr.shape[1], -1)
-        ds = [chain_diagnostics(flat[..., j], chains.n_walkers) for j in range(flat.shape[-1])]
-        per_var[n] = {
-            k: (float(ds[0][k]) if len(ds) == 1 else [float(d[k]) for d in ds]) for k in ds[0]
-        }
-        diag[n] = {
-            "r_hat": _worst([d["r_hat"] for d in ds], max),
-            "ess_bulk": _worst([d["ess_bulk"] for d in ds], min),
-            "ess_tail": _worst([d["ess_tail"] for d in ds], min),
-        }
-    warns = list(chains.warnings)
-    warns += [
-        w
-        for w in _rule_warnings(diag) + _acceptance_warnings(chains.acceptance, chains.accept_range)
-        if w not in warns
-    ]
-    acc = chains.acceptance
-    return {
-        "converged": not warns,
-        "warnings": warns,
-        "n_steps": chains.n_steps,
-        "burn_in": chains.burn,
-        "n_chains": int(chains.samples.shape[0]),
-        "n_walkers": int(chains.n_walkers),
-        "n_draws": int(chains.samples.shape[1]),
-        "tau": {n: float(t) for n, t in zip(chains.names, chains.tau, strict=True)},
-        "acceptance_fraction": {
-            "mean": float(acc.mean()),
-            "min": float(acc.min()),
-            "max": float(acc.max()),
-        },
-        "variables": per_var,
-    }

@@ -9,11 +9,24 @@ from __future__ import annotations
 
 
 class InputError(ValueError):
-    """Bad input: a one-line, actionable message; the CLI exits with status 2."""
+    """Bad input: a one-line, actionable message; the CLI exits with status 2.
 
-    def __init__(self, message: str):
+    ``param``: the library parameter the message is about (e.g. ``"load_N"``), when the message
+    starts with it (``"load_N: expected a positive load in N"``). The library speaks of its own
+    parameters, never of command-line options; the ``uq`` command names its option instead
+    (:meth:`for_option`)."""
+
+    def __init__(self, message: str, *, param: str | None = None):
         message = " ".join(str(message).split())  # one line, always
         super().__init__(message)
+        self.param = param
+
+    def for_option(self, option: str) -> InputError:
+        """The same error worded for the command line: ``param:`` replaced by ``option --x:``."""
+        text = str(self)
+        if self.param and text.startswith(f"{self.param}:"):
+            text = f"option {option}:" + text[len(self.param) + 1 :]
+        return InputError(text)
 
 
 def where(path: str, row: int | None = None, column: str | None = None) -> str:

@@ -12,34 +12,36 @@ make the force noise grow with the force, as the stand's error budget does.
 Priors (weakly informative, fixed physical scales, so they can be sampled for calibration):
     alpha_j ~ N(0, (100 kN)^2)    (the load cell's range; t is within about +-1 on the stand)
     gamma_j ~ N(0, (1 m)^2)       (longer than the 630 mm cylinder stroke)
-    log sigma0[N] ~ N(log 10, 2^2),  log r ~ N(log 0.005, 1),  log sigma_L[m] ~ N(log 1e-3, 2^2)
+    log sigma0[N] ~ N(log 10, 2^2),  log r ~ N(log r_stand, 1),  log sigma_L[m] ~ N(log 1e-3, 2^2)
+with r_stand the stand's load-cell error (0.5 % on the paper's stand).
 
-Given the three noise parameters the coefficients are Gaussian (``uq._inference.linear``): emcee samples
-(log sigma0, log r, log sigma_L) (mostly independence proposals fitted to the other walkers, with
-DE moves: ``uq._inference.sampler.INDEPENDENCE_MIX``) and every retained sample gets an exact draw of the eight
-coefficients, reported in the paper's basis (a + b u + c u^2 + d u^3, SI units).
+Given the three noise parameters the coefficients are Gaussian: the model is a
+:class:`uq._inference.collapsed.CollapsedModel` (``MODEL``), fitted by the one driver
+``fit_collapsed`` (emcee on the noise, exact draws of the eight coefficients), reported in the
+paper's basis (a + b u + c u^2 + d u^3, SI units).
 """
 
 from __future__ import annotations
 
-import warnings
+import os
 from dataclasses import dataclass
+from typing import NamedTuple
 
-import arviz as az
 import numpy as np
 import optimistix as optx
 
 from uq._data.recordings import PressureTest, Recordings
 from uq._data.reference import FORCE_NAMES, PISTON_NAMES
+from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._inference.collapsed import CollapsedModel, Posterior, fit_collapsed
+from uq._inference.convergence import CLI_ADVICE, LIBRARY_ADVICE
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import (
-    draw_exact,
-    gaussian_loglik,
-    linear_posterior,
-    map_rows,
-    row_keys,
-)
-from uq._inference.sampler import Chains, Settings, convergence, run_many, thin
+from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
+from uq._inference.sampler import Settings
+from uq._inference.summary import estimate
+from uq._models.residual_order import ALPHA as ORDER_ALPHA
+from uq._models.residual_order import lag_one_check, order_warnings
+from uq._physics.cubic import cubic
 from uq._physics.quantities import BASIS_SCALE_M, force_noise_var, to_paper_basis
 
 MAX_DRAWS = 8000  # retained posterior samples per test after thinning
@@ -47,8 +49,16 @@ FORCE_PRIOR_SD_N = 1.0e5
 PISTON_PRIOR_SD_M = 1.0
 NOISE_NAMES = ("sigma0_N", "rel_force", "sigma_L_m")
 SAMPLER_NAMES = ("log_noise_at_mean_force", "logit_floor_share", "log_sigma_L")
-NOISE_PRIOR_MEAN = np.log(np.array([10.0, 0.005, 1.0e-3]))
 NOISE_PRIOR_SD = np.array([2.0, 1.0, 2.0])
+
+
+def noise_prior_mean(stand: StandDescription = PAPER_STAND) -> np.ndarray:
+    """Prior centres of (log sigma0 [N], log r, log sigma_L [m]); r's from the stand's load cell
+    (a stand declaring a perfect load cell still gets a 0.01 % centre: log 0 has no prior)."""
+    return np.log(np.array([10.0, max(stand.load_cell_rel_sd, 1e-4), 1.0e-3]))
+
+
+NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 
 
 def basis(u_m, scale: float = BASIS_SCALE_M, degree: int = 3):
@@ -88,6 +98,20 @@ def least_squares(u_m, y) -> np.ndarray:
     return to_paper_basis(np.asarray(value))
 
 
+# ----------------------------------------------------------------------------- the model
+
+
+class CubicData(NamedTuple):
+    """One test's arrays for the model functions (n readings)."""
+
+    X: jnp.ndarray  # (n, 4) scaled basis [1, t, t^2, t^3]
+    force: jnp.ndarray  # (n,) N
+    piston: jnp.ndarray  # (n,) m
+    ref_force: jnp.ndarray  # (n,) force level of the relative noise term, N
+    prior_mean: jnp.ndarray  # (3,) prior centres of the natural noise logs
+    weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out (exact LOO refits)
+
+
 def natural_noise(theta, ref_mean):
     """Sampler coordinates -> (log sigma0, log r, log sigma_L).
 
@@ -106,60 +130,187 @@ def natural_noise(theta, ref_mean):
     )
 
 
-def _noise(theta, ref_force):
-    nat = natural_noise(theta, jnp.mean(ref_force))
+def _noise(theta, d: CubicData):
+    nat = natural_noise(theta, jnp.mean(d.ref_force))
     sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), jnp.exp(nat[2])
-    sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, ref_force))
+    sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, d.ref_force))
     return sigma_f, sigma_L, nat
 
 
-def _log_prior(nat):
-    z = (nat - NOISE_PRIOR_MEAN) / NOISE_PRIOR_SD
-    return -0.5 * jnp.sum(z**2)
-
-
-def _posteriors(theta, X, force, piston, ref_force):
-    sigma_f, sigma_L, _ = _noise(theta, ref_force)
-    k = X.shape[1]
-    pf = linear_posterior(X, force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N))
+def conditional_posteriors(theta, d: CubicData):
+    """The Gaussian posteriors of the force and the piston coefficients (scaled basis) given theta."""
+    sigma_f, sigma_L, _ = _noise(theta, d)
+    k = d.X.shape[1]
+    pf = linear_posterior(d.X, d.force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N), d.weight)
     pl = linear_posterior(
-        X, piston, jnp.full(piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M)
+        d.X, d.piston, jnp.full(d.piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M), d.weight
     )
     return pf, pl
 
 
-@jax.jit
-def log_prob(thetas, X, force, piston, ref_force):
-    """Log posterior of the noise parameters, coefficients integrated out. thetas (W, 3) -> (W,)."""
-
-    def one(theta):
-        pf, pl = _posteriors(theta, X, force, piston, ref_force)
-        lp = _log_prior(_noise(theta, ref_force)[2]) + pf.log_marginal + pl.log_marginal
-        return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
-
-    return jax.vmap(one)(thetas)
+def log_prob(theta, d: CubicData):
+    """Log posterior of the noise parameters, coefficients integrated out; theta (3,)."""
+    pf, pl = conditional_posteriors(theta, d)
+    z = (_noise(theta, d)[2] - d.prior_mean) / NOISE_PRIOR_SD
+    return -0.5 * jnp.sum(z**2) + pf.log_marginal + pl.log_marginal
 
 
-@dataclass(eq=False, frozen=True)
+def draw_linear(theta, key, d: CubicData):
+    """An exact draw of the eight coefficients (force, piston; scaled basis) given theta."""
+    pf, pl = conditional_posteriors(theta, d)
+    kf, kl = jax.random.split(key)
+    return jnp.concatenate([draw_exact(pf, kf), draw_exact(pl, kl)])
+
+
+def pointwise(theta, beta, d: CubicData):
+    sigma_f, sigma_L, _ = _noise(theta, d)
+    return {
+        "force_N": gaussian_loglik(d.force, d.X @ beta[:4], sigma_f),
+        "piston_m": gaussian_loglik(d.piston, d.X @ beta[4:], sigma_L),
+    }
+
+
+def predict(theta, beta, key, d: CubicData):
+    """A replicate of the test's readings: the mean curves plus the model's reading noise."""
+    sigma_f, sigma_L, _ = _noise(theta, d)
+    kf, kl = jax.random.split(key)
+    n = d.force.shape[0]
+    return {
+        "force_N": d.X @ beta[:4] + sigma_f * jax.random.normal(kf, (n,)),
+        "piston_m": d.X @ beta[4:] + sigma_L * jax.random.normal(kl, (n,)),
+    }
+
+
+def pointwise_loo(theta, d: CubicData):
+    """log p(force_i, piston_i | noise, the test's other readings), coefficients integrated out, (n,)."""
+    sigma_f, sigma_L, _ = _noise(theta, d)
+    k = d.X.shape[1]
+    return loo_given_noise(d.X, d.force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N)) + loo_given_noise(
+        d.X, d.piston, jnp.full(d.piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M)
+    )
+
+
+def hold_out(d: CubicData, held) -> CubicData:
+    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
+
+
+def start(d: CubicData) -> np.ndarray:
+    """The residual scales of the least-squares cubics: psi = log force sd, eta = 0, log sigma_L."""
+    X, n = np.asarray(d.X), d.force.shape[0]
+
+    def sd(y):
+        res = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+        return np.sqrt(np.sum(res**2) / max(n - 4, 1))
+
+    return np.array(
+        [np.log(sd(np.asarray(d.force)) + 1e-9), 0.0, np.log(sd(np.asarray(d.piston)) + 1e-12)]
+    )
+
+
+def report(theta, beta, d: CubicData) -> dict:
+    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
+    force, piston = to_paper_basis(beta[:, :4]), to_paper_basis(beta[:, 4:])
+    out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
+    out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
+    return out | {n: noise[:, i] for i, n in enumerate(NOISE_NAMES)}
+
+
+def observed(d: CubicData) -> dict:
+    return {"force_N": np.asarray(d.force), "piston_m": np.asarray(d.piston)}
+
+
+MODEL = CollapsedModel(
+    name="per-pressure cubics (eqs. 8, 9)",
+    theta_names=SAMPLER_NAMES,
+    log_prob=log_prob,
+    draw_linear=draw_linear,
+    pointwise=pointwise,
+    start=start,
+    report=report,
+    predict=predict,
+    observed=observed,
+    pointwise_loo=pointwise_loo,
+    hold_out=hold_out,
+)
+
+
+# ----------------------------------------------------------------------------- results
+
+
+def noise_reference(lsq_force, u, noise: str) -> np.ndarray:
+    """Force level of the relative noise term at u: the least-squares curve's |P| ("budget"), or
+    its mean over these points ("constant")."""
+    ref = np.abs(cubic(lsq_force, u))
+    return np.full_like(ref, ref.mean()) if noise == "constant" else ref
+
+
+@dataclass(eq=False, frozen=True, repr=False)
 class PressureFit:
-    """Posterior of one test. Draw arrays are (chains, draws, ...) in the paper's basis, SI."""
+    """Posterior of one test: the driver's :class:`~uq._inference.collapsed.Posterior` and what the
+    test's quantities need. Draw arrays are (chains, draws, ...) in the paper's basis, SI."""
 
     test: PressureTest
     x0_m: float
     lsq_force: np.ndarray  # (4,)
     lsq_piston: np.ndarray  # (4,)
-    force: np.ndarray  # (C, D, 4)
-    piston: np.ndarray  # (C, D, 4)
-    noise: np.ndarray  # (C, D, 3): sigma0_N, rel_force, sigma_L_m
-    chains: Chains
-    idata: az.InferenceData
-    diagnostics: dict
+    posterior: Posterior
     ref_force_N: np.ndarray  # (n,) force level of the relative noise term at each point
-    noise_model: str = "budget"  # "budget" or "constant" (fit_test's noise)
+    noise_model: str  # "budget" or "constant" (fit_test's noise)
+    force: np.ndarray  # (C, D, 4) a_P..d_P
+    piston: np.ndarray  # (C, D, 4) a_L..d_L
+    noise: np.ndarray  # (C, D, 3) sigma0_N, rel_force, sigma_L_m
+    #: the recording-order check of the residuals (uq._models.residual_order): force, piston, alpha
+    order_check: dict
+
+    @classmethod
+    def of(cls, test, x0_m, lsq_force, lsq_piston, posterior: Posterior, ref_force_N, noise_model):
+        post = posterior.idata.posterior
+
+        def stack(names):
+            return np.stack([np.asarray(post[n]) for n in names], axis=-1)
+
+        force, piston, noise = stack(FORCE_NAMES), stack(PISTON_NAMES), stack(NOISE_NAMES)
+        u = test.height_m - x0_m
+        mean_noise = noise.reshape(-1, 3).mean(axis=0)
+        design = np.asarray(basis(u))
+        residuals = {
+            "force": test.force_N - cubic(force.reshape(-1, 4).mean(0), u),
+            "piston": test.piston_m - cubic(piston.reshape(-1, 4).mean(0), u),
+        }
+        sd = {
+            "force": np.sqrt(force_noise_var(mean_noise[0], mean_noise[1], ref_force_N)),
+            "piston": np.full(u.shape, mean_noise[2]),
+        }
+        check = {b: lag_one_check(residuals[b], sd[b], design) for b in ("force", "piston")}
+        return cls(
+            test,
+            x0_m,
+            lsq_force,
+            lsq_piston,
+            posterior,
+            ref_force_N,
+            noise_model,
+            force,
+            piston,
+            noise,
+            check | {"alpha": ORDER_ALPHA},
+        )
 
     @property
     def pressure_bar(self) -> float:
         return self.test.pressure_bar
+
+    @property
+    def idata(self):
+        return self.posterior.idata
+
+    @property
+    def convergence(self):
+        return self.posterior.convergence
+
+    @property
+    def chains(self):
+        return self.posterior.chains
 
     def flat(self, name: str) -> np.ndarray:
         arr = getattr(self, name)
@@ -170,16 +321,16 @@ class PressureFit:
 
     def ref_force_at(self, height_m) -> np.ndarray:
         """The force level of the relative noise term at any heights, by the rule the fit used at
-        the data (``_noise_reference``): the report's predictive bands use it on their grid."""
+        the data: the report's predictive bands use it on their grid."""
         u = np.asarray(height_m, float) - self.x0_m
         if self.noise_model == "constant":
             return np.full(u.shape, float(np.mean(self.ref_force_N)))
-        return _noise_reference(self.lsq_force, u, self.noise_model)
+        return noise_reference(self.lsq_force, u, self.noise_model)
 
     def mean_residuals(self, block: str) -> np.ndarray:
         """Readings minus the posterior-mean curve of ``block`` ("force" N or "piston" m), (n,)."""
         y = self.test.force_N if block == "force" else self.test.piston_m
-        return y - _cubic_eval(self.flat(block).mean(0), self.test.height_m - self.x0_m)
+        return y - cubic(self.flat(block).mean(0), self.test.height_m - self.x0_m)
 
     def deviation_measures(self) -> tuple[float, float]:
         """The paper's s_P (N) and eps_P (%) of the posterior-mean curve (section 5)."""
@@ -188,146 +339,80 @@ class PressureFit:
             100.0 * np.mean(np.abs(res / self.test.force_N))
         )
 
-    def pointwise_loglik(self, max_draws: int = 2000, seed: int = 0) -> dict[str, np.ndarray]:
-        """Pointwise log-likelihood (chains, draws', n) of force and piston, for PSIS-LOO."""
-        C, D = self.force.shape[:2]
-        step = max(1, int(np.ceil(C * D / max_draws)))
-        f, l, nz = self.force[:, ::step], self.piston[:, ::step], self.noise[:, ::step]
-        u = self.test.height_m - self.x0_m
-        mu_f = np.einsum("cdk,nk->cdn", f, np.vander(u, 4, increasing=True))
-        mu_l = np.einsum("cdk,nk->cdn", l, np.vander(u, 4, increasing=True))
-        sf = np.sqrt(force_noise_var(nz[..., 0:1], nz[..., 1:2], self.ref_force()))
-        ll_f = gaussian_loglik(self.test.force_N, mu_f, sf)
-        ll_l = gaussian_loglik(self.test.piston_m, mu_l, nz[..., 2:3])
-        return {"force": np.asarray(ll_f), "piston": np.asarray(ll_l)}
+    def model_warnings(self) -> list[str]:
+        """The recording-order check's warnings (none when the residuals look independent)."""
+        return order_warnings(self.order_check)
+
+    def summary(self):
+        """ArviZ's summary table (pandas DataFrame) of the coefficients and noise parameters."""
+        return self.posterior.summary()
+
+    def to_json(self, advice: str = CLI_ADVICE) -> dict:
+        """One entry of ``tests`` in ``uq fit --json`` (docs/formats.md)."""
+        conv = self.convergence.to_json(advice, variables=False)
+        var = self.convergence.variables
+        s_P, eps_P = self.deviation_measures()
+
+        def block(draws, names):
+            return {
+                n: estimate(draws[..., i])
+                | {k: var[n][k] for k in ("r_hat", "ess_bulk", "ess_tail", "mcse_mean")}
+                for i, n in enumerate(names)
+            }
+
+        return {
+            "pressure_bar": self.pressure_bar,
+            "n_points": self.test.n_points,
+            "force": block(self.force, FORCE_NAMES),
+            "piston": block(self.piston, PISTON_NAMES),
+            "s_P_N": s_P,
+            "eps_P_pct": eps_P,
+            "noise": {
+                n: estimate(self.noise[..., i])
+                | {"r_hat": var[n]["r_hat"], "ess_bulk": var[n]["ess_bulk"]}
+                for i, n in enumerate(NOISE_NAMES)
+            },
+            "least_squares": {
+                "force": dict(zip(FORCE_NAMES, self.lsq_force.tolist(), strict=True)),
+                "piston": dict(zip(PISTON_NAMES, self.lsq_piston.tolist(), strict=True)),
+            },
+            "covariance": {
+                "force": np.cov(self.flat("force"), rowvar=False),
+                "piston": np.cov(self.flat("piston"), rowvar=False),
+            },
+            "convergence": conv,
+            "residual_order": self.order_check,
+        }
+
+    def __repr__(self) -> str:
+        state = "converged" if self.convergence.converged else "NOT converged"
+        return (
+            f"PressureFit({self.pressure_bar:g} bar, {self.test.n_points} readings, "
+            f"{self.flat('force').shape[0]} draws, {state})"
+        )
 
 
-def _cubic_eval(coef, u):
-    return coef[0] + coef[1] * u + coef[2] * u**2 + coef[3] * u**3
-
-
-def _start(X, force, piston, ref_force, lsq_f, lsq_l, u):
-    """Optimistix BFGS on the negative log posterior of the noise, from the residual scale."""
-    res_f = force - _cubic_eval(lsq_f, u)
-    res_l = piston - _cubic_eval(lsq_l, u)
-    n = force.size
-    s_f = np.sqrt(np.sum(res_f**2) / max(n - 4, 1)) + 1e-9
-    s_l = np.sqrt(np.sum(res_l**2) / max(n - 4, 1)) + 1e-12
-    theta0 = jnp.array([np.log(s_f), 0.0, np.log(s_l)])
-    theta, result = _bfgs(
-        theta0, X, jnp.asarray(force), jnp.asarray(piston), jnp.asarray(ref_force)
-    )
-    theta = np.asarray(theta)
-    if not np.all(np.isfinite(theta)) or result != optx.RESULTS.successful:
-        theta = np.asarray(theta0)
-    return theta
-
-
-def _neg_log_prob(theta, args):
-    return -log_prob(theta[None, :], *args)[0]
-
-
-@jax.jit
-def _bfgs(theta0, X, force, piston, ref_force):
-    sol = optx.minimise(
-        _neg_log_prob,
-        optx.BFGS(rtol=1e-8, atol=1e-8),
-        theta0,
-        args=(X, force, piston, ref_force),
-        max_steps=500,
-        throw=False,
-    )
-    return sol.value, sol.result
-
-
-def fit_test(
-    test: PressureTest,
-    x0_m: float,
-    *,
-    seed: int,
-    settings: Settings = Settings(),
-    noise: str = "budget",
-) -> PressureFit:
-    """Least squares, then the emcee posterior with exact coefficient draws, then diagnostics.
-
-    ``noise="budget"`` (default): force sd grows with the force (load cell) over a floor.
-    ``noise="constant"``: one force sd for the whole test, the common but wrong choice kept
-    for the calibration suite's misspecification study (the total is still sampled; its split
-    into floor and relative parts is then unidentified and follows the prior).
-    """
-    return fit_tests([test], x0_m, seed=seed, settings=settings, noise=noise)[0]
-
-
-@dataclass(frozen=True)
-class _Prepared:
-    """What the sampler needs of one test: data, least squares, noise reference, start."""
-
-    test: PressureTest
-    X: np.ndarray  # (n, 4) scaled basis
-    lsq_f: np.ndarray
-    lsq_l: np.ndarray
-    ref_force: np.ndarray  # (n,)
-    center: np.ndarray  # (3,) optimistix start
-    scale: np.ndarray  # (3,) posterior width estimate / settings.init_scale
-    noise: str  # "budget" or "constant"
-
-
-def _noise_reference(lsq_force, u, noise: str) -> np.ndarray:
-    """Force level of the relative noise term at u: the least-squares curve's |P| ("budget"), or
-    its mean over these points ("constant")."""
-    ref = np.abs(_cubic_eval(lsq_force, u))
-    return np.full_like(ref, ref.mean()) if noise == "constant" else ref
-
-
-def _prepare(test: PressureTest, x0_m: float, settings: Settings, noise: str) -> _Prepared:
+def _prepare(test: PressureTest, x0_m: float, noise: str, stand: StandDescription):
     if noise not in ("budget", "constant"):
         raise ValueError(f"noise must be 'budget' or 'constant', got {noise!r}")
     u = test.height_m - x0_m
     lsq_f = least_squares(u, test.force_N)
     lsq_l = least_squares(u, test.piston_m)
-    ref_force = _noise_reference(lsq_f, u, noise)
-    X = np.asarray(basis(u))
-    center = _start(jnp.asarray(X), test.force_N, test.piston_m, ref_force, lsq_f, lsq_l, u)
-    # Start spread: about the posterior width of a log-scale from n points.
-    scale = np.full(3, 1.0 / np.sqrt(2.0 * test.n_points)) / settings.init_scale * 0.5
-    return _Prepared(test, X, lsq_f, lsq_l, ref_force, center, scale, noise)
+    ref_force = noise_reference(lsq_f, u, noise)
+    data = CubicData(
+        basis(u),
+        jnp.asarray(test.force_N),
+        jnp.asarray(test.piston_m),
+        jnp.asarray(ref_force),
+        jnp.asarray(noise_prior_mean(stand)),
+        jnp.ones(np.size(test.force_N)),
+    )
+    return data, lsq_f, lsq_l, ref_force
 
 
-_log_prob_tests = jax.jit(
-    jax.vmap(log_prob)
-)  # (K, W, 3) thetas of K tests of equal length -> (K, W)
-
-
-def _campaign_log_prob(preps: list[_Prepared]):
-    """One log-probability over all tests, (K, W, 3) -> (K, W): one jitted, vmapped call per
-    test length (all tests of a campaign usually have one), so it compiles once per length."""
-    by_len: dict[int, list[int]] = {}
-    for i, pr in enumerate(preps):
-        by_len.setdefault(pr.test.n_points, []).append(i)
-    groups = []
-    for idx in by_len.values():
-        args = tuple(
-            jnp.asarray(np.stack(a))
-            for a in zip(
-                *[
-                    (preps[i].X, preps[i].test.force_N, preps[i].test.piston_m, preps[i].ref_force)
-                    for i in idx
-                ],
-                strict=True,
-            )
-        )
-        groups.append((np.array(idx), args))
-
-    def lp(thetas):
-        thetas = np.asarray(thetas, float)
-        out = np.empty(thetas.shape[:2])
-        for idx, args in groups:
-            out[idx] = np.asarray(
-                _log_prob_tests(thetas[idx], *args)
-            )  # numpy in: jit's fast dispatch path
-        return out
-
-    return lp
+def test_seeds(seed: int, n: int) -> list[int]:
+    """Independent per-test seeds derived from one campaign seed."""
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
 def fit_tests(
@@ -337,109 +422,60 @@ def fit_tests(
     seed: int,
     settings: Settings = Settings(),
     noise: str = "budget",
+    stand: StandDescription = PAPER_STAND,
     desc: str | None = None,
 ) -> list[PressureFit]:
-    """Fit several tests at once: one emcee sampler runs every test's ensembles in lockstep
-    (``uq._inference.sampler.run_many``), each test with its own independent ensembles, burn-in and
-    convergence verdict; the run lasts until every test passes every rule. The exact
-    coefficient draws of test i use the i-th seed derived from ``seed`` (:func:`test_seeds`).
+    """Fit several tests at once: one emcee run samples every test's ensembles in lockstep
+    (``fit_collapsed`` with a list of data), each test with its own independent ensembles,
+    burn-in and convergence verdict. The exact coefficient draws of test i use the i-th seed
+    derived from ``seed`` (:func:`test_seeds`).
+
+    ``noise="budget"`` (default): force sd grows with the force (load cell) over a floor.
+    ``noise="constant"``: one force sd for the whole test, the common but wrong choice kept
+    for the calibration suite's misspecification study (the total is still sampled; its split
+    into floor and relative parts is then unidentified and follows the prior).
     """
-    preps = [_prepare(t, x0_m, settings, noise) for t in tests]
-    runs = run_many(
-        _campaign_log_prob(preps),
-        np.stack([p.center for p in preps]),
-        np.stack([p.scale for p in preps]),
-        SAMPLER_NAMES,
+    prepared = [_prepare(t, x0_m, noise, stand) for t in tests]
+    posts = fit_collapsed(
+        MODEL,
+        [p[0] for p in prepared],
         seed=seed,
         settings=settings,
+        max_draws=MAX_DRAWS,
+        seeds=test_seeds(seed, len(prepared)),
         desc=desc,
     )
     return [
-        _posterior(pr, thin(ch, MAX_DRAWS), x0_m, s)
-        for pr, ch, s in zip(preps, runs, test_seeds(seed, len(preps)), strict=True)
+        PressureFit.of(t, x0_m, lsq_f, lsq_l, post, ref, noise)
+        for t, (_, lsq_f, lsq_l, ref), post in zip(tests, prepared, posts, strict=True)
     ]
 
 
-def _draw(sigma, key, X, y, prior_sd):
-    """One exact draw of a cubic's coefficients given the noise sd at each point (mapped by map_rows)."""
-    return draw_exact(linear_posterior(X, y, sigma, prior_sd), key)
+def fit_test(
+    test: PressureTest,
+    x0_m: float,
+    *,
+    seed: int,
+    settings: Settings = Settings(),
+    noise: str = "budget",
+    stand: StandDescription = PAPER_STAND,
+) -> PressureFit:
+    """One test's posterior (:func:`fit_tests` of one test)."""
+    return fit_tests([test], x0_m, seed=seed, settings=settings, noise=noise, stand=stand)[0]
 
 
-def _posterior(pr: _Prepared, chains: Chains, x0_m: float, seed: int) -> PressureFit:
-    """Exact coefficient draws for every retained noise sample, ArviZ data and diagnostics."""
-    test, ref_force = pr.test, pr.ref_force
-    C, D, _ = chains.samples.shape
-    rows = chains.samples.reshape(C * D, 3)
-    nat = map_rows(natural_noise, (rows,), (float(np.mean(ref_force)),))
-    noise_flat = np.exp(nat)
-    sigma_f = np.sqrt(force_noise_var(noise_flat[:, :1], noise_flat[:, 1:2], ref_force))
-    sigma_l = np.ascontiguousarray(np.broadcast_to(noise_flat[:, 2:3], sigma_f.shape))
-    key_f, key_l = jax.random.split(jax.random.PRNGKey(seed))
-    alpha_f = map_rows(
-        _draw,
-        (jnp.asarray(sigma_f), row_keys(key_f, C * D)),
-        (jnp.asarray(pr.X), jnp.asarray(test.force_N), jnp.full(4, FORCE_PRIOR_SD_N)),
-    )
-    alpha_l = map_rows(
-        _draw,
-        (jnp.asarray(sigma_l), row_keys(key_l, C * D)),
-        (jnp.asarray(pr.X), jnp.asarray(test.piston_m), jnp.full(4, PISTON_PRIOR_SD_M)),
-    )
-    force = to_paper_basis(np.asarray(alpha_f)).reshape(C, D, 4)
-    piston = to_paper_basis(np.asarray(alpha_l)).reshape(C, D, 4)
-    noise_draws = noise_flat.reshape(C, D, 3)
-    posterior = {n: force[..., i] for i, n in enumerate(FORCE_NAMES)}
-    posterior |= {n: piston[..., i] for i, n in enumerate(PISTON_NAMES)}
-    posterior |= {n: noise_draws[..., i] for i, n in enumerate(NOISE_NAMES)}
-    with warnings.catch_warnings():
-        # "More chains than draws" on deliberately short runs: reported by our own rules below.
-        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
-        idata = _idata(posterior, test, x0_m, chains)
-        diagnostics = convergence(idata, chains, list(posterior))
-    return PressureFit(
-        test,
-        x0_m,
-        pr.lsq_f,
-        pr.lsq_l,
-        force,
-        piston,
-        noise_draws,
-        chains,
-        idata,
-        diagnostics,
-        ref_force,
-        pr.noise,
-    )
-
-
-def _idata(posterior, test, x0_m, chains):
-    return az.from_dict(
-        posterior=posterior,
-        observed_data={"force_N": test.force_N, "piston_m": test.piston_m},
-        constant_data={
-            "height_m": test.height_m,
-            "pressure_bar": np.array(test.pressure_bar),
-            "x0_m": np.array(x0_m),
-        },
-        sample_stats={"lp": chains.log_prob},
-        attrs={
-            "n_ensembles": chains.n_ensembles,
-            "n_walkers": chains.n_walkers,
-            "draw_order": "each chain is one emcee ensemble; draw = step * n_walkers + walker",
-            "sampler": "emcee (DE, DE-snooker and independence-t moves), coefficients drawn exactly",
-        },
-    )
-
-
-@dataclass(eq=False, frozen=True)
+@dataclass(eq=False, frozen=True, repr=False)
 class CampaignFit:
+    """The per-pressure cubics of every test of a campaign (:func:`fit_campaign`)."""
+
     recordings: Recordings
     tests: list[PressureFit]
     seed: int
+    stand: StandDescription = PAPER_STAND
 
     @property
     def converged(self) -> bool:
-        return all(t.diagnostics["converged"] for t in self.tests)
+        return all(t.convergence.converged for t in self.tests)
 
     def at(self, pressure_bar: float) -> PressureFit:
         for t in self.tests:
@@ -447,18 +483,77 @@ class CampaignFit:
                 return t
         raise KeyError(pressure_bar)
 
+    def summary(self):
+        """One row per test and coefficient: ArviZ's summary statistics (pandas DataFrame)."""
+        import pandas as pd
 
-def test_seeds(seed: int, n: int) -> list[int]:
-    """Independent per-test seeds derived from one campaign seed."""
-    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
+        return pd.concat(
+            {f"{t.pressure_bar:g} bar": t.summary() for t in self.tests}, names=["test", "quantity"]
+        )
+
+    def warnings(self, advice: str = LIBRARY_ADVICE) -> list[str]:
+        """The sampler's failed rules of every test, each prefixed with its pressure."""
+        return [
+            f"{t.pressure_bar:g} bar: {w}"
+            for t in self.tests
+            for w in t.convergence.messages(advice)
+        ]
+
+    def model_warnings(self) -> list[str]:
+        """The recording-order warnings of every test, each prefixed with its pressure."""
+        return [f"{t.pressure_bar:g} bar: {w}" for t in self.tests for w in t.model_warnings()]
+
+    def to_json(self, advice: str = CLI_ADVICE) -> dict:
+        """What ``uq fit --json`` writes (docs/formats.md): per test the coefficients' and noise's
+        posterior summaries, the coefficient blocks' covariance, least squares and diagnostics."""
+        rec = self.recordings
+        return {
+            "x0_m": rec.x0_m,
+            "piston_area_m2": rec.piston_area_m2,
+            "source": os.path.basename(rec.path),
+            "seed": self.seed,
+            "converged": self.converged,
+            "warnings": self.warnings(advice),
+            "model_warnings": self.model_warnings(),
+            "tests": [t.to_json(advice) for t in self.tests],
+        }
+
+    def save(self, out_dir) -> list:
+        """One NetCDF file per test (ArviZ InferenceData with posterior, log_likelihood,
+        posterior_predictive and observed_data groups), each written atomically; returns the paths."""
+        from pathlib import Path
+
+        from uq._io.files import write_file_atomic
+
+        out = Path(out_dir)
+        return [
+            write_file_atomic(
+                out / f"posterior_{t.pressure_bar:g}bar.nc",
+                lambda tmp, t=t: t.idata.to_netcdf(str(tmp), engine="h5netcdf"),
+            )
+            for t in self.tests
+        ]
+
+    def __repr__(self) -> str:
+        state = "converged" if self.converged else "NOT converged"
+        return (
+            f"CampaignFit({len(self.tests)} tests at "
+            f"{', '.join(f'{t.pressure_bar:g}' for t in self.tests)} bar, "
+            f"{self.recordings.n_points} readings, seed {self.seed}, {state})"
+        )
 
 
 def fit_campaign(
-    recordings: Recordings, *, seed: int = 0, settings: Settings = Settings()
+    recordings: Recordings,
+    *,
+    seed: int = 0,
+    settings: Settings = Settings(),
+    stand: StandDescription = PAPER_STAND,
 ) -> CampaignFit:
     """Fit every test of a campaign: one emcee run samples all tests in lockstep, each with its
-    own ensembles and convergence checks (:func:`fit_tests`). ``uq fit`` is this plus
-    :func:`uq.fit_json`.
+    own ensembles and convergence checks (:func:`fit_tests`). ``stand``: the stand the recordings
+    were taken on (its load cell centres the prior of the relative force noise). ``uq fit`` is
+    this plus :meth:`CampaignFit.to_json`.
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -470,6 +565,11 @@ def fit_campaign(
     True
     """
     fits = fit_tests(
-        recordings.tests, recordings.x0_m, seed=seed, settings=settings, desc="sampling all tests"
+        recordings.tests,
+        recordings.x0_m,
+        seed=seed,
+        settings=settings,
+        stand=stand,
+        desc="sampling all tests",
     )
-    return CampaignFit(recordings, fits, seed)
+    return CampaignFit(recordings, fits, seed, stand)

@@ -40,17 +40,15 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import optimistix as optx
 
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._inference.collapsed import CollapsedModel
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import (
     draw_exact,
     gaussian_loglik,
-    map_rows,
     posterior_from_moments,
-    row_keys,
 )
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
@@ -133,6 +131,8 @@ class Data(NamedTuple):
     #: Moments of E over the fitted rows at unit noise scales: z-rows' and L-rows' Gram (ke, ke),
     #: right-hand sides (ke,), y^T W y, sum log sd^2 and row counts, each (z, L).
     moments_E: tuple
+    #: the model switch (``mask_of``): mechanism flags, then flags of the F_eff powers
+    mask: jnp.ndarray
 
 
 def _expanded(
@@ -237,11 +237,10 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         slope = dV @ cl[1:]
         p_pa = test.pressure_bar * BAR_PA
         feff = np.abs(P_hat) / p_pa
-        L_hat = V @ cl
-        # The piston is lowest at x_max, where the element holds element_volume_at_xmax_m3.
-        v_gas = stand.receiver_air_m3 + np.maximum(
-            stand.element_volume_at_xmax_m3 - S * (L_hat - L_hat.min()), 1e-4
-        )
+        # The gas a pressure error compresses (Boyle): element, receiver and pipe, whose volume
+        # keeps its value in isobaric-isothermal conditions (eq. 4: the gas/water boundary
+        # moves inside the receiver as the element is compressed).
+        v_gas = stand.gas_volume_at_xmax_m3
         p_abs_bar = test.pressure_bar + stand.p_atm_bar
         sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
         c = feff * p_abs_bar * BAR_PA * S / v_gas
@@ -320,6 +319,7 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         jnp.asarray(uses),
         jnp.asarray(prior_sd),
         moments,
+        mask_of((), 3),
     )
     meta = {
         "pressure_bar": cat["p"],
@@ -385,156 +385,91 @@ def _posterior(theta, mask, d: Data):
 def _log_post(theta, mask, d: Data):
     lp = _posterior(theta, mask, d)[0].log_marginal
     active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2], mask[5]])])
-    lp = lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
-    return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
+    return lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
 
 
-LOG_POST_CHUNK = 32  # rows per compiled call: the sampler asks for 2 x walkers per move
+def log_prob(theta, d: Data):
+    """Log posterior of the sampled parameters (N_THETA,), coefficients integrated out, for the
+    model switched on by ``d.mask``."""
+    return _log_post(theta, d.mask, d)
 
 
-def log_post(thetas: np.ndarray, mask, d: Data) -> np.ndarray:
-    """Log posterior of full thetas (m, N_THETA). A sequential map (``batch_size=1``), not vmap:
-    XLA CPU can deadlock on batched (vmapped) Cholesky factorisations, as seen here with batches
-    of 1000 under load; a sequential map over small factorisations is only slightly slower."""
-    return map_rows(
-        _log_post,
-        (np.atleast_2d(np.asarray(thetas, float)),),
-        (mask, d),
-        batch_size=1,
-        chunk=LOG_POST_CHUNK,
-    )
+def draw_linear(theta, key, d: Data):
+    """An exact coefficient draw given theta (model columns: F_eff powers, piston references,
+    casing cubic, offset, drift)."""
+    post, s, _ = _posterior(theta, d.mask, d)
+    return draw_exact(post, key) / s
 
 
-def draw_row(theta, key, mask, d: Data):
-    """One exact coefficient draw given theta, with what the engine keeps of it (mapped by map_rows):
-    the pointwise log-likelihood of every row (held out or not, at its own noise), the force and
-    piston means, the coefficients and the noise sds."""
-    post, s, coef = _posterior(theta, mask, d)
-    beta = draw_exact(post, key) / s
+def means(theta, beta, d: Data):
+    """Force and piston means of every recorded point at one draw, and the noise sd of every
+    row of the stacked (z, L) likelihood: (muF (n,), muL (n,), sigma (2n,))."""
+    coef = _coef(theta, d.mask, d)
     beta_E = coef * (d.onehot @ beta)
     muL = d.E_L @ beta_E
     mu_z = d.E_z @ beta_E
     sigma = jnp.concatenate([jnp.exp(theta[0]) * d.sd_z, jnp.exp(theta[1]) * d.sd_L])
-    ll = gaussian_loglik(
-        jnp.concatenate([decorrelated_force(d), d.piston]), jnp.concatenate([mu_z, muL]), sigma
-    )
-    return ll, mu_z - d.c * muL, muL, beta, sigma
+    return mu_z - d.c * muL, muL, sigma
 
 
-def draw_rows(theta: np.ndarray, key, mask, d: Data) -> tuple[np.ndarray, ...]:
-    """``draw_row`` for every row of ``theta`` (m, N_THETA), row i with key ``jax.random.split(key, m)[i]``,
-    as numpy arrays (ll, muF, muL, beta, sigma). Laplace draws, K-fold draws and the sampler's draws
-    share one compiled program whatever their number (``map_rows``)."""
-    return map_rows(
-        draw_row, (np.asarray(theta, float), row_keys(key, theta.shape[0])), (mask, d), chunk=256
-    )
+def pointwise(theta, beta, d: Data):
+    """Log-likelihood of every row of the stacked likelihood, held out or not: the decorrelated
+    force z = P + cL and the piston L, (n,) each."""
+    muF, muL, sigma = means(theta, beta, d)
+    n = d.force.shape[0]
+    mu_z = muF + d.c * muL
+    return {
+        "z": gaussian_loglik(decorrelated_force(d), mu_z, sigma[:n]),
+        "L": gaussian_loglik(d.piston, muL, sigma[n:]),
+    }
+
+
+_MECH_OF = {i: name for name, i in NONLINEAR.items()}
+
+#: starts of the optimiser: zero, and the nonlinear magnitudes at +-MAP_START
+MAP_START = 0.01
+
+
+def start(d: Data) -> np.ndarray:
+    mask = np.asarray(d.mask)
+    nonlin = np.zeros(N_THETA)
+    for name, i in NONLINEAR.items():
+        nonlin[i] = mask[MECHS.index(name)]
+    zero = np.zeros(N_THETA)
+    return np.stack([zero, MAP_START * nonlin, -MAP_START * nonlin]) if nonlin.any() else zero[None]
+
+
+def report(theta, beta, d: Data) -> dict:
+    """The sampled parameters of the model switched on by ``d.mask`` (the held ones are zeros)."""
+    mask = np.asarray(d.mask)
+    on = [i for i in range(N_THETA) if i < 2 or mask[MECHS.index(_MECH_OF[i])] > 0]
+    return {THETA_NAMES[i]: np.asarray(theta)[:, i] for i in on}
+
+
+MODEL = CollapsedModel(
+    name="traditional model with mechanisms (uq diagnose)",
+    theta_names=THETA_NAMES,
+    log_prob=log_prob,
+    draw_linear=draw_linear,
+    pointwise=pointwise,
+    start=start,
+    report=report,
+    hold_out=hold_out,
+    sequential=True,
+)
+
+
+def with_model(d: Data, names, order: int) -> Data:
+    """The data with the model switched to ``names`` and F_eff polynomial order ``order``."""
+    return d._replace(mask=mask_of(names, order))
+
+
+def active_of(names) -> np.ndarray:
+    """The free coordinates of theta for a model with mechanisms ``names`` (bool, (N_THETA,))."""
+    act = np.zeros(N_THETA, bool)
+    act[active_dims(names)] = True
+    return act
 
 
 def active_dims(names) -> list[int]:
     return [0, 1, *sorted(NONLINEAR[m] for m in names if m in NONLINEAR)]
-
-
-#: BFGS on the collapsed negative log posterior: |step| < atol + rtol |theta| and the same for
-#: the objective (optimistix's Cauchy criterion), at most MAP_MAX_STEPS steps (backtracking
-#: rejections count). Starts: zero, and the nonlinear magnitudes at +-MAP_START. A run that does
-#: not report success is restarted once from where it stopped; if that fails too, the point is
-#: kept only if a Newton step from it would gain less than MAP_DECREMENT nats.
-MAP_RTOL = 1e-10
-MAP_ATOL = 1e-10
-MAP_MAX_STEPS = 1000
-MAP_START = 0.01
-MAP_DECREMENT = 1e-3
-
-
-def _neg_log_post(x, args):
-    """Collapsed negative log posterior over the full theta (N_THETA,), differentiable.
-
-    ``active`` (N_THETA,) flags the sampled coordinates: inactive ones are held at zero in the
-    model and carry a unit quadratic, so every candidate minimises the same function of the
-    same shape (one compilation per campaign) and the Hessian's active block is exact."""
-    active, mask, d = args
-    return -_log_post(active * x, mask, d) + 0.5 * jnp.sum((1.0 - active) * x**2)
-
-
-@jax.jit
-def _minimise(x0, active, mask, d: Data):
-    """One BFGS run from ``x0``: theta, objective there, whether optimistix reports success."""
-    solver = optx.BFGS(rtol=MAP_RTOL, atol=MAP_ATOL)
-    sol = optx.minimise(
-        _neg_log_post, solver, x0, args=(active, mask, d), max_steps=MAP_MAX_STEPS, throw=False
-    )
-    return (
-        sol.value,
-        _neg_log_post(sol.value, (active, mask, d)),
-        sol.result == optx.RESULTS.successful,
-    )
-
-
-@jax.jit
-def _gradient_hessian(x, active, mask, d: Data):
-    args = (active, mask, d)
-    return jax.grad(_neg_log_post)(x, args), jax.hessian(_neg_log_post)(x, args)
-
-
-def _best_start(starts, active, mask, d: Data):
-    """The lowest finite optimum over the starts, as (theta, objective, converged), or None."""
-    best = None
-    for x0 in starts:
-        x, f, ok = _minimise(jnp.asarray(x0), active, mask, d)
-        f = float(f)
-        if np.isfinite(f) and (best is None or f < best[1]):
-            best = (np.asarray(x), f, bool(ok))
-    return best
-
-
-def fit_map(names, order: int, d: Data) -> tuple[np.ndarray, float, np.ndarray]:
-    """MAP of the sampled parameters (collapsed), log posterior there, Laplace covariance (active dims).
-
-    BFGS (optimistix) with JAX gradients on the collapsed negative log posterior, from zero and,
-    with nonlinear magnitudes, from +-MAP_START in them; the Laplace covariance is the inverse of
-    its JAX Hessian at the best optimum (the inverse diagonal if that is not positive definite).
-    One jitted solver and one jitted Hessian serve every candidate model of a campaign: the
-    model's mechanisms and active coordinates are array arguments.
-    """
-    mask = mask_of(names, order)
-    dims = active_dims(names)
-    flags = np.zeros(N_THETA)
-    flags[dims] = 1.0
-    active = jnp.asarray(flags)
-    nonlin = flags * (np.arange(N_THETA) >= 2)
-    starts = [np.zeros(N_THETA)] + (
-        [MAP_START * nonlin, -MAP_START * nonlin] if nonlin.any() else []
-    )
-    best = _best_start(starts, active, mask, d)
-    if best is not None and not best[2]:  # restart once, with a fresh BFGS, from where it stopped
-        again = _best_start([best[0]], active, mask, d)
-        if again is not None and again[1] <= best[1]:
-            best = again
-    if best is None:
-        raise FloatingPointError(
-            f"diagnose: the log posterior of model {names!r} is not finite at any start"
-        )
-    x, f, converged = best
-    g, Hm = (np.asarray(a) for a in _gradient_hessian(jnp.asarray(x), active, mask, d))
-    g, Hm = g[dims], Hm[np.ix_(dims, dims)]
-    try:
-        cov = np.linalg.inv(Hm)
-        np.linalg.cholesky(cov)
-    except np.linalg.LinAlgError:
-        cov = None
-    if not converged and (cov is None or 0.5 * g @ cov @ g > MAP_DECREMENT):
-        raise FloatingPointError(
-            f"diagnose: the MAP of model {names!r} did not converge (BFGS, "
-            f"{MAP_MAX_STEPS} steps, restarted once)"
-        )
-    if cov is None:
-        cov = np.diag(1.0 / np.maximum(np.abs(np.diag(Hm)), 1e-12))
-    return expand(x[dims], names), -f, cov
-
-
-def expand(sub: np.ndarray, names) -> np.ndarray:
-    """Sampled active coordinates (..., len(dims)) -> full theta (..., N_THETA)."""
-    dims = active_dims(names)
-    full = np.zeros(sub.shape[:-1] + (N_THETA,))
-    full[..., dims] = sub
-    return full

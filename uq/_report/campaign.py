@@ -18,8 +18,9 @@ import numpy as np
 from uq._data.recordings import leading_comments
 from uq._data.reference import table1, table2
 from uq._derived.bands import CampaignBands, campaign_bands
-from uq._derived.residuals import order_check, order_warnings
+from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import remove_stale, write_bytes_atomic, write_text_atomic
+from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import Figure, _plt, _png, render
 
@@ -105,13 +106,8 @@ def fig_force(cf, cb: CampaignBands) -> bytes:
 
 def _dV_points(tf, tb, S):
     """Recorded volume increments S [L_k - L(x_max)] with the posterior-mean curve's L(x_max)."""
-    L_top = np.mean(_cubic_at(tf.flat("piston"), tb.x_max_m - tf.x0_m))
+    L_top = np.mean(cubic(tf.flat("piston"), tb.x_max_m - tf.x0_m))
     return S * (tf.test.piston_m - L_top)
-
-
-def _cubic_at(coef, u):
-    c = np.asarray(coef)
-    return c[..., 0] + u * (c[..., 1] + u * (c[..., 2] + u * c[..., 3]))
 
 
 def fig_volume(cf, cb: CampaignBands) -> bytes:
@@ -284,7 +280,7 @@ def fig_test(t, force_mean, x0_m: float, tb, cb: CampaignBands) -> bytes:
     ax.legend(fontsize=7)
 
     ax = axs[0, 1]
-    fit_pts = _cubic_at(force_mean, t.height_m - x0_m)
+    fit_pts = cubic(force_mean, t.height_m - x0_m)
     ax.fill_between(
         x,
         tb.force_pred.lo - tb.force.mean,
@@ -456,22 +452,22 @@ def _table2(cf) -> list[dict]:
 def _diagnostics(cf) -> list[dict]:
     rows = []
     for tf in cf.tests:
-        d = tf.diagnostics
-        v = d["variables"]
+        d = tf.convergence
+        v = d.variables
         rows.append(
             {
                 "pressure_bar": tf.pressure_bar,
-                "n_steps": d["n_steps"],
-                "burn_in": d["burn_in"],
-                "tau": max(d["tau"].values()),
-                "acceptance": d["acceptance_fraction"]["mean"],
+                "n_steps": d.n_steps,
+                "burn_in": d.burn_in,
+                "tau": max(d.tau.values()),
+                "acceptance": d.acceptance["mean"],
                 "rhat": max(float(np.max(x["r_hat"])) for x in v.values()),
                 "ess": min(
                     min(float(np.min(x["ess_bulk"])), float(np.min(x["ess_tail"])))
                     for x in v.values()
                 ),
-                "converged": d["converged"],
-                "warnings": d["warnings"],
+                "converged": d.converged,
+                "warnings": d.messages(CLI_ADVICE),
             }
         )
     return rows
@@ -522,7 +518,7 @@ def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
                 "sigma0": np.mean(noise[:, 0]),
                 "rel_pct": 100 * np.mean(noise[:, 1]),
                 "sigma_L_mm": 1e3 * np.mean(noise[:, 2]),
-                "warnings": tf.diagnostics["warnings"] + order_warnings(order_check(tf)),
+                "warnings": tf.convergence.messages(CLI_ADVICE) + tf.model_warnings(),
                 "figure": figures[f"test_{tf.pressure_bar:g}bar.png"],
             }
         )
@@ -585,24 +581,24 @@ def write_report(
     *,
     draws: int = 2000,
     seed: int | None = None,
-    surface: bool = False,
-    settings=None,
     bands: CampaignBands | None = None,
     comments: list[str] | None = None,
+    surface=None,
+    comparison: dict | None = None,
     surface_page: str | None = None,
     jobs: int | None = None,
 ) -> Path:
     """Write ``out_dir/report.html`` and its PNG figures, as ``uq report`` does; return the page's path.
 
     ``cf`` is a :func:`uq.fit_campaign` result. The bands use ``draws`` joint posterior draws,
-    subsampled with ``seed`` (default: the fit's seed, as ``uq report --seed N`` does). With
-    ``surface=True`` the surface model is fitted too (``uq.fit_surface`` with ``settings``, default
-    ``uq.Settings()``; needs 6 or more tests) and ``surface.html`` is written beside the page, as
-    ``uq report --surface`` does. ``bands`` (from :func:`uq.campaign_bands`) replaces ``draws``/``seed``;
-    ``comments`` replaces the recordings' leading ``#`` lines (from ``cf.recordings.comments``, or
-    read from its file). Every file is written atomically; PNGs an earlier report left behind are
-    removed. The per-test figures are drawn by ``jobs`` worker processes (default: one per CPU;
-    ``jobs=1`` draws them here), with the same bytes either way.
+    subsampled with ``seed`` (default: the fit's seed, as ``uq report --seed N`` does); ``bands``
+    (from :func:`uq.campaign_bands`) replaces ``draws``/``seed``. ``surface``: a surface-model fit
+    of the same recordings (:func:`uq.fit_surface`) whose page ``surface.html`` is written beside
+    the report and linked from it, with ``comparison`` (:func:`uq.compare_models`) on it, as
+    ``uq report --surface`` does; this function only renders, it fits nothing. ``comments``
+    replaces the recordings' leading ``#`` lines. Every file is written atomically; PNGs an earlier
+    report left behind are removed. The per-test figures are drawn by ``jobs`` worker processes
+    (default: one per CPU; ``jobs=1`` draws them here), with the same bytes either way.
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -614,17 +610,14 @@ def write_report(
     from uq._io.errors import InputError
 
     if draws < MIN_DRAWS:
-        raise InputError(f"write_report: at least {MIN_DRAWS} draws, got {draws}")
+        raise InputError(f"draws: at least {MIN_DRAWS} draws, got {draws}", param="draws")
     seed = cf.seed if seed is None else seed
     out = Path(out_dir)
-    rec = cf.recordings
-    if surface:
-        from uq._inference.sampler import Settings
-        from uq._models.surface import compare_with_cubics, fit_surface, summary
+    if surface is not None:
+        from uq._models.surface import summary
         from uq._report.surface import write_surface_report
 
-        sf = fit_surface(rec, seed=seed, settings=Settings() if settings is None else settings)
-        surface_page = write_surface_report(sf, summary(sf, compare_with_cubics(sf, cf)), out).name
+        surface_page = write_surface_report(surface, summary(surface, comparison), out).name
     out.mkdir(parents=True, exist_ok=True)
     cb = bands if bands is not None else campaign_bands(cf, n_draws=draws, seed=seed)
     with _TestFigures(cf, cb, (os.cpu_count() or 1) if jobs is None else jobs) as test_pngs:
@@ -659,7 +652,7 @@ def _write_page(
         n_draws=cb.n_draws,
         bands_seed=cb.seed,
         fit_seed=cf.seed,
-        n_not_converged=sum(not t.diagnostics["converged"] for t in cf.tests),
+        n_not_converged=sum(not t.convergence.converged for t in cf.tests),
         reference_bar=cb.reference_bar,
         reference_note=cb.reference_note,
         scatter_pressures=cb.scatter_pressures_bar,

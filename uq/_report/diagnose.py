@@ -16,10 +16,10 @@ from uq._report.html import _plt, render
 FIGURE = "diagnose_residuals.png"
 
 
-def _residual_figure(res: dict, path: Path) -> None:
+def _residual_figure(res, path: Path) -> None:
     """Force and volume residuals of the traditional and the final model, by height, written to ``path``."""
     plt = _plt()
-    base, final, meta, d = res["_fits"]
+    base, final, meta, d = res.baseline, res.final, res.meta, res.data
     fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
     cmap = plt.get_cmap("viridis")
     pmax = meta["pressure_bar"].max()
@@ -51,14 +51,14 @@ def _residual_figure(res: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def write_diagnose_report(res: dict, out_dir) -> Path:
+def write_diagnose_report(res, out_dir) -> Path:
     """``out_dir/diagnose.html`` and ``out_dir/diagnose_residuals.png`` for the diagnosis ``res``
-    (with its ``_fits``, as :func:`uq._diagnose.engine.diagnose` returns it); returns the page's path."""
+    (a :class:`uq._diagnose.engine.Diagnosis`); returns the page's path."""
     out = Path(out_dir)
     _residual_figure(res, out / FIGURE)
     page = render(
         "diagnose.html",
-        summary=summary_text(res),
+        summary=summary_text(res.document),
         mechanisms=res["mechanisms"],
         baseline=res["baseline"],
         final=res["final"],

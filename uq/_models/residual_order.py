@@ -5,8 +5,8 @@ controller that corrects slowly leaves the pressure errors of successive reading
 and through Boyle's law (1.9 mm of piston per 0.01 bar at 5 bar) the piston readings with them;
 a drift does the same. Then the posterior intervals are too narrow, by up to
 sqrt((1 + rho) / (1 - rho)) for a lag-one correlation rho (2.4 at rho = 0.7), and the
-calibration suite shows it (README, calibration section: the 90 % intervals of a_L covered about half
-on such a stand). Nothing in the fit itself signals this, so each block (force, piston) of
+calibration suite shows it (README, calibration: the 90 % intervals of a_L covered about half on such a
+stand). Nothing in the fit itself signals this, so each block (force, piston) of
 each test is checked:
 
     z_i = (y_i - mean curve) / noise sd at reading i, in recording order,
@@ -23,30 +23,31 @@ warning is then just as true: the intervals rest on a model the readings do not 
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
-
-from uq._models.cubic import CampaignFit, PressureFit, basis
-from uq._physics.quantities import force_noise_var
 
 ALPHA = 1e-3  # per block: 22 blocks in a campaign like data/n50 give a false warning about once in 45 campaigns
 N_NULL = 10000
 
 
 def lag_one_check(
-    residuals: np.ndarray, sd: np.ndarray, u_m: np.ndarray, *, n_null: int = N_NULL, seed: int = 0
+    residuals: np.ndarray,
+    sd: np.ndarray,
+    design: np.ndarray,
+    *,
+    n_null: int = N_NULL,
+    seed: int = 0,
 ) -> dict:
     """Lag-one autocorrelation of standardised residuals in the given (recording) order and its
-    one-sided p-value under independent errors after a weighted cubic fit in ``u_m``.
+    one-sided p-value under independent errors after a weighted least-squares fit of ``design``.
 
-    ``residuals``, ``sd``, ``u_m``: (n,) in recording order. Returns ``{"lag1", "p"}``.
+    ``residuals``, ``sd``: (n,) in recording order; ``design``: (n, k) the fitted columns (e.g. the
+    cubic's basis). Returns ``{"lag1", "p"}``.
     """
     z = np.asarray(residuals, float) / np.asarray(sd, float)
-    W = np.asarray(basis(np.asarray(u_m, float))) / np.asarray(sd, float)[:, None]
+    W = np.asarray(design, float) / np.asarray(sd, float)[:, None]
     q, _ = np.linalg.qr(W)
     null = np.random.default_rng(seed).standard_normal((n_null, z.size))
-    null -= (null @ q) @ q.T  # the residuals of a weighted cubic fit to pure noise
+    null -= (null @ q) @ q.T  # the residuals of a weighted fit to pure noise
     r1 = _lag_one(z[None])[0]
     p = (1.0 + np.count_nonzero(_lag_one(null) >= r1)) / (n_null + 1.0)
     return {"lag1": float(r1), "p": float(p)}
@@ -56,35 +57,9 @@ def _lag_one(z: np.ndarray) -> np.ndarray:
     return np.sum(z[:, 1:] * z[:, :-1], axis=1) / np.sum(z * z, axis=1)
 
 
-_CHECKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # fit -> its check, made once
-
-
-def order_check(fit: PressureFit) -> dict:
-    """:func:`lag_one_check` of the force and piston blocks of one test, from the posterior-mean
-    curves and noise scales; ``{"force": {...}, "piston": {...}, "alpha": ALPHA}``. Computed once
-    per fit (the JSON, the printed warnings and the report page all ask for it)."""
-    if fit not in _CHECKS:
-        u = fit.test.height_m - fit.x0_m
-        noise = fit.flat("noise").mean(axis=0)
-        sd = {
-            "force": np.sqrt(force_noise_var(noise[0], noise[1], fit.ref_force())),
-            "piston": np.full(u.shape, noise[2]),
-        }
-        _CHECKS[fit] = {
-            b: lag_one_check(fit.mean_residuals(b), sd[b], u) for b in ("force", "piston")
-        } | {"alpha": ALPHA}
-    return _CHECKS[fit]
-
-
-def campaign_order_warnings(cf: CampaignFit) -> list[str]:
-    """The warning lines of every test of a campaign, each prefixed with its pressure."""
-    return [
-        f"{t.pressure_bar:g} bar: {w}" for t in cf.tests for w in order_warnings(order_check(t))
-    ]
-
-
 def order_warnings(check: dict) -> list[str]:
-    """The warning lines of one test's :func:`order_check` (none when every block passes)."""
+    """The warning lines of one test's check (``{"force": {...}, "piston": {...}, "alpha"}``;
+    none when every block passes)."""
     return [
         f"{block} residuals are correlated in recording order (lag-one r = {c['lag1']:.2f}, p = {c['p']:.1g} "
         f"< {check['alpha']:g}): the intervals assume independent readings and are likely too narrow "

@@ -1,0 +1,196 @@
+"""Leave-one-out model comparison in one place: PSIS-LOO, exact refits, K-fold, and the rules.
+
+* :func:`psis` — ArviZ's PSIS-LOO of pointwise log-likelihoods, as a :class:`Loo`.
+* :func:`reloo` — PSIS terms whose Pareto k exceeds ``PARETO_K_MAX`` replaced by exact
+  leave-one-out values from a refit callable (ArviZ's ``reloo`` remedy; arviz-stats
+  ``loo/reloo.py``): ``refit(i)`` returns log p(y_i | y_-i) from the model refitted without term i.
+* :func:`kfold` — exact K-fold cross-validation from a callable that scores held-out terms,
+  the sibling remedy when too many terms are unreliable for refits one by one.
+* :func:`held_out_density` — the exact leave-out value from a refitted posterior whose data kept
+  the held-out terms with zero weight (every model here can: ``CollapsedModel.hold_out``).
+* :func:`verdict` — which of two models the data prefer: a difference counts only beyond
+  ``SE_MULTIPLE`` (2) standard errors and ``ELPD_MIN`` (4) nats, and no verdict is given while a
+  Pareto k > 0.7 remains ("refused").
+* :func:`z_required` — the diagnose engine's rule for one mechanism's worth (its gain must exceed
+  4 nats and a Bonferroni-adjusted number of standard errors).
+
+Standard errors of a difference are sqrt(n Var(diff)) over the pointwise differences, as ArviZ's
+``compare`` computes them.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+#: a PSIS-LOO term is unreliable when its Pareto k exceeds this (Vehtari et al. 2017/2024)
+PARETO_K_MAX = 0.7
+#: a difference is called only beyond this many standard errors ...
+SE_MULTIPLE = 2.0
+#: ... and beyond this many nats (Sivula, Magnusson, Vehtari 2020: smaller ones are unreliable)
+ELPD_MIN = 4.0
+
+
+@dataclass(frozen=True)
+class Loo:
+    """Pointwise leave-one-out log predictive densities of one model.
+
+    ``loo_i`` (n,), ``pareto_k`` (n,) (0 where a term is exact: refits, K-fold), ``method`` how
+    they were obtained, ``n_refits`` how many terms were replaced by exact refits."""
+
+    loo_i: np.ndarray
+    pareto_k: np.ndarray
+    method: str = "psis-loo"
+    n_refits: int = 0
+    p_loo: float = float("nan")
+
+    @property
+    def elpd(self) -> float:
+        return float(np.sum(self.loo_i))
+
+    @property
+    def se(self) -> float:
+        return float(math.sqrt(self.loo_i.size * np.var(self.loo_i)))
+
+    @property
+    def n_bad(self) -> int:
+        return int(np.sum(self.pareto_k > PARETO_K_MAX))
+
+    @property
+    def reliable(self) -> bool:
+        return self.n_bad == 0
+
+    def pareto(self) -> dict:
+        """PSIS reliability: the largest Pareto k and how many terms exceed 0.7."""
+        return {
+            "max": float(np.max(self.pareto_k)),
+            "n_over_0.7": self.n_bad,
+            "n_terms": int(self.pareto_k.size),
+        }
+
+    def __repr__(self) -> str:
+        return f"Loo(elpd {self.elpd:.1f} +- {self.se:.1f}, {self.method}, max k {np.max(self.pareto_k):.2f})"
+
+
+def loglik_idata(loglik):
+    """ArviZ InferenceData holding pointwise log-likelihoods ``loglik`` (chains, draws, n) only."""
+    import arviz as az
+
+    ll = np.asarray(loglik)
+    return az.from_dict(posterior={"_": np.zeros(ll.shape[:2])}, log_likelihood={"reading": ll})
+
+
+def psis(loglik, *, reff: float | None = None) -> Loo:
+    """ArviZ's PSIS-LOO of log-likelihoods (chains, draws, n); ``reff`` the relative efficiency of
+    the draws (None: ArviZ estimates it from the chains; 1.0 for independent draws). ArviZ's
+    warning about high Pareto k is not raised: every caller reports the k values itself."""
+    import arviz as az
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        res = az.loo(loglik_idata(loglik), pointwise=True, reff=reff)
+    return Loo(
+        np.asarray(res.loo_i, float),
+        np.asarray(res.pareto_k, float),
+        "psis-loo",
+        0,
+        float(res.p_loo),
+    )
+
+
+def logmeanexp(a, axis=0):
+    """log of the mean of exp(a) along ``axis``, stably."""
+    a = np.asarray(a, float)
+    top = np.max(a, axis=axis, keepdims=True)
+    return np.squeeze(top, axis) + np.log(np.mean(np.exp(a - top), axis=axis))
+
+
+def held_out_density(loglik, terms) -> np.ndarray:
+    """log p(y_i | y_-i) of the held-out ``terms`` from the pointwise log-likelihood (draws..., n)
+    of a posterior fitted without them: the log of the mean likelihood over the draws."""
+    ll = np.asarray(loglik, float)
+    return logmeanexp(ll.reshape(-1, ll.shape[-1])[:, terms], axis=0)
+
+
+def reloo(loo: Loo, refit: Callable[[int], float], *, max_refits: int | None = None) -> Loo:
+    """``loo`` with every term of Pareto k > 0.7 replaced by ``refit(i)`` (exact; its k set to 0).
+
+    With more such terms than ``max_refits`` nothing is refitted and ``loo`` is returned as it is
+    (still unreliable: the caller decides what to do, e.g. :func:`kfold`)."""
+    bad = np.flatnonzero(loo.pareto_k > PARETO_K_MAX)
+    if bad.size == 0 or (max_refits is not None and bad.size > max_refits):
+        return loo
+    loo_i, k = loo.loo_i.copy(), loo.pareto_k.copy()
+    for i in bad:
+        loo_i[i], k[i] = refit(int(i)), 0.0
+    return replace(
+        loo,
+        loo_i=loo_i,
+        pareto_k=k,
+        method=f"{loo.method}, k > {PARETO_K_MAX:g} terms refitted exactly",
+        n_refits=int(bad.size),
+    )
+
+
+def kfold(
+    n_units: int, score: Callable[[np.ndarray], np.ndarray], *, n_folds: int = 10, seed: int = 0
+) -> Loo:
+    """Exact K-fold cross-validation: units split at random (seeded) into ``n_folds`` folds;
+    ``score(held)`` refits without the units ``held`` (bool, (n_units,)) and returns the log
+    predictive density of every term (the caller's terms; NaN where not held out); the result
+    holds each term's value from the fold that held it out."""
+    fold = np.random.default_rng(seed).permutation(n_units) % n_folds
+    out = None
+    for k in range(n_folds):
+        values = np.asarray(score(fold == k), float)
+        out = np.full_like(values, np.nan) if out is None else out
+        held = ~np.isnan(values)
+        out[held] = values[held]
+    return Loo(out, np.zeros_like(out), f"{n_folds}-fold cross-validation")
+
+
+def difference(a: Loo, b: Loo) -> tuple[float, float]:
+    """ELPD difference a - b and its standard error."""
+    diff = a.loo_i - b.loo_i
+    return float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
+
+
+def verdict(a: Loo, b: Loo, names=("surface", "per-pressure cubics")) -> dict:
+    """Which model the data prefer (module docstring): a name, "indistinguishable" or "refused"."""
+    d, se = difference(a, b)
+    bad = {nm: lo.n_bad for nm, lo in zip(names, (a, b), strict=True)}
+    if any(bad.values()):
+        which = ", ".join(f"{nm}: {c}" for nm, c in bad.items() if c)
+        better = "refused"
+        why = (
+            f"PSIS-LOO not reliable: readings with Pareto k > {PARETO_K_MAX:g} ({which}); "
+            "no verdict (K-fold cross-validation would be needed)"
+        )
+    elif abs(d) > SE_MULTIPLE * se and abs(d) > ELPD_MIN:
+        better = names[0] if d > 0 else names[1]
+        why = f"ELPD difference {d:.1f} +- {se:.1f} exceeds {SE_MULTIPLE:g} SE"
+    else:
+        better = "indistinguishable"
+        why = f"ELPD difference {d:.1f} +- {se:.1f} is within {SE_MULTIPLE:g} SE (or below {ELPD_MIN:g})"
+    return {
+        "elpd_diff": d,
+        "elpd_diff_se": se,
+        "better": better,
+        "reason": why,
+        "rule": f"better only if |diff| > {SE_MULTIPLE:g} SE and > {ELPD_MIN:g}, and every Pareto k <= {PARETO_K_MAX:g}",
+    }
+
+
+def z_required(n_candidates: int, gain_se: float) -> float:
+    """Bonferroni: the z a gain must exceed when ``n_candidates`` are tested at one step.
+
+    ``gain_se`` is the one-sided threshold for a single candidate; its tail probability is
+    shared out over the candidates, so the family of tests at a step keeps that error rate.
+    """
+    from scipy.stats import norm
+
+    return float(norm.isf(norm.sf(gain_se) / max(n_candidates, 1)))

@@ -197,6 +197,7 @@ def test_refusals_name_the_option():
         (dict(height_m=0.2), "--height-mm"),
         (dict(charge_bar=12.0), "--charge-bar"),
         (dict(volume_l=0.0), "--volume-l"),
+        (dict(volume_l=None), "filling the element with water"),
         (dict(polytropic=1.5), "--polytropic"),
         (dict(polytropic=(1.3, 1.1)), "--polytropic"),
         (dict(reservoir_l=-1.0), "--reservoir-l"),
@@ -285,3 +286,17 @@ def test_sealed_bands_cover_the_truth_over_seeded_replications():
     quantities) within its exact binomial region, false failure < 1e-3 overall."""
     res = _coverage_script().run(12, first_seed=700, tiny=True)
     assert res["passed"], res["counts"]
+
+
+def test_docs_example_runs():
+    """docs/design.md's example, as written (the numbers in its comment are this run's)."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "design.md").read_text()
+    (code,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    scope: dict = {}
+    exec(compile(code, "docs/design.md", "exec"), scope)
+    f = scope["doc"]["natural_frequency_Hz"]
+    assert round(float(f["mean"]), 3) == 2.223
+    assert (round(float(f["q05"]), 3), round(float(f["q95"]), 3)) == (2.218, 2.229)

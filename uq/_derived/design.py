@@ -127,7 +127,7 @@ def check_design(model, design: SealedDesign) -> None:
             f"option --charge-bar: {design.charge_bar:g} bar is outside the tested pressures "
             f"{plo:g}..{phi:g} bar; the model does not extrapolate"
         )
-    if not (np.isfinite(design.volume_l) and design.volume_l > 0):
+    if design.volume_l is None or not (np.isfinite(design.volume_l) and design.volume_l > 0):
         raise InputError(
             "option --volume-l: the sealed spring needs the internal volume at the design height and "
             "charge pressure (litres; measure it, e.g. by filling the element with water: the stand gives "

@@ -104,6 +104,10 @@ _API = {
     "StandDescription": "_data.stand_description",
     "PAPER_STAND": "_data.stand_description",
     "read_stand": "_data.stand_description",
+    "SealedDesign": "_derived.design",
+    "SurfaceDesignModel": "_derived.design",
+    "design_document": "_derived.design",
+    "simulate_sealed": "_stand.sealed_test",
 }
 
 __all__ = sorted(_API) + ["__version__"]

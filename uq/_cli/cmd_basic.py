@@ -30,6 +30,7 @@ SPRING_NAMES = (
     "n50",
     "n50-traditional",
     "n50-smooth",
+    "n50-thermo",
 )  # uq._stand.simulator.SPRINGS (tested equal)
 
 
@@ -41,7 +42,7 @@ def configure_simulate(p) -> None:
         "--spring",
         default="n50",
         choices=SPRING_NAMES,
-        help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth)",
+        help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth; n50-thermo: one potential)",
     )
     p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
     p.add_argument(

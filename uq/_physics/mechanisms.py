@@ -12,11 +12,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from uq._io.errors import InputError
+from uq._physics.quantities import BAR_PA
 
 #: Length scale of the casing-force shape E(x) = E(x0) exp(-(x - x0) / CASING_LENGTH_M):
 #: the casing resists more the more it is compressed (bulged), smooth in x, and clearly not
 #: a constant (which would be a ``force_offset``).
 CASING_LENGTH_M = 0.040
+
+#: Height profile of the elastic casing, h(t) = 1 + h1 t + h2 t^2 with t = (x - x0) / 0.05 m: the
+#: shape of C'(x) (the growth of the volume-derived area per pascal), 1 at x0. Fitted to Table 1:
+#: the slope in pressure (1..10 bar) of -S dL/dx at 19 heights, by least squares, divided by its
+#: value at x0 (tests/stand/test_thermo.py recomputes it). The casing's compliance grows towards
+#: both ends of the stroke, most towards x_max: Table 1's relative growth of the volume-derived
+#: area is about 0.02/bar from 95 to 112 mm, 0.036/bar at 65 mm and 0.12/bar at 155 mm.
+ELASTIC_CASING_PROFILE = (1.0, 0.16, 0.95)
+ELASTIC_CASING_LENGTH_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -84,8 +94,39 @@ MECHANISMS: dict[str, Mechanism] = {
             "fraction at every pressure: the casing's own membrane tension carries part of the pressure load, "
             "so eq. 1 and eq. 2 of the traditional theory do not give the same curve (the paper's main finding)",
         ),
+        Mechanism(
+            "elastic_casing",
+            "the casing stores elastic energy that depends on height and pressure, so force and volume "
+            "derive from one potential G(x, p_u) = -p_u V0(x) - p_u^2 C(x)/2 + ... (P = -dG/dx, "
+            "V = -dG/dp_u; the Maxwell relation dP/dp_u = dV/dx holds)",
+            "force gains p_u^2 C'(x)/2, the volume gains p_u C(x); C'(x) = m V0'(x0) h(x) per bar with "
+            "h(x) = 1 + 0.16 t + 0.95 t^2, t = (x - x0)/50 mm (Table 1's shape), C(x0) = 0; the "
+            "volume-derived area dV/dx exceeds P/p_u",
+            "1/bar",
+            "the rubber-cord casing stretches under pressure and stores the energy elastically: the volume "
+            "the element sweeps per mm of height grows with pressure (most near full extension), the force "
+            "grows with pressure at half that rate, and force and volume still come from one energy, so "
+            "compression and rebound agree (no hysteresis)",
+        ),
     )
 }
+
+
+def elastic_casing_slope(height_m, x0_m: float, magnitude_per_bar: float, area_m2: float):
+    """C'(x) of the elastic casing, m^2/Pa: m V0'(x0) h(x) per bar (``ELASTIC_CASING_PROFILE``);
+    ``area_m2`` is V0'(x0), the element's traditional area at x0."""
+    t = (np.asarray(height_m, float) - x0_m) / ELASTIC_CASING_LENGTH_M
+    h0, h1, h2 = ELASTIC_CASING_PROFILE
+    return magnitude_per_bar / BAR_PA * area_m2 * (h0 + h1 * t + h2 * t**2)
+
+
+def elastic_casing_compliance(height_m, x0_m: float, magnitude_per_bar: float, area_m2: float):
+    """C(x) = int_{x0}^{x} C'(x') dx' (C(x0) = 0: the volume at x0 does not change with pressure),
+    m^3/Pa; the volume gains p_u C(x)."""
+    t = (np.asarray(height_m, float) - x0_m) / ELASTIC_CASING_LENGTH_M
+    h0, h1, h2 = ELASTIC_CASING_PROFILE
+    integral = h0 * t + h1 * t**2 / 2 + h2 * t**3 / 3
+    return magnitude_per_bar / BAR_PA * area_m2 * ELASTIC_CASING_LENGTH_M * integral
 
 
 def casing_shape(height_m: np.ndarray, x0_m: float) -> np.ndarray:
@@ -121,5 +162,10 @@ def parse_effects(specs: list[str] | None, option: str = "--effect") -> dict[str
     if "volume_excess" in out and not -0.5 < out["volume_excess"] < 1.0:
         raise InputError(
             f"option {option} volume_excess={out['volume_excess']:g}: expected -0.5 < m < 1 (a fraction, not per cent)"
+        )
+    if "elastic_casing" in out and not -0.1 < out["elastic_casing"] < 0.1:
+        raise InputError(
+            f"option {option} elastic_casing={out['elastic_casing']:g}: expected |m| < 0.1 per bar "
+            "(Table 1 shows about 0.024/bar at x0)"
         )
     return out

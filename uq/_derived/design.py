@@ -1,0 +1,427 @@
+"""The sealed spring from a fitted model: load, rate and natural frequency with credible intervals
+(issue 22; the functions ``uq design`` calls, CONTRACT.md sections 2-3).
+
+What a designer does with isobaric characteristics: charge the spring at the design height x_c to
+p_c, close it (optionally with a reservoir), and ask for its load-deflection curve, its vertical
+rate and natural frequency. Per posterior draw of the model:
+
+1. the model's force P(x, p_u) and volume-derived area dV/dx(x, p_u) on a grid of heights (the
+   tested range, ``HEIGHT_STEP_M``, x_c on it) and pressures (the tested range, ``N_PRESSURES``),
+   and dP/dx from a not-a-knot spline in height (exact for cubics in x: the surface model is one);
+2. the absolute volume (uq._physics.volume): V_c drawn per posterior draw from the user's value and
+   sd, the isobaric increments integrated in height, and at x_c the stated assumption on dV/dp_u
+   (0 unless told: CONTRACT.md), a given value, or the model's own (``dvdp="model"``, only for a
+   model offering ``volume_pressure_draws``);
+3. the sealed path and its rate (uq._physics.sealed: the gas law with the casing's dV/dp_u),
+   the natural frequency sqrt(k g / P) / (2 pi), transmissibility of an undamped single degree of
+   freedom at a forcing frequency.
+
+The sealed curve is given only where every draw's path pressure stays within the tested
+pressures (the model does not extrapolate); beyond, the heights are listed with the reason.
+
+A model here is any object with ``force_draws(x_m, p_bar)`` (N) and ``volume_area_draws(x_m,
+p_bar)`` (dV/dx, m^2; the volume-derived area -S dL/dx), each returning draws of shape
+(S, *broadcast shape) on one fixed set of S posterior draws, ``height_range_m``,
+``pressure_range_bar`` and ``label``; optionally ``volume_pressure_draws(x_m, p_bar)`` (dV/dp_u,
+m^3/Pa). ``SurfaceDesignModel`` adapts today's surface model; a thermodynamic model offers the
+same methods.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from uq._inference.summary import estimate
+from uq._io.errors import InputError
+from uq._physics.quantities import BAR_PA
+from uq._physics.sealed import (
+    POLYTROPIC_RANGE,
+    Charge,
+    GridElement,
+    SealedPath,
+    isolation_pct,
+    natural_frequency_Hz,
+    sealed_path,
+    transmissibility,
+)
+from uq._physics.volume import L_PER_M3, absolute_volume_grid, charge_volume_draws
+
+DEFAULT_DRAWS = 1000
+HEIGHT_STEP_M = 0.002
+N_PRESSURES = 41
+CHUNK_DRAWS = 250  # draws per sealed-path solve: bounds the spline coefficients' memory
+LEVEL = 0.90
+N_CHART = 6
+
+
+class SurfaceDesignModel:
+    """The surface model (uq._models.surface.SurfaceFit) as a design model: force P = p_u F_p + E and
+    volume-derived area dV/dx = F_p + D on one fixed set of at most ``max_draws`` posterior draws.
+    It has no dV/dp_u of its own (isobaric tests do not give it)."""
+
+    def __init__(self, fit, max_draws: int = DEFAULT_DRAWS):
+        self.fit = fit
+        self.beta = fit.flat_beta(max_draws)
+        self.height_range_m = tuple(float(v) for v in fit.height_range_m)
+        self.pressure_range_bar = tuple(float(v) for v in fit.pressure_range_bar)
+        self.label = f"surface model ({fit.orders.label})"
+
+    def force_draws(self, height_m, p_bar):
+        return self.fit.force_draws(height_m, p_bar, beta=self.beta)
+
+    def volume_area_draws(self, height_m, p_bar):
+        return self.fit.pressure_area_draws(
+            height_m, p_bar, beta=self.beta
+        ) + self.fit.volume_excess_draws(height_m, p_bar, beta=self.beta)
+
+
+@dataclass(frozen=True)
+class SealedDesign:
+    """What the designer asks (SI except where a name says otherwise; ``uq design``'s options).
+
+    height_m        design height x_c, where the spring is charged and closed (--height-mm)
+    charge_bar      charge overpressure p_c there (--charge-bar)
+    volume_l        internal volume at x_c and p_c, measured (--volume-l)
+    volume_sd_l     its standard deviation, drawn per posterior draw (--volume-sd-l)
+    polytropic      n, or (lo, hi): n uniform in lo..hi per draw (--polytropic)
+    reservoir_l     extra reservoir joined to the element (--reservoir-l)
+    dvdp_l_per_bar  dV/dp_u at x_c: 0 (CONTRACT.md's assumption), a value, or "model"
+    forcing_Hz      forcing frequency for transmissibility and isolation (--forcing-hz)
+    """
+
+    height_m: float
+    charge_bar: float
+    volume_l: float
+    volume_sd_l: float = 0.0
+    polytropic: float | tuple[float, float] = 1.0
+    reservoir_l: float = 0.0
+    dvdp_l_per_bar: float | str = 0.0
+    forcing_Hz: float | None = None
+    p_atm_bar: float = 1.01325
+    seed: int = 0
+
+    @property
+    def polytropic_range(self) -> tuple[float, float]:
+        n = self.polytropic
+        return (float(n[0]), float(n[1])) if isinstance(n, tuple | list) else (float(n), float(n))
+
+
+def check_design(model, design: SealedDesign) -> None:
+    """One-line refusals naming the option, before anything is computed."""
+    if not hasattr(model, "volume_area_draws"):
+        raise InputError(
+            "the sealed rate and natural frequency need the volume-derived area dV/dx: this campaign is "
+            "force-only (no piston_mm column); only isobaric loads can be given"
+        )
+    (hlo, hhi), (plo, phi) = model.height_range_m, model.pressure_range_bar
+    if not hlo - 1e-9 <= design.height_m <= hhi + 1e-9:
+        raise InputError(
+            f"option --height-mm: {design.height_m * 1e3:g} mm is outside the tested heights "
+            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model does not extrapolate"
+        )
+    if not plo - 1e-9 <= design.charge_bar <= phi + 1e-9:
+        raise InputError(
+            f"option --charge-bar: {design.charge_bar:g} bar is outside the tested pressures "
+            f"{plo:g}..{phi:g} bar; the model does not extrapolate"
+        )
+    if design.volume_l is None or not (np.isfinite(design.volume_l) and design.volume_l > 0):
+        raise InputError(
+            "option --volume-l: the sealed spring needs the internal volume at the design height and "
+            "charge pressure (litres; measure it, e.g. by filling the element with water: the stand gives "
+            "only volume changes)"
+        )
+    lo, hi = design.polytropic_range
+    if not (POLYTROPIC_RANGE[0] <= lo <= hi <= POLYTROPIC_RANGE[1]):
+        raise InputError(
+            f"option --polytropic: expected a value or a range within {POLYTROPIC_RANGE[0]:g} (isothermal) .. "
+            f"{POLYTROPIC_RANGE[1]:g} (adiabatic), got {lo:g}..{hi:g}"
+        )
+    if not (np.isfinite(design.reservoir_l) and design.reservoir_l >= 0):
+        raise InputError(
+            f"option --reservoir-l: expected a volume >= 0 L, got {design.reservoir_l:g}"
+        )
+    d = design.dvdp_l_per_bar
+    if isinstance(d, str):
+        if d != "model" or not hasattr(model, "volume_pressure_draws"):
+            raise InputError(
+                f"option --dvdp-l-per-bar: '{d}': expected a number (L/bar), or 'model' for a model with its "
+                f"own dV/dp_u ({model.label} has none)"
+            )
+    elif not np.isfinite(d):
+        raise InputError("option --dvdp-l-per-bar: expected a finite number of litres per bar")
+    if design.forcing_Hz is not None and not (
+        np.isfinite(design.forcing_Hz) and design.forcing_Hz > 0
+    ):
+        raise InputError(
+            f"option --forcing-hz: expected a positive frequency, got {design.forcing_Hz:g}"
+        )
+
+
+def _heights(lo: float, hi: float, x_c: float, step: float) -> np.ndarray:
+    """x_c + k step over lo..hi, with the ends lo and hi exactly (a last step shorter than step/4
+    is merged into the end)."""
+    down = x_c - step * np.arange(1, int(np.floor((x_c - lo) / step)) + 1)
+    up = x_c + step * np.arange(1, int(np.floor((hi - x_c) / step)) + 1)
+    xs = np.concatenate([down[::-1], [x_c], up])
+    if xs[0] - lo > step / 4:
+        xs = np.concatenate([[lo], xs])
+    elif xs[0] != x_c:
+        xs[0] = lo
+    if hi - xs[-1] > step / 4:
+        xs = np.concatenate([xs, [hi]])
+    elif xs[-1] != x_c:
+        xs[-1] = hi
+    return xs
+
+
+class DesignGrid:
+    """The model's draws on a height x pressure grid around one design height (module docstring, 1).
+
+    force, dforce_dx, area: (S, H, Pn); heights (H,) with ``height_m`` on it; pressures (Pn,), Pa.
+    """
+
+    def __init__(
+        self,
+        model,
+        height_m: float,
+        *,
+        height_step_m: float = HEIGHT_STEP_M,
+        n_pressures: int = N_PRESSURES,
+    ):
+        self.model, self.height_m = model, float(height_m)
+        lo, hi = model.height_range_m
+        plo, phi = model.pressure_range_bar
+        self.heights = _heights(lo, hi, self.height_m, height_step_m)
+        self.pressures_bar = np.linspace(plo, phi, n_pressures)
+        self.pressures_pa = self.pressures_bar * BAR_PA
+        X, P = np.meshgrid(self.heights, self.pressures_bar, indexing="ij")
+        self.force = np.asarray(model.force_draws(X, P), float)
+        self.area = np.asarray(model.volume_area_draws(X, P), float)
+        self.dforce_dx = CubicSpline(self.heights, self.force, axis=1).derivative()(self.heights)
+        self.n_draws = self.force.shape[0]
+        self.dvdp_at_c = None
+        if hasattr(model, "volume_pressure_draws"):
+            self.dvdp_at_c = np.asarray(
+                model.volume_pressure_draws(
+                    np.full(n_pressures, self.height_m), self.pressures_bar
+                ),
+                float,
+            )
+
+    def draw_inputs(self, design: SealedDesign) -> tuple[np.ndarray, np.ndarray]:
+        """V_c (m^3) and n per posterior draw, (S,) each: seeded by ``design.seed``, independent of the
+        posterior (they are measured or chosen apart from the isobaric campaign)."""
+        rng = np.random.default_rng(design.seed)
+        v_c = charge_volume_draws(
+            design.volume_l / L_PER_M3, design.volume_sd_l / L_PER_M3, self.n_draws, rng
+        )
+        lo, hi = design.polytropic_range
+        n = np.full(self.n_draws, lo) if lo == hi else rng.uniform(lo, hi, self.n_draws)
+        return v_c, n
+
+    def volume(self, design: SealedDesign, v_c: np.ndarray):
+        """V(x, p_u) on the grid, (S, H, Pn) m^3, and its statement (uq._physics.volume)."""
+        d = design.dvdp_l_per_bar
+        dvdp, words = (
+            (self.dvdp_at_c, f"{self.model.label}'s own")
+            if d == "model"
+            else (float(d) / L_PER_M3 / BAR_PA, "")
+        )
+        return absolute_volume_grid(
+            self.heights,
+            self.pressures_pa,
+            self.area,
+            design_height_m=self.height_m,
+            charge_pa=design.charge_bar * BAR_PA,
+            volume_m3=v_c,
+            volume_sd_m3=design.volume_sd_l / L_PER_M3,
+            dvdp_m3_per_pa=dvdp,
+            dvdp_words=words,
+        )
+
+
+def sealed_draws(
+    grid: DesignGrid, design: SealedDesign, charge_bar: float | None = None, heights_m=None
+) -> tuple[SealedPath, str]:
+    """Per-draw sealed path (S, H) at ``heights_m`` (default: the grid's) for a charge at the design
+    height (default ``design.charge_bar``; another charge pressure keeps the design's volume
+    assumption: V(x_c, p') = V_c + [V(x_c, p') - V(x_c, p_c)]), and the volume statement."""
+    if grid.height_m != design.height_m:
+        raise ValueError("the grid was built for another design height")
+    p_c = design.charge_bar if charge_bar is None else float(charge_bar)
+    plo, phi = grid.model.pressure_range_bar
+    if not plo - 1e-9 <= p_c <= phi + 1e-9:
+        raise InputError(
+            f"charge pressure {p_c:g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
+        )
+    heights = grid.heights if heights_m is None else np.asarray(heights_m, float).reshape(-1)
+    v_c, n = grid.draw_inputs(design)
+    vol = grid.volume(design, v_c)
+    parts = []
+    for lo in range(0, grid.n_draws, CHUNK_DRAWS):
+        sl = slice(lo, lo + CHUNK_DRAWS)
+        el = GridElement(
+            grid.heights,
+            grid.pressures_pa,
+            grid.force[sl],
+            grid.dforce_dx[sl],
+            vol.volume_m3[sl],
+            grid.area[sl],
+        )
+        x_c = np.array([grid.height_m])
+        v_charge = el.volume_m3(x_c, np.full((el.n_draws, 1), p_c * BAR_PA))[:, 0]
+        charge = Charge(
+            grid.height_m,
+            p_c * BAR_PA,
+            v_charge,
+            n[sl],
+            design.reservoir_l / L_PER_M3,
+            design.p_atm_bar * BAR_PA,
+        )
+        parts.append(sealed_path(el, heights, charge, pressure_bounds_pa=el.pressure_bounds_pa))
+    path = SealedPath(
+        heights, *(np.concatenate([getattr(p, f) for p in parts]) for f in SealedPath._fields[1:])
+    )
+    return path, vol.statement
+
+
+def _polytropic_words(design: SealedDesign) -> str:
+    lo, hi = design.polytropic_range
+    if lo == hi:
+        kind = {1.0: " (isothermal: slow strokes)", 1.4: " (adiabatic: fast strokes)"}.get(lo, "")
+        return f"polytropic exponent n = {lo:g}{kind}"
+    return f"polytropic exponent n uniform in {lo:g}..{hi:g} per draw (the stroke's heat exchange unknown)"
+
+
+def _at_design(grid: DesignGrid, design: SealedDesign, charge_bar: float):
+    """Load, rate and natural-frequency draws (S,) at the design height for one charge."""
+    path, statement = sealed_draws(grid, design, charge_bar, [grid.height_m])
+    load, rate = path.force_N[:, 0], path.rate_N_per_m[:, 0]
+    where = f"at {grid.height_m * 1e3:g} mm charged to {charge_bar:g} bar"
+    return load, rate, natural_frequency_Hz(rate, load, where), statement
+
+
+def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
+    """The contract's ``uq design --json`` keys at the design height (CONTRACT.md section 3), each
+    estimate {"mean", "sd", "q05", "q95"}, with the transmissibility at ``design.forcing_Hz`` and
+    the assumptions in words."""
+    check_design(model, design)
+    grid = grid or DesignGrid(model, design.height_m)
+    load, rate, freq, statement = _at_design(grid, design, design.charge_bar)
+    lo, hi = design.polytropic_range
+    out = {
+        "height_m": design.height_m,
+        "charge_bar": design.charge_bar,
+        "volume_l": design.volume_l,
+        "polytropic": lo if lo == hi else [lo, hi],
+        "reservoir_l": design.reservoir_l,
+        "load_N": estimate(load),
+        "rate_N_per_m": estimate(rate),
+        "natural_frequency_Hz": estimate(freq),
+        "volume_sd_l": design.volume_sd_l,
+        "dvdp_l_per_bar": design.dvdp_l_per_bar,
+        "model": model.label,
+        "n_draws": int(load.size),
+        "level": LEVEL,
+        "assumptions": [
+            statement,
+            _polytropic_words(design),
+            "the load is the element's force at the design height: the sealed spring carries it there",
+        ],
+    }
+    if design.forcing_Hz is not None:
+        out["transmissibility"] = transmissibility_summary(freq, design.forcing_Hz)
+    return out
+
+
+def transmissibility_summary(natural_Hz, forcing_Hz: float) -> dict:
+    """Transmissibility T = 1/|1 - r^2| and isolation 100 (1 - T) %, r = f_forcing / f_n, per draw.
+
+    Undamped single degree of freedom: above r = sqrt 2 damping raises T, so the isolation stated
+    is the best the spring can give; near resonance (r = 1) damping caps T, which this does not."""
+    T = transmissibility(forcing_Hz, natural_Hz)
+    return {
+        "forcing_Hz": forcing_Hz,
+        "transmissibility": estimate(T),
+        "isolation_pct": estimate(isolation_pct(T)),
+        "probability_isolating": float(np.mean(T < 1.0)),
+        "model": "undamped single degree of freedom, T = 1/|1 - r^2|, r = f_forcing / f_n; "
+        "isolation = 100 (1 - T) % (negative: amplification); damping raises T above r = sqrt 2",
+    }
+
+
+def sealed_curve(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
+    """The sealed load-deflection curve with 90 % bands: overpressure (bar), load (N) and rate (N/m)
+    at the grid heights where every draw's path pressure stays within the tested pressures."""
+    check_design(model, design)
+    grid = grid or DesignGrid(model, design.height_m)
+    path, statement = sealed_draws(grid, design)
+    ok = path.in_range.all(axis=0)
+    out = {"height_m": grid.heights[ok]}
+    a = (1.0 - LEVEL) / 2
+    for key, draws, scale in (
+        ("pressure_bar", path.overpressure_pa, 1.0 / BAR_PA),
+        ("load_N", path.force_N, 1.0),
+        ("rate_N_per_m", path.rate_N_per_m, 1.0),
+    ):
+        d = draws[:, ok] * scale
+        out[key] = {
+            "mean": d.mean(axis=0),
+            "q05": np.quantile(d, a, axis=0),
+            "q95": np.quantile(d, 1 - a, axis=0),
+        }
+    plo, phi = model.pressure_range_bar
+    out["omitted_height_m"] = grid.heights[~ok]
+    out["omitted_reason"] = (
+        f"at {int((~ok).sum())} heights the sealed pressure leaves the tested pressures {plo:g}..{phi:g} bar "
+        "in some draws: the model does not extrapolate"
+        if (~ok).any()
+        else ""
+    )
+    out["assumptions"] = [statement, _polytropic_words(design)]
+    return out
+
+
+def frequency_chart(
+    model, design: SealedDesign, charges_bar=None, grid: DesignGrid | None = None
+) -> dict:
+    """Natural frequency against load at the design height over several charge pressures (the
+    catalogue's chart), each with the design's volume assumption; a charge whose frequency is
+    undefined in some draws is listed with the reason instead."""
+    check_design(model, design)
+    grid = grid or DesignGrid(model, design.height_m)
+    plo, phi = model.pressure_range_bar
+    if charges_bar is None:
+        charges_bar = np.linspace(max(plo, 1.0) if phi > 1.0 else plo, phi, N_CHART)
+    rows, omitted = [], []
+    for p in np.asarray(charges_bar, float):
+        try:
+            load, rate, freq, _ = _at_design(grid, design, float(p))
+        except InputError as exc:
+            omitted.append({"charge_bar": float(p), "reason": str(exc)})
+            continue
+        rows.append(
+            {
+                "charge_bar": float(p),
+                "load_N": estimate(load),
+                "rate_N_per_m": estimate(rate),
+                "natural_frequency_Hz": estimate(freq),
+            }
+        )
+    return {"height_m": design.height_m, "rows": rows, "omitted": omitted}
+
+
+def design_document(
+    model, design: SealedDesign, charges_bar=None, grid: DesignGrid | None = None
+) -> dict:
+    """Everything ``uq design --json`` writes: the contract's keys at the design height, the sealed
+    curve, the frequency chart (one model grid serves all three)."""
+    check_design(model, design)
+    grid = grid or DesignGrid(model, design.height_m)
+    out = design_point(model, design, grid)
+    out["sealed_curve"] = sealed_curve(model, design, grid)
+    out["frequency_chart"] = frequency_chart(model, design, charges_bar, grid)
+    return out

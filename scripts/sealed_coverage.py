@@ -149,7 +149,7 @@ def replicate(seed: int, layout, orders, settings, max_draws) -> list[dict]:
     model = SurfaceDesignModel(fit, max_draws)
     rows = [scenario_rows(model, sc, seed) for sc in SCENARIOS]
     for r in rows:
-        r["converged"] = bool(fit.diagnostics["converged"])
+        r["converged"] = bool(fit.convergence.converged)
     return rows
 
 

@@ -87,7 +87,7 @@ def test_elastic_casing_profile_is_table1s():
     a quadratic in t = u / 0.05 m by least squares, normalised at x0 (to 0.02)."""
     t1 = table1()
     u = XS - 0.112
-    area = -S_PISTON * cubic_slope(t1.piston, u)
+    area = -S_PISTON * cubic_slope(t1.piston[:, None, :], u)
     slope = np.array([np.polyfit(t1.pressures_bar[1:], area[1:, j], 1)[0] for j in range(XS.size)])
     q = np.polyfit(u / 0.05, slope, 2)[::-1]
     assert np.allclose(q / q[0], ELASTIC_CASING_PROFILE, atol=0.02)

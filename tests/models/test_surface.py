@@ -228,7 +228,7 @@ def test_integrated_loo_equals_refitting_without_the_reading():
     import jax.numpy as jnp
 
     from uq._inference.linear import LOG_2PI, linear_posterior, loo_given_noise, posterior_cov
-    from uq._models.surface import _block_loo
+    from uq._models.pair import block_loo as _block_loo
 
     rng = np.random.default_rng(3)
     n, k = 9, 3
@@ -373,7 +373,7 @@ def test_reading_covariance_has_the_gas_law_sign():
 
     import jax.numpy as jnp
 
-    from uq._models.surface import _cov_factors
+    from uq._models.pair import cov_factors as _cov_factors
 
     dp, feff, V0, p_abs, S = 1.0e3, 0.025, 6.2e-3, 6.0e5, 54.82e-4
     c = SimpleNamespace(
@@ -399,19 +399,20 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
     import jax.numpy as jnp
 
     from uq._inference.linear import linear_posterior
+    from uq._models import pair
     from uq._models import surface as S
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)
     rng = np.random.default_rng(0)
     for theta in S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((4, 5)):
-        L11, L21, L22 = S._cov_factors(theta, d)
+        L11, L21, L22 = pair.cov_factors(theta, d)
         yf, xf = d.F / L11, d.Xf / L11[:, None]
         yl = (d.L - L21 * yf) / L22
         xl = (d.Xl - L21[:, None] * xf) / L22[:, None]
         X, y = jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])
         ref = linear_posterior(X, y, jnp.ones_like(y), jnp.ones(X.shape[1]))
-        got = S._posterior(theta, d)
+        got = pair.posterior(theta, d)
         assert float(got.log_marginal) == pytest.approx(
             float(ref.log_marginal - jnp.sum(jnp.log(L11) + jnp.log(L22))), rel=1e-9
         )

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import asdict, dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -50,40 +49,26 @@ from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel, Posterior, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.float64 import jax, jnp
-from uq._inference.linear import (
-    LOG_2PI,
-    GramPlan,
-    draw_exact,
-    gram_plan,
-    posterior_from_moments,
-    weighted_gram,
-)
 from uq._inference.loo import Loo, psis
 from uq._inference.sampler import Settings
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
-from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
+from uq._models import pair
+from uq._models.pair import (
+    NATURAL_NAMES,
+    NOISE_NAMES,
+    PairData,
+    noise_prior_mean,
+    pair_data,
+)
+from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 MAX_DRAWS = 4000
 SCALE_C = 0.1  # m^2
 SCALE_E = 1.0e4  # N
 SCALE_D = 0.1  # m^2
 SCALE_R = 1.0  # m
-NOISE_NAMES = ("log_s0_N", "log_rel_load", "log_k_p", "log_sL_m", "log_V0_m3")
-
-
-def noise_prior_mean(stand: StandDescription = PAPER_STAND) -> np.ndarray:
-    """Prior centres of the five noise logs from the stand's description (a stand declaring a
-    perfect load cell still gets a 0.01 % floor: log 0 has no prior)."""
-    rel = max(stand.load_cell_rel_sd, 1e-4)
-    return np.array(
-        [np.log(10.0), np.log(rel), 0.0, np.log(1e-4), np.log(stand.gas_volume_at_xmax_m3)]
-    )
-
-
 NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
-NOISE_PRIOR_SD = np.array([1.5, 0.5, 0.5, 1.5, 0.5])
 LEVEL = 0.90
 
 
@@ -182,146 +167,36 @@ def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
 
 # ----------------------------------------------------------------------------- likelihood
 
-
-class SurfaceData(NamedTuple):
-    """The campaign's arrays for the model functions (n readings, k coefficients)."""
-
-    Xf: jnp.ndarray  # (n, k) force design (standardised coefficients)
-    Xl: jnp.ndarray  # (n, k) piston design
-    F: jnp.ndarray  # (n,) force, N
-    L: jnp.ndarray  # (n,) piston coordinate, m
-    phat: jnp.ndarray  # (n,) reference force of the load-cell term, N
-    feff_hat: jnp.ndarray  # (n,) reference pressure area (the lever of a pressure error), m^2
-    dp_pa: jnp.ndarray  # (n,) the stand's pressure-holding sd, Pa
-    p_abs_pa: jnp.ndarray  # (n,) absolute pressure, Pa
-    area: jnp.ndarray  # () piston area S, m^2
-    prior_mean: jnp.ndarray  # (5,) prior centres of the noise logs
-    gram: GramPlan  # the Gram matrix's plan (``_posterior``)
-    weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out
-
-
-def _cov_factors(theta, d: SurfaceData):
-    """Per-point whitening of the (force, piston) pair: (L11, L21, L22), each (n,)."""
-    s0, rel, kp, sL, V0 = (jnp.exp(theta[i]) for i in range(5))
-    a2 = force_noise_var(s0, rel, d.phat)
-    b = kp * d.dp_pa * d.feff_hat
-    cc = kp * d.dp_pa * V0 / (d.p_abs_pa * d.area)
-    L11 = jnp.sqrt(a2 + b**2)
-    L21 = -b * cc / L11  # pressure error: force up, piston down (anti-correlated)
-    L22 = jnp.sqrt(cc**2 + sL**2 - L21**2)
-    return L11, L21, L22
-
-
-def gram_groups(Xf, Xl):
-    """The design pairs of the whitened Gram matrix, grouped by their weight (``_posterior``)."""
-    return [[(Xf, Xf)], [(Xl, Xl)], [(Xl, Xf), (Xf, Xl)]]
-
-
-def _posterior(theta, d: SurfaceData):
-    """The coefficients' Gaussian posterior given the noise theta (log_marginal includes the
-    readings' covariance determinant).
-
-    Whitening reading i, a = xf / L11 and b = xl / L22 - s xf with s = L21 / (L11 L22), makes the
-    Gram matrix  Xf^T diag(1/L11^2 + s^2) Xf + Xl^T diag(1/L22^2) Xl - (Xl^T diag(s/L22) Xf + its
-    transpose): three weight vectors on designs that do not change while sampling, formed from
-    the plan ``d.gram`` (``uq._inference.linear.GramPlan``) without the whitened design. A held-out
-    reading (weight 0) drops out of every sum.
-    """
-    L11, L21, L22 = _cov_factors(theta, d)
-    w = d.weight
-    s = L21 / (L11 * L22)
-    yf = d.F / L11
-    yl = (d.L - L21 * yf) / L22
-    gram = weighted_gram(d.gram, (w * (1.0 / L11**2 + s**2), w / L22**2, -w * s / L22))
-    rhs = d.Xf.T @ (w * (yf / L11 - s * yl)) + d.Xl.T @ (w * yl / L22)
-    log_det = 2.0 * jnp.sum(w * (jnp.log(L11) + jnp.log(L22)))
-    return posterior_from_moments(
-        gram, rhs, jnp.sum(w * (yf**2 + yl**2)), 2 * jnp.sum(w), log_det, jnp.ones(d.Xf.shape[1])
-    )
-
-
-def log_prob(theta, d: SurfaceData):
+def log_prob(theta, d: PairData):
     """Log posterior of the noise parameters (coefficients integrated out); theta (5,)."""
-    z = (theta - d.prior_mean) / NOISE_PRIOR_SD
-    return -0.5 * jnp.sum(z**2) + _posterior(theta, d).log_marginal
+    return pair.log_prior(theta, d) + pair.posterior(theta, d).log_marginal
 
 
-def draw_linear(theta, key, d: SurfaceData):
+def draw_linear(theta, key, d: PairData):
     """One exact coefficient draw given the noise theta."""
-    return draw_exact(_posterior(theta, d), key)
+    return pair.draw(theta, key, d)
 
 
-def pointwise(theta, beta, d: SurfaceData):
-    """Log-likelihood of each (force, piston) reading at one draw, (n,)."""
-    L11, L21, L22 = _cov_factors(theta, d)
-    r1 = (d.F - d.Xf @ beta) / L11
-    r2 = (d.L - d.Xl @ beta - L21 * r1) / L22
-    return {"reading": -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI}
+def pointwise(theta, beta, d: PairData):
+    return {"reading": pair.pointwise(theta, beta, d)}
 
 
-def predict(theta, beta, key, d: SurfaceData):
-    """A replicate of every reading: the mean surfaces plus the correlated reading noise."""
-    L11, L21, L22 = _cov_factors(theta, d)
-    z = jax.random.normal(key, (2, d.F.shape[0]))
-    return {
-        "force_N": d.Xf @ beta + L11 * z[0],
-        "piston_m": d.Xl @ beta + L21 * z[0] + L22 * z[1],
-    }
+def predict(theta, beta, key, d: PairData):
+    return pair.predict(theta, beta, key, d)
 
 
-def observed(d: SurfaceData) -> dict:
-    return {"force_N": np.asarray(d.F), "piston_m": np.asarray(d.L)}
+def pointwise_loo(theta, d: PairData):
+    return pair.pointwise_loo(theta, d)
 
 
-def _block_loo(X, y, n, chol, mean):
-    """log N of each whitened 2-row block (rows i, n+i) under the predictive from the other blocks.
-
-    With unit whitened noise and posterior precision A = L L^T, leaving block i out gives the
-    predictive N(X_i m_-i, (I - H_i)^-1) with H_i = X_i A^-1 X_i^T, and y_i - X_i m_-i =
-    (I - H_i)^-1 (y_i - X_i m) (Woodbury): no refit needed.
-    """
-    Z = jax.scipy.linalg.solve_triangular(chol, X.T, lower=True)
-    Zf, Zl = Z[:, :n], Z[:, n:]
-    a, e, b = 1.0 - jnp.sum(Zf**2, 0), 1.0 - jnp.sum(Zl**2, 0), -jnp.sum(Zf * Zl, 0)
-    r = y - X @ mean
-    r1, r2 = r[:n], r[n:]
-    det = a * e - b * b
-    quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
-    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI
-
-
-def pointwise_loo(theta, d: SurfaceData):
-    """log p(force_i, piston_i | noise, all other readings), coefficients integrated out, (n,).
-
-    PSIS-LOO over the noise draws with these (instead of the pointwise likelihood at drawn
-    coefficients) importance-samples only the 5 noise parameters, which one reading hardly
-    moves; the coefficients' leave-one-out is exact. Same ELPD, far smaller Pareto k.
-    """
-    L11, L21, L22 = _cov_factors(theta, d)
-    yf = d.F / L11
-    xf = d.Xf / L11[:, None]
-    yl = (d.L - L21 * yf) / L22
-    xl = (d.Xl - L21[:, None] * xf) / L22[:, None]
-    post = _posterior(theta, d)
-    X, y = jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])
-    return _block_loo(X, y, d.F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
-
-
-def hold_out(d: SurfaceData, held) -> SurfaceData:
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
-
-
-def start(d: SurfaceData) -> np.ndarray:
+def start(d: PairData) -> np.ndarray:
     return np.asarray(d.prior_mean)
 
 
-def report(theta, beta, d: SurfaceData) -> dict:
+def report(theta, beta, d: PairData) -> dict:
     noise = np.exp(np.asarray(theta))
     return {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES)}
 
-
-#: the natural noise parameters reported (exp of the sampled logs)
-NATURAL_NAMES = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3")
 
 MODEL = CollapsedModel(
     name="pressure-coupled surface",
@@ -332,9 +207,9 @@ MODEL = CollapsedModel(
     start=start,
     report=report,
     predict=predict,
-    observed=observed,
+    observed=pair.observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=pair.hold_out,
 )
 
 
@@ -569,25 +444,12 @@ def _reference(o, g, x, p, F, L, idx, n_tests):
     return beta, phat, np.abs(feff), Xf, Xl
 
 
-def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> SurfaceData:
+def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> PairData:
     """The model's arrays for a campaign: designs, readings, the noise references, the Gram plan."""
     g = geometry_of(rec)
     x, p, F, L, idx = _arrays(rec)
     _, phat, feff, Xf, Xl = _reference(orders, g, x, p, F, L, idx, len(rec.tests))
-    return SurfaceData(
-        jnp.asarray(Xf),
-        jnp.asarray(Xl),
-        jnp.asarray(F),
-        jnp.asarray(L),
-        jnp.asarray(phat),
-        jnp.asarray(feff),
-        jnp.asarray(stand.pressure_sd_bar(p) * BAR_PA),
-        jnp.asarray((p + stand.p_atm_bar) * BAR_PA),
-        jnp.asarray(g.area_m2),
-        jnp.asarray(noise_prior_mean(stand)),
-        gram_plan(gram_groups(Xf, Xl)),
-        jnp.ones(F.size),
-    )
+    return pair_data(Xf, Xl, F, L, phat, feff, p, g.area_m2, stand)
 
 
 def fit_surface(

@@ -1,0 +1,200 @@
+"""The (force, piston) reading pair: the likelihood shared by the models over all tests at once.
+
+A model of a whole campaign (the surface model, the thermodynamic model) predicts both readings
+of every point linearly in its coefficients beta: force = Xf beta, piston = s Xl beta, with Xf and
+Xl fixed designs and s an optional scale of the piston's travel (the thermodynamic model's
+piston-area factor 1 + m; 1 otherwise). The noise is the stand's error budget (paper section
+3.2): one pressure-holding error dp moves the force by +dp F_hat and the piston by
+-V_gas dp / (p_abs S) at once (a higher pressure compresses the gas, so the piston stands short
+of its isobaric position), so each reading pair is bivariate normal with covariance
+
+    [[s0^2 + (r Phat)^2 + b^2,  -b c], [-b c, c^2 + sL^2]],
+    b = k_p dp_i F_hat,  c = k_p dp_i V0 / (p_abs S)
+
+with dp_i the stand's holding sd (0.01 bar, 0.001 bar at 0.1 bar), k_p its multiplier and V0
+the stand's gas volume (element, receiver and pipe: in isobaric-isothermal conditions it keeps its
+value, the gas/water boundary moving inside the receiver, eq. 4). The sampled noise parameters
+are the logs of (s0 [N], r, k_p, sL [m], V0 [m^3]) with priors centred on the stand's description
+(``--stand``; default the paper's stand): log s0 ~ N(log 10, 1.5), log r ~ N(log
+stand.load_cell_rel_sd, 0.5), log k_p ~ N(0, 0.5), log sL ~ N(log 1e-4, 1.5), log V0 ~
+N(log stand.gas_volume_at_xmax_m3, 0.5). Coefficients are standardised, beta ~ N(0, I).
+
+Given the noise the coefficients are Gaussian; the Gram matrix of the whitened pair is formed from
+a :class:`uq._inference.linear.GramPlan` of the fixed designs with per-reading weights, so a log
+posterior costs a few weighted sums, not a (2n x k) product.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._inference.float64 import jax, jnp
+from uq._inference.linear import (
+    LOG_2PI,
+    GramPlan,
+    draw_exact,
+    gram_plan,
+    posterior_from_moments,
+    weighted_gram,
+)
+from uq._physics.quantities import force_noise_var
+
+NOISE_NAMES = ("log_s0_N", "log_rel_load", "log_k_p", "log_sL_m", "log_V0_m3")
+#: the natural noise parameters reported (exp of the sampled logs)
+NATURAL_NAMES = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3")
+NOISE_PRIOR_SD = np.array([1.5, 0.5, 0.5, 1.5, 0.5])
+
+
+def noise_prior_mean(stand: StandDescription = PAPER_STAND) -> np.ndarray:
+    """Prior centres of the five noise logs from the stand's description (a stand declaring a
+    perfect load cell still gets a 0.01 % floor: log 0 has no prior)."""
+    rel = max(stand.load_cell_rel_sd, 1e-4)
+    return np.array(
+        [np.log(10.0), np.log(rel), 0.0, np.log(1e-4), np.log(stand.gas_volume_at_xmax_m3)]
+    )
+
+
+class PairData(NamedTuple):
+    """A campaign's arrays for the pair likelihood (n readings, k coefficients)."""
+
+    Xf: jnp.ndarray  # (n, k) force design (standardised coefficients)
+    Xl: jnp.ndarray  # (n, k) piston design
+    F: jnp.ndarray  # (n,) force, N
+    L: jnp.ndarray  # (n,) piston coordinate, m
+    phat: jnp.ndarray  # (n,) reference force of the load-cell term, N
+    feff_hat: jnp.ndarray  # (n,) the lever of a pressure error on the force, dP/dp_u, m^2
+    dp_pa: jnp.ndarray  # (n,) the stand's pressure-holding sd, Pa
+    p_abs_pa: jnp.ndarray  # (n,) absolute pressure, Pa
+    area: jnp.ndarray  # () piston area S, m^2
+    prior_mean: jnp.ndarray  # (5,) prior centres of the noise logs
+    gram: GramPlan  # the Gram matrix's plan (``posterior``)
+    weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out
+
+
+def pair_data(Xf, Xl, F, L, phat, lever, p_bar, area, stand: StandDescription) -> PairData:
+    """The pair likelihood's arrays from the designs, the readings and plug-in noise references."""
+    from uq._physics.quantities import BAR_PA
+
+    p_bar = np.asarray(p_bar, float)
+    return PairData(
+        jnp.asarray(Xf),
+        jnp.asarray(Xl),
+        jnp.asarray(F),
+        jnp.asarray(L),
+        jnp.asarray(phat),
+        jnp.asarray(lever),
+        jnp.asarray(stand.pressure_sd_bar(p_bar) * BAR_PA),
+        jnp.asarray((p_bar + stand.p_atm_bar) * BAR_PA),
+        jnp.asarray(area),
+        jnp.asarray(noise_prior_mean(stand)),
+        gram_plan([[(Xf, Xf)], [(Xl, Xl)], [(Xl, Xf), (Xf, Xl)]]),
+        jnp.ones(np.size(F)),
+    )
+
+
+def cov_factors(noise, d: PairData):
+    """Per-point whitening of the (force, piston) pair: (L11, L21, L22), each (n,); noise (5,)."""
+    s0, rel, kp, sL, V0 = (jnp.exp(noise[i]) for i in range(5))
+    a2 = force_noise_var(s0, rel, d.phat)
+    b = kp * d.dp_pa * d.feff_hat
+    cc = kp * d.dp_pa * V0 / (d.p_abs_pa * d.area)
+    L11 = jnp.sqrt(a2 + b**2)
+    L21 = -b * cc / L11  # pressure error: force up, piston down (anti-correlated)
+    L22 = jnp.sqrt(cc**2 + sL**2 - L21**2)
+    return L11, L21, L22
+
+
+def posterior(noise, d: PairData, scale=1.0):
+    """The coefficients' Gaussian posterior given the noise (log_marginal includes the readings'
+    covariance determinant), with the piston design scaled by ``scale``.
+
+    Whitening reading i, a = xf / L11 and b = xl / L22 - s xf with s = L21 / (L11 L22), makes the
+    Gram matrix  Xf^T diag(1/L11^2 + s^2) Xf + Xl^T diag(1/L22^2) Xl - (Xl^T diag(s/L22) Xf + its
+    transpose): three weight vectors on designs that do not change while sampling. A held-out
+    reading (weight 0) drops out of every sum.
+    """
+    L11, L21, L22 = cov_factors(noise, d)
+    w = d.weight
+    s = L21 / (L11 * L22)
+    yf = d.F / L11
+    yl = (d.L - L21 * yf) / L22
+    gram = weighted_gram(
+        d.gram, (w * (1.0 / L11**2 + s**2), w * scale**2 / L22**2, -w * scale * s / L22)
+    )
+    rhs = d.Xf.T @ (w * (yf / L11 - s * yl)) + scale * (d.Xl.T @ (w * yl / L22))
+    log_det = 2.0 * jnp.sum(w * (jnp.log(L11) + jnp.log(L22)))
+    return posterior_from_moments(
+        gram, rhs, jnp.sum(w * (yf**2 + yl**2)), 2 * jnp.sum(w), log_det, jnp.ones(d.Xf.shape[1])
+    )
+
+
+def log_prior(noise, d: PairData):
+    z = (noise - d.prior_mean) / NOISE_PRIOR_SD
+    return -0.5 * jnp.sum(z**2)
+
+
+def draw(noise, key, d: PairData, scale=1.0):
+    return draw_exact(posterior(noise, d, scale), key)
+
+
+def pointwise(noise, beta, d: PairData, scale=1.0):
+    """Log-likelihood of each (force, piston) reading at one draw, (n,)."""
+    L11, L21, L22 = cov_factors(noise, d)
+    r1 = (d.F - d.Xf @ beta) / L11
+    r2 = (d.L - scale * (d.Xl @ beta) - L21 * r1) / L22
+    return -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI
+
+
+def predict(noise, beta, key, d: PairData, scale=1.0):
+    """A replicate of every reading: the mean surfaces plus the correlated reading noise."""
+    L11, L21, L22 = cov_factors(noise, d)
+    z = jax.random.normal(key, (2, d.F.shape[0]))
+    return {
+        "force_N": d.Xf @ beta + L11 * z[0],
+        "piston_m": scale * (d.Xl @ beta) + L21 * z[0] + L22 * z[1],
+    }
+
+
+def block_loo(X, y, n, chol, mean):
+    """log N of each whitened 2-row block (rows i, n+i) under the predictive from the other blocks.
+
+    With unit whitened noise and posterior precision A = L L^T, leaving block i out gives the
+    predictive N(X_i m_-i, (I - H_i)^-1) with H_i = X_i A^-1 X_i^T, and y_i - X_i m_-i =
+    (I - H_i)^-1 (y_i - X_i m) (Woodbury): no refit needed.
+    """
+    Z = jax.scipy.linalg.solve_triangular(chol, X.T, lower=True)
+    Zf, Zl = Z[:, :n], Z[:, n:]
+    a, e, b = 1.0 - jnp.sum(Zf**2, 0), 1.0 - jnp.sum(Zl**2, 0), -jnp.sum(Zf * Zl, 0)
+    r = y - X @ mean
+    r1, r2 = r[:n], r[n:]
+    det = a * e - b * b
+    quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
+    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI
+
+
+def pointwise_loo(noise, d: PairData, scale=1.0):
+    """log p(force_i, piston_i | noise, all other readings), coefficients integrated out, (n,).
+
+    PSIS-LOO over the noise draws with these (instead of the pointwise likelihood at drawn
+    coefficients) importance-samples only the noise parameters, which one reading hardly moves;
+    the coefficients' leave-one-out is exact. Same ELPD, far smaller Pareto k.
+    """
+    L11, L21, L22 = cov_factors(noise, d)
+    yf = d.F / L11
+    xf = d.Xf / L11[:, None]
+    yl = (d.L - L21 * yf) / L22
+    xl = (scale * d.Xl - L21[:, None] * xf) / L22[:, None]
+    post = posterior(noise, d, scale)
+    X, y = jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])
+    return block_loo(X, y, d.F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
+
+
+def hold_out(d: PairData, held) -> PairData:
+    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
+
+
+def observed(d: PairData) -> dict:
+    return {"force_N": np.asarray(d.F), "piston_m": np.asarray(d.L)}

@@ -30,13 +30,18 @@ MAX_VOLUME_M3 = 10.0  # a 2.5 m bellows 1 m high holds about 5 m^3
 MIN_LARGEST_HEIGHT_MM = 2.0
 
 
-def number(text, path: str, row: int, column: str, decimal_comma: bool = False) -> float:
+def number(
+    text, path: str, row: int, column: str, decimal_comma: bool = False, workbook: bool = False
+) -> float:
     text = "" if text is None else str(text)
     shown = text.strip() or "(empty)"
     if "," in text and not decimal_comma:
-        raise InputError(
-            f"{where(path, row, column)}: '{shown}' is not a number (a decimal comma? in a comma-separated file write a decimal point)"
+        hint = (
+            "a decimal comma in a text cell? enter it as a number"
+            if workbook
+            else "a decimal comma? in a comma-separated file write a decimal point"
         )
+        raise InputError(f"{where(path, row, column)}: '{shown}' is not a number ({hint})")
     if decimal_comma:
         if (
             "." in text
@@ -212,10 +217,12 @@ def parse(table: Table, cols: dict[str, Column], pressure_offset_bar: float) -> 
             elif q == "volume" and not str(text).strip():
                 values[q][i] = np.nan  # volumes are given only for the tests they were measured at
             else:
-                raw = number(text, name, row, c.name, decimal_comma)
+                raw = number(text, name, row, c.name, decimal_comma, sep is None)
                 si = raw * c.factor
-                if q in ("pressure", "set_pressure"):
-                    si += pressure_offset_bar
+                if q in ("pressure", "set_pressure") and (c.factor != 1.0 or pressure_offset_bar):
+                    # 12 digits: a test's label is 1 bar, not the 1.0000000000000002 bar that
+                    # 2.01325 - 1.01325 or 14.5037737730 psi leave (1e-7 Pa is no information)
+                    si = float(f"{si + pressure_offset_bar:.12g}")
                 _check_value(name, row, c, raw, si, pressure_offset_bar)
                 values[q][i] = si
     return Readings(

@@ -148,6 +148,14 @@ class Recordings:
         """Every test has branch and step (recording order); False for a one-pass table."""
         return all(t.step is not None for t in self.tests)
 
+    @property
+    def has_both_branches(self) -> bool:
+        """Every test has readings on both branches (compression and rebound), so a branch
+        difference (hysteresis) can be seen; False for one pass or a compression-only campaign."""
+        return self.order_known and all(
+            t.compression.any() and not t.compression.all() for t in self.tests
+        )
+
     def test_at(self, pressure_bar: float) -> PressureTest:
         for t in self.tests:
             if abs(t.pressure_bar - pressure_bar) < 1e-9:

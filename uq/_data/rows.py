@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -129,7 +130,9 @@ def _workbook_table(path: str, raw: bytes, engine: str, sheet: str | None) -> Ta
     import pandas as pd
 
     try:
-        book = pd.ExcelFile(io.BytesIO(raw), engine=engine)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            book = pd.ExcelFile(io.BytesIO(raw), engine=engine)
         names = [str(s) for s in book.sheet_names]
         if sheet is None and len(names) > 1:
             raise InputError(
@@ -141,7 +144,11 @@ def _workbook_table(path: str, raw: bytes, engine: str, sheet: str | None) -> Ta
                 f"option --sheet {sheet}: {path} has no such sheet; its sheets are {', '.join(repr(n) for n in names)}"
             )
         chosen = names[0] if sheet is None else sheet
-        frame = book.parse(chosen, header=None, dtype=object)
+        with warnings.catch_warnings():
+            # openpyxl warns about styles and data validation it does not read: noise on stderr
+            # for a user whose cells are read all the same
+            warnings.simplefilter("ignore")
+            frame = pd.read_excel(book, sheet_name=chosen, header=None, dtype=object)
     except InputError:
         raise
     except Exception as exc:  # openpyxl and odfpy raise many kinds on a damaged file

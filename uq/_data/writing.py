@@ -26,7 +26,7 @@ _DECIMALS = {
     ("volume", "m3"): 8,
     ("volume", "in3"): 3,
 }
-#: Measured pressure to 1 Pa (the paper's sensor resolution) in bar; other units to 10 digits.
+#: Measured pressure to 1 Pa (the paper's sensor resolution) in bar; other units to 15 digits (read back to 12, the exact bar value).
 _MEASURED_BAR_DECIMALS = 5
 WRITE_PRESSURE = ("set", "measured", "both")
 
@@ -84,8 +84,8 @@ def write_recordings_csv(
             return f"{round(v / step) * step:.{_decimals(step)}f}"
         if quantity in ("pressure", "set_pressure"):
             if measured_column and quantity == "pressure":
-                return f"{v:.{_MEASURED_BAR_DECIMALS}f}" if suffix == "bar" else f"{v:.10g}"
-            return f"{v:g}" if suffix == "bar" else f"{v:.10g}"
+                return f"{v:.{_MEASURED_BAR_DECIMALS}f}" if suffix == "bar" else f"{v:.15g}"
+            return f"{v:g}" if suffix == "bar" else f"{v:.15g}"
         return f"{v:.{_DECIMALS[(quantity, suffix)]}f}"
 
     measured_column = pressure != "set"

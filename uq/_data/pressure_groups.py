@@ -10,8 +10,8 @@ A test is all readings taken at one set overpressure. Files say which in one of 
 3. No set column, and the pressures scatter around set points (4.993, 5.004, ...): the readings
    are clustered. Sorted, they split wherever two neighbours differ by more than the tolerance;
    each cluster is one test, whose set value is the median rounded to the coarsest of 1, 0.5,
-   0.1, 0.05, ... units of the file that lies within three standard errors of the median (so
-   4.9987 bar gives 5 bar, 80.003 psi gives 80 psi). Refused when ambiguous: a reading farther
+   0.1, 0.05, ... units of the file that lies within three standard errors and 0.1 % (a sensor's
+   calibration) of the median (so 4.9987 bar gives 5 bar, 80.003 psi gives 80 psi). Refused when ambiguous: a reading farther
    than the tolerance from its cluster's median, a cluster too small for a test, or a value
    shared by most but not all of a cluster's readings (a typo in a file of set pressures).
 
@@ -154,6 +154,9 @@ def _measured_test(cols, rows, p, idx, min_points, tolerance) -> Group:
     return Group(set_value_bar(p[idx], cols.factor), np.sort(idx))
 
 
+#: The relative accuracy of a pressure sensor (the paper's: 0.1 %), allowed between a cluster's
+#: median and the set point it rounds to.
+SENSOR_ACCURACY = 0.001
 ROUNDING_STEPS = (1.0, 0.5, 0.1, 0.05, 0.01, 0.005, 0.001, 0.0005, 0.0001)
 
 
@@ -161,8 +164,9 @@ def set_value_bar(p_bar: np.ndarray, factor: float = 1.0) -> float:
     """A cluster's set value: its median rounded as a set point is written, in the file's unit.
 
     The coarsest of ROUNDING_STEPS (in the unit whose factor to bar is ``factor``) that lies
-    within three standard errors of the median (1.2533 x 1.4826 MAD / sqrt(n)) and within the
-    readings' range; the median to 1e-4 units when none does.
+    within the readings' range and within three standard errors of the median (1.2533 x 1.4826
+    MAD / sqrt(n)) plus SENSOR_ACCURACY of it (a sensor's calibration moves every reading of a
+    campaign alike, which no standard error shows); the median to 1e-4 units when none does.
 
     >>> set_value_bar(np.array([4.993, 5.004, 4.998, 5.001, 4.999, 5.002]))
     5.0
@@ -175,6 +179,6 @@ def set_value_bar(p_bar: np.ndarray, factor: float = 1.0) -> float:
     se = 1.2533 * mad / math.sqrt(v.size)
     for step in ROUNDING_STEPS:
         r = round(med / step) * step
-        if abs(r - med) <= 3.0 * se and v.min() <= r <= v.max() and r > 0:
+        if abs(r - med) <= 3.0 * se + SENSOR_ACCURACY * med and v.min() <= r <= v.max() and r > 0:
             return float(f"{r:.10g}") * factor
     return float(f"{round(med, 4):.10g}") * factor

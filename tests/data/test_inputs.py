@@ -920,3 +920,35 @@ def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
     names = sorted(p.name for p in out.iterdir())
     assert "test_3bar.png" in names and "my_photo.png" in names
     assert not {"test_7bar.png", "surface_spread.png", "surface.html"} & set(names)
+
+
+# ----------------------------------------------------------------------------- options elsewhere
+
+
+def test_fit_definition_and_batch_take_the_reading_options(tmp_path):
+    from uq._cli.cmd_basic import read_fit_config
+    from uq._drivers import batch
+
+    (tmp_path / "rec.csv").write_text(_text(NEGATIVE))
+    toml = tmp_path / "fit.toml"
+    toml.write_text(
+        '[data]\nrecordings = "rec.csv"\ncompression = "negative"\nabsolute_pressure = false\n'
+        'pressure_tolerance_bar = 0.02\nsheet = "Data"\n'
+    )
+    values = read_fit_config(toml)
+    assert values["compression"] == "negative" and values["absolute_pressure"] is False
+    assert values["pressure_tolerance_bar"] == 0.02 and values["sheet"] == "Data"
+    toml.write_text('[data]\ncompression = "down"\n')
+    with pytest.raises(InputError, match="compression: expected positive or negative"):
+        read_fit_config(toml)
+
+    entry = {"file": "rec.csv", "tasks": "fit", "compression": "negative"}
+    c = batch._campaign(entry, tmp_path, "cat.csv, row 2")
+    assert c.options == {"compression": "negative"}
+    job = {"file": str(c.file), "options": c.options}
+    assert _same(batch._recordings(job), _reference())
+    (tmp_path / "fo.csv").write_text(_text(_drop(GOOD, "piston_mm")))
+    with pytest.raises(InputError, match="force-only campaign"):
+        batch._recordings({"file": str(tmp_path / "fo.csv"), "options": {}})
+    with pytest.raises(InputError, match="column 'absolute_pressure': expected true or false"):
+        batch._campaign(entry | {"absolute_pressure": "maybe"}, tmp_path, "cat.csv, row 2")

@@ -301,6 +301,17 @@ RECORDINGS += [
         ["rec.csv", "'pressure_bar'", "--absolute-pressure"],
     ),
     (
+        "absolute-pressure-in-a-single-test",  # no zero crossing: the areas disagree by p/(p+1)
+        write_recordings_csv(
+            [
+                dict(t, pressure_bar=t["pressure_bar"] + 1.01325)
+                for t in simulate("n50", seed=5, layout=Layout(pressures_bar=(2.0,)))
+            ]
+        ).splitlines(),
+        [],
+        ["row 2", "3.01325 bar test", "--absolute-pressure"],
+    ),
+    (
         "absolute-pressure-declared-on-gauge",
         GOOD,
         ["--absolute-pressure"],
@@ -386,6 +397,7 @@ ISSUE_21_ROWS = {
     ],
     "absolute pressure in the gauge column": [
         "absolute-pressure-undeclared",
+        "absolute-pressure-in-a-single-test",
         "absolute-pressure-declared-on-gauge",
         "test_declared_conventions_read_as_the_paper_format",
     ],

@@ -156,14 +156,18 @@ def check_gauge(name: str, tests, column: str, absolute_declared: bool, p_atm_ba
         )
 
 
-def check_areas(name, tests, piston_area_m2: float, columns: dict) -> None:
+def check_areas(
+    name, tests, piston_area_m2: float, columns: dict, p_atm_bar: float | None = None
+) -> None:
     """Unit slips and a wrong piston area, seen through the effective area (eqs. 1, 5).
 
     In the highest-pressure test: P/p_u (mean force over the height range, over the pressure)
     must be an air spring's area; with a piston, S|dL/dx| (mean slope over each pass) too, and
     their ratio within AREA_RATIO_RANGE (from 1 bar up; a factor 4 below). With a volume column,
     the same for dV/dx in the highest-pressure test that has volumes. ``columns``: quantity ->
-    (header name, unit) of the file.
+    (header name, unit) of the file. ``p_atm_bar`` (None once the pressure is known to be
+    absolute and converted): a ratio that absolute pressure in the gauge column would explain
+    (P/p_u too small by p_u / (p_u + p_atm)) says so in the message.
     """
     lo, hi = AREA_RANGE_M2
     rng = f"{lo * 1e4:g} cm^2 .. {hi:g} m^2"
@@ -196,6 +200,7 @@ def check_areas(name, tests, piston_area_m2: float, columns: dict) -> None:
             f"S|dL/dx| (S = {piston_area_m2 * 1e4:g} cm^2)",
             f"a wrong --piston-area-cm2 (the area S of the piston cavity), or a unit slip in {force_col}, "
             f"{columns['pressure'][0]} or {col}?",
+            p_atm_bar,
         )
     if "volume" in columns:
         col, unit = columns["volume"]
@@ -221,16 +226,27 @@ def check_areas(name, tests, piston_area_m2: float, columns: dict) -> None:
             a_volume,
             "dV/dx",
             f"a unit slip in {force_col}, {columns['pressure'][0]} or {col}, or volumes of another element?",
+            p_atm_bar,
         )
 
 
-def _check_ratio(first: str, t, a_force: float, a_volume: float, what: str, cause: str) -> None:
+def _check_ratio(
+    first: str, t, a_force: float, a_volume: float, what: str, cause: str, p_atm_bar=None
+) -> None:
     if not (a_force > 0 and a_volume > 0):
         return
     low = t.pressure_bar < AREA_RATIO_MIN_PRESSURE_BAR
     r_lo, r_hi = AREA_RATIO_RANGE_LOW_PRESSURE if low else AREA_RATIO_RANGE
     ratio = a_volume / a_force
     if not r_lo <= ratio <= r_hi:
+        p = t.pressure_bar
+        if p_atm_bar is not None and p > p_atm_bar:
+            gauge = ratio * (p - p_atm_bar) / p  # the ratio were the label p_u + p_atm
+            if AREA_RATIO_RANGE[0] <= gauge <= AREA_RATIO_RANGE[1]:
+                cause = (
+                    cause.rstrip("?")
+                    + ", or absolute pressure in the gauge column (--absolute-pressure)?"
+                )
         raise InputError(
             f"{first}: the {t.label} test's force gives an effective area P/p_u of {a_force * 1e4:.3g} cm^2 but its "
             f"volume-derived area {what} is {a_volume * 1e4:.3g} cm^2 (ratio {ratio:.2f}; a casing explains "

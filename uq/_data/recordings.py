@@ -402,7 +402,9 @@ def _recordings(
     checks.check_force_sign(name, tests, compression == "negative", cols["force"].name)
     checks.check_gauge(name, tests, p_col.name, absolute_pressure, p_atm_bar)
     named = {q: (c.name, c.unit) for q, c in cols.items()}
-    checks.check_areas(name, tests, piston_area_cm2 * 1e-4, named)
+    checks.check_areas(
+        name, tests, piston_area_cm2 * 1e-4, named, None if absolute_pressure else p_atm_bar
+    )
     for t in tests:
         checks.check_outliers(name, t, _outlier_columns(t, cols))
 

@@ -279,6 +279,13 @@ RECORDINGS += [
         [],
         ["row 6", "'height_mm'", "also row 4"],
     ),
+    (
+        "catalogue-volume-column-empty",
+        [_drop(GOOD, "piston_mm")[0] + ",volume_l"]
+        + [ln + "," for ln in _drop(GOOD, "piston_mm")[1:]],
+        [],
+        ["row 1", "'volume_l'", "the column is empty"],
+    ),
     ("branch-without-step", _drop(GOOD, "step"), [], ["rec.csv", "'branch' without 'step'"]),
     ("piston-and-volume", [GOOD[0] + ",volume_l"] + GOOD[1:], [], ["piston_mm", "volume_l"]),
     (
@@ -384,6 +391,7 @@ ISSUE_21_ROWS = {
         "catalogue-one-pass",
         "catalogue-with-volume",
         "catalogue-volume-on-some-rows",
+        "catalogue-volume-column-empty",
         "catalogue-height-twice",
         "branch-without-step",
         "piston-and-volume",

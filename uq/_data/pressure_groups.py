@@ -140,7 +140,7 @@ def _measured_test(cols, rows, p, idx, min_points, tolerance) -> Group:
     )
     if idx.size < min_points:
         raise InputError(
-            f"{where(cols.name, first, col)}: only {idx.size} readings have pressures near {med:g} bar "
+            f"{where(cols.name, first, col)}: only {idx.size} {'reading has a pressure' if idx.size == 1 else 'readings have pressures'} near {med:g} bar "
             f"({lo:g}..{hi:g} bar), too few for a test (at least {min_points}); {rule}"
         )
     far = np.abs(p[idx] - med)

@@ -148,12 +148,315 @@ RECORDINGS = [
 ]
 
 
+# ----------------------------------------------------------------------------- issue 21
+# Real recordings: measured pressure, force-only stands, catalogue tables, units, signs. Each row
+# of the issue's table has rows here (ISSUE_21_ROWS below says which) that either read (the
+# tests after the table) or exit 2 with one line naming the place.
+
+
+def _drop(lines, *cols):
+    """The lines without the columns ``cols``."""
+    keep = [i for i, c in enumerate(lines[0].split(",")) if c not in cols]
+    return [",".join(ln.split(",")[i] for i in keep) for ln in lines]
+
+
+def _rename(lines, old, new):
+    return [",".join(new if c == old else c for c in lines[0].split(","))] + list(lines[1:])
+
+
+def _measured(lines, sd_bar=0.01, seed=1, decimals=3):
+    """Each reading's pressure as measured: set value + N(0, sd) (4.993, 5.004, ...)."""
+    rng = np.random.default_rng(seed)
+    return _column(
+        lines, "pressure_bar", lambda t: f"{float(t) + rng.normal(0, sd_bar):.{decimals}f}"
+    )
+
+
+def _one_pass(lines):
+    """A catalogue-like table: the compression branch only, without branch and step."""
+    rows = [ln for ln in lines[1:] if ",compression," in ln]
+    return _drop([lines[0]] + rows, "branch", "step")
+
+
+def _with_set_pressure(lines):
+    """set_pressure_bar added in front, the pressure column then read as measured."""
+    return ["set_pressure_bar," + lines[0]] + [ln.split(",")[0] + "," + ln for ln in lines[1:]]
+
+
+def _volume_from_piston(lines, top_l=4.2, area_cm2=54.82):
+    """piston_mm replaced by the element's volume_l: V = V(top) - S (L - L(top)) (eq. 5)."""
+    k = lines[0].split(",").index("piston_mm")
+    out = [lines[0].replace("piston_mm", "volume_l")]
+    top = {}
+    for ln in lines[1:]:
+        f = ln.split(",")
+        L = float(f[k])
+        top.setdefault(f[0], L)  # each test starts at its highest height
+        f[k] = f"{top_l - area_cm2 * 1e-4 * (L - top[f[0]]):.4f}"
+        out.append(",".join(f))
+    return out
+
+
+class Book(dict):
+    """Sheets of a workbook to write: sheet name -> rows, each a CSV line or a list of cells
+    (numbers written as numbers)."""
+
+
+def _write_book(path, book: Book, engine="openpyxl"):
+    import pandas as pd
+
+    def cell(text):
+        try:
+            return float(text)
+        except ValueError:
+            return text
+
+    with pd.ExcelWriter(path, engine=engine) as w:
+        for name, lines in book.items():
+            rows = [ln.split(",") if isinstance(ln, str) else ln for ln in lines]
+            width = max(len(r) for r in rows)
+            frame = pd.DataFrame([[cell(c) for c in r] + [None] * (width - len(r)) for r in rows])
+            frame.to_excel(w, sheet_name=name, header=False, index=False)
+
+
+ABSOLUTE = _column(GOOD, "pressure_bar", lambda t: f"{float(t) + 1.01325:g}")
+NEGATIVE = _column(GOOD, "force_N", lambda t: f"{-float(t):.2f}")
+
+RECORDINGS += [
+    (
+        "measured-pressure-too-spread",
+        _measured(GOOD, sd_bar=0.1),
+        [],
+        ["'pressure_bar'", "--pressure-tolerance-bar", "set_pressure"],
+    ),
+    (
+        "measured-pressure-cluster-too-small",
+        _measured(GOOD[:3] + GOOD[38:]),
+        [],
+        ["row 2", "'pressure_bar'", "too few for a test", "set_pressure"],
+    ),
+    (
+        "set-pressure-file-with-a-typo",
+        _cell(GOOD, 40, "pressure_bar", lambda _: "5.05"),
+        [],
+        ["row 42", "'pressure_bar'", "5.05", "typo"],
+    ),
+    (
+        "measured-far-from-set",
+        _with_set_pressure(GOOD)[:41]
+        + [_with_set_pressure(GOOD)[41].replace(",5,", ",6.013,", 1)]
+        + _with_set_pressure(GOOD)[42:],
+        [],
+        ["row 42", "'pressure_bar'", "set_pressure_bar", "absolute"],
+    ),
+    ("no-piston-column", _drop(GOOD, "piston_mm"), [], ["rec.csv", "force-only campaign"]),
+    (
+        "piston-column-of-zeros",
+        _column(GOOD, "piston_mm", lambda _: "0"),
+        [],
+        ["row 2", "'piston_mm'", "omit the piston_mm column"],
+    ),
+    ("catalogue-one-pass", _one_pass(GOOD), [], ["rec.csv", "unknown order", "branch"]),
+    (
+        "catalogue-with-volume",
+        _volume_from_piston(_one_pass(GOOD)),
+        [],
+        ["rec.csv", "volume_* column without piston_*"],
+    ),
+    (
+        "catalogue-volume-on-some-rows",
+        _rename(_drop(GOOD, "piston_mm"), "force_N", "force_N,volume_l")[:1]
+        + [
+            ",".join(ln.split(",")[:3] + (["4.2"] if i != 5 else [""]) + ln.split(",")[3:])
+            for i, ln in enumerate(_drop(GOOD, "piston_mm")[1:])
+        ],
+        [],
+        ["row 7", "'volume_l'", "on every row of a test"],
+    ),
+    (
+        "catalogue-height-twice",
+        _one_pass(GOOD)[:5] + [_one_pass(GOOD)[3]] + _one_pass(GOOD)[5:],
+        [],
+        ["row 6", "'height_mm'", "also row 4"],
+    ),
+    (
+        "catalogue-volume-column-empty",
+        [_drop(GOOD, "piston_mm")[0] + ",volume_l"]
+        + [ln + "," for ln in _drop(GOOD, "piston_mm")[1:]],
+        [],
+        ["row 1", "'volume_l'", "the column is empty"],
+    ),
+    ("branch-without-step", _drop(GOOD, "step"), [], ["rec.csv", "'branch' without 'step'"]),
+    ("piston-and-volume", [GOOD[0] + ",volume_l"] + GOOD[1:], [], ["piston_mm", "volume_l"]),
+    (
+        "compression-negative-undeclared",
+        NEGATIVE,
+        [],
+        ["row 39", "'force_N'", "--compression negative"],
+    ),
+    (
+        "compression-negative-declared-wrongly",
+        GOOD,
+        ["--compression", "negative"],
+        ["row 39", "'force_N'", "--compression negative", "drop the option"],
+    ),
+    ("compression-option-unknown", GOOD, ["--compression", "down"], ["--compression"]),
+    (
+        "absolute-pressure-undeclared",
+        ABSOLUTE,
+        [],
+        ["rec.csv", "'pressure_bar'", "--absolute-pressure"],
+    ),
+    (
+        "absolute-pressure-in-a-single-test",  # no zero crossing: the areas disagree by p/(p+1)
+        write_recordings_csv(
+            [
+                dict(t, pressure_bar=t["pressure_bar"] + 1.01325)
+                for t in simulate("n50", seed=5, layout=Layout(pressures_bar=(2.0,)))
+            ]
+        ).splitlines(),
+        [],
+        ["row 2", "3.01325 bar test", "--absolute-pressure"],
+    ),
+    (
+        "absolute-pressure-declared-on-gauge",
+        GOOD,
+        ["--absolute-pressure"],
+        ["row 2", "'pressure_bar'", "--absolute-pressure"],
+    ),
+    (
+        "psi-in-a-bar-column",
+        _column(GOOD, "pressure_bar", _scaled(14.5038)),
+        [],
+        ["row 39", "'pressure_bar'", "psi"],
+    ),
+    (
+        "unknown-unit",
+        _rename(GOOD, "pressure_bar", "pressure_atm"),
+        [],
+        ["row 1", "'pressure_atm'", "unknown unit 'atm'", "pressure_psi"],
+    ),
+    (
+        "unit-in-wrong-case",
+        _rename(GOOD, "force_N", "force_n"),
+        [],
+        ["row 1", "'force_n'", "case-sensitive", "force_N"],
+    ),
+    (
+        "two-units-for-one-quantity",
+        [GOOD[0] + ",pressure_psi"] + [ln + ",14.5" for ln in GOOD[1:]],
+        [],
+        ["row 1", "pressure_bar", "pressure_psi", "keep one"],
+    ),
+    (
+        "workbook-with-two-sheets-no-sheet-option",
+        Book(Data=GOOD, Notes=["a,b"]),
+        [],
+        ["rec.xlsx", "'Data', 'Notes'", "--sheet"],
+    ),
+    ("workbook-unknown-sheet", Book(Data=GOOD), ["--sheet", "Daten"], ["--sheet", "'Data'"]),
+    (
+        "workbook-bad-cell",
+        Book(
+            Data=[
+                ln.split(",") if i != 5 else ["1", "135", "12,5", "1", "compression", "4"]
+                for i, ln in enumerate(GOOD)
+            ]
+        ),
+        [],
+        ["rec.xlsx, sheet 'Data', row 6", "'force_N'", "12,5"],
+    ),
+    ("sheet-option-on-csv", GOOD, ["--sheet", "Data"], ["--sheet", "not a workbook"]),
+    ("excel-97-workbook", b"\xd0\xcf\x11\xe0" + bytes(100), [], ["rec.xls", ".xlsx"]),
+    (
+        "piston-area-20-cm2",
+        GOOD,
+        ["--piston-area-cm2", "20"],
+        ["row 39", "--piston-area-cm2", "ratio 0.4"],
+    ),
+]
+
+#: Every row of issue 21's table, and the rows above (or tests below) that cover it.
+ISSUE_21_ROWS = {
+    "measured overpressure per reading": [
+        "measured-pressure-too-spread",
+        "measured-pressure-cluster-too-small",
+        "set-pressure-file-with-a-typo",
+        "measured-far-from-set",
+        "test_measured_pressures_are_clustered_into_tests",
+        "test_set_pressure_column_groups_and_keeps_measured",
+    ],
+    "no piston column": ["no-piston-column", "piston-column-of-zeros", "test_force_only_campaign"],
+    "catalogue data sheet": [
+        "catalogue-one-pass",
+        "catalogue-with-volume",
+        "catalogue-volume-on-some-rows",
+        "catalogue-volume-column-empty",
+        "catalogue-height-twice",
+        "branch-without-step",
+        "piston-and-volume",
+        "test_catalogue_table_reads",
+    ],
+    "compression recorded negative": [
+        "compression-negative-undeclared",
+        "compression-negative-declared-wrongly",
+        "compression-option-unknown",
+        "test_declared_conventions_read_as_the_paper_format",
+    ],
+    "absolute pressure in the gauge column": [
+        "absolute-pressure-undeclared",
+        "absolute-pressure-in-a-single-test",
+        "absolute-pressure-declared-on-gauge",
+        "test_declared_conventions_read_as_the_paper_format",
+    ],
+    "psi, in, lbf, in^3": [
+        "psi-in-a-bar-column",
+        "unknown-unit",
+        "unit-in-wrong-case",
+        "two-units-for-one-quantity",
+        "test_units_from_column_suffixes",
+    ],
+    "an .xlsx file": [
+        "workbook-with-two-sheets-no-sheet-option",
+        "workbook-unknown-sheet",
+        "workbook-bad-cell",
+        "sheet-option-on-csv",
+        "excel-97-workbook",
+        "test_workbooks_read_like_csv",
+    ],
+    "0.01-0.02 mm steps": ["test_fine_steps_are_accepted"],
+    "only the compression branch": ["test_compression_branch_only"],
+    "--piston-area-cm2 20": [
+        "piston-area-20-cm2",
+        "test_piston_area_within_what_a_casing_explains",
+    ],
+}
+
+
+def test_every_row_of_issue_21_is_covered():
+    ids = {r[0] for r in RECORDINGS} | {n for n in globals() if n.startswith("test_")}
+    for row, covered_by in ISSUE_21_ROWS.items():
+        assert covered_by and set(covered_by) <= ids, (row, set(covered_by) - ids)
+
+
+def _write_input(tmp_path, content):
+    if isinstance(content, Book):
+        path = tmp_path / "rec.xlsx"
+        _write_book(path, content)
+    elif isinstance(content, bytes):
+        path = tmp_path / "rec.xls"
+        path.write_bytes(content)
+    else:
+        path = tmp_path / "rec.csv"
+        path.write_text("\n".join(content) + "\n")
+    return path
+
+
 @pytest.mark.parametrize(
     "lines, options, names", [r[1:] for r in RECORDINGS], ids=[r[0] for r in RECORDINGS]
 )
 def test_bad_recordings_exit_2_one_line_nothing_written(tmp_path, capsys, lines, options, names):
-    csv = tmp_path / "rec.csv"
-    csv.write_text("\n".join(lines) + "\n")
+    csv = _write_input(tmp_path, lines)
     out = tmp_path / "out"
     status = _run(
         ["fit", str(csv), "--json", str(out / "fit.json"), "--max-steps", "400", *options]
@@ -162,10 +465,225 @@ def test_bad_recordings_exit_2_one_line_nothing_written(tmp_path, capsys, lines,
     err = captured.err.strip()
     assert status == 2, err
     assert err.count("\n") == 0 and err.startswith("uq fit: error:")
-    assert "rec.csv" in err or names[0].startswith("--")
+    assert csv.name in err or names[0].startswith("--")
     for name in names:
         assert name in err, (name, err)
     assert not out.exists()
+
+
+# ----------------------------------------------------------------------------- issue 21: what reads
+
+
+def _text(lines) -> str:
+    return "\n".join(lines) + "\n"
+
+
+def _from_lines(lines, **kw):
+    from uq._data.recordings import recordings_from_text
+
+    return recordings_from_text(_text(lines), "rec.csv", **kw)
+
+
+def test_measured_pressures_are_clustered_into_tests():
+    ref = _reference()
+    lines = _measured(GOOD)
+    rec = _from_lines(lines)
+    assert [t.pressure_bar for t in rec.tests] == [1.0, 5.0] and rec.pressure_measured
+    written = [float(ln.split(",")[0]) for ln in lines[1:]]
+    assert np.array_equal(np.concatenate([t.measured_pressure_bar for t in rec.tests]), written)
+    assert _same(rec, ref)
+    # the paper's format: one value per test, measured equals set, nothing clustered
+    assert not ref.pressure_measured
+    assert all(
+        np.array_equal(t.measured_pressure_bar, np.full(37, t.pressure_bar)) for t in ref.tests
+    )
+    with pytest.raises(InputError, match="too few for a test.*--pressure-tolerance-bar"):
+        _from_lines(lines, pressure_tolerance_bar=0.001)
+
+
+def test_set_value_of_a_cluster_is_its_median_rounded_as_set_points_are_written():
+    from uq._data.pressure_groups import set_value_bar
+
+    rng = np.random.default_rng(0)
+    assert set_value_bar(5.0 + rng.normal(0, 0.01, 37)) == 5.0
+    assert set_value_bar(2.5 + rng.normal(0, 0.01, 37)) == 2.5
+    assert set_value_bar(1.02 + rng.normal(0, 0.001, 37)) == 1.02
+    psi = 0.0689475729316836
+    assert set_value_bar((80 + rng.normal(0, 0.1, 37)) * psi, psi) == pytest.approx(
+        80 * psi, rel=1e-12
+    )
+
+
+def test_set_pressure_column_groups_and_keeps_measured():
+    measured = _measured(GOOD, decimals=5)
+    lines = ["set_pressure_bar," + GOOD[0]] + [
+        g.split(",")[0] + "," + m for g, m in zip(GOOD[1:], measured[1:], strict=True)
+    ]
+    rec = _from_lines(lines)
+    assert [t.pressure_bar for t in rec.tests] == [1.0, 5.0] and rec.pressure_measured
+    assert rec.units["set_pressure"] == "bar"
+    measured = np.concatenate([t.measured_pressure_bar for t in rec.tests])
+    assert np.array_equal(measured, [float(ln.split(",")[1]) for ln in lines[1:]])
+    assert np.abs(measured - np.repeat([1.0, 5.0], 37)).max() < 0.05
+    assert _same(rec, _reference())
+
+
+def test_force_only_campaign():
+    from uq._data.recordings import require
+
+    rec = _from_lines(_drop(GOOD, "piston_mm"))
+    ref = _reference()
+    assert all(t.piston_m is None for t in rec.tests)
+    assert not rec.has_volume and not rec.has_piston and rec.order_known
+    assert all(
+        np.array_equal(a.force_N, b.force_N) for a, b in zip(rec.tests, ref.tests, strict=True)
+    )
+    require(rec, {"order"})  # what a force-side command will ask for
+    with pytest.raises(InputError, match="force-only campaign: this command needs piston_"):
+        require(rec, {"piston"})
+
+
+def test_commands_refuse_in_one_place_and_the_refusal_lifts(tmp_path, monkeypatch, capsys):
+    import argparse
+
+    from uq._cli.common import load
+    from uq._data import recordings
+
+    path = tmp_path / "rec.csv"
+    path.write_text(_text(_drop(GOOD, "piston_mm")))
+    for command in ("surface", "diagnose"):
+        assert _run([command, str(path)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and err.startswith(f"uq {command}: error: {path}: force-only")
+    args = argparse.Namespace(file=str(path), piston_area_cm2=54.82, x0_mm=112.0, _name="surface")
+    with pytest.raises(InputError, match="force-only"):
+        load(args)
+    assert load(args, needs=()).n_points == 74
+    monkeypatch.setitem(recordings.COMMAND_NEEDS, "surface", frozenset())
+    assert not load(args).has_volume
+
+
+def test_catalogue_table_reads():
+    lines = _volume_from_piston(_one_pass(GOOD))
+    lines = [ln if not ln.startswith("1,") else ln.rsplit(",", 1)[0] + "," for ln in lines]
+    rec = _from_lines(lines)
+    assert not rec.order_known and rec.has_volume and not rec.has_piston
+    low, high = rec.tests
+    assert low.compression is None and low.step is None and low.volume_m3 is None
+    assert np.all(np.diff(high.height_m) < 0) and high.n_points == 19
+    assert high.volume_m3[0] == pytest.approx(4.2e-3) and np.all(np.diff(high.volume_m3) < 0)
+    assert rec.units["volume"] == "l"
+    ref = _reference().tests[1]
+    comp = ref.compression
+    assert np.array_equal(high.force_N, ref.force_N[comp])
+
+
+def test_declared_conventions_read_as_the_paper_format():
+    ref = _reference()
+    neg = _from_lines(NEGATIVE, compression="negative")
+    assert _same(neg, ref) and neg.conventions["compression"] == "negative"
+    absolute = _from_lines(ABSOLUTE, absolute_pressure=True)
+    assert [t.pressure_bar for t in absolute.tests] == [1.0, 5.0] and _same(absolute, ref)
+    assert absolute.conventions == {
+        "compression": "positive",
+        "pressure": "absolute",
+        "p_atm_bar": 1.01325,
+    }
+    assert ref.conventions == {"compression": "positive", "pressure": "gauge"}
+
+
+def test_units_from_column_suffixes():
+    from uq._data import units
+
+    # pint's factors, cleaned of float noise: the paper's units read bit for bit as before
+    assert units.factor("height", "mm") == 1e-3 and units.factor("volume", "l") == 1e-3
+    assert (
+        units.factor("height", "in") == 0.0254 and units.factor("force", "lbf") == 4.4482216152605
+    )
+    tests = simulate("n50", seed=5, layout=Layout(pressures_bar=(1.0, 5.0)))
+    us = {"pressure": "psi", "height": "in", "force": "lbf"}
+    text = write_recordings_csv(tests, units=us)
+    assert text.splitlines()[0] == "pressure_psi,height_in,force_lbf,piston_in,branch,step"
+    from uq._data.recordings import recordings_from_text
+
+    rec = recordings_from_text(text, "us.csv")
+    ref = _reference()
+    assert rec.units == {"pressure": "psi", "height": "in", "force": "lbf", "piston": "in"}
+    assert [t.pressure_bar for t in rec.tests] == [1.0, 5.0]
+    for a, b in zip(rec.tests, ref.tests, strict=True):
+        assert np.allclose(a.height_m, b.height_m, atol=0.5e-5 * 0.0254)  # printed to 1e-5 in
+        assert np.allclose(a.force_N, b.force_N, atol=0.5e-3 * 4.45 + 0.005)  # 1e-3 lbf, 0.01 N
+        assert np.allclose(a.piston_m, b.piston_m, atol=0.5e-5 * 0.0254 + 0.5e-6)
+    for q, u in (("pressure", "kPa"), ("pressure", "MPa"), ("pressure", "mbar"), ("force", "kN")):
+        other = recordings_from_text(write_recordings_csv(tests, units={q: u}), "o.csv")
+        assert [t.pressure_bar for t in other.tests] == [1.0, 5.0] and other.units[q] == u
+
+
+def test_workbooks_read_like_csv(tmp_path):
+    ref = _reference()
+    lines = ["# made on the stand", "# operator: a. n. other"] + GOOD
+    for engine, suffix in (("openpyxl", "xlsx"), ("odf", "ods")):
+        path = tmp_path / f"rec.{suffix}"
+        _write_book(path, Book(Data=lines), engine)
+        rec = read_recordings(path)
+        assert _same(rec, ref) and rec.sheet == "Data"
+        assert rec.comments == ("made on the stand", "operator: a. n. other")
+        assert rec.tests[0].rows[0] == 4  # the sheet's row: two comments, the header, then data
+        _write_book(path, Book(Notes=["a,b"], Data=lines), engine)
+        assert _same(read_recordings(path, sheet="Data"), ref)
+        bad = _cell(GOOD, 2, "force_N", lambda _: "x")
+        _write_book(path, Book(Data=["# note"] + bad), engine)
+        with pytest.raises(
+            InputError, match=rf"rec.{suffix}, sheet 'Data', row 5, column 'force_N'"
+        ):
+            read_recordings(path)
+
+
+def test_fine_steps_are_accepted(tmp_path):
+    for step in (0.01e-3, 0.02e-3):
+        tests = simulate("n50", seed=5, layout=Layout(pressures_bar=(5.0,), step_m=step))
+        rec = _from_lines(write_recordings_csv(tests).splitlines())
+        assert rec.n_points == 2 * round(0.09 / step) + 1
+
+
+def test_compression_branch_only():
+    lines = [GOOD[0]] + [ln for ln in GOOD[1:] if ",compression," in ln]
+    rec = _from_lines(lines)
+    assert rec.order_known and not rec.has_both_branches and rec.tests[0].compression.all()
+    assert _reference().has_both_branches
+
+
+@pytest.mark.parametrize(
+    "area, ok", [(30, False), (40, True), (54.82, True), (70, True), (80, False)]
+)
+def test_piston_area_within_what_a_casing_explains(area, ok):
+    # the paper's spring: S|dL/dx| / (P/p_u) = 1.12 at 5 bar with S = 54.82 cm^2; 0.67..1.5 allowed
+    if ok:
+        assert _from_lines(GOOD, piston_area_cm2=area).piston_area_m2 == pytest.approx(area * 1e-4)
+    else:
+        with pytest.raises(InputError, match="--piston-area-cm2"):
+            _from_lines(GOOD, piston_area_cm2=area)
+
+
+def test_low_pressure_campaigns_keep_the_unit_slip_bound():
+    # below 1 bar the casing's force rivals p_u F_eff: only a factor 4 is refused there
+    tests = simulate("n50", seed=5, layout=Layout(pressures_bar=(0.1, 0.3)))
+    assert _from_lines(write_recordings_csv(tests).splitlines(), piston_area_cm2=80).n_points == 74
+
+
+def test_zero_force_pressure_separates_gauge_from_absolute():
+    from uq._data.checks import zero_force_pressure_bar
+
+    for pressures in ((1.0, 5.0), (3.0, 4.0, 5.0, 6.0, 7.0), (0.5, 1.5, 2.5), (2.0, 6.0, 10.0)):
+        for effects in ({}, {"casing_force": 200.0}, {"pressure_dependent_area": 0.01}):
+            tests = simulate("n50", seed=1, effects=effects, layout=Layout(pressures_bar=pressures))
+            rec = _from_lines(write_recordings_csv(tests, piston=False).splitlines())
+            p0 = zero_force_pressure_bar(rec.tests)
+            assert abs(p0) < 0.4, (pressures, effects, p0)
+            shifted = [dict(t, pressure_bar=t["pressure_bar"] + 1.01325) for t in tests]
+            text = write_recordings_csv(shifted, piston=False).splitlines()
+            with pytest.raises(InputError, match="--absolute-pressure"):
+                _from_lines(text)
 
 
 OPTIONS = [
@@ -422,3 +940,35 @@ def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
     names = sorted(p.name for p in out.iterdir())
     assert "test_3bar.png" in names and "my_photo.png" in names
     assert not {"test_7bar.png", "surface_spread.png", "surface.html"} & set(names)
+
+
+# ----------------------------------------------------------------------------- options elsewhere
+
+
+def test_fit_definition_and_batch_take_the_reading_options(tmp_path):
+    from uq._cli.cmd_basic import read_fit_config
+    from uq._drivers import batch
+
+    (tmp_path / "rec.csv").write_text(_text(NEGATIVE))
+    toml = tmp_path / "fit.toml"
+    toml.write_text(
+        '[data]\nrecordings = "rec.csv"\ncompression = "negative"\nabsolute_pressure = false\n'
+        'pressure_tolerance_bar = 0.02\nsheet = "Data"\n'
+    )
+    values = read_fit_config(toml)
+    assert values["compression"] == "negative" and values["absolute_pressure"] is False
+    assert values["pressure_tolerance_bar"] == 0.02 and values["sheet"] == "Data"
+    toml.write_text('[data]\ncompression = "down"\n')
+    with pytest.raises(InputError, match="compression: expected positive or negative"):
+        read_fit_config(toml)
+
+    entry = {"file": "rec.csv", "tasks": "fit", "compression": "negative"}
+    c = batch._campaign(entry, tmp_path, "cat.csv, row 2")
+    assert c.options == {"compression": "negative"}
+    job = {"file": str(c.file), "options": c.options}
+    assert _same(batch._recordings(job), _reference())
+    (tmp_path / "fo.csv").write_text(_text(_drop(GOOD, "piston_mm")))
+    with pytest.raises(InputError, match="force-only campaign"):
+        batch._recordings({"file": str(tmp_path / "fo.csv"), "options": {}})
+    with pytest.raises(InputError, match="column 'absolute_pressure': expected true or false"):
+        batch._campaign(entry | {"absolute_pressure": "maybe"}, tmp_path, "cat.csv, row 2")

@@ -13,6 +13,8 @@ from uq._cli.common import (
     add_recordings,
     add_sampling,
     add_stand,
+    boolean,
+    compression,
     load,
     positive_float,
     positive_int,
@@ -70,7 +72,76 @@ def configure_simulate(p) -> None:
         help="the stand that makes the noise: error budget and gas volumes (TOML, keys of "
         "uq._data.stand_description.StandDescription; default the paper's stand, section 3.2)",
     )
+    g = p.add_argument_group("the shape of the file (docs/formats.md, section 1)")
+    g.add_argument(
+        "--units",
+        type=unit_list,
+        default=None,
+        metavar="LIST",
+        help="units of the columns, e.g. psi,in,lbf,in3 (pressure: bar, psi, kPa, MPa, mbar; "
+        "length, for height and piston: mm, m, in; force: N, kN, lbf; volume: l, cm3, m3, in3); "
+        "the paper's bar, mm, N (and l) when not given",
+    )
+    g.add_argument(
+        "--force-only",
+        action="store_true",
+        help="no piston or volume column: a stand that measures force only",
+    )
+    g.add_argument(
+        "--catalogue",
+        action="store_true",
+        help="a data sheet: one compression pass without branch and step, values rounded as "
+        "catalogues print them, and a volume_* column at --volume-at-bar instead of the piston",
+    )
+    g.add_argument(
+        "--volume-at-bar",
+        type=positive_float,
+        metavar="P",
+        help="with --catalogue: the pressure whose test lists the element's volume (one of "
+        "--pressures; default the middle one)",
+    )
+    g.add_argument(
+        "--record-pressure",
+        nargs="?",
+        const="both",
+        choices=("both", "measured"),
+        help="record each reading's pressure as a sensor reads it (1 Pa resolution, 0.1 %% gain "
+        "error per campaign): 'both' (the default when given) writes set_pressure_* and the measured "
+        "pressure_*, 'measured' only the measured pressure_* (the reader then clusters the tests)",
+    )
+    g.add_argument(
+        "--compression-negative",
+        action="store_true",
+        help="write compression as negative force (a load frame's convention)",
+    )
     add_json(p)
+
+
+def unit_list(text: str) -> dict:
+    """``psi,in,lbf`` -> {"pressure": "psi", "height": "in", "force": "lbf"} (argparse type)."""
+    import argparse
+
+    from uq._data.units import QUANTITIES
+
+    out: dict[str, str] = {}
+    for name in (n.strip() for n in text.split(",") if n.strip()):
+        quantity = next(
+            (q for q in ("pressure", "height", "force", "volume") if name in QUANTITIES[q][1]),
+            None,
+        )
+        if quantity is None:
+            known = ", ".join(
+                s for q in ("pressure", "height", "force", "volume") for s in QUANTITIES[q][1]
+            )
+            raise argparse.ArgumentTypeError(f"unknown unit '{name}'; expected some of {known}")
+        if quantity in out:
+            raise argparse.ArgumentTypeError(
+                f"two units for the {quantity}: {out[quantity]} and {name}"
+            )
+        out[quantity] = name
+    if not out:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of units, got '{text}'")
+    return out
 
 
 def _pressures(text: str) -> tuple[float, ...]:
@@ -91,6 +162,7 @@ def command_simulate(args) -> int:
     from uq._data.recordings import write_recordings_csv
     from uq._io.files import emit_json, write_text_atomic
     from uq._physics.mechanisms import parse_effects
+    from uq._stand import shapes
     from uq._stand.simulator import Layout, simulate, simulation_comment
 
     stand = stand_from(args, model=False)
@@ -99,9 +171,9 @@ def command_simulate(args) -> int:
         raise InputError(
             f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}"
         )
-    layout = Layout(
-        _pressures(args.pressures), args.x_max_mm * 1e-3, args.x_min_mm * 1e-3, args.step_mm * 1e-3
-    )
+    pressures = _pressures(args.pressures)
+    volume_at = _volume_at(args, pressures)
+    layout = Layout(pressures, args.x_max_mm * 1e-3, args.x_min_mm * 1e-3, args.step_mm * 1e-3)
     tests = simulate(
         args.spring,
         seed=args.seed,
@@ -110,18 +182,57 @@ def command_simulate(args) -> int:
         piston_area_m2=args.piston_area_cm2 * 1e-4,
         stand=stand,
     )
+    if args.record_pressure:
+        tests = shapes.record_pressure(tests, args.seed)
+    if args.catalogue:
+        tests = shapes.catalogue(
+            tests,
+            args.spring,
+            effects,
+            volume_at_bar=volume_at,
+            x_max_m=layout.x_max_m,
+            element_volume_at_xmax_m3=stand.element_volume_at_xmax_m3,
+            piston_area_m2=args.piston_area_cm2 * 1e-4,
+        )
+    units = dict(args.units or {})
     eff = " ".join(f"--effect {k}={v:g}" for k, v in effects.items())
-    cmd = (
-        f"uq simulate --out {args.out} --spring {args.spring} --seed {args.seed} --pressures {args.pressures} "
-        f"--x-max-mm {args.x_max_mm:g} --x-min-mm {args.x_min_mm:g} --step-mm {args.step_mm:g} "
-        f"--piston-area-cm2 {args.piston_area_cm2:g} {eff}{' --stand ' + str(args.stand) if args.stand else ''}"
-    ).strip()
+    shape = _shape_options(args, volume_at)
+    cmd = " ".join(
+        w
+        for w in (
+            f"uq simulate --out {args.out} --spring {args.spring} --seed {args.seed} --pressures {args.pressures} "
+            f"--x-max-mm {args.x_max_mm:g} --x-min-mm {args.x_min_mm:g} --step-mm {args.step_mm:g} "
+            f"--piston-area-cm2 {args.piston_area_cm2:g}",
+            eff,
+            f"--stand {args.stand}" if args.stand else "",
+            shape,
+        )
+        if w
+    )
     comment = simulation_comment(args.spring, effects, stand, cmd)
-    write_text_atomic(args.out, write_recordings_csv(tests, comment))
+    described = _shape_comment(args, volume_at, stand)
+    if described:
+        comment = comment + "\n" + described
+    text = write_recordings_csv(
+        tests,
+        comment,
+        units=units,
+        pressure={None: "set", "both": "both", "measured": "measured"}[args.record_pressure],
+        order=not args.catalogue,
+        piston=not (args.force_only or args.catalogue),
+        volume=args.catalogue and not args.force_only,
+        compression_negative=args.compression_negative,
+        rounding=(
+            shapes.catalogue_rounding({"height": "mm", "force": "N", "volume": "l"} | units)
+            if args.catalogue
+            else None
+        ),
+    )
+    write_text_atomic(args.out, text)
     n = sum(len(t["height_m"]) for t in tests)
     print(
         f"wrote {args.out}: {len(tests)} tests, {n} points (spring {args.spring}, seed {args.seed}"
-        f"{', effects ' + ', '.join(effects) if effects else ''})"
+        f"{', effects ' + ', '.join(effects) if effects else ''}{', ' + shape if shape else ''})"
     )
     emit_json(
         {
@@ -132,10 +243,80 @@ def command_simulate(args) -> int:
             "n_tests": len(tests),
             "n_points": n,
             "pressures_bar": [float(t["pressure_bar"]) for t in tests],
+            "shape": {
+                "units": {"pressure": "bar", "height": "mm", "force": "N"} | units,
+                "force_only": bool(args.force_only),
+                "catalogue": bool(args.catalogue),
+                "volume_at_bar": volume_at if args.catalogue and not args.force_only else None,
+                "record_pressure": args.record_pressure,
+                "compression_negative": bool(args.compression_negative),
+            },
         },
         args.json,
     )
     return 0
+
+
+def _volume_at(args, pressures: tuple[float, ...]) -> float | None:
+    """The pressure of the catalogue's volume column (--volume-at-bar, default the middle one)."""
+    if args.volume_at_bar is not None and not args.catalogue:
+        raise InputError("option --volume-at-bar: only with --catalogue")
+    if not args.catalogue:
+        return None
+    if args.volume_at_bar is None:
+        return sorted(pressures)[len(pressures) // 2]
+    if not any(abs(p - args.volume_at_bar) < 1e-9 for p in pressures):
+        raise InputError(
+            f"option --volume-at-bar {args.volume_at_bar:g}: not one of --pressures {args.pressures}"
+        )
+    return args.volume_at_bar
+
+
+def _shape_options(args, volume_at) -> str:
+    """The shape options as a command line gives them (for the file's 'Regenerate' line)."""
+    words = []
+    if args.units:
+        words.append("--units " + ",".join(args.units.values()))
+    if args.force_only:
+        words.append("--force-only")
+    if args.catalogue:
+        words.append(f"--catalogue --volume-at-bar {volume_at:g}")
+    if args.record_pressure:
+        words.append(f"--record-pressure {args.record_pressure}")
+    if args.compression_negative:
+        words.append("--compression-negative")
+    return " ".join(words)
+
+
+def _shape_comment(args, volume_at, stand) -> str:
+    """Comment lines that say how the file departs from the paper's full format."""
+    from uq._stand import shapes
+
+    lines = []
+    if args.units:
+        lines.append("Units: " + ", ".join(f"{q} in {u}" for q, u in args.units.items()) + ".")
+    if args.catalogue:
+        vol = (
+            ""
+            if args.force_only
+            else f"; volume at {volume_at:g} bar from the element's {stand.element_volume_at_xmax_m3 * 1e3:g} L "
+            "at x_max (assumed) plus the integral of the true volume slope"
+        )
+        lines.append(
+            "Shape: catalogue table, one compression pass without branch and step, rounded as "
+            f"catalogues print{vol}."
+        )
+    if args.force_only:
+        lines.append("Shape: force only (no piston column).")
+    if args.record_pressure:
+        lines.append(
+            f"Pressure: measured by a sensor of {shapes.SENSOR_RESOLUTION_PA:g} Pa resolution with a gain error "
+            f"drawn once per campaign (sd {shapes.SENSOR_GAIN_SD:.1%}; this campaign's "
+            f"{shapes.sensor_gain(args.seed):+.4%}) on the held pressure p + dp."
+        )
+    if args.compression_negative:
+        lines.append("Force: compression written negative (read with --compression negative).")
+    return "\n".join(lines)
 
 
 def configure_fit(p) -> None:
@@ -161,6 +342,11 @@ CONFIG_KEYS = {
         "recordings": ("file", None),
         "x0_mm": ("x0_mm", positive_float),
         "piston_area_cm2": ("piston_area_cm2", positive_float),
+        "compression": ("compression", compression),
+        "sheet": ("sheet", str),
+        "absolute_pressure": ("absolute_pressure", boolean),
+        "p_atm_bar": ("p_atm_bar", positive_float),
+        "pressure_tolerance_bar": ("pressure_tolerance_bar", positive_float),
     },
     "sampling": {
         "seed": ("seed", seed),

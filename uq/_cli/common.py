@@ -23,6 +23,7 @@ DEFAULT_SEED = 20201  # fixed: a rerun gives the same numbers
 # parser does not import numpy/ArviZ; tests/cli/test_cli.py checks they equal the library's.
 DEFAULT_PISTON_AREA_CM2 = 54.82
 DEFAULT_X0_MM = 112.0
+DEFAULT_P_ATM_BAR = 1.01325
 DEFAULT_WALKERS = 32
 DEFAULT_ENSEMBLES = 4  # independent, overdispersed ensembles for R-hat (uq/_inference/sampler.py)
 DEFAULT_MAX_STEPS = 20000
@@ -48,6 +49,8 @@ positive_float = _option_type(values.positive_float)
 nonnegative_float = _option_type(values.nonnegative_float)
 finite_float = _option_type(values.finite_float)
 positive_int = _option_type(values.positive_int)
+compression = _option_type(values.compression)
+boolean = _option_type(values.boolean)
 walkers = _option_type(values.walkers)
 seed = _option_type(values.seed)
 
@@ -84,7 +87,7 @@ def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> N
     p.add_argument(
         "file",
         nargs="?" if file_optional else None,
-        help="recordings CSV (format: docs/formats.md)",
+        help="recordings: CSV, .xlsx or .ods (format: docs/formats.md)",
     )
     p.add_argument(
         "--piston-area-cm2",
@@ -97,6 +100,40 @@ def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> N
         type=positive_float,
         default=DEFAULT_X0_MM,
         help="reference height x0 of the polynomial basis, mm (the paper's value)",
+    )
+    g = p.add_argument_group("reading the recordings (docs/formats.md, section 1)")
+    g.add_argument(
+        "--compression",
+        type=compression,
+        default="positive",
+        metavar="positive|negative",
+        help="sign of a compressive force in the file: negative for a load frame that records "
+        "compression negative (forces are negated on reading)",
+    )
+    g.add_argument(
+        "--sheet",
+        metavar="NAME",
+        help="the sheet holding the campaign, for an .xlsx/.ods workbook with several sheets",
+    )
+    g.add_argument(
+        "--absolute-pressure",
+        action="store_true",
+        help="the pressure columns hold absolute pressure: --p-atm-bar is subtracted to get the "
+        "gauge overpressure",
+    )
+    g.add_argument(
+        "--p-atm-bar",
+        type=positive_float,
+        default=DEFAULT_P_ATM_BAR,
+        help="atmospheric pressure, bar (used with --absolute-pressure)",
+    )
+    g.add_argument(
+        "--pressure-tolerance-bar",
+        type=positive_float,
+        default=None,
+        metavar="BAR",
+        help="how far a reading's measured pressure may lie from its test's set pressure "
+        "(default max(0.05 bar, 2 %% of the pressure))",
     )
 
 
@@ -139,12 +176,28 @@ def add_json(p: argparse.ArgumentParser) -> None:
     )
 
 
-def load(args, min_points: int = 6):
-    from uq._data.recordings import read_recordings
+def load(args, min_points: int = 6, needs=None):
+    """The recordings of ``args.file`` read with the command's reading options.
 
-    return read_recordings(
-        args.file, piston_area_cm2=args.piston_area_cm2, x0_mm=args.x0_mm, min_points=min_points
+    ``needs``: what the command cannot yet do without ("piston", "order"); by default the
+    command's entry of uq._data.recordings.COMMAND_NEEDS, the one table to edit when a command
+    learns to use force-only campaigns or campaigns in unknown order.
+    """
+    from uq._data.recordings import COMMAND_NEEDS, read_recordings, require
+
+    rec = read_recordings(
+        args.file,
+        piston_area_cm2=args.piston_area_cm2,
+        x0_mm=args.x0_mm,
+        min_points=min_points,
+        compression=getattr(args, "compression", "positive"),
+        sheet=getattr(args, "sheet", None),
+        absolute_pressure=getattr(args, "absolute_pressure", False),
+        p_atm_bar=getattr(args, "p_atm_bar", DEFAULT_P_ATM_BAR),
+        pressure_tolerance_bar=getattr(args, "pressure_tolerance_bar", None),
     )
+    require(rec, COMMAND_NEEDS.get(getattr(args, "_name", ""), ()) if needs is None else needs)
+    return rec
 
 
 def positive(name: str, value: float) -> float:

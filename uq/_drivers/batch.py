@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from uq._io.errors import InputError, where
-from uq._io.values import positive_float, positive_int, seed, walkers
+from uq._io.values import boolean, compression, positive_float, positive_int, seed, walkers
 
 TASKS = ("fit", "report", "surface", "diagnose")
 #: Per-campaign options: name -> parser (the same checks as the single-campaign commands' options).
@@ -45,6 +45,11 @@ OPTIONS = {
     "piston_area_cm2": positive_float,
     "draws": positive_int,
     "stand": str,
+    "compression": compression,
+    "sheet": str,
+    "absolute_pressure": boolean,
+    "p_atm_bar": positive_float,
+    "pressure_tolerance_bar": positive_float,
 }
 DEFAULT_SEED = 20201  # as every command's --seed
 STAMP = "batch.json"
@@ -327,12 +332,23 @@ def run_job(job: dict) -> dict:
 # ----------------------------------------------------------------------------- tasks
 
 
+READING_OPTIONS = (
+    "piston_area_cm2",
+    "x0_mm",
+    "compression",
+    "sheet",
+    "absolute_pressure",
+    "p_atm_bar",
+    "pressure_tolerance_bar",
+)
+
+
 def _recordings(job: dict):
-    from uq._data.recordings import read_recordings
+    from uq._data.recordings import read_recordings, require_for
 
     o = job["options"]
-    kw = {k: o[k] for k in ("piston_area_cm2", "x0_mm") if k in o}
-    return read_recordings(job["file"], **kw)
+    kw = {k: o[k] for k in READING_OPTIONS if k in o}
+    return require_for(read_recordings(job["file"], **kw), "batch")
 
 
 def _settings(job: dict):

@@ -55,3 +55,20 @@ def seed(text: str) -> int:
     if not 0 <= value < 2**63:  # numpy's seed sequences take non-negative integers
         raise ValueError(f"expected an integer seed >= 0, got '{text}'")
     return value
+
+
+def compression(text: str) -> str:
+    """The file's force sign convention: 'positive' (compression positive) or 'negative'."""
+    value = text.strip()
+    if value not in ("positive", "negative"):
+        raise ValueError(f"expected positive or negative, got '{text}'")
+    return value
+
+
+def boolean(text: str) -> bool:
+    value = text.strip().lower()
+    if value in ("true", "yes", "1"):
+        return True
+    if value in ("false", "no", "0"):
+        return False
+    raise ValueError(f"expected true or false, got '{text}'")

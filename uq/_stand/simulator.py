@@ -347,6 +347,7 @@ def simulate(
                 piston_m=piston_read,
                 compression=comp,
                 step=steps,
+                pressure_error_bar=dp_bar,  # the held pressure was p + dp (uq._stand.shapes)
             )
         )
     return tests

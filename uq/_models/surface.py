@@ -167,6 +167,7 @@ def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
 
 # ----------------------------------------------------------------------------- likelihood
 
+
 def log_prob(theta, d: PairData):
     """Log posterior of the noise parameters (coefficients integrated out); theta (5,)."""
     return pair.log_prior(theta, d) + pair.posterior(theta, d).log_marginal

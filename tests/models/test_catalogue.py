@@ -12,10 +12,12 @@ The recordings are these curves plus Gaussian reading noise of known, constant s
 virtual stand, and not the noise family the models assume: a floor only). Every model must find
 the answer in closed form: the cubic posteriors' 90 % intervals contain the coefficients, the
 bands contain A(x) and a zero traditional-minus-experimental spread, the surface model's force
-and the margin query's needed pressure (load / A(x)) are recovered, and diagnose names nothing.
+and the margin query's needed pressure (load / A(x)) are recovered, the thermodynamic model's
+force, volume-derived area, Maxwell ratio (1) and piston area are recovered, and diagnose names
+nothing.
 
-The cylinder (A1 = A2 = 0) runs through the cubic model, the bands and diagnose in the fast
-suite; its surface and margin, and the other problems through every model, are marked slow.
+The cylinder (A1 = A2 = 0) runs through the cubic model, the bands, the thermodynamic model and
+diagnose in the fast suite; its surface and margin, and the other problems through every model, are marked slow.
 """
 
 from __future__ import annotations
@@ -141,6 +143,23 @@ def _surface_and_margin(problem: Problem, rec):
     assert need["q05"] - 0.02 <= 5.0 <= need["q95"] + 0.02, (problem.name, need)
 
 
+def _thermo(problem: Problem, rec):
+    """The thermodynamic model: force and the volume-derived area dV/dx are A(x) p_u and A(x), the
+    Maxwell ratio (dV/dx)/(P/p_u) is 1 (the traditional theory holds) and the piston area the
+    recordings imply covers the S they were made with."""
+    fit = uq.fit_thermo(rec, uq.ThermoOrders(4, 2), seed=11, settings=QUICK, max_draws=1000)
+    assert fit.convergence.converged, fit.convergence.warnings
+    for x, p in ((0.112, 5.0), (0.090, 3.0), (0.135, 7.0)):
+        for draws, truth in (
+            (fit.force_draws(x, p), p * BAR * problem.area(x)),
+            (fit.volume_area_draws(x, p), problem.area(x)),
+            (fit.maxwell_ratio_draws(x, p), 1.0),
+        ):
+            lo, hi = np.quantile(draws, [0.0005, 0.9995])
+            assert lo <= truth <= hi, (problem.name, x, p, lo, truth, hi)
+    assert _inside(fit.piston_area_draws(), S, level=0.999), problem.name
+
+
 def _diagnose(rec):
     found = uq.diagnose(rec, seed=11, settings=QUICK, sample_final=False)
     assert found["mechanisms"] == [], found["mechanisms"]
@@ -159,6 +178,10 @@ def test_cylinder_diagnose(cylinder):
     _diagnose(cylinder[1])
 
 
+def test_cylinder_thermodynamic(cylinder):
+    _thermo(*cylinder)
+
+
 @pytest.mark.slow
 def test_cylinder_surface_and_margin(cylinder):
     _surface_and_margin(*cylinder)
@@ -170,4 +193,5 @@ def test_catalogue_through_every_model(problem):
     rec = problem.recordings(seed=11)
     _cubic_and_bands(problem, rec)
     _surface_and_margin(problem, rec)
+    _thermo(problem, rec)
     _diagnose(rec)

@@ -1,13 +1,17 @@
-"""``uq surface``: the command line of :mod:`uq._models.surface`."""
+"""``uq surface``: the command line of the models over all tests at once: the pressure-coupled
+surface (:mod:`uq._models.surface`, the default) and the thermodynamic potential
+(:mod:`uq._models.thermo`, ``--model thermodynamic``)."""
 
 from __future__ import annotations
 
 import time
 
 from uq._cli.common import add_stand, stand_from
+from uq._derived.comparison import FITTERS
 from uq._derived.comparison import words as comparison_words
 from uq._models import surface as _surface
-from uq._models.surface import NOISE_NAMES, summary
+from uq._models import thermo as _thermo
+from uq._models.thermo import THETA_NAMES
 
 
 def configure_surface(p) -> None:
@@ -16,6 +20,13 @@ def configure_surface(p) -> None:
     add_recordings(p)
     add_sampling(p)
     add_json(p)
+    p.add_argument(
+        "--model",
+        choices=("surface", "thermodynamic"),
+        default="surface",
+        help="surface: force and volume surfaces smooth in pressure (no link between them); "
+        "thermodynamic: force and volume from one potential G(x, p_u) (the Maxwell relation holds)",
+    )
     p.add_argument(
         "--select",
         action="store_true",
@@ -49,21 +60,91 @@ def command_surface(args) -> int:
         args
     )  # a bad --stand file or --walkers is refused before the recordings are read
     settings = settings_from(args)
-    settings.require_walkers(len(NOISE_NAMES))
+    settings.require_walkers(len(THETA_NAMES))
+    if args.model == "thermodynamic":
+        from uq._io.errors import InputError
+
+        for option, value in (("--report", args.report), ("--out", args.out)):
+            if value is not None:
+                raise InputError(
+                    f"option {option}: not yet with --model thermodynamic (its page and saved "
+                    "answer are the surface model's); use --json"
+                )
     rec = load(args)
+    module = _thermo if args.model == "thermodynamic" else _surface
     if args.select:
-        fit, _ = _surface.select_orders(rec, seed=args.seed, settings=settings, stand=stand)
+        fit, _ = module.select_orders(rec, seed=args.seed, settings=settings, stand=stand)
     else:
-        fit = _surface.fit_surface(rec, seed=args.seed, settings=settings, stand=stand)
+        fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
     if not args.no_compare:
         _, _, comparison = fit_both(
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
-    res = summary(fit, comparison)
-    seconds_total = (
-        time.perf_counter() - t0
-    )  # printed, not in the JSON: reruns give identical bytes
+    res = fit.to_json(comparison)
+    if args.model == "thermodynamic":
+        _print_thermo(rec, fit, res, comparison)
+    else:
+        _print_surface(rec, fit, res, comparison)
+    for w in res["warnings"]:
+        print(f"  warning: {w}")
+    if args.report:
+        from uq._report.surface import write_surface_report
+
+        print(f"  report: {write_surface_report(fit, res, args.report)}")
+    if args.out:
+        from uq._derived.margin import save_surface_answer
+
+        print(
+            f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
+            "(uq margin --fit answers from it)"
+        )
+    # printed, not in the JSON: reruns give identical bytes
+    print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    emit_json(res, args.json)
+    return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0
+
+
+def _print_comparison(name: str, c: dict) -> None:
+    print(
+        f"  PSIS-LOO: {name} {c[name]['elpd_loo']:.1f} ({c[name]['n_coefficients']} coef., "
+        f"max Pareto k {c[name]['max_pareto_k']:.2f}), cubics {c['cubics']['elpd_loo']:.1f} "
+        f"({c['cubics']['n_coefficients']} coef., max Pareto k {c['cubics']['max_pareto_k']:.2f}): "
+        f"{comparison_words(c)}"
+    )
+
+
+def _print_thermo(rec, fit, res, comparison) -> None:
+    print(
+        f"{rec.path}: thermodynamic model over {len(rec.tests)} tests, {rec.n_points} readings "
+        f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)"
+    )
+    for row in fit.selection:
+        print(
+            f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}"
+        )
+    for pb, r in res["at_x0"].items():
+        f, m = r["force_N"], r["maxwell_ratio"]
+        print(
+            f"  x0, {pb} bar: force {f['mean']:.0f} N [{f['q05']:.0f}, {f['q95']:.0f}], F_eff = P/p_u "
+            f"{r['feff_m2']['mean'] * 1e4:.2f} cm^2, dV/dx {r['volume_area_m2']['mean'] * 1e4:.2f} cm^2, "
+            f"(dV/dx)/(P/p_u) {m['mean']:.3f} [{m['q05']:.3f}, {m['q95']:.3f}]"
+        )
+    S = res["implied_piston_area_m2"]
+    print(
+        f"  piston area the recordings imply: {S['mean'] * 1e4:.2f} cm^2 [{S['q05'] * 1e4:.2f}, "
+        f"{S['q95'] * 1e4:.2f}] (given {res['piston_area_m2'] * 1e4:.2f} cm^2)"
+    )
+    nz = res["noise"]
+    print(
+        f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
+        f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
+    )
+    if comparison:
+        _print_comparison("thermodynamic", comparison)
+
+
+def _print_surface(rec, fit, res, comparison) -> None:
     print(
         f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
         f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)"
@@ -88,26 +169,4 @@ def command_surface(args) -> int:
         f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range"
     )
     if comparison:
-        c = comparison
-        print(
-            f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} ({c['surface']['n_coefficients']} coef., "
-            f"max Pareto k {c['surface']['max_pareto_k']:.2f}), cubics {c['cubics']['elpd_loo']:.1f} "
-            f"({c['cubics']['n_coefficients']} coef., max Pareto k {c['cubics']['max_pareto_k']:.2f}): "
-            f"{comparison_words(c)}"
-        )
-    for w in res["warnings"]:
-        print(f"  warning: {w}")
-    if args.report:
-        from uq._report.surface import write_surface_report
-
-        print(f"  report: {write_surface_report(fit, res, args.report)}")
-    if args.out:
-        from uq._derived.margin import save_surface_answer
-
-        print(
-            f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
-            "(uq margin --fit answers from it)"
-        )
-    print(f"  {seconds_total:.1f} s (fit {fit.seconds:.1f} s)")
-    emit_json(res, args.json)
-    return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0
+        _print_comparison("surface", comparison)

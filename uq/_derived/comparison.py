@@ -72,8 +72,10 @@ def _cubic_refit(cubic_fit, settings: Settings, seed: int):
 
 
 def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
-    """PSIS-LOO of the surface model against the per-pressure cubics, per (force, piston) reading
+    """PSIS-LOO of a model over all tests (the surface model, or the thermodynamic one: its
+    ``short_name`` keys the document) against the per-pressure cubics, per (force, piston) reading
     (module docstring); the ``comparison`` document of the JSON results."""
+    name = surface_fit.short_name
     cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.beta.shape[-1], 8 * len(cubic_fit.tests)
@@ -82,36 +84,55 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
     k_psis = float(np.max(loo_c.pareto_k))
     loo_c = reloo(loo_c, _cubic_refit(cubic_fit, settings, seed), max_refits=RELOO_MAX)
     plain_s, plain_c = psis(sur_plain), psis(cub_plain)
+    names = (name, "per-pressure cubics")
     return {
-        "surface": _part(loo_s, n_s, sur_plain),
+        name: _part(loo_s, n_s, sur_plain),
         "cubics": _part(loo_c, n_c, cub_plain)
         | {"max_pareto_k_psis": k_psis, "n_exact_refits": loo_c.n_refits},
-        **verdict(loo_s, loo_c),
+        **verdict(loo_s, loo_c, names),
         "method": (
             "PSIS-LOO over the noise draws with the coefficients integrated out exactly per left-out reading; "
             f"cubic readings still at Pareto k > {PARETO_K_MAX:g} (up to {RELOO_MAX}) replaced by exact refits "
             "of their test without the reading"
         ),
         "plain_psis_loo": {
-            "surface": _part(plain_s, n_s, sur_plain),
+            name: _part(plain_s, n_s, sur_plain),
             "cubics": _part(plain_c, n_c, cub_plain),
-            **verdict(plain_s, plain_c),
+            **verdict(plain_s, plain_c, names),
         },
         "unit": "log density per (force, piston) reading, summed over readings",
     }
 
 
-def fit_both(rec, *, seed: int, settings: Settings, stand, surface_fit=None, cubic_fit=None):
-    """The surface model and the per-pressure cubics of ``rec`` with the same settings (either
-    may be given already) and their :func:`compare` document: (surface, cubics, comparison)."""
+def fit_both(
+    rec, *, seed: int, settings: Settings, stand, surface_fit=None, cubic_fit=None, model="surface"
+):
+    """A model over all tests (``model``: "surface" or "thermodynamic") and the per-pressure
+    cubics of ``rec`` with the same settings (either fit may be given already) and their
+    :func:`compare` document: (model fit, cubics, comparison)."""
     from uq._models.cubic import fit_campaign
-    from uq._models.surface import fit_surface
 
     if surface_fit is None:
-        surface_fit = fit_surface(rec, seed=seed, settings=settings, stand=stand)
+        surface_fit = FITTERS[model](rec, seed=seed, settings=settings, stand=stand)
     if cubic_fit is None:
         cubic_fit = fit_campaign(rec, seed=seed, settings=settings, stand=stand)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
+
+
+def _fit_surface(rec, **kw):
+    from uq._models.surface import fit_surface
+
+    return fit_surface(rec, **kw)
+
+
+def _fit_thermo(rec, **kw):
+    from uq._models.thermo import fit_thermo
+
+    return fit_thermo(rec, **kw)
+
+
+#: the models over all tests, by the name ``uq surface --model`` takes
+FITTERS = {"surface": _fit_surface, "thermodynamic": _fit_thermo}
 
 
 def words(c: dict) -> str:

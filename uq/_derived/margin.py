@@ -39,7 +39,8 @@ import numpy as np
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
-from uq._models.surface import SurfaceFit, refuse_extrapolation
+from uq._models.pair import refuse_extrapolation
+from uq._models.surface import SurfaceFit
 from uq._physics.quantities import BAR_PA
 
 N_P_GRID = 801

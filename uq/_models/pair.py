@@ -26,6 +26,7 @@ posterior costs a few weighted sums, not a (2n x k) product.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -198,3 +199,110 @@ def hold_out(d: PairData, held) -> PairData:
 
 def observed(d: PairData) -> dict:
     return {"force_N": np.asarray(d.F), "piston_m": np.asarray(d.L)}
+
+
+def refuse_extrapolation(
+    height_m, p_bar, height_range_m, pressure_range_bar, param: str | None, model: str
+) -> None:
+    """InputError naming the first height or overpressure outside the tested ranges: models of the
+    stand's recordings answer only where it measured. ``param``: the caller's parameter the value
+    came from (the message starts with it), or None."""
+    from uq._io.errors import InputError
+
+    for values, (lo, hi), scale, unit, name, tested in (
+        (height_m, height_range_m, 1e3, "mm", "height", "heights"),
+        (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures"),
+    ):
+        v = np.atleast_1d(np.asarray(values, float))
+        out = (v < lo - 1e-9) | (v > hi + 1e-9)
+        if np.any(out):
+            raise InputError(
+                f"{param + ': ' if param else ''}{name} {v[out][0] * scale:g} {unit} is outside the "
+                f"tested {tested} {lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate",
+                param=param,
+            )
+
+
+@dataclass(eq=False, frozen=True, repr=False)
+class PairFit:
+    """What the fits of the models over all tests share: the recordings, the driver's
+    :class:`~uq._inference.collapsed.Posterior` (``beta`` (C, D, k) standardised coefficients,
+    ``theta`` (C, D, n_theta) the sampled parameters), the stand, the tested ranges."""
+
+    recordings: object
+    posterior: object
+    stand: StandDescription
+
+    #: the model's name in messages ("the surface model")
+    model_name = "the model"
+
+    @property
+    def beta(self) -> np.ndarray:
+        return self.posterior.beta
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.posterior.theta
+
+    @property
+    def idata(self):
+        return self.posterior.idata
+
+    @property
+    def convergence(self):
+        return self.posterior.convergence
+
+    @property
+    def chains(self):
+        return self.posterior.chains
+
+    @property
+    def seconds(self) -> float:
+        return self.posterior.seconds
+
+    @property
+    def loglik_loo(self) -> np.ndarray:
+        return self.posterior.loglik_loo
+
+    @property
+    def pressure_range_bar(self):
+        p = self.recordings.pressures_bar
+        return float(p.min()), float(p.max())
+
+    @property
+    def height_range_m(self):
+        return self.recordings.height_range_m
+
+    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
+        """Refuse heights/pressures outside the tested ranges (no extrapolation)."""
+        refuse_extrapolation(
+            height_m, p_bar, self.height_range_m, self.pressure_range_bar, param, self.model_name
+        )
+
+    def flat_beta(self, max_draws: int | None = None) -> np.ndarray:
+        """The coefficient draws with chains flattened, thinned evenly to at most ``max_draws``."""
+        b = self.beta.reshape(-1, self.beta.shape[-1])
+        if max_draws and b.shape[0] > max_draws:
+            b = b[:: int(np.ceil(b.shape[0] / max_draws))]
+        return b
+
+    def summary(self):
+        """ArviZ-style table (pandas DataFrame) of the sampled parameters."""
+        return self.posterior.summary()
+
+    def loo(self):
+        """PSIS-LOO per (force, piston) reading, coefficients integrated out exactly."""
+        from uq._inference.loo import psis
+
+        return psis(self.loglik_loo)
+
+
+def arrays(rec):
+    """Every reading of a campaign: height (m), set pressure (bar), force, piston, test index."""
+    tests = rec.tests
+    x = np.concatenate([t.height_m for t in tests])
+    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in tests])
+    F = np.concatenate([t.force_N for t in tests])
+    L = np.concatenate([t.piston_m for t in tests])
+    idx = np.concatenate([np.full(t.n_points, i) for i, t in enumerate(tests)])
+    return x, p, F, L, idx

@@ -47,9 +47,8 @@ import numpy as np
 
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, Posterior, fit_collapsed
+from uq._inference.collapsed import CollapsedModel, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.loo import Loo, psis
 from uq._inference.sampler import Settings
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
@@ -58,6 +57,7 @@ from uq._models.pair import (
     NATURAL_NAMES,
     NOISE_NAMES,
     PairData,
+    PairFit,
     noise_prior_mean,
     pair_data,
 )
@@ -217,66 +217,17 @@ MODEL = CollapsedModel(
 # ----------------------------------------------------------------------------- fit
 
 
-def refuse_extrapolation(
-    height_m, p_bar, height_range_m, pressure_range_bar, param: str | None, model: str
-) -> None:
-    """InputError naming the first height or overpressure outside the tested ranges: models of the
-    stand's recordings answer only where it measured. ``param``: the caller's parameter the value
-    came from (the message starts with it), or None."""
-    for values, (lo, hi), scale, unit, name, tested in (
-        (height_m, height_range_m, 1e3, "mm", "height", "heights"),
-        (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures"),
-    ):
-        v = np.atleast_1d(np.asarray(values, float))
-        out = (v < lo - 1e-9) | (v > hi + 1e-9)
-        if np.any(out):
-            raise InputError(
-                f"{param + ': ' if param else ''}{name} {v[out][0] * scale:g} {unit} is outside the "
-                f"tested {tested} {lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate",
-                param=param,
-            )
-
-
 @dataclass(eq=False, frozen=True, repr=False)
-class SurfaceFit:
-    """Posterior of the surface model: the driver's :class:`~uq._inference.collapsed.Posterior`
-    (``beta`` (C, D, k) standardised coefficients, ``theta`` (C, D, 5) the noise logs) and the
-    surfaces evaluated from it."""
+class SurfaceFit(PairFit):
+    """Posterior of the surface model (``uq._models.pair.PairFit``) and the surfaces evaluated
+    from it."""
 
-    recordings: Recordings
-    orders: Orders
-    geometry: Geometry
-    posterior: Posterior
-    stand: StandDescription = PAPER_STAND
+    orders: Orders = DEFAULT_ORDERS
+    geometry: Geometry | None = None
     selection: tuple = ()
 
-    @property
-    def beta(self) -> np.ndarray:
-        return self.posterior.beta
-
-    @property
-    def theta(self) -> np.ndarray:
-        return self.posterior.theta
-
-    @property
-    def idata(self):
-        return self.posterior.idata
-
-    @property
-    def convergence(self):
-        return self.posterior.convergence
-
-    @property
-    def chains(self):
-        return self.posterior.chains
-
-    @property
-    def seconds(self) -> float:
-        return self.posterior.seconds
-
-    @property
-    def loglik_loo(self) -> np.ndarray:
-        return self.posterior.loglik_loo
+    model_name = "the surface model"
+    short_name = "surface"
 
     def __repr__(self) -> str:
         state = "converged" if self.convergence.converged else "NOT converged"
@@ -286,34 +237,7 @@ class SurfaceFit:
             f"{self.beta.shape[0] * self.beta.shape[1]} draws, {state})"
         )
 
-    # ---- ranges
-    @property
-    def pressure_range_bar(self):
-        p = self.recordings.pressures_bar
-        return float(p.min()), float(p.max())
-
-    @property
-    def height_range_m(self):
-        return self.recordings.height_range_m
-
-    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
-        """Refuse heights/pressures outside the tested ranges (no extrapolation)."""
-        refuse_extrapolation(
-            height_m,
-            p_bar,
-            self.height_range_m,
-            self.pressure_range_bar,
-            param,
-            "the surface model",
-        )
-
     # ---- coefficient blocks (physical units, flattened draws)
-    def flat_beta(self, max_draws: int | None = None) -> np.ndarray:
-        b = self.beta.reshape(-1, self.beta.shape[-1])
-        if max_draws and b.shape[0] > max_draws:
-            b = b[:: int(np.ceil(b.shape[0] / max_draws))]
-        return b
-
     def blocks(self, beta=None):
         beta = self.flat_beta() if beta is None else beta
         nc, ne, nd, nr = _sizes(self.orders, len(self.recordings.tests))
@@ -401,28 +325,9 @@ class SurfaceFit:
             out[name] = {"mean": m, "lower": lo, "upper": hi}
         return out
 
-    # ---- LOO and summaries
-    def loo(self) -> Loo:
-        """PSIS-LOO per (force, piston) reading, coefficients integrated out exactly."""
-        return psis(self.loglik_loo)
-
-    def summary(self):
-        """ArviZ-style table (pandas DataFrame) of the noise parameters."""
-        return self.posterior.summary()
-
     def to_json(self, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
         """What ``uq surface --json`` writes (docs/formats.md)."""
         return summary(self, comparison, advice)
-
-
-def _arrays(rec: Recordings):
-    tests = rec.tests
-    x = np.concatenate([t.height_m for t in tests])
-    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in tests])
-    F = np.concatenate([t.force_N for t in tests])
-    L = np.concatenate([t.piston_m for t in tests])
-    idx = np.concatenate([np.full(t.n_points, i) for i, t in enumerate(tests)])
-    return x, p, F, L, idx
 
 
 def geometry_of(rec: Recordings) -> Geometry:
@@ -448,7 +353,7 @@ def _reference(o, g, x, p, F, L, idx, n_tests):
 def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> PairData:
     """The model's arrays for a campaign: designs, readings, the noise references, the Gram plan."""
     g = geometry_of(rec)
-    x, p, F, L, idx = _arrays(rec)
+    x, p, F, L, idx = pair.arrays(rec)
     _, phat, feff, Xf, Xl = _reference(orders, g, x, p, F, L, idx, len(rec.tests))
     return pair_data(Xf, Xl, F, L, phat, feff, p, g.area_m2, stand)
 
@@ -484,7 +389,7 @@ def fit_surface(
         predictive=False,  # 2 x 814 replicates per draw: made when asked for, not on every fit
         desc="surface sampling",
     )
-    return SurfaceFit(rec, orders, geometry_of(rec), post, stand)
+    return SurfaceFit(rec, post, stand, orders, geometry_of(rec))
 
 
 def select_orders(

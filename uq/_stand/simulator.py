@@ -68,8 +68,8 @@ from uq._data.reference import (
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._io.errors import InputError
 from uq._physics.mechanisms import (
-    casing_shape,
-    elastic_casing_compliance,
+    StandCurves,
+    apply_effects,
     elastic_casing_slope,
 )
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
@@ -249,31 +249,20 @@ def true_curves(
     loses p_u (C(x) - C(x0)) / S (C of uq._physics.mechanisms, on ``casing_reference_area_m2``).
     """
     height_m = np.asarray(height_m, float)
-    x0 = spring.x0_m
-    force = np.asarray(spring.force_N(height_m, p_bar), float)
-    piston = np.asarray(spring.piston_m(height_m, p_bar), float)
-    if "pressure_dependent_area" in effects:
-        k = 1.0 + effects["pressure_dependent_area"] * p_bar
-        ref = float(spring.piston_m(np.array(x0), p_bar))
-        force = force * k
-        piston = ref + (piston - ref) * k
-    if "casing_force" in effects:
-        force = force + effects["casing_force"] * casing_shape(height_m, x0)
-    if "elastic_casing" in effects:
-        m, area, p_pa = effects["elastic_casing"], casing_reference_area_m2(spring), p_bar * BAR_PA
-        force = force + p_pa**2 * elastic_casing_slope(height_m, x0, m, area) / 2
-        piston = piston - p_pa * elastic_casing_compliance(height_m, x0, m, area) / piston_area_m2
-    if "hysteresis" in effects:
-        m = effects["hysteresis"]
-        force = force * np.where(compression, 1.0 + m, 1.0 - m)
-    if "force_offset" in effects:
-        force = force + effects["force_offset"]
-    if "volume_excess" in effects:
-        ref = float(spring.piston_m(np.array(x0), p_bar))
-        piston = ref + (piston - ref) * (1.0 + effects["volume_excess"])
-    if "thermal_drift" in effects:
-        piston = piston + np.asarray(step) * effects["thermal_drift"] * 1e-6 / piston_area_m2
-    return force, piston
+    curves = StandCurves(
+        force=np.asarray(spring.force_N(height_m, p_bar), float),
+        piston=np.asarray(spring.piston_m(height_m, p_bar), float),
+        height_m=height_m,
+        p_bar=p_bar,
+        compression=np.asarray(compression),
+        step=np.asarray(step),
+        x0_m=spring.x0_m,
+        piston_area_m2=piston_area_m2,
+        piston_at_x0_m=float(spring.piston_m(np.array(spring.x0_m), p_bar)),
+        reference_area_m2=casing_reference_area_m2(spring),
+    )
+    curves = apply_effects(effects, curves)
+    return curves.force, curves.piston
 
 
 def reading_errors(rng: np.random.Generator, sd, n: int, df: float = 0.0) -> np.ndarray:

@@ -319,15 +319,15 @@ def test_each_move_keeps_the_variance_of_the_target(move, steps):
 @pytest.mark.slow
 @pytest.mark.parametrize("move", list(_MOVE_MIXES))
 def test_each_move_keeps_the_variance_of_the_target_long(move):
-    """The same with 12 000 steps: v within 0.4 % of 1 and each whitened coordinate's variance
-    within 1.2 % of 1. Standard errors (scaled from the 10 seeds of the short test): v at most
-    0.08 %, a coordinate's variance at most 0.21 % (snooker; 0.13 % for DE); the tolerances are
-    at least 5.1 standard errors (false-failure rate below 3e-7 per check, below 1e-5 for the 20
-    checks and the guards), and a drift of 0.7 % in v or 2 % in one coordinate fails with
-    probability above 0.9999."""
+    """The same with 12 000 steps: v within 0.5 % of 1 and each whitened coordinate's variance
+    within 1.2 % of 1. Standard errors (seed 21, and scaled from the 10 seeds of the short test):
+    v at most 0.1 % (DE; 0.08 % snooker, 0.05 % the others), a coordinate's variance at most
+    0.21 % (snooker). The tolerances are at least 5 standard errors (false-failure rate below
+    1e-6 per check, below 3e-5 for the 20 checks; the guard se < 0.2 % below 1e-6 per move), and
+    a drift of 0.9 % in v or 2 % in one coordinate fails with probability above 0.9999."""
     v, se, per_coord = _variance_kept(_MOVE_MIXES[move], 12000, seed=21)
-    assert abs(v - 1.0) < 0.004, (move, v, se)
-    assert se < 0.0012, (move, se)
+    assert abs(v - 1.0) < 0.005, (move, v, se)
+    assert se < 0.002, (move, se)
     np.testing.assert_array_less(np.abs(per_coord - 1.0), 0.012)
 
 

@@ -112,7 +112,7 @@ def test_points_file_carries_the_paper_estimators_covariance():
     assert np.sqrt(five["covariance"]["force"][0][0]) == pytest.approx(
         21.9, abs=0.1
     )  # a_P +/- 22 N
-    # piston: the budget's ~2 mm per reading at 5 bar (gas volume x 0.01 bar / p_abs / S) -> a_L +/- 0.4 mm
+    # piston: the budget's ~1.9 mm per reading at 5 bar (air volume x 0.01 bar / p_abs / S) -> a_L +/- 0.47 mm
     assert 3e-4 < np.sqrt(five["covariance"]["piston"][0][0]) < 5e-4
     assert "covariance_source" in doc
 

@@ -76,6 +76,22 @@ def test_noise_sd_is_the_budget():
     assert 0.5e-3 < sd_l[0] < 2e-3  # V_gas dp / (p_abs S): about 1 mm at 10 bar
 
 
+def test_piston_noise_of_the_pressure_holding_is_the_same_at_every_height():
+    """Eq. 4: the air volume V_air (element + receiver + pipe) keeps its value as the element is
+    compressed, so a pressure-holding error dp moves the piston by V_air dp / (p_abs S) at x_min
+    as at x_max. With the displacement term off (the only term that depends on the height) the
+    budget's piston sd is that and the calipers' at every height, from first principles here."""
+    from uq._data.stand_description import PAPER_STAND
+
+    stand = PAPER_STAND.replace(displacement_sd_m=0.0)
+    x = np.linspace(0.065, 0.155, 19)
+    for p in (0.1, 5.0, 10.0):
+        _, sd_l = noise_sd(N50Spring(), x, p, stand=stand)
+        boyle = stand.gas_volume_at_xmax_m3 * stand.pressure_sd_bar(p) / (p + stand.p_atm_bar)
+        expect = np.hypot(boyle / 54.82e-4, stand.caliper_sd_m)
+        np.testing.assert_allclose(sd_l, expect, rtol=1e-12)
+
+
 def test_effects_follow_the_contract():
     s = TraditionalSpring()
     x = np.array([0.155, 0.112, 0.065])
@@ -169,7 +185,9 @@ def test_pressure_error_obeys_boyle_force_up_piston_short():
     """A reading taken at p + dp: the force rises by dp F_eff, and by Boyle's law
     (p_abs V = const at the reading) the gas occupies less room, so the piston stands *short*
     of its isobaric position. Checked against the gas law, not against the stand's own formula:
-    with every other noise term off, (p_abs + dp) (V_gas + S dL) must equal p_abs V_gas."""
+    with every other noise term off, (p_abs + dp) (V_air + S dL) must equal p_abs V_air, where
+    V_air, all the air of element, receiver and pipe, is the same at every height (eq. 4: the
+    gas/water boundary moves inside the receiver as the element is compressed)."""
     from uq._data.stand_description import PAPER_STAND
 
     stand = PAPER_STAND.replace(load_cell_rel_sd=0.0, displacement_sd_m=0.0, caliper_sd_m=0.0)
@@ -182,11 +200,9 @@ def test_pressure_error_obeys_boyle_force_up_piston_short():
     dL = test["piston_m"] - spring.piston_m(x, p)
     assert np.std(dp_pa) > 0.5 * 0.01e5  # the pressure error is there
     S = 54.82e-4
-    v_gas = stand.gas_volume_at_xmax_m3 - S * (
-        spring.piston_m(x, p) - spring.piston_m(np.array(0.155), p)
-    )
+    v_air = stand.gas_volume_at_xmax_m3
     p_abs = (p + stand.p_atm_bar) * 1e5
-    boyle = (p_abs + dp_pa) * (v_gas + S * dL) / (p_abs * v_gas) - 1.0
+    boyle = (p_abs + dp_pa) * (v_air + S * dL) / (p_abs * v_air) - 1.0
     assert np.max(np.abs(boyle)) < 1e-4  # second order in dp / p_abs (first order would be ~3e-3)
     assert np.corrcoef(dp_pa, dL)[0, 1] < -0.9  # force and piston errors anti-correlated
 

@@ -86,7 +86,9 @@ class StandDescription:
 
     @property
     def gas_volume_at_xmax_m3(self) -> float:
-        """All the gas the pressure holding acts on at the highest height, m^3."""
+        """All the air the pressure holding acts on, m^3: the element's at the highest height and
+        the receiver's. The same at every height (eq. 4: the gas/water boundary moves inside the
+        receiver as the element is compressed)."""
         return self.receiver_air_m3 + self.element_volume_at_xmax_m3
 
     def pressure_sd_bar(self, pressure_bar):

@@ -17,13 +17,17 @@ reading reproduces the s_P the budget predicts):
   the recording shows the commanded height x. Force and piston follow the true height.
 * pressure holding: the pressure during a reading is p_u + dp, dp ~ N(0, sd_p) with
   sd_p = 0.001 bar at 0.1 bar and 0.01 bar from 1 bar up (in between: 0.01 x p_u). It moves
-  the force by dp x F_eff(x) and shrinks the gas by V_gas dp / p_abs (isothermal, eq. 4).
+  the force by dp x F_eff(x) and shrinks the air by V_air dp / p_abs (Boyle, isothermal).
   Larger L means more room for the gas, so a reading taken at p + dp finds the piston
-  *short* of its isobaric position: L loses V_gas dp / (p_abs S). Force and piston errors
+  *short* of its isobaric position: L loses V_air dp / (p_abs S). Force and piston errors
   from the pressure holding are therefore anti-correlated.
-* gas volume V_gas = element volume + 2.0 L of air in receiver and branch pipe, with the
-  element volume 4.2 L at x_max (assumed: the paper gives neither; the measured volume
-  increment of about 2.6 L from 155 to 65 mm bounds the element's volume from below).
+* air volume V_air = 4.2 L, the element's volume at x_max, + 2.0 L of air in receiver and
+  branch pipe (assumed: the paper gives neither; the measured volume increment of about 2.6 L
+  from 155 to 65 mm bounds the element's volume from below). V_air is the same at every
+  height: in isobaric-isothermal conditions the air keeps its volume (eq. 4), and as the
+  element is compressed its air moves into the receiver, where the gas/water boundary moves
+  and pushes water into the cylinder. So the piston error of the pressure holding does not
+  depend on the height.
 * load cell 0.5 %: the force reading is multiplied by 1 + e, e ~ N(0, 0.005).
 * calipers 0.01 mm on the piston coordinate: L gains N(0, 0.01 mm).
 * p_atm = 1.01325 bar.
@@ -324,10 +328,10 @@ def simulate(
         force, piston = true_curves(spring, effects, x_true, p, comp, steps, piston_area_m2)
         feff = pressure_lever_m2(spring, effects, x_true, p)
         force_read = (force + dp_bar * BAR_PA * feff) * (1.0 + e_load)
-        ref_piston = float(spring.piston_m(np.array(layout.x_max_m), p))
-        v_gas = stand.gas_volume_at_xmax_m3 - piston_area_m2 * (piston - ref_piston)
-        # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_gas dp / p_abs.
-        piston_read = piston - v_gas * dp_bar / (p + stand.p_atm_bar) / piston_area_m2 + e_cal
+        # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_air dp / p_abs.
+        # V_air does not depend on the height (eq. 4: the gas/water boundary moves in the receiver).
+        v_air = stand.gas_volume_at_xmax_m3
+        piston_read = piston - v_air * dp_bar / (p + stand.p_atm_bar) / piston_area_m2 + e_cal
         tests.append(
             dict(
                 pressure_bar=p,
@@ -429,11 +433,10 @@ def noise_sd(
         + (sdp_bar * BAR_PA * feff) ** 2
         + (dPdx * stand.displacement_sd_m) ** 2
     )
-    L = np.asarray(spring.piston_m(height_m, p_bar))
-    v_gas = stand.gas_volume_at_xmax_m3 - piston_area_m2 * (L - L.min())
+    v_air = stand.gas_volume_at_xmax_m3  # the same at every height (eq. 4)
     slope = np.asarray(spring.piston_slope(height_m, p_bar))
     sd_piston = np.sqrt(
-        (v_gas * sdp_bar / (p_bar + stand.p_atm_bar) / piston_area_m2) ** 2
+        (v_air * sdp_bar / (p_bar + stand.p_atm_bar) / piston_area_m2) ** 2
         + (slope * stand.displacement_sd_m) ** 2
         + stand.caliper_sd_m**2
     )

@@ -19,21 +19,33 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _explicit(theta, mask, d):
-    """Stacked design of (z = P + cL, L) rows, written out column by column (the reference)."""
-    m_area, m_hyst, m_vol = mask[0] * theta[2], mask[2] * theta[3], mask[5] * theta[4]
+    """Stacked design of (z = P + cL, L) rows, written out column by column from the physics
+    (the reference): force p F_eff (1 + m_A p)(1 + m_H sgn) + (1 + m_H sgn)(E(x) + p^2 C'(x)/2)
+    + offset; piston r_i - (1 + m_V)[(1 + m_A p) int F_eff + p C(x)] / S + drift step, with
+    C(x) = sum_j c_j t^j (j = 1..3) and model columns in the order F_eff, references, casing,
+    elastic casing, offset, drift."""
+    on_mech = dict(zip(M.MECHS, mask[: M.N_MECH], strict=True))
+    m_area = on_mech["pressure_dependent_area"] * theta[2]
+    m_hyst = on_mech["hysteresis"] * theta[3]
+    m_vol = on_mech["volume_excess"] * theta[4]
     g, hy = 1.0 + m_area * d.p_bar, 1.0 + m_hyst * d.sgn
     pw = jnp.arange(M.K_MAX + 1)
     on = mask[M.N_MECH :]
     T = d.t[:, None] ** pw * on
     Tint = d.t[:, None] ** (pw + 1) / (pw + 1) * on
     n = d.t.size
-    Tc = d.t[:, None] ** jnp.arange(M.CASING_DEG + 1)
+    Tc = d.t[:, None] ** jnp.arange(4)
+    j = jnp.arange(1, 4)
+    p_pa = d.p_bar * BAR_PA
+    C = d.t[:, None] ** j
+    dC = j * d.t[:, None] ** (j - 1) / BASIS_SCALE_M
     XF = jnp.concatenate(
         [
-            (d.p_bar * BAR_PA * g * hy)[:, None] * T,
+            (p_pa * g * hy)[:, None] * T,
             jnp.zeros_like(d.R),
-            mask[1] * hy[:, None] * Tc,
-            mask[3] * jnp.ones((n, 1)),
+            on_mech["casing_force"] * hy[:, None] * Tc,
+            on_mech["elastic_casing"] * (hy * p_pa**2 / 2)[:, None] * dC,
+            on_mech["force_offset"] * jnp.ones((n, 1)),
             jnp.zeros((n, 1)),
         ],
         axis=1,
@@ -43,8 +55,9 @@ def _explicit(theta, mask, d):
             -(BASIS_SCALE_M / d.area) * (g * (1.0 + m_vol))[:, None] * Tint,
             d.R,
             jnp.zeros_like(Tc),
+            -on_mech["elastic_casing"] * ((1.0 + m_vol) * p_pa / d.area)[:, None] * C,
             jnp.zeros((n, 1)),
-            mask[4] * (d.step * 1e-6 / d.area)[:, None],
+            on_mech["thermal_drift"] * (d.step * 1e-6 / d.area)[:, None],
         ],
         axis=1,
     )
@@ -59,7 +72,8 @@ def _explicit_log_post(theta, mask, d):
     keep = d.fit_w > 0
     lp = linear_posterior(X[keep], y[keep], sigma[keep], d.prior_sd).log_marginal
     lp += 0.5 * (np.sum(keep) - y.size) * 1.8378770664093453  # the model counts every row's 2 pi
-    active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2], mask[5]])])
+    on_mech = dict(zip(M.MECHS, mask[: M.N_MECH], strict=True))
+    active = jnp.concatenate([jnp.ones(2)] + [jnp.array([on_mech[name]]) for name in M.SCALES])
     return lp - 0.5 * jnp.sum(active * (theta / M.THETA_PRIOR_SD) ** 2)
 
 
@@ -70,7 +84,12 @@ def data():
 
 @pytest.mark.parametrize(
     "names,order",
-    [((), 3), (("pressure_dependent_area", "volume_excess", "casing_force"), 4), (M.MECHS, 5)],
+    [
+        ((), 3),
+        (("pressure_dependent_area", "volume_excess", "casing_force"), 4),
+        (("elastic_casing", "hysteresis", "volume_excess"), 3),
+        (M.MECHS, 5),
+    ],
 )
 def test_log_posterior_and_draws_equal_the_explicit_design(data, names, order):
     rng = np.random.default_rng(3)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._diagnose.maxwell import campaign_table
 from uq._inference.collapsed import Posterior, find_map, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.linear import map_rows
@@ -129,16 +130,15 @@ class Fit:
             self.loo = psis(self.ll[None], reff=1.0)  # independent Laplace draws
             self.elpd = self.loo.elpd
 
-    def magnitude(self, name: str, n_tests: int) -> np.ndarray:
-        """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table."""
-        base = M.K_MAX + 1 + n_tests
+    def magnitude(self, name: str, n_tests: int, ctx) -> np.ndarray:
+        """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table
+        (a ScaleTerm's magnitude is sampled; a LinearTerm's is read from its coefficients)."""
         if name in M.NONLINEAR:
             return self.theta[:, M.NONLINEAR[name]]
-        if name == "casing_force":
-            return self.beta[:, base]  # E(x0) = e_0 (t = 0)
-        if name == "force_offset":
-            return self.beta[:, base + M.CASING_DEG + 1]
-        return self.beta[:, base + M.CASING_DEG + 2]  # thermal_drift, cm^3 per step
+        cols = M.model_columns(n_tests)
+        return MECHANISMS[name].term.magnitude(
+            self.beta[:, cols[name]], self.beta[:, cols["feff"]], ctx
+        )
 
 
 class Scoring:
@@ -402,8 +402,50 @@ def _to_remove(removable: list[str], table: dict) -> str:
     return max(near, key=lambda m: (M.N_PARAMS[m], -table[m]["delta_elpd"]))
 
 
+#: what a campaign must hold for a mechanism to be identifiable, in words (``Mechanism.needs``)
+NEEDS_WORDS = {
+    "volume": "piston or volume readings",
+    "pressures": "tests at two or more pressures",
+    "both_branches": "compression and rebound in a known recording order (with one pass the "
+    "recording order is the height order, so a change in time cannot be told from a shape in height)",
+}
+
+
+def capabilities(rec) -> set[str]:
+    """What the campaign ``rec`` can identify (the words of ``Mechanism.needs``)."""
+    have = set()
+    if rec.has_piston:
+        have.add("volume")
+    if len(rec.tests) >= 2:
+        have.add("pressures")
+    if rec.has_both_branches:
+        have.add("both_branches")
+    return have
+
+
+def offered(rec) -> tuple[tuple[str, ...], dict[str, str]]:
+    """The mechanisms the campaign's design can identify, and for each other one why not."""
+    have = capabilities(rec)
+    names, why = [], {}
+    for name in M.MECHS:
+        missing = sorted(MECHANISMS[name].needs - have)
+        if missing:
+            why[name] = "needs " + " and ".join(NEEDS_WORDS[k] for k in missing)
+        else:
+            names.append(name)
+    return tuple(names), why
+
+
 def _select(
-    base: Fit, order: int, d, rng, scoring: Scoring, gain_se: float, max_mechanisms: int, bar
+    base: Fit,
+    order: int,
+    d,
+    rng,
+    scoring: Scoring,
+    gain_se: float,
+    max_mechanisms: int,
+    bar,
+    candidates: tuple,
 ):
     """Backward elimination from the model with every mechanism (module docstring, step 3).
 
@@ -412,7 +454,7 @@ def _select(
     of them and removing the one whose absence costs least does not.
     """
     fits = {(): base}
-    current = Fit(M.MECHS, order, d, int(rng.integers(2**31)), bar=bar)
+    current = Fit(candidates, order, d, int(rng.integers(2**31)), bar=bar)
     steps = []
     while current.names:
         step = _elimination_step(current, fits, order, d, rng, scoring, gain_se, bar)
@@ -430,6 +472,16 @@ def _select(
         current = fits[tuple(n for n in current.names if n != drop)]
     chosen = [(m, steps[-1]["candidates"][m]) for m in current.names] if current.names else []
     return current, steps, chosen
+
+
+def _other_reading(name: str, magnitude: np.ndarray, rec) -> dict:
+    """What else the same readings say when a mechanism is confounded with a stand constant: both
+    readings are named (a piston-area error is exactly a volume excess)."""
+    out = {"words": MECHANISMS[name].confounded_with}
+    if name == "volume_excess":
+        out["piston_area_m2"] = estimate(rec.piston_area_m2 / (1.0 + magnitude))
+        out["given_piston_area_m2"] = rec.piston_area_m2
+    return out
 
 
 def noise_check(w: dict) -> dict:
@@ -560,12 +612,15 @@ def diagnose(
     t_start = time.time()
     d, meta = M.prepare(rec, stand)
     n_tests = len(rec.tests)
+    candidates, not_offered = offered(rec)
     order, order_lps = choose_order(d)
     rng = np.random.default_rng(seed)
     base = Fit((), order, d, int(rng.integers(2**31)))
     scoring = Scoring(d, order, seed)
     with progress(desc="diagnose screening", unit="model fit") as bar:
-        current, steps, chosen = _select(base, order, d, rng, scoring, gain_se, max_mechanisms, bar)
+        current, steps, chosen = _select(
+            base, order, d, rng, scoring, gain_se, max_mechanisms, bar, candidates
+        )
     t_screen = time.time() - t_start
 
     diagnostics = None
@@ -578,7 +633,7 @@ def diagnose(
     check = noise_check(w_final)
     mechanisms = []
     for name, c in chosen:
-        mag = final.magnitude(name, n_tests)
+        mag = final.magnitude(name, n_tests, meta["context"])
         entry = {
             "name": name,
             "magnitude": estimate(mag),
@@ -592,6 +647,8 @@ def diagnose(
         }
         if diagnostics and name in diagnostics:
             entry["magnitude"] |= diagnostics[name]
+        if MECHANISMS[name].confounded_with:
+            entry["other_reading"] = _other_reading(name, mag, rec)
         mechanisms.append(entry)
     mechanisms.sort(key=lambda e: -e["delta_elpd"])
     rms = {
@@ -626,7 +683,8 @@ def diagnose(
         },
         "selection": {
             "rule": (
-                f"backward elimination from the model with all {len(M.MECHS)} mechanisms: a mechanism stays "
+                f"backward elimination from the model with every mechanism the campaign can identify "
+                f"({len(candidates)} of {len(M.MECHS)}): a mechanism stays "
                 f"only if leaving it out loses more than {GAIN_MIN:g} nats of ELPD and z = loss / SE exceeds "
                 f"z_required, the Bonferroni-adjusted one-sided threshold (a single mechanism would need "
                 f"{gain_se:g} SE; the tail probability is shared over the mechanisms tested at the step); at "
@@ -638,11 +696,14 @@ def diagnose(
                 "fails its noise-scale check"
             ),
             "steps": steps,
+            "offered": list(candidates),
+            "not_offered": not_offered,
             "feff_order_log_marginal": {str(k): v for k, v in order_lps.items()},
             "n_points": int(meta["force_N"].size),
             "n_tests": n_tests,
         },
         "sampling": diagnostics["_summary"] if diagnostics else None,
+        "maxwell": campaign_table(rec, seed=seed),
     }
     # wall times are kept off the JSON, so reruns with one seed give identical bytes
     seconds = {"screening": t_screen, "total": time.time() - t_start}
@@ -705,6 +766,16 @@ def summary_text(res: dict) -> str:
             f"ELPD gain {m['delta_elpd']:.1f} +- {m['delta_elpd_se']:.1f} ({m['comparison']})"
         )
         lines.append(f"    meaning: {m['meaning']}")
+        if "other_reading" in m:
+            o = m["other_reading"]
+            extra = ""
+            if "piston_area_m2" in o:
+                a = o["piston_area_m2"]
+                extra = (
+                    f": {a['mean'] * 1e4:.2f} cm^2 (90% {a['q05'] * 1e4:.2f} .. {a['q95'] * 1e4:.2f}) "
+                    f"instead of the {o['given_piston_area_m2'] * 1e4:.2f} cm^2 given"
+                )
+            lines.append(f"    or, from the same readings: {o['words']}{extra}")
     if not res["mechanisms"]:
         lines.append(f"none of the {len(M.MECHS)} mechanisms explains the mismatch")
     nc = f["noise_check"]
@@ -745,6 +816,14 @@ def summary_text(res: dict) -> str:
             "thermal_drift tilts L with recording order; volume_excess makes the volume-derived area exceed "
             "the force-derived one by the same fraction at every pressure)"
         )
+    mx = res.get("maxwell")
+    if mx:
+        levels = mx["interpretation"]["middle"]["mean_r_by_pressure"]
+        lines.append(
+            "Maxwell relation dP/dp_u = dV/dx, test by test (r = (dV/dx)/(dP/dp_u) - 1, middle of the "
+            "stroke): " + ", ".join(f"{p} bar {v:+.3f}" for p, v in levels.items())
+        )
+        lines.append(f"  {mx['interpretation']['words']}")
     if f["remaining_flags"]:
         lines.append("left unexplained: " + "; ".join(f["remaining_flags"][:10]))
     else:

@@ -37,6 +37,7 @@ numbers (tests/models/test_diagnose_model.py), about 8 times faster per call.
 
 from __future__ import annotations
 
+import itertools
 from typing import NamedTuple
 
 import numpy as np
@@ -50,49 +51,44 @@ from uq._inference.linear import (
     gaussian_loglik,
     posterior_from_moments,
 )
+from uq._physics.mechanisms import MECHANISMS, DesignContext, LinearTerm, ScaleTerm
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
-MECHS = (
-    "pressure_dependent_area",
-    "casing_force",
-    "hysteresis",
-    "force_offset",
-    "thermal_drift",
-    "volume_excess",
-)
+#: every mechanism, in the order of the table in uq._physics.mechanisms
+MECHS = tuple(MECHANISMS)
 N_MECH = len(MECHS)
+#: the mechanisms that are a magnitude multiplying parts of the model, and those with coefficients
+SCALES = tuple(n for n in MECHS if isinstance(MECHANISMS[n].term, ScaleTerm))
+LINEARS = tuple(n for n in MECHS if isinstance(MECHANISMS[n].term, LinearTerm))
 K_MAX = 5  # highest power of t in F_eff
-CASING_DEG = 3
 #: Number of parameters each mechanism adds (parsimony order: fewer is simpler).
-N_PARAMS = {
-    "force_offset": 1,
-    "thermal_drift": 1,
-    "hysteresis": 1,
-    "pressure_dependent_area": 1,
-    "volume_excess": 1,
-    "casing_force": CASING_DEG + 1,
-}
-SIMPLICITY = (
-    "force_offset",
-    "thermal_drift",
-    "hysteresis",
-    "volume_excess",
-    "pressure_dependent_area",
-    "casing_force",
-)
-THETA_NAMES = ("log_k_force", "log_k_piston", "m_area_per_bar", "m_hysteresis", "m_volume_excess")
-#: Prior sds of the sampled parameters; volume_excess is a fraction of F_eff (0.12 on Table 1).
-THETA_PRIOR_SD = np.array([2.0, 2.0, 0.1, 0.1, 0.3])
+N_PARAMS = {n: MECHANISMS[n].n_params for n in MECHS}
+THETA_NAMES = ("log_k_force", "log_k_piston", *(f"m_{n}" for n in SCALES))
+#: Prior sds of the sampled parameters (the noise scale factors', then each magnitude's).
+THETA_PRIOR_SD = np.array([2.0, 2.0, *(MECHANISMS[n].term.prior_sd for n in SCALES)])
 N_THETA = len(THETA_NAMES)
 #: theta index of each nonlinear magnitude.
-NONLINEAR = {"pressure_dependent_area": 2, "hysteresis": 3, "volume_excess": 4}
+NONLINEAR = {n: 2 + i for i, n in enumerate(SCALES)}
+#: a magnitude with g = 1 multiplies its parts as a whole (1 + m); the others split into terms
+WHOLE = np.array([MECHANISMS[n].term.variable == "one" for n in SCALES])
 FEFF_PRIOR_SD = 1.0  # m^2
 REF_PRIOR_SD = 1.0  # m
-CASING_PRIOR_SD = 1.0e4  # N
-OFFSET_PRIOR_SD = 1.0e4  # N
-DRIFT_PRIOR_SD = 100.0  # cm^3 per step
 FLOOR_N = 1.0
 DP_RESIDUAL_SHARE = 0.2  # share of the pressure term left in z if V_gas is off
+
+
+def model_columns(n_tests: int) -> dict[str, np.ndarray]:
+    """The model's coefficient columns by group: "feff" (K_MAX + 1 powers of t), "offsets" (one
+    piston reference per test), then each mechanism with coefficients (``LINEARS``)."""
+    out, start = {}, 0
+    for group, width in (
+        ("feff", K_MAX + 1),
+        ("offsets", n_tests),
+        *((n, MECHANISMS[n].term.n_params) for n in LINEARS),
+    ):
+        out[group] = np.arange(start, start + width)
+        start += width
+    return out
 
 
 class Data(NamedTuple):
@@ -126,7 +122,7 @@ class Data(NamedTuple):
     E_L: jnp.ndarray  # (n, ke) expanded columns of the L rows
     onehot: jnp.ndarray  # (ke, k) O: the model column of each expanded column
     mask_idx: jnp.ndarray  # (ke,) int: entry of [mask, 1] switching the column on
-    uses: jnp.ndarray  # (ke, 3) whether the factor holds m_A, m_H, (1 + m_V)
+    uses: jnp.ndarray  # (ke, len(SCALES)) whether the column's factor holds each magnitude
     prior_sd: jnp.ndarray  # (k,)
     #: Moments of E over the fitted rows at unit noise scales: z-rows' and L-rows' Gram (ke, ke),
     #: right-hand sides (ke,), y^T W y, sum log sd^2 and row counts, each (z, L).
@@ -135,43 +131,65 @@ class Data(NamedTuple):
     mask: jnp.ndarray
 
 
-def _expanded(
-    p_bar, t, sgn, step, R, c, area
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The fixed expanded design (module docstring, ``Data``): z-row and L-row columns, the model
-    column of each, the mask entry switching it and the magnitudes in its factor."""
+def _scale_value(name: str, ctx: DesignContext) -> np.ndarray:
+    """g of a magnitude's factor (1 + m g) at every point."""
+    variable = MECHANISMS[name].term.variable
+    return {"pressure": ctx.p_bar, "branch": ctx.sgn, "one": np.ones_like(ctx.t)}[variable]
+
+
+def _parts(ctx: DesignContext, R: np.ndarray):
+    """(group, kind, raw columns, mask entry) of every part of the model: the traditional area's
+    force (p F_eff) and volume (its integral, the piston's travel) parts, the piston references,
+    and each mechanism's force and piston columns."""
     pw = np.arange(K_MAX + 1)
-    T = t[:, None] ** pw
-    Tint = -(BASIS_SCALE_M / area) * t[:, None] ** (pw + 1) / (pw + 1)
-    Tc = t[:, None] ** np.arange(CASING_DEG + 1)
-    P = (p_bar * BAR_PA)[:, None]
-    n, n_tests = R.shape
-    zero = lambda w: np.zeros((n, w))  # noqa: E731
-    drift = (step * 1e-6 / area)[:, None]
-    a_cols, r_cols = np.arange(K_MAX + 1), K_MAX + 1 + np.arange(n_tests)
-    e_cols = K_MAX + 1 + n_tests + np.arange(CASING_DEG + 1)
-    o_col, d_col = e_cols[-1] + 1, e_cols[-1] + 2
-    on_a = N_MECH + a_cols
-    # (z-row block, L-row block, model columns, mask entries, uses (m_A, m_H, 1 + m_V))
-    blocks = [
-        (P * T, zero(6), a_cols, on_a, (0, 0, 0)),
-        (P * p_bar[:, None] * T, zero(6), a_cols, on_a, (1, 0, 0)),
-        (P * sgn[:, None] * T, zero(6), a_cols, on_a, (0, 1, 0)),
-        (P * (p_bar * sgn)[:, None] * T, zero(6), a_cols, on_a, (1, 1, 0)),
-        (c[:, None] * Tint, Tint, a_cols, on_a, (0, 0, 1)),
-        (c[:, None] * p_bar[:, None] * Tint, p_bar[:, None] * Tint, a_cols, on_a, (1, 0, 1)),
-        (c[:, None] * R, R, r_cols, np.full(n_tests, N_MECH + K_MAX + 1), (0, 0, 0)),
-        (Tc, zero(CASING_DEG + 1), e_cols, np.full(CASING_DEG + 1, 1), (0, 0, 0)),
-        (sgn[:, None] * Tc, zero(CASING_DEG + 1), e_cols, np.full(CASING_DEG + 1, 1), (0, 1, 0)),
-        (np.ones((n, 1)), zero(1), [o_col], [3], (0, 0, 0)),
-        (c[:, None] * drift, drift, [d_col], [4], (0, 0, 0)),
+    T = ctx.t[:, None] ** pw
+    Tint = -(BASIS_SCALE_M / ctx.area_m2) * ctx.t[:, None] ** (pw + 1) / (pw + 1)
+    parts = [
+        ("feff", "force", (ctx.p_bar * BAR_PA)[:, None] * T, N_MECH + pw),
+        ("feff", "volume", Tint, N_MECH + pw),
+        ("offsets", "volume", R, np.full(R.shape[1], N_MECH + K_MAX + 1)),
     ]
+    for name in LINEARS:
+        force, piston = MECHANISMS[name].term.columns(ctx)
+        switch = MECHS.index(name)
+        for kind, cols in (("force", force), ("volume", piston)):
+            if cols is not None:
+                parts.append((name, kind, np.asarray(cols, float), np.full(cols.shape[1], switch)))
+    return parts
+
+
+def _expanded(ctx: DesignContext, R, c):
+    """The fixed expanded design (``Data``): z-row and L-row columns, the model column of each,
+    the mask entry switching it and the magnitudes in its factor. Every part is expanded over the
+    magnitudes that scale it (``ScaleTerm.scales``): (1 + m_1 g_1)(1 + m_2 g_2) B = B + m_1 g_1 B
+    + ... term by term, except a magnitude with g = 1, which multiplies as a whole (1 + m)."""
+    n = ctx.t.size
+    cols = model_columns(R.shape[1])
+    blocks = []
+    for group, kind, raw, switch in _parts(ctx, R):
+        applicable = [
+            j for j, s in enumerate(SCALES) if f"{group}.{kind}" in MECHANISMS[s].term.scales
+        ]
+        split = [j for j in applicable if not WHOLE[j]]
+        for subset in itertools.chain.from_iterable(
+            itertools.combinations(split, r) for r in range(len(split) + 1)
+        ):
+            g = np.prod([_scale_value(SCALES[j], ctx) for j in subset], axis=0) if subset else 1.0
+            block = raw * np.reshape(g, (-1, 1)) if subset else raw
+            uses = np.zeros(len(SCALES))
+            uses[list(subset) + [j for j in applicable if WHOLE[j]]] = 1.0
+            if kind == "force":
+                z, L = block, np.zeros_like(block)
+            else:
+                z, L = c[:, None] * block, block
+            blocks.append((z, L, cols[group], switch, uses))
     E_z = np.concatenate([b[0] for b in blocks], axis=1)
     E_L = np.concatenate([b[1] for b in blocks], axis=1)
-    col = np.concatenate([np.asarray(b[2]) for b in blocks])
-    onehot = np.eye(d_col + 1)[col]
-    mask_idx = np.concatenate([np.asarray(b[3]) for b in blocks]).astype(np.int32)
-    uses = np.concatenate([np.tile(b[4], (len(b[2]), 1)) for b in blocks]).astype(float)
+    width = sum(len(v) for v in cols.values())
+    onehot = np.eye(width)[np.concatenate([b[2] for b in blocks])]
+    mask_idx = np.concatenate([b[3] for b in blocks]).astype(np.int32)
+    uses = np.concatenate([np.tile(b[4], (len(b[2]), 1)) for b in blocks])
+    assert E_z.shape == (n, onehot.shape[0])
     return E_z, E_L, onehot, mask_idx, uses
 
 
@@ -224,13 +242,15 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
     cols = {
         k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")
     }
+    has_piston = rec.has_piston
     for i, test in enumerate(rec.tests):
         u = test.height_m - rec.x0_m
         t = u / BASIS_SCALE_M
         deg = min(4, test.n_points - 2)
         V = np.vander(t, deg + 1, increasing=True)
+        piston = test.piston_m if has_piston else np.zeros(test.n_points)
         cf = np.linalg.lstsq(V, test.force_N, rcond=None)[0]
-        cl = np.linalg.lstsq(V, test.piston_m, rcond=None)[0]
+        cl = np.linalg.lstsq(V, piston, rcond=None)[0]
         dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / BASIS_SCALE_M
         P_hat = V @ cf
         dPdx = dV @ cf[1:]
@@ -243,7 +263,8 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         v_gas = stand.gas_volume_at_xmax_m3
         p_abs_bar = test.pressure_bar + stand.p_atm_bar
         sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
-        c = feff * p_abs_bar * BAR_PA * S / v_gas
+        # force-only: no piston rows to decorrelate with (they are held out of the fit below)
+        c = feff * p_abs_bar * BAR_PA * S / v_gas if has_piston else np.zeros_like(feff)
         sdz = np.sqrt(
             (stand.load_cell_rel_sd * P_hat) ** 2
             + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
@@ -256,40 +277,41 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
             + stand.caliper_sd_m**2
         )
         i0 = np.argmin(np.abs(u))
-        area_check.append(
-            {
-                "pressure_bar": test.pressure_bar,
-                "from_force_m2": float(P_hat[i0] / p_pa),
-                "from_volume_m2": float(-S * slope[i0]),
-                "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa)),
-            }
-        )
+        if has_piston:
+            area_check.append(
+                {
+                    "pressure_bar": test.pressure_bar,
+                    "from_force_m2": float(P_hat[i0] / p_pa),
+                    "from_volume_m2": float(-S * slope[i0]),
+                    "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa)),
+                }
+            )
         n = test.n_points
         cols["p"].append(np.full(n, test.pressure_bar))
         cols["t"].append(t)
-        cols["sgn"].append(np.where(test.compression, 1.0, -1.0))
-        cols["step"].append(test.step.astype(float))
+        # unknown order (a catalogue table): no branch sign, the rows' order as steps; neither
+        # hysteresis nor a drift is then offered (their ``needs``)
+        order_known = test.compression is not None and test.step is not None
+        cols["sgn"].append(np.where(test.compression, 1.0, -1.0) if order_known else np.zeros(n))
+        cols["step"].append(test.step.astype(float) if order_known else np.arange(n, dtype=float))
         cols["ti"].append(np.full(n, i))
         cols["c"].append(c)
         cols["F"].append(test.force_N)
-        cols["L"].append(test.piston_m)
+        cols["L"].append(piston)
         cols["sdz"].append(sdz)
         cols["sdL"].append(sdL)
         cols["x"].append(test.height_m)
-        cols["comp"].append(test.compression)
+        cols["comp"].append(test.compression if order_known else np.ones(n, bool))
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     R = np.eye(len(rec.tests))[cat["ti"].astype(int)]
-    E_z, E_L, onehot, mask_idx, uses = _expanded(
-        cat["p"], cat["t"], cat["sgn"], cat["step"], R, cat["c"], S
-    )
-    fit_w = np.ones(2 * cat["F"].size)
+    ctx = DesignContext(cat["t"], cat["p"], cat["sgn"], cat["step"], S)
+    E_z, E_L, onehot, mask_idx, uses = _expanded(ctx, R, cat["c"])
+    n_points = cat["F"].size
+    # force-only: the piston rows are held out of the fit for good
+    fit_w = np.concatenate([np.ones(n_points), np.full(n_points, 1.0 if has_piston else 0.0)])
     prior_sd = np.concatenate(
-        [
-            np.full(K_MAX + 1, FEFF_PRIOR_SD),
-            np.full(R.shape[1], REF_PRIOR_SD),
-            np.full(CASING_DEG + 1, CASING_PRIOR_SD),
-            [OFFSET_PRIOR_SD, DRIFT_PRIOR_SD],
-        ]
+        [np.full(K_MAX + 1, FEFF_PRIOR_SD), np.full(R.shape[1], REF_PRIOR_SD)]
+        + [np.full(MECHANISMS[n].term.n_params, MECHANISMS[n].term.prior_sd) for n in LINEARS]
     )
     moments = _moments(
         E_z, E_L, cat["F"] + cat["c"] * cat["L"], cat["L"], cat["sdz"], cat["sdL"], fit_w
@@ -329,6 +351,8 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         "test": cat["ti"].astype(int),
         "force_N": cat["F"],
         "piston_m": cat["L"],
+        "has_piston": has_piston,
+        "context": ctx,
         "area": S,
         "area_check": area_check,
     }
@@ -342,13 +366,15 @@ def mask_of(names, order: int) -> jnp.ndarray:
     return jnp.asarray(mech + powers)
 
 
+_SCALE_SWITCH = np.array([MECHS.index(n) for n in SCALES])
+
+
 def _coef(theta, mask, d: Data):
-    """The factor of every expanded column (ke,): its switch times the magnitudes it holds."""
-    m_area = mask[0] * theta[2]
-    m_hyst = mask[2] * theta[3]
-    vol = 1.0 + mask[5] * theta[4]
+    """The factor of every expanded column (ke,): its switch times the magnitudes it holds (m for
+    a split term, 1 + m for a magnitude that multiplies as a whole)."""
+    m = mask[_SCALE_SWITCH] * theta[2:]
+    f = jnp.where(WHOLE, 1.0 + m, m)
     switch = jnp.concatenate([mask, jnp.ones(1)])[d.mask_idx]
-    f = jnp.stack([m_area, m_hyst, vol])
     return switch * jnp.prod(jnp.where(d.uses > 0, f, 1.0), axis=1)
 
 
@@ -384,7 +410,7 @@ def _posterior(theta, mask, d: Data):
 
 def _log_post(theta, mask, d: Data):
     lp = _posterior(theta, mask, d)[0].log_marginal
-    active = jnp.concatenate([jnp.ones(2), jnp.array([mask[0], mask[2], mask[5]])])
+    active = jnp.concatenate([jnp.ones(2), mask[_SCALE_SWITCH]])
     return lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
 
 

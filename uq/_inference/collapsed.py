@@ -202,7 +202,11 @@ def find_map(model: CollapsedModel, data, active=None) -> Optimum:
         np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:
         cov = None
-    if not ok and (cov is None or 0.5 * g @ cov @ g > MAP_DECREMENT):
+    if cov is not None and not np.all(np.isfinite(cov)):
+        cov = None
+    if not np.all(np.isfinite(x)) or (
+        not ok and (cov is None or 0.5 * g @ cov @ g > MAP_DECREMENT)
+    ):
         raise FloatingPointError(
             f"{model.name}: the MAP did not converge (BFGS, {MAP_MAX_STEPS} steps, restarted once)"
         )

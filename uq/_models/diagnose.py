@@ -408,10 +408,23 @@ def _posterior(theta, mask, d: Data):
     return post, s, coef
 
 
+#: Support of the sampled parameters: noise scale factors within e^+-8 of the stand's budget and
+#: magnitudes below 1 in size (a 100 % branch difference or volume excess; 1/bar of area growth).
+#: Beyond them the collapsed marginal likelihood is not computable in float64: with noise
+#: e^-45 times the budget the quadratic form y^T W y - m^T A m cancels to garbage and an
+#: optimiser can run away along it.
+LOG_K_BOUND = 8.0
+MAGNITUDE_BOUND = 1.0
+
+
 def _log_post(theta, mask, d: Data):
     lp = _posterior(theta, mask, d)[0].log_marginal
     active = jnp.concatenate([jnp.ones(2), mask[_SCALE_SWITCH]])
-    return lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
+    lp = lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
+    inside = jnp.all(jnp.abs(theta[:2]) < LOG_K_BOUND) & jnp.all(
+        jnp.abs(theta[2:]) < MAGNITUDE_BOUND
+    )
+    return jnp.where(inside, lp, -jnp.inf)
 
 
 def log_prob(theta, d: Data):

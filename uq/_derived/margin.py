@@ -476,10 +476,9 @@ def answer_idata(
 
 def save_answer(path, ans, info: dict, **provenance) -> Path:
     """Write the answer atomically to ``path`` (NetCDF, ``answer_idata``); returns the path."""
-    from uq._io.files import write_file_atomic
+    from uq._io.files import write_netcdf_atomic
 
-    idata = answer_idata(ans, info, **provenance)
-    return write_file_atomic(path, lambda tmp: idata.to_netcdf(str(tmp), engine="h5netcdf"))
+    return write_netcdf_atomic(path, answer_idata(ans, info, **provenance))
 
 
 def save_surface_answer(

@@ -8,7 +8,6 @@ diagnostics. SI units throughout.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -80,19 +79,12 @@ def fit_json(cf: CampaignFit) -> dict:
 
 
 def save_posteriors(cf: CampaignFit, out_dir: str | Path) -> list[Path]:
-    """One NetCDF file (ArviZ InferenceData) per test, written atomically."""
+    """One NetCDF file (ArviZ InferenceData) per test, made in memory and written atomically
+    (a full disk is a one-line error, not a crash inside HDF5: ``uq._io.files.netcdf_bytes``)."""
+    from uq._io.files import write_netcdf_atomic
+
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for t in cf.tests:
-        target = out_dir / f"posterior_{t.pressure_bar:g}bar.nc"
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=out_dir)
-        os.close(fd)
-        try:
-            t.idata.to_netcdf(tmp, engine="h5netcdf")
-            os.replace(tmp, target)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        paths.append(target)
-    return paths
+    return [
+        write_netcdf_atomic(out_dir / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
+        for t in cf.tests
+    ]

@@ -57,6 +57,7 @@ def command_report(args) -> int:
         comments=read_comments(args.file),
         surface=args.surface,
         settings=settings,
+        jobs=None,  # per-test figures in worker processes, one per CPU
     )
     t_all = time.perf_counter() - t0
     print(

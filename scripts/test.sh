@@ -4,6 +4,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
-.venv/bin/ruff check uq tests scripts fits
-.venv/bin/ruff format --check uq tests scripts fits
+.venv/bin/ruff check uq tests scripts fits benchmarks
+.venv/bin/ruff format --check uq tests scripts fits benchmarks
 .venv/bin/python -m pytest -q "$@"

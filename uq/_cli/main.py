@@ -54,11 +54,6 @@ COMMANDS = [
         "uq._cli.cmd_check",
         "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)",
     ),
-    (
-        "bench",
-        "uq._cli.cmd_bench",
-        "effective samples per second of the project's sampler against a plain emcee baseline",
-    ),
     ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
     ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
     (

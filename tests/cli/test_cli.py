@@ -278,7 +278,7 @@ def test_every_default_is_shown_in_help(name):
 
 
 def test_out_has_one_meaning():
-    """--out is where the command writes: the CSV file for simulate (CONTRACT.md), a folder elsewhere."""
+    """--out is where the command writes: the CSV file for simulate, a folder elsewhere."""
     from uq._cli.main import OUTPUT_KIND, OUTPUT_KIND_BY_COMMAND
 
     for name, _, _ in COMMANDS:

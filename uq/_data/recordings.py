@@ -1,4 +1,4 @@
-"""Recordings: the CSV format of CONTRACT.md section 1, read and validated in one place.
+"""Recordings: the CSV format of docs/formats.md section 1, read and validated in one place.
 
 One file is one test campaign: rows of ``pressure_bar, height_mm, force_N, piston_mm,
 branch, step`` (column order free, extra columns kept but ignored, ``#`` comment lines).
@@ -244,7 +244,7 @@ def read_recordings(
     x0_mm: float = DEFAULT_X0_MM,
     min_points: int = 6,
 ) -> Recordings:
-    """Read and validate a recordings CSV (CONTRACT.md section 1; docs/formats.md).
+    """Read and validate a recordings CSV (docs/formats.md section 1).
 
     Parameters
     ----------
@@ -600,7 +600,7 @@ def _check_outliers(path: str, t: PressureTest) -> None:
 
 
 def write_recordings_csv(tests: list[dict], header_comment: str = "") -> str:
-    """Format recordings as CSV text (CONTRACT.md section 1).
+    """Format recordings as CSV text (docs/formats.md section 1).
 
     ``tests``: dicts with keys pressure_bar, height_m, force_N, piston_m, compression, step
     (arrays). Numbers are printed at a fixed precision so that files are byte-reproducible.

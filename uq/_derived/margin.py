@@ -1,4 +1,4 @@
-"""Design-margin queries (``uq margin``, CONTRACT.md section 3), answered by the model the data prefer.
+"""Design-margin queries (``uq margin``, docs/formats.md section 2), answered by the model the data prefer.
 
 Which model answers. Two descriptions of a campaign can answer "at which overpressure does
 the element carry W at height x": the pressure-coupled surface model (uq/_models/surface.py,

@@ -1,4 +1,4 @@
-"""The JSON of ``uq fit`` (CONTRACT.md section 3) and the saved posteriors (NetCDF).
+"""The JSON of ``uq fit`` (docs/formats.md section 2) and the saved posteriors (NetCDF).
 
 Extends the contract with each test's posterior covariance of the coefficients (used by
 ``uq check``), the least-squares coefficients, the noise parameters and the convergence

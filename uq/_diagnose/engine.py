@@ -22,7 +22,7 @@ Pipeline (models in ``uq._models.diagnose``):
    Mechanisms are reported as provisional while the final model's noise scales exceed the
    stand's error budget by more than 2x (its own noise-scale check).
 4. The final model's sampled parameters are drawn with emcee (short chains; R-hat, ESS),
-   coefficients exactly; magnitudes in the units of CONTRACT.md section 4.
+   coefficients exactly; magnitudes in the units of docs/formats.md section 3.
 5. Posterior predictive checks of baseline and final model: residuals by pressure, height,
    branch and recording order, in force (N) and element volume (cm^3).
 """
@@ -114,7 +114,7 @@ class Fit:
         return bool(np.all(self.pareto_k <= K_BAD))
 
     def magnitude(self, name: str, n_tests: int) -> np.ndarray:
-        """Posterior draws of the mechanism's magnitude in the units of CONTRACT.md section 4."""
+        """Posterior draws of the mechanism's magnitude in the units of docs/formats.md section 3."""
         base = M.K_MAX + 1 + n_tests
         if name in M.NONLINEAR:
             return self.theta[:, M.NONLINEAR[name]]

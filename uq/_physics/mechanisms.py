@@ -1,4 +1,4 @@
-"""The physics the traditional model leaves out (CONTRACT.md section 4).
+"""The physics the traditional model leaves out (docs/formats.md section 3).
 
 One table, shared by the virtual stand (``uq simulate --effect NAME=VALUE``) and the
 discrepancy engine (``uq diagnose``), so that a concealed effect and a diagnosed one mean

@@ -22,7 +22,10 @@ RUN_BY = {
     "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
     "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
     "scripts/diagnose_proof.py": "test_diagnose_proof_small",
-    "scripts/readme_numbers.py": "tests/test_docs.py::test_report_blocks_agree_with_committed_reports",
+    "scripts/readme_numbers.py": "tests/test_docs.py (--check, and every run block rerun)",
+    "scripts/docs_figure.py": "test_docs_figure_from_a_small_report",
+    "scripts/mkdocs_hooks.py": "tests/test_docs.py::test_api_reference_lists_every_public_name "
+    "(and the mkdocs build of scripts/test.sh)",
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
     "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",
     "scripts/main.sh": "test_shell_scripts_parse",
@@ -78,6 +81,21 @@ def test_diagnose_proof_small(tmp_path):
     assert len(results) == 1 and results[0]["key"].endswith("|small")
     assert json.loads((tmp_path / "summary.json").read_text())["n_runs"] == 1
     assert (tmp_path / "README.md").read_text().startswith("# uq diagnose: proof")
+
+
+def test_docs_figure_from_a_small_report(tmp_path):
+    """The README's figure is the report's Figure 2 (here of a small campaign, short chains)."""
+    import matplotlib.image
+
+    csv, png = tmp_path / "small.csv", tmp_path / "fig.png"
+    simulate = ["simulate", "--out", csv, "--pressures", "1,5", "--step-mm", 10]
+    assert _run("-m", "uq._cli.main", *simulate).returncode == 0
+    quick = ["--max-steps", 200, "--walkers", 8, "--draws", 50]
+    proc = _run("scripts/docs_figure.py", "--recordings", csv, "--out", png, *quick)
+    assert proc.returncode == 0, proc.stderr
+    image = matplotlib.image.imread(png)
+    assert image.ndim == 3 and image.shape[0] > 300 and image.shape[1] > 400
+    assert image[..., :3].std() > 0.05  # drawn, not blank
 
 
 TINY_BENCH = ["--seed", 3, "--walkers", 8, "--max-steps", 60, "--baseline-walkers", 12]

@@ -2,11 +2,14 @@
 
     .venv/bin/python scripts/diagnose_proof.py [--seeds 2] [--jobs 2] [--out reports/diagnose-proof]
 
-For each mechanism of CONTRACT.md section 4 at two magnitudes (clearly visible; near the
+(``--small --limit N --out DIR``: the first N campaigns on small layouts with short chains, to
+check that the script runs; tests/test_scripts.py does so. Not a proof.)
+
+For each mechanism of docs/formats.md section 3 at two magnitudes (clearly visible; near the
 detection limit), on two stand layouts (the paper's; pressures 0.5..6.5 bar, 70..150 mm in
 2.5 mm steps), with several seeds; clean controls; campaigns with two mechanisms at once.
 The virtual stand (uq._stand.simulator.simulate, spring 'n50-traditional') conceals the effects with
-the exact definitions of section 4; the engine is given nothing but the recordings.
+the exact definitions of that section; the engine is given nothing but the recordings.
 
 Writes results.json (every run), summary.json and README.md (confusion matrix, false-alarm
 rate on clean data, detection rates, coverage of the true magnitude by the 90 % interval,
@@ -37,7 +40,7 @@ MECHS = (
     "thermal_drift",
     "volume_excess",
 )
-MAGNITUDES = {  # (clearly visible, near the detection limit), units of section 4
+MAGNITUDES = {  # (clearly visible, near the detection limit), units of docs/formats.md section 3
     "pressure_dependent_area": (0.01, 0.002),
     "casing_force": (200.0, 40.0),
     "hysteresis": (0.02, 0.005),
@@ -64,6 +67,11 @@ LAYOUTS = {
         x_min_m=0.070,
         step_m=0.0025,
     ),
+}
+#: --small: the same layout names with few pressures and 10 mm steps, and short chains.
+SMALL_LAYOUTS = {
+    "paper": dict(pressures_bar=(1.0, 5.0, 9.0), x_max_m=0.155, x_min_m=0.065, step_m=0.01),
+    "alt": dict(pressures_bar=(1.5, 4.5), x_max_m=0.150, x_min_m=0.070, step_m=0.01),
 }
 PAIRS = [
     {"hysteresis": 0.02, "thermal_drift": 2.0},
@@ -95,7 +103,8 @@ def cases(n_seeds: int) -> list[dict]:
 def key(case: dict) -> str:
     eff = ",".join(f"{k}={v:g}" for k, v in sorted(case["effects"].items())) or "clean"
     stand = ",".join(f"{k}={v:g}" for k, v in sorted(case.get("stand", {}).items()))
-    return f"{case['layout']}|{case['seed']}|{eff}" + (f"|stand:{stand}" if stand else "")
+    small = "|small" if case.get("small") else ""
+    return f"{case['layout']}|{case['seed']}|{eff}" + (f"|stand:{stand}" if stand else "") + small
 
 
 def run_case(case: dict) -> dict:
@@ -106,11 +115,16 @@ def run_case(case: dict) -> dict:
     from uq._stand.simulator import Layout, simulate
 
     stand = PAPER_STAND.replace(**case.get("stand", {}))
+    layouts, settings = (
+        (SMALL_LAYOUTS, Settings(max_steps=200))
+        if case.get("small")
+        else (LAYOUTS, Settings(min_steps=300, chunk=200, tau_multiple=30.0))
+    )
     tests = simulate(
         "n50-traditional",
         seed=case["seed"],
         effects=case["effects"],
-        layout=Layout(**LAYOUTS[case["layout"]]),
+        layout=Layout(**layouts[case["layout"]]),
         stand=stand,
     )
     rec = Recordings(
@@ -129,9 +143,7 @@ def run_case(case: dict) -> dict:
         ),
     )
     t0 = time.time()
-    res = diagnose(
-        rec, seed=case["seed"], settings=Settings(min_steps=300, chunk=200, tau_multiple=30.0)
-    ).to_json()
+    res = diagnose(rec, seed=case["seed"], settings=settings).to_json()
     return {
         **case,
         "key": key(case),
@@ -222,7 +234,7 @@ def summarise(results: list[dict]) -> dict:
             "mean": float(np.mean([r["seconds"] for r in results])),
             "max": float(np.max([r["seconds"] for r in results])),
             "paper_layout_mean": float(
-                np.mean([r["seconds"] for r in results if r["layout"] == "paper"])
+                np.mean([r["seconds"] for r in results if r["layout"] == "paper"] or [np.nan])
             ),
         },
     }
@@ -319,6 +331,12 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--only-summary", action="store_true", help="rewrite summary and README from results.json"
     )
+    ap.add_argument(
+        "--small",
+        action="store_true",
+        help="small layouts and short chains (checks that the script runs; not a proof)",
+    )
+    ap.add_argument("--limit", type=int, help="run only the first LIMIT campaigns")
     args = ap.parse_args(argv)
     from uq._io.files import dumps_json, write_text_atomic
 
@@ -329,7 +347,8 @@ def main(argv=None) -> int:
         if args.fresh or not path.exists()
         else {r["key"]: r for r in json.loads(path.read_text())}
     )
-    todo = [c for c in cases(args.seeds) if key(c) not in done]
+    todo = [c | ({"small": True} if args.small else {}) for c in cases(args.seeds)]
+    todo = [c for c in todo if key(c) not in done]
     if not args.only_summary and todo:
         # Clean controls and visible effects first, so a cut-short run still says something.
         todo.sort(
@@ -338,6 +357,7 @@ def main(argv=None) -> int:
                 {"clean": 0, "visible": 1, "pair": 2, "near-limit": 3}[c["level"]],
             )
         )
+        todo = todo[: args.limit]
         ctx = mp.get_context("spawn")
         with ctx.Pool(args.jobs, maxtasksperchild=None) as pool:
             for r in pool.imap_unordered(run_case, todo):

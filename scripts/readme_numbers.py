@@ -1,6 +1,6 @@
-"""Regenerate every number the README quotes from a run, so none of them is typed by hand.
+"""Regenerate every command output and number the documentation quotes, so none of them is typed by hand.
 
-The README marks each generated block:
+README.md and the pages of docs/ mark each generated block:
 
     <!-- generated: NAME -->
     ...whatever this script wrote...
@@ -8,12 +8,16 @@ The README marks each generated block:
 
 Two kinds of blocks:
 
-* ``run`` blocks paste what a `uq` command prints on data/n50 (the command is shown above the
-  output). They take minutes: `python scripts/readme_numbers.py` runs them all, `--only NAME`
-  one of them.
-* ``report`` blocks summarise the committed results in reports/ (calibration, surface coverage,
-  diagnose proof, benchmark). They are cheap; `--check` recomputes them and fails when the README
-  disagrees with reports/ (the test suite runs that).
+* ``run`` blocks paste what a command prints (the command is shown above its output, after
+  ``$``). They are made in a scratch copy of the repository's data (data/, fits/ and the
+  example files of docs/examples/), so a block may overwrite its inputs or write its outputs
+  without touching the repository. They take minutes: ``python scripts/readme_numbers.py``
+  runs them all, ``--only NAME`` some. tests/test_docs.py reruns the command of every run block
+  and compares with the page (numbers within a small relative tolerance, timings masked): the
+  quick commands in the fast suite, the slow ones under ``-m slow``.
+* ``report`` blocks summarise committed results in reports/ (calibration, surface coverage,
+  diagnose proof, benchmarks, the timings of the run blocks). They are cheap; ``--check``
+  recomputes them and fails when a page disagrees with reports/ (the test suite runs that).
 
 Usage (from the project root, with the project installed):
 
@@ -23,23 +27,46 @@ Usage (from the project root, with the project installed):
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-README = ROOT / "README.md"
 DATA = "data/n50/recordings.csv"
 BLOCK = re.compile(
     r"(<!-- generated: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- end generated: (?P=name) -->)",
     re.S,
 )
+TIMINGS = ROOT / "reports" / "readme-timings.json"
+#: What a workspace holds: copies, so that a block may write anywhere in it.
+WORKSPACE_COPIES = ("data", "fits", "docs/examples")
+
+
+def pages() -> list[Path]:
+    """Every page that may hold generated blocks: README.md and the Markdown pages of docs/."""
+    return [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+
+# ----------------------------------------------------------------------------- running commands
+
+
+def make_workspace(folder: Path) -> Path:
+    """A scratch folder with copies of the data the run blocks read, and an empty reports/."""
+    folder = Path(folder)
+    for rel in WORKSPACE_COPIES:
+        if (ROOT / rel).exists():
+            shutil.copytree(ROOT / rel, folder / rel, dirs_exist_ok=True)
+    (folder / "reports").mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 def _uq() -> list[str]:
@@ -47,7 +74,14 @@ def _uq() -> list[str]:
     return [str(venv)] if venv.exists() else [sys.executable, "-m", "uq._cli.main"]
 
 
-TIMINGS = ROOT / "reports" / "readme-timings.json"
+def run_command(args: str, cwd: Path, statuses=(0, 1)) -> tuple[list[str], float]:
+    """Run ``uq ARGS`` in ``cwd``: its output lines (stdout, then stderr) and wall time."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(_uq() + shlex.split(args), cwd=cwd, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    if proc.returncode not in statuses:
+        raise RuntimeError(f"`uq {args}` exited {proc.returncode}: {proc.stderr.strip()[-500:]}")
+    return (proc.stdout + proc.stderr).rstrip().splitlines(), seconds
 
 
 def _load_timings() -> dict:
@@ -67,65 +101,43 @@ def _save_timing(args: str, seconds: float, load: float) -> None:
     os.replace(tmp, TIMINGS)
 
 
-def _run(args: str) -> tuple[list[str], float]:
-    """Run `uq ARGS` in the project root; its output lines (stdout, then stderr) and wall time."""
-    load0 = os.getloadavg()[0]
-    t0 = time.perf_counter()
-    proc = subprocess.run(
-        _uq() + shlex.split(args),
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        env={**os.environ, "UQ_NO_PROGRESS": "1"},
-    )
-    seconds = time.perf_counter() - t0
-    if proc.returncode not in (0, 1):
-        raise SystemExit(
-            f"readme_numbers: `uq {args}` exited {proc.returncode}: {proc.stderr.strip()[-500:]}"
-        )
-    _save_timing(args, seconds, max(load0, os.getloadavg()[0]))
-    if load0 > 1.5:
-        print(
-            f"readme_numbers: load average {load0:.1f} when `uq {args}` started: its time is not an idle one",
-            file=sys.stderr,
-        )
-    return (proc.stdout + proc.stderr).rstrip().splitlines(), seconds
+# ----------------------------------------------------------------------------- the blocks
 
 
-def run_block(*commands: str, keep: int | None = None):
-    """A block that shows each `uq ARGS` and what it prints (stdout and stderr, in that order)."""
+@dataclasses.dataclass(frozen=True)
+class Block:
+    """One generated block. ``run`` blocks: the ``uq`` commands (arguments after ``uq``) whose
+    output they show, the blocks whose outputs they read (run first, in the same workspace), how
+    many output lines they keep, the exit statuses that are expected, and whether their check
+    belongs to the slow suite. ``report`` blocks: ``summarise()`` makes the text."""
 
-    def make() -> str:
-        shown = []
-        for args in commands:
-            lines, _ = _run(args)
-            if keep is not None and len(lines) > keep:
-                lines = lines[:keep] + [f"... ({len(lines) - keep} more lines)"]
-            shown += [f"$ uq {args}", *lines]
-        return "\n".join("    " + ln if ln else "" for ln in shown) + "\n"
-
-    return "run", make
+    kind: str
+    commands: tuple[str, ...] = ()
+    requires: tuple[str, ...] = ()
+    keep: int | None = None
+    statuses: tuple[int, ...] = (0, 1)
+    slow: bool = False
+    summarise: Callable[[], str] | None = None
 
 
-def speed_table():
-    """Wall times of the run blocks (reports/readme-timings.json), with the load they ran under."""
+def run_block(*commands, requires=(), keep=None, statuses=(0, 1), slow=False) -> Block:
+    return Block("run", tuple(commands), tuple(requires), keep, tuple(statuses), slow)
 
-    def make() -> str:
-        t = _load_timings()
-        if not t:
-            return "(no timings yet: python scripts/readme_numbers.py runs the commands)\n"
-        out = [
-            "| command | wall time | load average (1 min), the larger of start and end | date |",
-            "| --- | --- | --- | --- |",
-        ]
-        for args, v in t.items():
-            out.append(
-                f"| `uq {args}` | {v['seconds']:.0f} s | {v['load_average_1min']:.1f} on {v['cpus']} CPUs "
-                f"| {v['date']} |"
-            )
-        return "\n".join(out) + "\n"
 
-    return "report", make
+def report_block(summarise: Callable[[], str]) -> Block:
+    return Block("report", summarise=summarise)
+
+
+def shown(args: str, lines: list[str], keep: int | None) -> list[str]:
+    """The lines a block shows for one command: ``$ uq ARGS`` and its output (maybe cut short)."""
+    if keep is not None and len(lines) > keep:
+        lines = lines[:keep] + [f"... ({len(lines) - keep} more lines)"]
+    return [f"$ uq {args}", *lines]
+
+
+def body_of(lines: list[str]) -> str:
+    """A block's text: every line indented by four spaces (a Markdown code block)."""
+    return "\n".join("    " + ln if ln else "" for ln in lines) + "\n"
 
 
 def _load(rel: str) -> dict | None:
@@ -133,7 +145,26 @@ def _load(rel: str) -> dict | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
-def calibration_summary(rel: str):
+def speed_table() -> str:
+    """Wall times of the run blocks (reports/readme-timings.json), with the load they ran under."""
+    t = _load_timings()
+    commands = [c for b in BLOCKS.values() for c in b.commands]
+    rows = [(c, t[c]) for c in commands if c in t]
+    if not rows:
+        return "(no timings yet: python scripts/readme_numbers.py runs the commands)\n"
+    out = [
+        "| command | wall time | load average (1 min), the larger of start and end | date |",
+        "| --- | --- | --- | --- |",
+    ]
+    for args, v in sorted(rows):
+        out.append(
+            f"| `uq {args}` | {v['seconds']:.0f} s | {v['load_average_1min']:.1f} on {v['cpus']} CPUs "
+            f"| {v['date']} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def calibration_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         data = _load(rel)
         if data is None:
@@ -173,21 +204,18 @@ def calibration_summary(rel: str):
             truth = s["truth"] + (
                 "".join(f", {k} {v:g}" for k, v in s["stand"].items()) if s.get("stand") else ""
             )
+            holm_text = f"{min(holm):.3f}" if holm else "-"
             out.append(
                 f"| {truth} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
                 f"| {min(cov)}..{max(cov)} of {s['replications']} | {', '.join(outside) or 'none'} "
-                f"| {pmin[0]:.3f} ({pmin[1]}) | {min(holm):.3f} | {pred} |"
-                if holm
-                else f"| {truth} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
-                f"| {min(cov)}..{max(cov)} of {s['replications']} | {', '.join(outside) or 'none'} "
-                f"| {pmin[0]:.3f} ({pmin[1]}) | - | {pred} |"
+                f"| {pmin[0]:.3f} ({pmin[1]}) | {holm_text} | {pred} |"
             )
         return "\n".join(out) + "\n"
 
-    return "report", make
+    return make
 
 
-def surface_coverage_summary(rel: str):
+def surface_coverage_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         d = _load(rel)
         if d is None:
@@ -214,10 +242,10 @@ def surface_coverage_summary(rel: str):
                 lines.append(f"- {k}: {v}")
         return "\n".join(lines) + "\n"
 
-    return "report", make
+    return make
 
 
-def diagnose_proof_summary(rel: str):
+def diagnose_proof_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         d = _load(rel)
         if d is None:
@@ -253,14 +281,42 @@ def diagnose_proof_summary(rel: str):
         ]
         return "\n".join(lines) + "\n"
 
-    return "report", make
+    return make
 
 
-def margin_bench_summary(rel: str):
+def _bench_missing(rel: str, flag: str) -> str:
+    return f"(no benchmark yet: `python benchmarks/bench.py {flag}--json {rel}` writes it)\n"
+
+
+def ess_bench_summary(rel: str) -> Callable[[], str]:
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return _bench_missing(rel, "")
+        p, b = r["project"], r["baseline"]
+        lines = [
+            f"From `{rel}` (`python benchmarks/bench.py`, {r['cores']} cores at load average "
+            f"{r['load_average_1min']:.1f}): {r['workload']}, {r['n_points']} points; force posterior, "
+            "min bulk ESS of a_P..d_P per second",
+            "",
+            f"- project: {p['ess_per_s']:.1f} ESS/s ({p['ess_bulk_min']:.0f} ESS in {p['wall_s']:.2f} s, "
+            f"{p['runs']} run(s))",
+            f"- baseline (plain emcee): {b['ess_per_s']:.1f} ESS/s ({b['ess_bulk_min']:.0f} ESS in "
+            f"{b['wall_s']:.2f} s, {b['n_steps']} steps x {b['n_walkers']} walkers, tau {b['tau_max']:.0f})",
+            f"- ratio project / baseline: {r['ratio']:.1f}; per quantity: "
+            + ", ".join(f"{n} {v:.1f}" for n, v in r["ratio_each"].items())
+            + f"; smallest {r['ratio_min_all']:.1f}",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+def margin_bench_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         d = _load(rel)
         if d is None:
-            return f"(no benchmark yet: `uq bench --margin --bench-dir {Path(rel).parent}` writes {rel})\n"
+            return _bench_missing(rel, "--margin ")
         f, s, q, c = (
             d["full_query"],
             d["from_saved_file"],
@@ -268,7 +324,7 @@ def margin_bench_summary(rel: str):
             d["cold_cli_from_saved_file"],
         )
         return (
-            f"From `{rel}` (`uq bench --margin`, one process, {d['cores']} cores at load average "
+            f"From `{rel}` (`python benchmarks/bench.py --margin`, one process, {d['cores']} cores at load average "
             f"{d['load_average_1min']:.1f}; answered by the {d['answered_by']}): full query (fit both models, "
             f"compare, answer) {f['wall_s']:.0f} s; the same query from the saved file {s['wall_s']:.2f} s "
             f"(ratio {d['ratio_full_to_saved']:.0f}x, identical answer: {d['identical_answer']}); "
@@ -276,36 +332,188 @@ def margin_bench_summary(rel: str):
             f"`uq margin --fit` in a fresh interpreter {c['wall_s']:.1f} s, almost all of it imports.\n"
         )
 
-    return "report", make
+    return make
 
 
-BLOCKS = {
+def batch_bench_summary(rel: str) -> Callable[[], str]:
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return _bench_missing(rel, "--batch 20 ")
+        s, d = r["serial"], r["dask"]
+        return (
+            f"From `{rel}` (`python benchmarks/bench.py --batch N`, {r['cores']} cores at load average "
+            f"{r['load_average_1min']:.1f}): {r['workload']}: one process {s['wall_s']:.0f} s (peak RSS "
+            f"{s['peak_rss_mb']:.0f} MB), a {r['workers']}-worker LocalCluster {d['wall_s']:.0f} s (largest "
+            f"worker {d['children_peak_rss_mb']:.0f} MB): speed-up {r['speedup']:.2f}; the two runs' posterior "
+            f"means differ by at most {r['max_mean_difference_in_sd']:.2f} posterior sd.\n"
+        )
+
+    return make
+
+
+def scaling_bench_summary(rel: str) -> Callable[[], str]:
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return _bench_missing(rel, "--scaling ")
+        lines = [
+            f"From `{rel}` (`python benchmarks/bench.py --scaling`, load average "
+            f"{r['load_average_1min']:.1f}): {r['workload']}",
+            "",
+            "| points per test | wall time | time ratio | ms per step | peak RSS | added by the fit |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
+        for x in r["runs"]:
+            lines.append(
+                f"| {x['points_per_test']:.0f} ({x['factor']}x) | {x['wall_s']:.1f} s | x{x['time_ratio']:.2f} "
+                f"| {x['ms_per_step']:.2f} | {x['peak_rss_mb']:.0f} MB | {x['added_rss_mb']:.0f} MB |"
+            )
+        rep = r["report"]
+        lines += [
+            "",
+            f"`uq report` on the paper's campaign in a fresh process: {rep['wall_s']:.1f} s, peak RSS "
+            f"{rep['peak_rss_mb']:.0f} MB.",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+BLOCKS: dict[str, Block] = {
+    "simulate-n50": run_block(
+        "simulate --out data/n50/recordings.csv --spring n50 --seed 20201 --pressures "
+        "0.1,1,2,3,4,5,6,7,8,9,10 --x-max-mm 155 --x-min-mm 65 --step-mm 5 --piston-area-cm2 54.82"
+    ),
+    "fit-bad-csv": run_block("fit docs/examples/bad-cell.csv", statuses=(2,)),
     "fit-n50": run_block(f"fit {DATA} --json reports/n50-fit.json"),
-    "check-n50": run_block("check reports/n50-fit.json --against fits/n50/table1_points.json"),
-    "report-n50": run_block(f"report {DATA} --out reports/n50", keep=30),
-    "bench-run": run_block("bench"),
-    "speed": speed_table(),
-    "surface-select": run_block(f"surface {DATA} --select --no-compare"),
-    "surface-n50": run_block(f"surface {DATA}"),
+    "check-n50": run_block(
+        "check reports/n50-fit.json --against fits/n50/table1_points.json", requires=("fit-n50",)
+    ),
+    "check-moved": run_block(
+        "check reports/n50-fit.json --against docs/examples/table1-a_P-moved.json",
+        requires=("fit-n50",),
+        keep=8,
+    ),
+    "report-n50": run_block(f"report {DATA} --out reports/n50", keep=30, slow=True),
+    "surface-select": run_block(f"surface {DATA} --select --no-compare", slow=True),
+    "surface-n50": run_block(f"surface {DATA}", slow=True),
     "margin-n50": run_block(
-        f"margin {DATA} --height-mm 112 --load-N 13020 --pressure-bar 5 --tolerance-pct 10"
+        f"margin {DATA} --height-mm 112 --load-N 13020 --pressure-bar 5 --tolerance-pct 10",
+        slow=True,
     ),
-    "diagnose-n50": run_block(f"diagnose {DATA}", keep=45),
-    "calibration": calibration_summary("reports/calibration/calibration.json"),
-    "calibration-rough-stand": calibration_summary(
-        "reports/calibration-rough-stand/calibration.json"
+    "diagnose-n50": run_block(f"diagnose {DATA}", keep=45, slow=True),
+    "speed": report_block(speed_table),
+    "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
+    "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
+    "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),
+    "bench-scaling": report_block(scaling_bench_summary("reports/bench/scaling.json")),
+    "calibration": report_block(calibration_summary("reports/calibration/calibration.json")),
+    "calibration-rough-stand": report_block(
+        calibration_summary("reports/calibration-rough-stand/calibration.json")
     ),
-    "bench-margin": margin_bench_summary("reports/bench/margin.json"),
-    "surface-coverage": surface_coverage_summary("reports/surface-coverage/coverage.json"),
-    "diagnose-proof": diagnose_proof_summary("reports/diagnose-proof/summary.json"),
+    "surface-coverage": report_block(
+        surface_coverage_summary("reports/surface-coverage/coverage.json")
+    ),
+    "diagnose-proof": report_block(diagnose_proof_summary("reports/diagnose-proof/summary.json")),
 }
 
 
+# ----------------------------------------------------------------------------- checking a run block
+
+NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+TIMING = re.compile(r"(?<![\w.])\d+(?:\.\d+)? s\b")  # "11.5 s": wall times differ run to run
+#: Numbers may differ between machines in their last digits (floating-point sums in another
+#: order, another BLAS): equal within this relative tolerance or one unit of the last digit shown.
+RTOL = 2e-3
+
+
+def _close(a: str, b: str) -> bool:
+    x, y = float(a), float(b)
+    decimals = len(a.split(".")[1].split("e")[0].split("E")[0]) if "." in a else 0
+    unit = 10.0**-decimals if "e" not in a.lower() else abs(x) * 10.0**-decimals
+    return abs(x - y) <= max(RTOL * max(abs(x), abs(y)), unit * 1.0000001)
+
+
+def _split(line: str) -> tuple[str, list[str]]:
+    line = TIMING.sub("<time> s", line)
+    return NUMBER.sub("<n>", line), NUMBER.findall(line)
+
+
+def compare_lines(page: list[str], fresh: list[str]) -> list[str]:
+    """Differences between what a page shows and a fresh run, one message each (empty: they agree).
+    Text must match exactly, timings are masked, numbers agree within RTOL or the last digit."""
+    problems = []
+    if page and (m := re.fullmatch(r"\.\.\. \((\d+) more lines\)", page[-1])):
+        cut = len(page) - 1
+        if len(fresh) - cut != int(m[1]):
+            problems.append(f"the page says {m[1]} more lines, the run has {len(fresh) - cut}")
+        page, fresh = page[:cut], fresh[:cut]
+    if len(page) != len(fresh):
+        problems.append(f"the page shows {len(page)} lines, the run printed {len(fresh)}")
+    for i, (want, got) in enumerate(zip(page, fresh, strict=False)):
+        (t1, n1), (t2, n2) = _split(want), _split(got)
+        if t1 != t2 or len(n1) != len(n2) or not all(map(_close, n1, n2)):
+            problems.append(f"line {i + 1}:\n  page: {want}\n  run:  {got}")
+    return problems
+
+
+def parse_run_body(body: str) -> list[tuple[str, list[str]]]:
+    """(command after ``$ uq``, its shown output lines) for each command of a run block's text."""
+    out: list[tuple[str, list[str]]] = []
+    for raw in body.splitlines():
+        line = raw[4:] if raw.startswith("    ") else raw
+        if line.startswith("$ uq "):
+            out.append((line[len("$ uq ") :], []))
+        elif out:
+            out[-1][1].append(line)
+    return out
+
+
+def block_bodies() -> dict[str, tuple[Path, str]]:
+    """Every generated block of every page: name -> (page, body)."""
+    found = {}
+    for page in pages():
+        for m in BLOCK.finditer(page.read_text(encoding="utf-8")):
+            if m["name"] in found:
+                raise SystemExit(f"readme_numbers: block '{m['name']}' appears twice")
+            found[m["name"]] = (page, m["body"])
+    return found
+
+
+# ----------------------------------------------------------------------------- regenerating
+
+
+def make_run_body(name: str, workspace: Path, made: dict[str, str], timed: set[str]) -> str:
+    """Run the block's commands in ``workspace`` (after those of the blocks it requires, once
+    each: ``made`` keeps the bodies made so far) and return its text. The wall times of the
+    blocks named in ``timed`` are recorded for the speed table."""
+    if name in made:
+        return made[name]
+    block = BLOCKS[name]
+    for req in block.requires:
+        make_run_body(req, workspace, made, timed)
+    lines = []
+    for args in block.commands:
+        load0 = os.getloadavg()[0]
+        out, seconds = run_command(args, workspace, block.statuses)
+        if name in timed:
+            _save_timing(args, seconds, max(load0, os.getloadavg()[0]))
+        if load0 > 1.5:
+            print(
+                f"readme_numbers: load average {load0:.1f} when `uq {args}` started: its time is not an idle one",
+                file=sys.stderr,
+            )
+        lines += shown(args, out, block.keep)
+    made[name] = body_of(lines)
+    return made[name]
+
+
 def regenerate(
-    text: str, names: set[str], bodies: dict[str, str] | None = None
+    text: str, names: set[str], bodies: dict[str, str] | None = None, where: str = "README.md"
 ) -> tuple[str, list[str]]:
-    """The README with the named blocks rebuilt (from ``bodies`` where given, else made now), and
-    the names of blocks whose text changed."""
+    """The page with the named blocks rebuilt (from ``bodies`` where given, else made now, which
+    works for report blocks only), and the names of blocks whose text changed."""
     changed = []
     bodies = {} if bodies is None else bodies
 
@@ -315,14 +523,22 @@ def regenerate(
             return m[0]
         if name not in BLOCKS:
             raise SystemExit(
-                f"readme_numbers: README.md has a block '{name}' this script does not know"
+                f"readme_numbers: {where} has a block '{name}' this script does not know"
             )
-        body = bodies[name] if name in bodies else BLOCKS[name][1]()
+        body = bodies[name] if name in bodies else BLOCKS[name].summarise()
         if body != m["body"]:
             changed.append(name)
         return m[1] + body + m[4]
 
     return BLOCK.sub(repl, text), changed
+
+
+def _write(page: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=page.parent, prefix=f".{page.name}.", suffix=".tmp")
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(text)
+    os.chmod(tmp, page.stat().st_mode & 0o777)
+    os.replace(tmp, page)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -334,38 +550,48 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--check",
         action="store_true",
-        help="rebuild the report blocks in memory; exit 1 if README differs",
+        help="rebuild the report blocks in memory; exit 1 if a page differs",
     )
     args = ap.parse_args(argv)
-    text = README.read_text()
-    present = {m["name"] for m in BLOCK.finditer(text)}
-    names = set(args.only or BLOCKS) & present
+    present = block_bodies()
+    unknown = sorted(set(present) - set(BLOCKS))
+    if unknown:
+        raise SystemExit(f"readme_numbers: blocks this script does not know: {', '.join(unknown)}")
+    names = set(args.only or BLOCKS) & set(present)
     if args.reports_only or args.check:
-        names = {n for n in names if BLOCKS[n][0] == "report"}
+        names = {n for n in names if BLOCKS[n].kind == "report"}
     if args.check:
-        new, changed = regenerate(text, names)
-        if changed:
+        stale = []
+        for page in pages():
+            _, changed = regenerate(page.read_text(encoding="utf-8"), names, where=str(page))
+            stale += [f"{page.relative_to(ROOT)}: {n}" for n in changed]
+        if stale:
             print(
-                f"README.md is out of date with reports/ in: {', '.join(sorted(changed))}; "
+                f"out of date with reports/: {'; '.join(stale)}; "
                 "run python scripts/readme_numbers.py --reports-only",
                 file=sys.stderr,
             )
             return 1
         return 0
-    # Run blocks take minutes: make every body first (run blocks in README order, so `fit` comes
-    # before `check`; report blocks last, after the runs have written their timings), then
-    # re-read the README, so edits made meanwhile are kept.
-    order = [m["name"] for m in BLOCK.finditer(text) if m["name"] in names]
-    order.sort(key=lambda n: BLOCKS[n][0] == "report")
-    bodies = {n: BLOCKS[n][1]() for n in order}
-    new, changed = regenerate(README.read_text(), names, bodies)
-    fd, tmp = tempfile.mkstemp(dir=ROOT, prefix=".README.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write(new)
-    os.chmod(tmp, README.stat().st_mode & 0o777)
-    os.replace(tmp, README)
+    # Run blocks take minutes: make every body first (report blocks last, after the runs have
+    # written their timings), then re-read each page, so edits made meanwhile are kept.
+    made: dict[str, str] = {}
+    with tempfile.TemporaryDirectory(prefix="uq-readme-numbers-") as tmp:
+        workspace = make_workspace(Path(tmp))
+        for name in sorted(n for n in names if BLOCKS[n].kind == "run"):
+            make_run_body(name, workspace, made, timed=names)
+    bodies = {n: made[n] for n in names if n in made}
+    for name in names - set(bodies):
+        bodies[name] = BLOCKS[name].summarise()
+    changed_all = []
+    for page in pages():
+        text = page.read_text(encoding="utf-8")
+        new, changed = regenerate(text, names, bodies, where=str(page))
+        if new != text:
+            _write(page, new)
+        changed_all += changed
     print(
-        f"README.md: rebuilt {', '.join(sorted(names)) or 'nothing'}; changed: {', '.join(sorted(changed)) or 'nothing'}"
+        f"rebuilt {', '.join(sorted(names)) or 'nothing'}; changed: {', '.join(sorted(changed_all)) or 'nothing'}"
     )
     return 0
 

@@ -11,7 +11,7 @@ Each layer is a subpackage of private modules (the optimistix ``_solver/`` style
   _diagnose  the discrepancy engine
   _derived   bands, margins, checks, result documents
   _report    the HTML pages and figures
-  _drivers   whole pipelines: batch on Dask, bench, calibration
+  _drivers   whole pipelines: batch on Dask, calibration
   _cli       the command line: one module per command, the only user of argparse
 
 A module may import from its own layer or below, never above; the modules import each other
@@ -151,7 +151,7 @@ def test_graph_sees_the_imports_it_must():
     edges = import_graph()
     assert ("_report.surface", "_models.surface") in edges  # top-level absolute import
     assert ("_diagnose.engine", "_models.diagnose") in edges  # from uq._models import diagnose as M
-    assert ("_cli.cmd_bench", "_drivers.bench") in edges
+    assert ("_cli.cmd_batch", "_drivers.batch") in edges  # from uq._drivers import batch as B
     assert any(
         a == "_drivers.batch" and b == "_inference.float64" for a, b in edges
     )  # function level
@@ -210,7 +210,6 @@ def test_functions_are_short():
     long = [
         f"{p.relative_to(UQ.parent)}:{n.lineno} {n.name} ({n.end_lineno - n.lineno + 1} lines)"
         for p in _modules().values()
-        if p.name != "bench.py"  # the benchmark harness is leaving the package for benchmarks/
         for n in ast.walk(ast.parse(p.read_text(encoding="utf-8")))
         if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)
         and n.end_lineno - n.lineno + 1 > 120

@@ -21,7 +21,7 @@ mechanisms), ``_data`` (recordings, the paper's tables, stand descriptions), ``_
 virtual test stand), ``_inference`` (exact linear-Gaussian draws, the emcee edge, convergence),
 ``_models`` (cubic, surface, diagnose models), ``_diagnose`` (the discrepancy engine),
 ``_derived`` (bands, margins, checks, result documents), ``_report`` (HTML pages and figures),
-``_drivers`` (batch, bench, calibration) and ``_cli`` (one module per command). A module imports
+``_drivers`` (batch, calibration) and ``_cli`` (one module per command). A module imports
 only from its own layer or below (tests/test_layers.py). The names below are the public API.
 
 Float64. uq's models need JAX in double precision (the cubics' coefficients span ten orders of

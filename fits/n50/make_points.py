@@ -1,21 +1,22 @@
 """Write table1_points.json: Table 1 of the paper in SI, the point estimates for ``uq check``.
 
-Run from the repository root:  .venv/bin/python fits/n50/make_points.py
-The values come from uq._reference.table1() (the paper's table shipped in uq/_data,
+Run from the repository root:  .venv/bin/python fits/n50/make_points.py [--out PATH]
+The values come from uq._data.reference.table1() (the paper's table shipped in uq/_data,
 converted to SI there); this script reshapes them (and rounds away the binary noise of
-the conversion at 12 significant digits) into CONTRACT.md section 3's point-estimate
-format, so rerunning it reproduces the JSON byte for byte.
+the conversion at 12 significant digits) into the point-estimate format of ``uq check``
+(docs/formats.md), so rerunning it reproduces the JSON byte for byte (tests/test_scripts.py
+checks that).
 
 Each test also carries ``covariance`` (force, piston; SI, paper basis): the sampling
 covariance of the paper's own estimator, because Table 1 is a least-squares fit to one
-campaign and has its own error (uq._check.lsq_covariance):
+campaign and has its own error (uq._derived.check.lsq_covariance):
 * force: ordinary least squares on the test's 37 readings (19 compression, 18 rebound,
   section 3.4) with the noise sd taken from Table 2: s_P^2 N/(N-4) (X^T X)^-1; s_P is the
   paper's rms residual (divisor N), N/(N-4) turns it into the unbiased residual variance.
   Table 2's s_P holds everything the paper's data scatter by (including the
   compression/rebound difference), so this is the paper's own measure of its noise.
 * piston: the paper gives no residual measure, so the noise sd of each reading comes from
-  the stand's error budget (uq._stand.noise_sd on the Table 1 curves: calipers, displacement,
+  the stand's error budget (uq._stand.simulator.noise_sd on the Table 1 curves: calipers, displacement,
   and the gas volume's response to the pressure holding), propagated through the same
   least-squares estimator (X^T X)^-1 X^T diag(sd^2) X (X^T X)^-1. This assumes the budget
   is the whole piston scatter; if the paper's piston readings scattered more, the
@@ -83,8 +84,12 @@ def points() -> dict:
     }
 
 
-def main() -> None:
-    target = HERE / "table1_points.json"
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(HERE / "table1_points.json"), help="the file to write")
+    target = ap.parse_args(argv).out
     write_text_atomic(target, dumps_json(points()))
     print(f"wrote {target}")
 

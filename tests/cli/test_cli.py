@@ -92,7 +92,6 @@ def _bad_usage_rows(tmp: Path):
         (["calibrate", "--reps", 0], ["--reps"]),
         (["calibrate", "--out", afile], ["--out"]),
         (["check", afile, "--against", afile, "--alpha", 2], ["--alpha"]),
-        (["bench", "--json", tmp], ["--json"]),
         (["simulate", "--out", tmp], ["--out", "folder"]),
         (["simulate", "--out", tmp / "s.csv", "--step-mm", 0], ["--step-mm"]),
         (["simulate", "--out", tmp / "s.csv", "--pressures", "1,inf"], ["--pressures"]),
@@ -102,7 +101,7 @@ def _bad_usage_rows(tmp: Path):
     ]
 
 
-N_BAD_USAGE = 34
+N_BAD_USAGE = 33
 
 
 def test_bad_usage_table_size(tmp_path):
@@ -279,7 +278,7 @@ def test_every_default_is_shown_in_help(name):
 
 
 def test_out_has_one_meaning():
-    """--out is where the command writes: the CSV file for simulate (CONTRACT.md), a folder elsewhere."""
+    """--out is where the command writes: the CSV file for simulate, a folder elsewhere."""
     from uq._cli.main import OUTPUT_KIND, OUTPUT_KIND_BY_COMMAND
 
     for name, _, _ in COMMANDS:
@@ -367,21 +366,6 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         "fit": ["fit", csv, *quick],
         "report": ["report", csv, "--out", d / "rep", "--draws", "50", *quick],
         "check": ["check", fit, "--against", d / "points.json"],
-        "bench": [
-            "bench",
-            "--seconds",
-            "0",
-            "--seed",
-            "3",
-            "--walkers",
-            "8",
-            "--max-steps",
-            "60",
-            "--baseline-walkers",
-            "12",
-            "--bench-dir",
-            d / "bench",
-        ],
         "surface": [
             "surface",
             csv,

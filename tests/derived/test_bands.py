@@ -55,7 +55,7 @@ def test_traditional_from_own_volume_curve_at_x0(paper_bands):
 
 
 def test_spread_at_x0_matches_physics_md(paper_bands):
-    # PHYSICS.md: own volume curve 12-14 % above at 1..10 bar, 22 % at 0.1 bar;
+    # expected from the paper: own volume curve 12-14 % above at 1..10 bar, 22 % at 0.1 bar;
     # 5-bar volume curve: ~21 % at 1 bar, 12 % at 5 bar, 2.5 % at 10 bar.
     own = {tb.pressure_bar: tb.at_x0["spread_own_pct"]["mean"] for tb in paper_bands.tests}
     ref = {tb.pressure_bar: tb.at_x0["spread_ref_pct"]["mean"] for tb in paper_bands.tests}

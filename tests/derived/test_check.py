@@ -94,7 +94,7 @@ def test_points_file_is_table1_in_si():
     np.testing.assert_allclose(
         [[x["piston"][n] for n in PISTON_NAMES] for x in doc["tests"]], t.piston, rtol=1e-12
     )
-    assert doc["tests"][-1]["force"]["a_P"] == 28570.0  # PHYSICS.md: P(x0) = 28.57 kN at 10 bar
+    assert doc["tests"][-1]["force"]["a_P"] == 28570.0  # Table 1: P(x0) = 28.57 kN at 10 bar
 
 
 def test_points_file_carries_the_paper_estimators_covariance():

@@ -399,7 +399,7 @@ def command_fit(args) -> int:
         raise InputError(
             "give the recordings CSV (uq fit FILE.csv) or a fit definition (uq fit --config FILE.toml)"
         )
-    from uq._io.files import emit_json
+    from uq._io.files import emit_json, staged_folder
     from uq._models.cubic import fit_campaign
 
     stand = stand_from(args)
@@ -423,9 +423,10 @@ def command_fit(args) -> int:
         print(f"WARNING: {w}", file=sys.stderr)
     for w in result["model_warnings"]:
         print(f"WARNING (model): {w}", file=sys.stderr)
-    if args.out:
-        paths = cf.save(args.out)
-        emit_json(result, str(Path(args.out) / "fit.json"))
+    if args.out:  # the posteriors and fit.json whole or not at all (a full disk leaves none)
+        with staged_folder(args.out, last=("fit.json",)) as stage:
+            paths = cf.save(stage)
+            emit_json(result, str(stage / "fit.json"))
         print(f"posteriors: {len(paths)} NetCDF files and fit.json in {args.out}")
     emit_json(result, args.json)
     if not result["converged"]:

@@ -42,7 +42,7 @@ def configure_batch(p) -> None:
     p.add_argument(
         "--serial",
         action="store_true",
-        help="no Dask: run the tasks one after another in this process (debugging; the benchmark's reference)",
+        help="no Dask: run the tasks one after another in this process (debugging; the reference of benchmarks/bench.py --batch)",
     )
     p.add_argument(
         "--json", metavar="PATH", help="also write the summary JSON to PATH ('-' for stdout)"

@@ -17,7 +17,7 @@ def configure_check(p) -> None:
         "--against",
         required=True,
         metavar="POINTS.json",
-        help="point estimates to check (CONTRACT.md section 3, e.g. fits/n50/table1_points.json)",
+        help="point estimates to check (the format of docs/formats.md section 2, e.g. fits/n50/table1_points.json)",
     )
     p.add_argument(
         "--alpha",

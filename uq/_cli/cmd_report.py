@@ -73,6 +73,7 @@ def command_report(args) -> int:
         comments=read_comments(args.file),
         surface=surface,
         comparison=comparison,
+        jobs=None,  # per-test figures in worker processes, one per CPU
     )
     t_all = time.perf_counter() - t0
     print(

@@ -1,10 +1,10 @@
-"""The ``uq`` command line (CONTRACT.md section 2): thin drivers around the library.
+"""The ``uq`` command line (docs/commands.md): thin drivers around the library.
 
 Each command lives in the module that owns its concept and exposes ``configure_NAME(parser)``
 and ``command_NAME(args) -> int``; this file wires them up. Only the module of the command
 being run is imported (``uq --help`` imports no numpy, JAX, ArviZ or matplotlib).
 
-Exit status, the same for every command (README, "Exit status"):
+Exit status, the same for every command (docs/commands.md):
 
 * 0  done (for ``uq check``: all agree)
 * 1  ``uq check`` found a disagreement, or sampling did not converge under ``--strict``
@@ -54,11 +54,6 @@ COMMANDS = [
         "uq._cli.cmd_check",
         "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)",
     ),
-    (
-        "bench",
-        "uq._cli.cmd_bench",
-        "effective samples per second of the project's sampler against a plain emcee baseline",
-    ),
     ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
     ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
     (
@@ -80,7 +75,7 @@ COMMANDS = [
 
 #: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"
 #: (the folder to write into). --out is always "where this command writes": the file for
-#: simulate (CONTRACT.md: --out FILE.csv), the folder for every other command.
+#: simulate (--out FILE.csv), the folder for every other command.
 OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir"}
 OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
 

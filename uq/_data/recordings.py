@@ -1,4 +1,4 @@
-"""Recordings: the format of CONTRACT.md section 1, read and validated in one place.
+"""Recordings: the format of docs/formats.md section 1, read and validated in one place.
 
 One file (CSV, or one sheet of an .xlsx/.ods workbook) is one test campaign. The paper's full
 format has the columns ``pressure_bar, height_mm, force_N, piston_mm, branch, step``; real stands
@@ -259,7 +259,7 @@ def read_recordings(
     p_atm_bar: float = DEFAULT_P_ATM_BAR,
     pressure_tolerance_bar: float | None = None,
 ) -> Recordings:
-    """Read and validate recordings (CONTRACT.md section 1; docs/formats.md section 1).
+    """Read and validate recordings (docs/formats.md section 1).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The paper's Tables 1 and 2 (shared/reference/, shipped in ``uq/_data``), in SI units.
+"""The paper's Tables 1 and 2 (shipped in ``uq/_data/tables``), in SI units.
 
 Table 1 gives, per overpressure, the cubic coefficients of force P(x) (eq. 8) and piston
 coordinate L(x) (eq. 9) against u = x - x0 in metres, x0 = 0.112 m. Converted here:

@@ -1,6 +1,6 @@
 """``uq check RESULT.json --against POINTS.json``: do stored point estimates agree with a posterior?
 
-RESULT is the JSON of ``uq fit --json`` (CONTRACT.md section 3), which carries per test the
+RESULT is the JSON of ``uq fit --json`` (docs/formats.md section 2), which carries per test the
 posterior mean of each coefficient and the posterior covariance of each coefficient block
 (``covariance: {force: 4x4, piston: 4x4}``, SI, paper basis). POINTS holds point estimates
 in the same units (e.g. ``fits/n50/table1_points.json``, Table 1 of the paper).

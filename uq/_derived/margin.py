@@ -1,4 +1,4 @@
-"""Design-margin queries (``uq margin``, CONTRACT.md section 3), answered by the model the data prefer.
+"""Design-margin queries (``uq margin``, docs/formats.md section 2), answered by the model the data prefer.
 
 Which model answers. Two descriptions of a campaign can answer "at which overpressure does
 the element carry W at height x": the pressure-coupled surface model (uq/_models/surface.py,
@@ -481,10 +481,9 @@ def answer_idata(
 
 def save_answer(path, ans, info: dict, **provenance) -> Path:
     """Write the answer atomically to ``path`` (NetCDF, ``answer_idata``); returns the path."""
-    from uq._io.files import write_file_atomic
+    from uq._io.files import write_netcdf_atomic
 
-    idata = answer_idata(ans, info, **provenance)
-    return write_file_atomic(path, lambda tmp: idata.to_netcdf(str(tmp), engine="h5netcdf"))
+    return write_netcdf_atomic(path, answer_idata(ans, info, **provenance))
 
 
 def save_surface_answer(

@@ -22,7 +22,7 @@ Pipeline (models in ``uq._models.diagnose``):
    Mechanisms are reported as provisional while the final model's noise scales exceed the
    stand's error budget by more than 2x (its own noise-scale check).
 4. The final model's sampled parameters are drawn with emcee (short chains; R-hat, ESS),
-   coefficients exactly; magnitudes in the units of CONTRACT.md section 4.
+   coefficients exactly; magnitudes in the units of docs/formats.md section 3.
 5. Posterior predictive checks of baseline and final model: residuals by pressure, height,
    branch and recording order, in force (N) and element volume (cm^3).
 """

@@ -1,1 +1,1 @@
-"""Layer 10: whole pipelines: a catalogue on Dask, the benchmarks, the calibration study."""
+"""Layer 10: whole pipelines: a catalogue on Dask, the calibration study."""

@@ -538,7 +538,7 @@ def run_dask(
 
 
 def run_serial(jobs: list[dict], on_row=None) -> list[dict]:
-    """The same jobs one after another in this process (the benchmark's reference, and for debugging)."""
+    """The same jobs one after another in this process (for debugging, and the reference of benchmarks/bench.py --batch)."""
     rows = []
     for j in jobs:
         rows.append(run_job(j))
@@ -621,27 +621,3 @@ def run_batch(
             else run_dask(todo, scheduler=scheduler, workers=workers, on_row=on_row)
         )
     return write_summary(_ordered(rows, jobs), out_dir, catalogue)
-
-
-# ----------------------------------------------------------------------------- benchmark
-
-
-def bench_catalogue(
-    folder, n: int, *, seed: int = 20201, pressures: str = "2,5", step_mm: float = 5.0
-) -> Path:
-    """``n`` simulated campaigns (virtual stand, seeds seed+i) and a catalogue running ``fit`` on each."""
-    from uq._data.recordings import write_recordings_csv
-    from uq._io.files import write_text_atomic
-    from uq._stand.simulator import Layout, simulate
-
-    folder = Path(folder)
-    layout = Layout(tuple(float(p) for p in pressures.split(",")), step_m=step_mm * 1e-3)
-    rows = ["name,file,tasks,seed"]
-    for i in range(n):
-        tests = simulate("n50", seed=seed + i, layout=layout)
-        write_text_atomic(
-            folder / f"c{i:02d}.csv",
-            write_recordings_csv(tests, f"benchmark campaign {i}, seed {seed + i}"),
-        )
-        rows.append(f"c{i:02d},c{i:02d}.csv,fit,{seed + i}")
-    return write_text_atomic(folder / "catalogue.csv", "\n".join(rows) + "\n")

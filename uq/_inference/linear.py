@@ -9,7 +9,7 @@ likelihood in closed form:
                              + log det A + n log 2 pi ]          (Woodbury / matrix determinant lemma)
 
 So emcee only has to explore the noise (and any nonlinear mechanism) parameters; the
-coefficients are drawn exactly for every retained sample (PHYSICS.md, sampling note).
+coefficients are drawn exactly for every retained sample (docs/methods.md).
 All functions are pure and jittable; shapes in the docstrings.
 """
 

@@ -387,9 +387,9 @@ def run_many(
     """
     from uq._io.progress import _Silent, progress
 
-    with (
-        progress(total=settings.max_steps, desc=desc, unit="step") if desc else _Silent(None) as bar
-    ):
+    # No total: the run stops when the rules pass, usually far below max_steps, so a bar to
+    # max_steps would show an ETA many times too long. It counts steps and their rate instead.
+    with progress(desc=desc, unit="step") if desc else _Silent(None) as bar:
         return _run_many(log_prob, centers, covs, names, seed, settings, bar, mix)
 
 

@@ -7,10 +7,15 @@ never replaced, and a device such as /dev/null is written to, not replaced.
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import math
 import os
+import shutil
 import stat
+import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +26,17 @@ from uq._io.errors import InputError
 
 def _refuse(path: Path, why: str) -> InputError:
     return InputError(f"cannot write {path}: {why}")
+
+
+#: Write failures that are the place's fault, not the program's: no space, a file-size limit, a quota.
+_NO_ROOM = {errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", errno.ENOSPC)}
+
+
+def _no_room(path: Path, exc: BaseException) -> InputError | None:
+    """The one-line error for a full disk (or a file-size limit, a quota) while writing ``path``."""
+    if isinstance(exc, OSError) and exc.errno in _NO_ROOM:
+        return _refuse(path, f"{exc.strerror or os.strerror(exc.errno)} (nothing was written)")
+    return None
 
 
 def _target_mode(path: Path) -> tuple[bool, int | None]:
@@ -106,8 +122,11 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
             fh = open(path, "wb")
         except OSError as exc:
             raise _refuse(path, exc.strerror or str(exc)) from None
-        with fh:
-            fh.write(data)
+        try:
+            with fh:
+                fh.write(data)
+        except OSError as exc:
+            raise (_no_room(path, exc) or exc) from None
         return path
 
     def fill(fd, tmp):
@@ -129,43 +148,102 @@ def _replace_atomically(path: Path, fill) -> Path:
     try:
         fill(fd, tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        full = _no_room(path, exc)
+        if full is not None:
+            raise full from None
         raise
     _fsync_folder(path.parent)
     return path
 
 
-def write_file_atomic(path: str | os.PathLike, write) -> Path:
-    """Atomically write a file that a library writes by name (``write(tmp_path)``, e.g. NetCDF).
+def netcdf_bytes(idata) -> bytes:
+    """An ArviZ InferenceData as NetCDF-4 bytes, made in memory (what ArviZ 0.23's
+    ``idata.to_netcdf(path)`` writes: root attributes, every group, zlib compression of numbers;
+    ``arviz.from_netcdf`` reads the file back).
 
-    The same promises as :func:`write_bytes_atomic`: the temporary file is created beside the
-    target (mode 0666 less the umask, or the replaced file's mode), fsynced and renamed over
-    it; a symbolic link or a folder is refused; a device or pipe gets the finished bytes.
+    Why in memory: HDF5 writing straight to a full disk (or past a file-size limit) fails inside
+    h5py, which can crash the interpreter (a segmentation fault, exit 139); the bytes are
+    written afterwards like any other output, where a full disk is a one-line error."""
+    import io
+
+    import xarray as xr
+    from arviz.data.inference_data import _compressible_dtype
+
+    buf = io.BytesIO()
+    mode = "w"
+    with _local_dask_scheduler():
+        if idata._attrs:  # the InferenceData's own attributes, on the root group
+            xr.Dataset(attrs=idata._attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")
+            mode = "a"
+        for group in idata._groups_all:
+            data = getattr(idata, group)
+            encoding = {
+                name: {"zlib": True}
+                for name, values in data.variables.items()
+                if _compressible_dtype(values.dtype)
+            }
+            data.to_netcdf(buf, mode=mode, group=f"/{group}", engine="h5netcdf", encoding=encoding)
+            mode = "a"
+    return buf.getvalue()
+
+
+@contextlib.contextmanager
+def _local_dask_scheduler():
+    """In a Dask worker (``uq batch``), xarray would take a cluster-wide lock named after the
+    target, which a buffer in memory cannot name; the data here are in memory, so a local lock is right."""
+    if "dask" not in sys.modules:
+        yield
+        return
+    import dask
+
+    with dask.config.set(scheduler="synchronous"):
+        yield
+
+
+def write_netcdf_atomic(path: str | os.PathLike, idata) -> Path:
+    """Write an ArviZ InferenceData to ``path`` as NetCDF, atomically (:func:`netcdf_bytes`, then
+    :func:`write_bytes_atomic`): a full disk is an :class:`InputError` and leaves no file."""
+    return write_bytes_atomic(path, netcdf_bytes(idata))
+
+
+@contextlib.contextmanager
+def staged_folder(out: str | os.PathLike, *, last: tuple[str, ...] = ()):
+    """Write a set of files (a report and its figures) whole or not at all.
+
+    Yields a new hidden folder inside ``out``; write the set there. When the block ends without
+    an exception every file is moved into ``out`` (renames in one file system: they need no
+    space, so a full disk cannot stop them half-way), the names in ``last`` after the others (the
+    page that links the figures); on any failure the folder and what it holds are removed and
+    ``out`` keeps what it had. The targets get the promises of :func:`write_bytes_atomic`: a
+    replaced file keeps its mode, a symbolic link or a folder is refused (before anything is
+    moved), a device is written to. Errors name the files in ``out``, not the hidden folder.
     """
-    path = Path(path)
-    in_place, mode = _target_mode(path)
-    if in_place:
-        import tempfile
-
-        with tempfile.TemporaryDirectory(prefix="uq-write-") as folder:
-            tmp = Path(folder) / path.name
-            write(tmp)
-            return write_bytes_atomic(path, tmp.read_bytes())
-
-    def fill(fd, tmp):
-        os.close(fd)
-        write(tmp)
-        fd = os.open(tmp, os.O_RDONLY)
+    out = Path(out)
+    _make_parent(out / "x")
+    try:
+        stage = Path(tempfile.mkdtemp(prefix=".uq-staging-", dir=out))
+    except OSError as exc:
+        raise (_no_room(out, exc) or _refuse(out, exc.strerror or str(exc))) from None
+    try:
         try:
+            yield stage
+        except InputError as exc:
+            raise InputError(str(exc).replace(f"{stage}{os.sep}", f"{out}{os.sep}")) from None
+        files = sorted(stage.iterdir(), key=lambda p: (p.name in last, p.name))
+        plan = [(src, out / src.name, *_target_mode(out / src.name)) for src in files]
+        for src, dst, in_place, mode in plan:
+            if in_place:
+                write_bytes_atomic(dst, src.read_bytes())
+                continue
             if mode is not None:
-                os.fchmod(fd, mode)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-    return _replace_atomically(path, fill)
+                os.chmod(src, mode)
+            os.replace(src, dst)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    _fsync_folder(out)
 
 
 def remove_stale(folder: str | os.PathLike, patterns: tuple[str, ...], keep) -> list[Path]:
@@ -224,8 +302,6 @@ def emit_json(result: Any, target: str | None) -> None:
         return
     text = dumps_json(result)
     if target == "-":
-        import sys
-
         sys.stdout.write(text)
         sys.stdout.flush()
     else:

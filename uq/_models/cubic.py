@@ -520,17 +520,16 @@ class CampaignFit:
 
     def save(self, out_dir) -> list:
         """One NetCDF file per test (ArviZ InferenceData with posterior, log_likelihood,
-        posterior_predictive and observed_data groups), each written atomically; returns the paths."""
+        posterior_predictive and observed_data groups), made in memory and written atomically (a
+        full disk is a one-line error, not a crash inside HDF5: ``uq._io.files.netcdf_bytes``);
+        returns the paths."""
         from pathlib import Path
 
-        from uq._io.files import write_file_atomic
+        from uq._io.files import write_netcdf_atomic
 
         out = Path(out_dir)
         return [
-            write_file_atomic(
-                out / f"posterior_{t.pressure_bar:g}bar.nc",
-                lambda tmp, t=t: t.idata.to_netcdf(str(tmp), engine="h5netcdf"),
-            )
+            write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
             for t in self.tests
         ]
 

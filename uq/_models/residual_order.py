@@ -5,8 +5,8 @@ controller that corrects slowly leaves the pressure errors of successive reading
 and through Boyle's law (1.9 mm of piston per 0.01 bar at 5 bar) the piston readings with them;
 a drift does the same. Then the posterior intervals are too narrow, by up to
 sqrt((1 + rho) / (1 - rho)) for a lag-one correlation rho (2.4 at rho = 0.7), and the
-calibration suite shows it (README, calibration: the 90 % intervals of a_L covered about half on such a
-stand). Nothing in the fit itself signals this, so each block (force, piston) of
+calibration suite shows it (docs/validation.md: the 90 % intervals of a_L covered about half
+on such a stand). Nothing in the fit itself signals this, so each block (force, piston) of
 each test is checked:
 
     z_i = (y_i - mean curve) / noise sd at reading i, in recording order,

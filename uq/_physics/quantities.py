@@ -6,7 +6,7 @@
   are reported in the paper's basis (against u = x - x0 in m) by ``to_paper_basis``.
 * ``force_noise_var``: the fitted force noise, a floor sigma0 (pressure holding, displacement,
   relaxation) plus the load cell's relative error r on the force level:
-  sigma_F^2 = sigma0^2 + (r * F_ref)^2 (PHYSICS.md, error budget). Every model, the report's
+  sigma_F^2 = sigma0^2 + (r * F_ref)^2 (the stand's error budget). Every model, the report's
   predictive bands and the calibration suite's prior simulations use this one formula.
 
 Pure functions of arrays; they work on numpy and JAX arrays alike.

@@ -9,6 +9,7 @@ write is atomic (``uq._io.files``). The page is the template ``templates/report.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 from types import SimpleNamespace
@@ -19,7 +20,7 @@ from uq._data.recordings import leading_comments
 from uq._data.reference import table1, table2
 from uq._derived.bands import CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
-from uq._io.files import remove_stale, write_bytes_atomic, write_text_atomic
+from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import Figure, _plt, _png, render
@@ -357,6 +358,36 @@ def fig_test(t, force_mean, x0_m: float, tb, cb: CampaignBands) -> bytes:
     return _png(fig)
 
 
+def _ignore_interrupts() -> None:
+    """A figure worker's initializer: leave Ctrl-C to the process that started it."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def _workers_ignore_interrupts():
+    """Processes started in this block ignore Ctrl-C from their first instruction on.
+
+    Ctrl-C reaches every process of the terminal's group, and a spawned worker is still importing
+    (matplotlib, this module) when it arrives: it would print a traceback each. Only this process
+    may answer it (one line, exit 130). An ignored signal stays ignored across exec, and Python
+    keeps it so. The cost: a Ctrl-C in the few milliseconds the workers take to start is ignored
+    here too (press it again). (Only the main thread can set handlers; elsewhere nothing is done.)
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, handler)
+
+
 class _TestFigures:
     """The per-test figures (the slow part of a report: about 1 s each), drawn by ``jobs``
     spawned worker processes while the page and the campaign figures are made in this one.
@@ -376,12 +407,15 @@ class _TestFigures:
             import concurrent.futures
             import multiprocessing
 
-            # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
-            self._pool = concurrent.futures.ProcessPoolExecutor(
-                max_workers=min(jobs, len(self._work)),
-                mp_context=multiprocessing.get_context("spawn"),
-            )
-            self._futures = [self._pool.submit(fig_test, *w) for w in self._work]
+            with _workers_ignore_interrupts():
+                # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
+                self._pool = concurrent.futures.ProcessPoolExecutor(
+                    max_workers=min(jobs, len(self._work)),
+                    mp_context=multiprocessing.get_context("spawn"),
+                    initializer=_ignore_interrupts,
+                )
+                # the workers start here (spawn launches them all at the first submit)
+                self._futures = [self._pool.submit(fig_test, *w) for w in self._work]
 
     def result(self, i: int) -> bytes:
         return self._futures[i].result() if self._pool else fig_test(*self._work[i])
@@ -586,7 +620,7 @@ def write_report(
     surface=None,
     comparison: dict | None = None,
     surface_page: str | None = None,
-    jobs: int | None = None,
+    jobs: int | None = 1,
 ) -> Path:
     """Write ``out_dir/report.html`` and its PNG figures, as ``uq report`` does; return the page's path.
 
@@ -597,8 +631,12 @@ def write_report(
     the report and linked from it, with ``comparison`` (:func:`uq.compare_models`) on it, as
     ``uq report --surface`` does; this function only renders, it fits nothing. ``comments``
     replaces the recordings' leading ``#`` lines. Every file is written atomically; PNGs an earlier
-    report left behind are removed. The per-test figures are drawn by ``jobs`` worker processes
-    (default: one per CPU; ``jobs=1`` draws them here), with the same bytes either way.
+    report left behind are removed. The per-test figures are drawn in this process by default;
+    ``jobs=N`` draws them in N worker processes (``None``: one per CPU; ``uq report`` does so),
+    with the same bytes either way. Workers are started by spawning (this process may hold a JAX
+    runtime, which forking can deadlock), and a spawned worker imports the calling script again:
+    with ``jobs`` other than 1, call ``write_report`` from a script only under
+    ``if __name__ == "__main__":``.
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -613,19 +651,21 @@ def write_report(
         raise InputError(f"draws: at least {MIN_DRAWS} draws, got {draws}", param="draws")
     seed = cf.seed if seed is None else seed
     out = Path(out_dir)
-    if surface is not None:
-        from uq._models.surface import summary
-        from uq._report.surface import write_surface_report
-
-        surface_page = write_surface_report(surface, summary(surface, comparison), out).name
-    out.mkdir(parents=True, exist_ok=True)
     cb = bands if bands is not None else campaign_bands(cf, n_draws=draws, seed=seed)
-    with _TestFigures(cf, cb, (os.cpu_count() or 1) if jobs is None else jobs) as test_pngs:
-        page, names = _write_page(cf, cb, out, test_pngs, comments, surface_page)
+    # All pages and figures go to a hidden folder first and are moved in at the end, so a full
+    # disk or a Ctrl-C leaves the previous report (or nothing), never part of a new one.
+    with staged_folder(out, last=("surface.html", "report.html")) as stage:
+        if surface is not None:
+            from uq._models.surface import summary
+            from uq._report.surface import write_surface_report
+
+            surface_page = write_surface_report(surface, summary(surface, comparison), stage).name
+        with _TestFigures(cf, cb, (os.cpu_count() or 1) if jobs is None else jobs) as test_pngs:
+            page, names = _write_page(cf, cb, stage, test_pngs, comments, surface_page)
     # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
     stale = REPORT_FIGURES + (() if surface_page else SURFACE_OUTPUTS)
     remove_stale(out, stale, keep=names | {page.name})
-    return page
+    return out / page.name
 
 
 def _write_page(

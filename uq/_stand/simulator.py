@@ -10,8 +10,8 @@ raised again in 5 mm steps to 155 mm (18 points, ``rebound``): 37 points per tes
 0..36 in recording order. Pressures 0.1 and 1..10 bar by default; all of it is optional.
 
 Error budget and the assumptions made to turn it into noise (each term independent,
-Gaussian, the paper's figures read as one standard deviation; PHYSICS.md shows that this
-reading reproduces the s_P the budget predicts):
+Gaussian, the paper's figures read as one standard deviation; this reading reproduces the
+s_P the budget predicts, tested over 12 seeds):
 
 * displacement sensor 0.02 mm: the element stands at x + dx, dx ~ N(0, 0.02 mm), while
   the recording shows the commanded height x. Force and piston follow the true height.
@@ -245,7 +245,7 @@ def true_curves(
 ):
     """Noise-free force (N) and piston coordinate (m) of ``spring`` with concealed ``effects``.
 
-    Mechanism definitions as CONTRACT.md section 4, applied in the order
+    Mechanism definitions as docs/formats.md section 3, applied in the order
     pressure_dependent_area, casing_force, elastic_casing, hysteresis, force_offset (force) and
     pressure_dependent_area, elastic_casing, volume_excess, thermal_drift (piston). volume_excess
     scales the piston's travel from its position at x0 by (1 + m): dV/dx = (1 + m) F_eff.

@@ -1,4 +1,16 @@
-"""``uq bench``: effective samples per second of the force posterior, project sampler vs plain emcee.
+"""Benchmarks of airspring-uq: sampler efficiency, memory and scale, batch speed-up, margin queries.
+
+Not part of the installed package: run from the repository root with the project installed,
+
+    .venv/bin/python benchmarks/bench.py [--seconds 10] [--json reports/bench/ess.json]
+    .venv/bin/python benchmarks/bench.py --scaling  [--json reports/bench/scaling.json]
+    .venv/bin/python benchmarks/bench.py --batch 20 [--json reports/bench/batch.json]
+    .venv/bin/python benchmarks/bench.py --margin   [--json reports/bench/margin.json]
+
+The summary goes to stdout (to stderr with ``--json -``); the JSON goes only where ``--json``
+says (the committed records are reports/bench/*.json: pass their path to refresh one).
+
+Default measurement: effective samples per second of the force posterior, project sampler vs plain emcee.
 
 Workload: one 37-point test, the 5 bar test of the virtual stand (``uq._stand.simulator.simulate``,
 spring n50, seeded by ``--seed``), or the test at ``--pressure-bar`` of ``--recordings FILE``.
@@ -26,7 +38,10 @@ process, after a JIT warm-up run that is not timed.
 
 from __future__ import annotations
 
+import argparse
 import math
+import os
+import sys
 import time
 from pathlib import Path
 
@@ -38,6 +53,7 @@ from uq._data.reference import FORCE_NAMES
 from uq._inference.convergence import bulk_ess
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
+from uq._io.files import emit_json
 
 BENCH_PRESSURE_BAR = 5.0
 BASELINE_WALKERS = 32
@@ -392,8 +408,6 @@ def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
     import json
     import tempfile
 
-    from uq._drivers.batch import bench_catalogue
-
     with tempfile.TemporaryDirectory(prefix="uq-bench-batch-") as tmp:
         cat = bench_catalogue(tmp, n, seed=seed)
         serial = run_child(["batch", cat, "--out", Path(tmp) / "serial", "--serial"])
@@ -487,7 +501,7 @@ def margin_speed(
         t_fit = time.perf_counter() - t0
         plo, phi = ans.pressure_range_bar
         if recordings is None:
-            h, load, pb = 0.112, 13020.0, 5.0  # the README's query
+            h, load, pb = 0.112, 13020.0, 5.0  # the documented query (docs/surface.md)
         else:
             h, pb = rec.x0_m, (plo + phi) / 2
             load = float(ans.force_draws(h, pb).mean())
@@ -521,7 +535,7 @@ def margin_speed(
             info,
             recordings=rec,
             seed=seed,
-            written_by="uq bench --margin",
+            written_by="benchmarks/bench.py --margin",
             settings=settings,
             stand=PAPER_STAND,
             diagnostics=diagnostics,
@@ -642,3 +656,228 @@ def bench(
         "ratio_each": each,
         "ratio_min_all": min(each.values()),
     }
+
+
+def bench_catalogue(
+    folder, n: int, *, seed: int = 20201, pressures: str = "2,5", step_mm: float = 5.0
+) -> Path:
+    """``n`` simulated campaigns (virtual stand, seeds seed+i) and a catalogue running ``fit`` on each."""
+    from uq._data.recordings import write_recordings_csv
+    from uq._io.files import write_text_atomic
+    from uq._stand.simulator import Layout, simulate
+
+    folder = Path(folder)
+    layout = Layout(tuple(float(p) for p in pressures.split(",")), step_m=step_mm * 1e-3)
+    rows = ["name,file,tasks,seed"]
+    for i in range(n):
+        tests = simulate("n50", seed=seed + i, layout=layout)
+        write_text_atomic(
+            folder / f"c{i:02d}.csv",
+            write_recordings_csv(tests, f"benchmark campaign {i}, seed {seed + i}"),
+        )
+        rows.append(f"c{i:02d},c{i:02d}.csv,fit,{seed + i}")
+    return write_text_atomic(folder / "catalogue.csv", "\n".join(rows) + "\n")
+
+
+# --------------------------------------------------------------------------- the script
+
+
+def summary(r: dict) -> str:
+    p, b = r["project"], r["baseline"]
+    return "\n".join(
+        [
+            f"bench: {r['workload']}, {r['n_points']} points; force posterior, min bulk ESS of a_P..d_P per second",
+            f"  project  : {p['ess_per_s']:10.1f} ESS/s  ({p['ess_bulk_min']:.0f} ESS in {p['wall_s']:.2f} s, {p['runs']} run(s))",
+            f"  baseline : {b['ess_per_s']:10.1f} ESS/s  ({b['ess_bulk_min']:.0f} ESS in {b['wall_s']:.2f} s, "
+            f"{b['n_steps']} steps x {b['n_walkers']} walkers, tau {b['tau_max']:.0f})",
+            f"  ratio project / baseline: {r['ratio']:.1f}",
+            "  per quantity: "
+            + ", ".join(f"{n} {v:.1f}" for n, v in r["ratio_each"].items())
+            + f"; smallest {r['ratio_min_all']:.1f}",
+        ]
+    )
+
+
+def scale_summary(name: str, r: dict) -> str:
+    if name == "margin":
+        f, s, m, c = (
+            r["full_query"],
+            r["from_saved_file"],
+            r["queries_from_saved_file"],
+            r["cold_cli_from_saved_file"],
+        )
+        return "\n".join(
+            [
+                f"bench --margin: {r['workload']}; {r['cores']} cores, load average {r['load_average_1min']:.1f}",
+                f"  full query (fit + answer) : {f['wall_s']:8.2f} s (answered by the {r['answered_by']})",
+                f"  from the saved file       : {s['wall_s']:8.3f} s (load {s['load_s']:.3f} s, answer {s['answer_s']:.3f} s); "
+                f"identical answer: {r['identical_answer']}",
+                f"  ratio {r['ratio_full_to_saved']:.0f}x; {m['n']} queries from the saved file {m['wall_s']:.2f} s "
+                f"({m['per_query_s']:.3f} s a query)",
+                f"  cold uq margin --fit (fresh interpreter, imports included): {c['wall_s']:.1f} s",
+            ]
+        )
+    if name == "batch":
+        s, d = r["serial"], r["dask"]
+        return "\n".join(
+            [
+                f"bench --batch: {r['workload']}; {r['cores']} cores, load average {r['load_average_1min']:.1f}",
+                f"  one process : {s['wall_s']:7.1f} s, peak RSS {s['peak_rss_mb']:.0f} MB",
+                f"  Dask        : {d['wall_s']:7.1f} s, peak RSS driver {d['peak_rss_mb']:.0f} MB, largest worker "
+                f"{d['children_peak_rss_mb']:.0f} MB ({r['workers']} workers)",
+                f"  speed-up {r['speedup']:.2f}x; posterior means of the two runs differ by at most "
+                f"{r['max_mean_difference_in_sd']:.2f} posterior sd",
+            ]
+        )
+    lines = [f"bench --scaling: {r['workload']}; load average {r['load_average_1min']:.1f}"]
+    for x in r["runs"]:
+        lines.append(
+            f"  {x['factor']:>3}x ({x['n_points']:>5} points): {x['wall_s']:6.1f} s (x{x['time_ratio']:.2f}), "
+            f"{x['ms_per_step']:.2f} ms/step (x{x['per_step_time_ratio']:.2f}), peak RSS {x['peak_rss_mb']:.0f} MB, "
+            f"added {x['added_rss_mb']:.0f} MB (x{x['added_rss_ratio']:.2f})"
+        )
+    rep = r["report"]
+    lines.append(
+        f"  uq report (paper's campaign, cold process): {rep['wall_s']:.1f} s, peak RSS {rep['peak_rss_mb']:.0f} MB"
+    )
+    return "\n".join(lines)
+
+
+def _seconds(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a non-negative number of seconds, got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text}")
+    return value
+
+
+def _baseline_walkers(text: str) -> int:
+    value = int(text)
+    if value < 12 or value % 2:
+        raise argparse.ArgumentTypeError(
+            f"an even number of at least 12 walkers (2 x 6 parameters) is needed, got {text}"
+        )
+    return value
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="benchmarks/bench.py",
+        description=__doc__.splitlines()[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument(
+        "--seconds",
+        type=_seconds,
+        default=10.0,
+        help="minimum timed wall time of each sampler, s (the project runs whole fits)",
+    )
+    p.add_argument("--seed", type=int, default=20201, help="workload and samplers")
+    p.add_argument(
+        "--recordings", metavar="FILE", help="the test (or campaign, --margin) from this CSV"
+    )
+    p.add_argument(
+        "--pressure-bar", type=float, default=BENCH_PRESSURE_BAR, help="pressure of the test"
+    )
+    p.add_argument(
+        "--walkers", type=_positive_int, default=Settings.n_walkers, help="project: walkers"
+    )
+    p.add_argument(
+        "--max-steps",
+        type=_positive_int,
+        default=Settings.max_steps,
+        help="project: cap on emcee steps per ensemble",
+    )
+    p.add_argument(
+        "--baseline-walkers",
+        type=_baseline_walkers,
+        default=BASELINE_WALKERS,
+        help="baseline: emcee walkers (>= 12, even)",
+    )
+    p.add_argument(
+        "--json",
+        metavar="PATH",
+        help="write the result to PATH ('-' for stdout); nothing is written without it",
+    )
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--scaling",
+        action="store_true",
+        help="instead: uq fit at --factors times the points per test (time and peak-RSS ratios) "
+        "and the peak RSS of uq report on the paper's campaign",
+    )
+    p.add_argument(
+        "--factors",
+        default=",".join(map(str, SCALING_FACTORS)),
+        help="--scaling: points-per-test factors (the step is 5 mm / factor)",
+    )
+    mode.add_argument(
+        "--batch",
+        type=_positive_int,
+        metavar="N",
+        help="instead: uq batch of N simulated campaigns on a LocalCluster against one process",
+    )
+    mode.add_argument(
+        "--margin",
+        action="store_true",
+        help="instead: one full uq margin query (fit + answer) against the same query and 100 "
+        "queries from a saved fit; the campaign is --recordings or the paper's",
+    )
+    p.add_argument(
+        "--queries", type=_positive_int, default=100, help="--margin: queries from the saved fit"
+    )
+    return p
+
+
+def measure(args) -> tuple[str, dict]:
+    """Run the benchmark the options ask for: (its name, its result)."""
+    settings = Settings(n_walkers=args.walkers, max_steps=args.max_steps)
+    settings.validate()
+    record = {"load_average_1min": os.getloadavg()[0], "cores": cores()}
+    if args.scaling:
+        factors = tuple(int(f) for f in args.factors.split(","))
+        r = scaling(seed=args.seed, settings=settings, factors=factors)
+        return "scaling", record | r | {"report": report_memory(args.seed)}
+    if args.batch:
+        return "batch", record | batch_speedup(args.batch, seed=args.seed)
+    if args.margin:
+        from uq._models.surface import NOISE_NAMES
+
+        settings.require_walkers(len(NOISE_NAMES))  # the surface model samples its noise
+        r = margin_speed(
+            seed=args.seed, settings=settings, recordings=args.recordings, n_queries=args.queries
+        )
+        return "margin", record | r
+    r = bench(
+        seconds=args.seconds,
+        seed=args.seed,
+        settings=settings,
+        recordings=args.recordings,
+        pressure_bar=args.pressure_bar,
+        baseline_walkers=args.baseline_walkers,
+    )
+    return "ess", record | r
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        name, r = measure(args)
+        emit_json(r, args.json)
+    except InputError as exc:
+        print(f"benchmarks/bench.py: error: {exc}", file=sys.stderr)
+        return 2
+    text = summary(r) if name == "ess" else scale_summary(name, r)
+    where = f"\n  written to {args.json}" if args.json not in (None, "-") else ""
+    print(text + where, file=sys.stderr if args.json == "-" else sys.stdout)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,208 @@
+"""What a user meets at the edges: a full disk, Ctrl-C, the library in a plain script, the progress bar.
+
+Each test runs the real command in a fresh interpreter (the crashes were in h5py, in spawned
+workers and in a re-imported script: only a separate process shows them).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from uq._io.errors import InputError
+
+QUICK = ["--max-steps", "200", "--walkers", "8"]
+
+
+def _env(**extra) -> dict:
+    # No bytecode: under a file-size limit Python writes truncated .pyc files (a short write is
+    # not an error to it), which break every later import of the module. No compilation cache:
+    # its files would hit the limit too.
+    return {**os.environ, "PYTHONDONTWRITEBYTECODE": "1", "UQ_CACHE_DIR": "off", **extra}
+
+
+def _uq(*args) -> list[str]:
+    return [sys.executable, "-m", "uq._cli.main", *map(str, args)]
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory) -> Path:
+    """Eight small tests: enough for the report to draw its per-test figures in workers."""
+    csv = tmp_path_factory.mktemp("edges") / "c.csv"
+    argv = ["simulate", "--out", csv, "--pressures", "1,2,3,4,5,6,7,8", "--step-mm", "10"]
+    subprocess.run(_uq(*argv), check=True, capture_output=True, env=_env())
+    return csv
+
+
+def _limited(argv, max_file_bytes: int, cwd) -> subprocess.CompletedProcess:
+    """Run with no file larger than ``max_file_bytes`` (RLIMIT_FSIZE): a write beyond it fails
+    with EFBIG, as one on a full disk fails with ENOSPC. Python ignores SIGXFSZ, so the write
+    returns the error instead of the kernel killing the process."""
+    # The limit is set by a small launcher, not preexec_fn: that forks this process, and JAX
+    # (loaded by earlier tests) warns that a fork of its threads may deadlock.
+    launcher = (
+        "import os, resource, sys; n = int(sys.argv[1]); "
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (n, n)); os.execv(sys.argv[2], sys.argv[2:])"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", launcher, str(max_file_bytes), *argv],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=600,
+    )
+
+
+def _no_traceback(proc) -> list[str]:
+    assert "Traceback" not in proc.stderr and "Segmentation" not in proc.stderr, proc.stderr
+    return [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("WARNING")]
+
+
+def test_full_disk_uq_fit_out_is_one_line_and_exit_2(campaign, tmp_path):
+    out = tmp_path / "fit"
+    proc = _limited(_uq("fit", campaign, "--out", out, *QUICK), 100_000, tmp_path)
+    lines = _no_traceback(proc)
+    assert proc.returncode == 2, proc.stderr  # it was 139: a segmentation fault inside h5py
+    assert len(lines) == 1 and lines[0].startswith("uq fit: error: cannot write "), proc.stderr
+    assert "File too large" in lines[0] and str(out / "posterior_1bar.nc") in lines[0]
+    assert sorted(p.name for p in out.iterdir()) == []  # no posterior, no fit.json, no temp folder
+
+
+def test_full_disk_uq_report_leaves_no_partial_set(campaign, tmp_path):
+    out = tmp_path / "rep"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's own file")
+    proc = _limited(_uq("report", campaign, "--out", out, "--draws", 50, *QUICK), 30_000, tmp_path)
+    lines = _no_traceback(proc)
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and lines[0].startswith("uq report: error: cannot write "), proc.stderr
+    assert f"{out}{os.sep}" in lines[0] and ".uq-staging" not in lines[0]
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]  # was: 4 of 16 PNGs
+
+
+def test_staged_folder_moves_all_or_nothing(tmp_path):
+    from uq._io.files import staged_folder, write_text_atomic
+
+    out = tmp_path / "out"
+    out.mkdir()
+    write_text_atomic(out / "a.png", "old a")
+    os.chmod(out / "a.png", 0o600)
+    with staged_folder(out, last=("page.html",)) as stage:
+        write_text_atomic(stage / "a.png", "new a")
+        write_text_atomic(stage / "page.html", "page")
+    assert (out / "a.png").read_text() == "new a" and (out / "page.html").read_text() == "page"
+    assert (out / "a.png").stat().st_mode & 0o777 == 0o600  # a replaced file keeps its mode
+    before = {p.name: p.read_text() for p in out.iterdir()}
+    with pytest.raises(KeyboardInterrupt), staged_folder(out) as stage:
+        write_text_atomic(stage / "a.png", "half of a new set")
+        raise KeyboardInterrupt
+    assert {p.name: p.read_text() for p in out.iterdir()} == before
+    (out / "link.png").symlink_to(out / "a.png")
+    with pytest.raises(InputError, match="symbolic link"), staged_folder(out) as stage:
+        write_text_atomic(stage / "b.png", "b")
+        write_text_atomic(stage / "link.png", "through a link")
+    assert not (out / "b.png").exists()  # refused before anything moved
+
+
+def _children(pid: int) -> list[str]:
+    kids = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            kids += (task / "children").read_text().split()
+        except OSError:
+            pass
+    return kids
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+def test_ctrl_c_in_uq_report_prints_one_line_and_exits_130(campaign, tmp_path):
+    """Ctrl-C at a terminal reaches the whole process group, figure workers included."""
+    env = _env(UQ_CACHE_DIR=str(tmp_path / "cache"))
+    argv = _uq("report", campaign, "--out", tmp_path / "rep", "--draws", 50, *QUICK)
+    proc = subprocess.Popen(
+        argv, process_group=0, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        # the figure workers are started (resource tracker + workers) and are still importing
+        seen, stable_since = 0, time.monotonic()
+        while proc.poll() is None:
+            n = len(_children(proc.pid))
+            if n != seen:
+                seen, stable_since = n, time.monotonic()
+            if seen >= 3 and time.monotonic() - stable_since > 0.3:
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, "the report finished before the workers were seen"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("WARNING")]
+    assert proc.returncode == 130 and lines == ["uq report: interrupted"], err
+
+
+def test_library_in_a_plain_script_without_main_guard(tmp_path):
+    """The README's first example as a script (no ``if __name__ == "__main__":``) fits once and
+    writes the report: the library draws in this process unless asked for workers."""
+    script = tmp_path / "example.py"
+    script.write_text(
+        textwrap.dedent(
+            """
+            import uq
+            small = uq.Layout(pressures_bar=(1.0, 2.0, 3.0, 5.0), step_m=0.01)
+            fit = uq.fit_campaign(uq.simulate("n50", layout=small), settings=uq.Settings(max_steps=200))
+            print("fitted")
+            print(uq.write_report(fit, "out/", draws=50).name)
+            """
+        )
+    )
+    proc = subprocess.run(
+        [sys.executable, script], cwd=tmp_path, capture_output=True, text=True, env=_env()
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == [
+        "fitted",
+        "report.html",
+    ]  # was: fitted 3 times, BrokenProcessPool
+    assert len(list((tmp_path / "out").glob("test_*bar.png"))) == 4
+
+
+def test_sampling_bar_shows_no_made_up_total(monkeypatch):
+    """The run stops when the rules pass, far below max_steps: a bar to max_steps showed an ETA
+    ("25:37 remaining" for a 28 s fit). It counts steps instead."""
+    import io
+
+    import numpy as np
+
+    import uq._io.progress as progress
+    from uq._inference.sampler import Settings, run_ensembles
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    tty = Terminal()
+    monkeypatch.setattr(sys, "stderr", tty)
+    monkeypatch.setattr(progress, "_enabled", True)
+    settings = Settings(n_walkers=8, n_ensembles=2, max_steps=5000, min_steps=40, chunk=20)
+    run_ensembles(
+        lambda th: -0.5 * np.sum(np.asarray(th) ** 2, axis=1),
+        np.zeros(2),
+        np.ones(2),
+        ("a", "b"),
+        seed=1,
+        settings=settings,
+        desc="sampling",
+    )
+    shown = tty.getvalue()
+    assert "sampling" in shown and "step" in shown
+    assert "5000" not in shown and "<" not in shown  # no total, no time remaining

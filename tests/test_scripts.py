@@ -1,0 +1,157 @@
+"""Every script of the repository (scripts/, fits/, benchmarks/) runs, with tiny settings, so none rots.
+
+The scripts are run as a user runs them: ``python PATH ARGS`` in a fresh interpreter, from the
+repository root unless a test says otherwise. Their numbers are not checked here (they are
+proofs and measurements, reviewed where their results are committed), only that they run to
+the end and write what they promise, where they promise it.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Every script and the test that runs it (test_every_script_is_run_by_a_test checks the list).
+RUN_BY = {
+    "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
+    "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
+    "scripts/diagnose_proof.py": "test_diagnose_proof_small",
+    "scripts/readme_numbers.py": "tests/test_docs.py (--check, and every run block rerun)",
+    "scripts/docs_figure.py": "test_docs_figure_from_a_small_report",
+    "scripts/mkdocs_hooks.py": "tests/test_docs.py::test_api_reference_lists_every_public_name "
+    "(and the mkdocs build of scripts/test.sh)",
+    "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
+    "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",
+    "scripts/main.sh": "test_shell_scripts_parse",
+    "scripts/test.sh": "test_shell_scripts_parse (and every CI run)",
+}
+
+
+def _run(*argv, cwd=ROOT, timeout=900) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, *map(str, argv)], cwd=cwd, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def test_every_script_is_run_by_a_test():
+    found = {
+        str(p.relative_to(ROOT))
+        for folder in ("scripts", "fits", "benchmarks")
+        for p in (ROOT / folder).rglob("*")
+        if p.suffix in (".py", ".sh") and "__pycache__" not in p.parts
+    }
+    assert found == set(RUN_BY), "scripts without a test (add one here): " + str(
+        sorted(found ^ set(RUN_BY))
+    )
+
+
+@pytest.mark.parametrize("name", ["install.sh", "main.sh", "test.sh"])
+def test_shell_scripts_parse(name):
+    proc = subprocess.run(["bash", "-n", ROOT / "scripts" / name], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_make_points_reproduces_the_committed_file(tmp_path):
+    out = tmp_path / "points.json"
+    proc = _run("fits/n50/make_points.py", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_bytes() == (ROOT / "fits" / "n50" / "table1_points.json").read_bytes()
+
+
+def test_sbc_piston_exact_few_replications():
+    proc = _run("scripts/sbc_piston_exact.py", 12, 7)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert [ln.split(":")[0] for ln in lines] == ["a_L", "b_L", "c_L", "d_L"]
+    assert all("chi-square p = " in ln for ln in lines)
+
+
+def test_diagnose_proof_small(tmp_path):
+    proc = _run(
+        "scripts/diagnose_proof.py", "--small", "--limit", 1, "--jobs", 1, "--out", tmp_path
+    )
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert len(results) == 1 and results[0]["key"].endswith("|small")
+    assert json.loads((tmp_path / "summary.json").read_text())["n_runs"] == 1
+    assert (tmp_path / "README.md").read_text().startswith("# uq diagnose: proof")
+
+
+def test_docs_figure_from_a_small_report(tmp_path):
+    """The README's figure is the report's Figure 2 (here of a small campaign, short chains)."""
+    import matplotlib.image
+
+    csv, png = tmp_path / "small.csv", tmp_path / "fig.png"
+    simulate = ["simulate", "--out", csv, "--pressures", "1,5", "--step-mm", 10]
+    assert _run("-m", "uq._cli.main", *simulate).returncode == 0
+    quick = ["--max-steps", 200, "--walkers", 8, "--draws", 50]
+    proc = _run("scripts/docs_figure.py", "--recordings", csv, "--out", png, *quick)
+    assert proc.returncode == 0, proc.stderr
+    image = matplotlib.image.imread(png)
+    assert image.ndim == 3 and image.shape[0] > 300 and image.shape[1] > 400
+    assert image[..., :3].std() > 0.05  # drawn, not blank
+
+
+TINY_BENCH = ["--seed", 3, "--walkers", 8, "--max-steps", 60, "--baseline-walkers", 12]
+
+
+def test_bench_tiny_run_writes_only_where_asked(tmp_path):
+    """The ESS benchmark with tiny settings: structure and positive rates, never timing; the JSON
+    goes to --json and nowhere else (uq bench also wrote reports/bench/ess.json into the cwd)."""
+    out = tmp_path / "result" / "ess.json"
+    proc = _run(
+        ROOT / "benchmarks" / "bench.py", "--seconds", 0, *TINY_BENCH, "--json", out, cwd=tmp_path
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert [p.relative_to(tmp_path) for p in tmp_path.rglob("*") if p.is_file()] == [
+        Path("result/ess.json")
+    ]
+    r = json.loads(out.read_text())
+    assert r["cores"] >= 1 and r["load_average_1min"] >= 0
+    assert r["n_points"] == 37 and r["seed"] == 3 and "5 bar" in r["workload"]
+    for name in ("project", "baseline"):
+        block = r[name]
+        assert block["runs"] >= 1 and block["wall_s"] > 0
+        assert block["ess_bulk_min"] > 0 and block["ess_per_s"] > 0
+    assert r["ratio"] == r["project"]["ess_per_s"] / r["baseline"]["ess_per_s"] > 0
+    names = ("a_P", "b_P", "c_P", "d_P", "sigma0_N", "rel_force")
+    assert tuple(r["ratio_each"]) == names and r["ratio_min_all"] == min(r["ratio_each"].values())
+    for n in names:
+        want = r["project"]["ess_per_s_each"][n] / r["baseline"]["ess_per_s_each"][n]
+        assert r["ratio_each"][n] == want
+    assert "ratio project / baseline" in proc.stdout and f"written to {out}" in proc.stdout
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--seconds", "-1"], "--seconds"),
+        (["--baseline-walkers", "7"], "--baseline-walkers"),
+        (["--scaling", "--margin"], "not allowed with"),
+    ],
+)
+def test_bench_bad_options_exit_2(argv, words):
+    proc = _run(ROOT / "benchmarks" / "bench.py", *argv)
+    assert proc.returncode == 2 and words in proc.stderr, proc.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "argv, key",
+    [
+        (["--scaling", "--factors", "1,2", "--walkers", 8, "--max-steps", 200], "runs"),
+        (["--batch", 2], "speedup"),
+        (["--margin", "--queries", 3, "--max-steps", 400], "ratio_full_to_saved"),
+    ],
+)
+def test_bench_other_measurements_run(argv, key, tmp_path):
+    out = tmp_path / "r.json"
+    proc = _run(ROOT / "benchmarks" / "bench.py", *argv, "--json", out, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert key in json.loads(out.read_text())

@@ -27,6 +27,8 @@ RUN_BY = {
     "scripts/mkdocs_hooks.py": "tests/test_docs.py::test_api_reference_lists_every_public_name "
     "(and the mkdocs build of scripts/test.sh)",
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
+    "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
+    "scripts/sealed_coverage.py": "tests/derived/test_design.py::test_coverage_script_runs_with_tiny_settings",
     "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",
     "scripts/main.sh": "test_shell_scripts_parse",
     "scripts/test.sh": "test_shell_scripts_parse (and every CI run)",
@@ -155,3 +157,14 @@ def test_bench_other_measurements_run(argv, key, tmp_path):
     proc = _run(ROOT / "benchmarks" / "bench.py", *argv, "--json", out, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert key in json.loads(out.read_text())
+
+
+def test_maxwell_table1_reproduces_the_committed_report(tmp_path):
+    """scripts/maxwell_table1.py with its defaults writes reports/maxwell-table1 byte for byte."""
+    proc = _run(ROOT / "scripts" / "maxwell_table1.py", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    for name in ("maxwell.json", "summary.md"):
+        committed = (ROOT / "reports" / "maxwell-table1" / name).read_text()
+        assert (tmp_path / name).read_text() == committed.replace(
+            "python scripts/maxwell_table1.py", f"python scripts/maxwell_table1.py --out {tmp_path}"
+        ), name

@@ -197,7 +197,7 @@ def test_sampling_bar_shows_no_made_up_total(monkeypatch):
     run_ensembles(
         lambda th: -0.5 * np.sum(np.asarray(th) ** 2, axis=1),
         np.zeros(2),
-        np.ones(2),
+        np.eye(2),
         ("a", "b"),
         seed=1,
         settings=settings,

@@ -1,4 +1,4 @@
-"""Units of the recordings' columns: the suffix of a column name is its unit (CONTRACT.md s. 1).
+"""Units of the recordings' columns: the suffix of a column name is its unit (docs/formats.md section 1).
 
 ``pressure_psi`` is the pressure in psi, ``height_in`` the height in inches, ``volume_l`` the
 element's volume in litres. Each suffix maps to a unit of pint (one module-level registry, made
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 
-#: quantity -> (unit inside, {suffix: pint unit}); the suffixes are those of CONTRACT.md s. 1.
+#: quantity -> (unit inside, {suffix: pint unit}); the suffixes are those of docs/formats.md section 1.
 _PRESSURE = {"bar": "bar", "psi": "psi", "kPa": "kPa", "MPa": "MPa", "mbar": "mbar"}
 _LENGTH = {"mm": "mm", "m": "m", "in": "inch"}
 QUANTITIES: dict[str, tuple[str, dict[str, str]]] = {

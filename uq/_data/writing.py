@@ -48,7 +48,7 @@ def write_recordings_csv(
     compression_negative: bool = False,
     rounding: dict | None = None,
 ) -> str:
-    """Format recordings as CSV text (CONTRACT.md section 1).
+    """Format recordings as CSV text (docs/formats.md section 1).
 
     ``tests``: dicts of arrays with keys pressure_bar (the set value, a float), height_m,
     force_N, piston_m, compression, step, and where used measured_pressure_bar (n,) and

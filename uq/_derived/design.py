@@ -1,5 +1,5 @@
 """The sealed spring from a fitted model: load, rate and natural frequency with credible intervals
-(issue 22; the functions ``uq design`` calls, CONTRACT.md sections 2-3).
+(the functions ``uq design`` calls; docs/design.md, docs/formats.md).
 
 What a designer does with isobaric characteristics: charge the spring at the design height x_c to
 p_c, close it (optionally with a reservoir), and ask for its load-deflection curve, its vertical
@@ -10,7 +10,7 @@ rate and natural frequency. Per posterior draw of the model:
    and dP/dx from a not-a-knot spline in height (exact for cubics in x: the surface model is one);
 2. the absolute volume (uq._physics.volume): V_c drawn per posterior draw from the user's value and
    sd, the isobaric increments integrated in height, and at x_c the stated assumption on dV/dp_u
-   (0 unless told: CONTRACT.md), a given value, or the model's own (``dvdp="model"``, only for a
+   (0 unless told: the documented default, docs/design.md), a given value, or the model's own (``dvdp="model"``, only for a
    model offering ``volume_pressure_draws``);
 3. the sealed path and its rate (uq._physics.sealed: the gas law with the casing's dV/dp_u),
    the natural frequency sqrt(k g / P) / (2 pi), transmissibility of an undamped single degree of
@@ -88,7 +88,7 @@ class SealedDesign:
     volume_sd_l     its standard deviation, drawn per posterior draw (--volume-sd-l)
     polytropic      n, or (lo, hi): n uniform in lo..hi per draw (--polytropic)
     reservoir_l     extra reservoir joined to the element (--reservoir-l)
-    dvdp_l_per_bar  dV/dp_u at x_c: 0 (CONTRACT.md's assumption), a value, or "model"
+    dvdp_l_per_bar  dV/dp_u at x_c: 0 (the documented default), a value, or "model"
     forcing_Hz      forcing frequency for transmissibility and isolation (--forcing-hz)
     """
 
@@ -305,7 +305,7 @@ def _at_design(grid: DesignGrid, design: SealedDesign, charge_bar: float):
 
 
 def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
-    """The contract's ``uq design --json`` keys at the design height (CONTRACT.md section 3), each
+    """The contract's ``uq design --json`` keys at the design height (docs/formats.md), each
     estimate {"mean", "sd", "q05", "q95"}, with the transmissibility at ``design.forcing_Hz`` and
     the assumptions in words."""
     check_design(model, design)

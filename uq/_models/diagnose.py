@@ -233,75 +233,78 @@ def decorrelated_force(d: Data):
     return d.force + d.c * d.piston
 
 
+def _test_columns(
+    test, i: int, rec: Recordings, stand: StandDescription
+) -> tuple[dict, dict | None]:
+    """One test's columns for ``prepare`` (the noise budget of z = P + cL and of L at every point,
+    from a quartic least-squares plug-in) and its area check at x0 (None without a piston)."""
+    S, has_piston = rec.piston_area_m2, rec.has_piston
+    u = test.height_m - rec.x0_m
+    t = u / BASIS_SCALE_M
+    deg = min(4, test.n_points - 2)
+    V = np.vander(t, deg + 1, increasing=True)
+    piston = test.piston_m if has_piston else np.zeros(test.n_points)
+    cf = np.linalg.lstsq(V, test.force_N, rcond=None)[0]
+    cl = np.linalg.lstsq(V, piston, rcond=None)[0]
+    dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / BASIS_SCALE_M
+    P_hat, dPdx, slope = V @ cf, dV @ cf[1:], dV @ cl[1:]
+    p_pa = test.pressure_bar * BAR_PA
+    feff = np.abs(P_hat) / p_pa
+    # The gas a pressure error compresses (Boyle): element, receiver and pipe, whose volume keeps
+    # its value in isobaric-isothermal conditions (eq. 4: the gas/water boundary moves inside the
+    # receiver as the element is compressed).
+    v_gas = stand.gas_volume_at_xmax_m3
+    p_abs_bar = test.pressure_bar + stand.p_atm_bar
+    sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
+    n = test.n_points
+    # unknown order (a catalogue table): no branch sign, the rows' order as steps; neither
+    # hysteresis nor a drift is then offered (their ``needs``)
+    order_known = test.compression is not None and test.step is not None
+    cols = {
+        "p": np.full(n, test.pressure_bar),
+        "t": t,
+        "sgn": np.where(test.compression, 1.0, -1.0) if order_known else np.zeros(n),
+        "step": test.step.astype(float) if order_known else np.arange(n, dtype=float),
+        "ti": np.full(n, i),
+        # force-only: no piston rows to decorrelate with (they are held out of the fit)
+        "c": feff * p_abs_bar * BAR_PA * S / v_gas if has_piston else np.zeros_like(feff),
+        "F": test.force_N,
+        "L": piston,
+        "sdz": np.sqrt(
+            (stand.load_cell_rel_sd * P_hat) ** 2
+            + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
+            + (dPdx * stand.displacement_sd_m) ** 2
+            + FLOOR_N**2
+        ),
+        "sdL": np.sqrt(
+            (v_gas * sdp_bar / p_abs_bar / S) ** 2
+            + (slope * stand.displacement_sd_m) ** 2
+            + stand.caliper_sd_m**2
+        ),
+        "x": test.height_m,
+        "comp": test.compression if order_known else np.ones(n, bool),
+    }
+    if not has_piston:
+        return cols, None
+    i0 = np.argmin(np.abs(u))
+    check = {
+        "pressure_bar": test.pressure_bar,
+        "from_force_m2": float(P_hat[i0] / p_pa),
+        "from_volume_m2": float(-S * slope[i0]),
+        "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa)),
+    }
+    return cols, check
+
+
 def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Data, dict]:
     """Arrays for the models and per-point metadata (numpy) for the residual analysis.
 
     Noise formulas from ``stand`` (its error budget and gas volumes)."""
     S = rec.piston_area_m2
-    area_check = []
-    cols = {
-        k: [] for k in ("p", "t", "sgn", "step", "ti", "c", "F", "L", "sdz", "sdL", "x", "comp")
-    }
     has_piston = rec.has_piston
-    for i, test in enumerate(rec.tests):
-        u = test.height_m - rec.x0_m
-        t = u / BASIS_SCALE_M
-        deg = min(4, test.n_points - 2)
-        V = np.vander(t, deg + 1, increasing=True)
-        piston = test.piston_m if has_piston else np.zeros(test.n_points)
-        cf = np.linalg.lstsq(V, test.force_N, rcond=None)[0]
-        cl = np.linalg.lstsq(V, piston, rcond=None)[0]
-        dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / BASIS_SCALE_M
-        P_hat = V @ cf
-        dPdx = dV @ cf[1:]
-        slope = dV @ cl[1:]
-        p_pa = test.pressure_bar * BAR_PA
-        feff = np.abs(P_hat) / p_pa
-        # The gas a pressure error compresses (Boyle): element, receiver and pipe, whose volume
-        # keeps its value in isobaric-isothermal conditions (eq. 4: the gas/water boundary
-        # moves inside the receiver as the element is compressed).
-        v_gas = stand.gas_volume_at_xmax_m3
-        p_abs_bar = test.pressure_bar + stand.p_atm_bar
-        sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
-        # force-only: no piston rows to decorrelate with (they are held out of the fit below)
-        c = feff * p_abs_bar * BAR_PA * S / v_gas if has_piston else np.zeros_like(feff)
-        sdz = np.sqrt(
-            (stand.load_cell_rel_sd * P_hat) ** 2
-            + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
-            + (dPdx * stand.displacement_sd_m) ** 2
-            + FLOOR_N**2
-        )
-        sdL = np.sqrt(
-            (v_gas * sdp_bar / p_abs_bar / S) ** 2
-            + (slope * stand.displacement_sd_m) ** 2
-            + stand.caliper_sd_m**2
-        )
-        i0 = np.argmin(np.abs(u))
-        if has_piston:
-            area_check.append(
-                {
-                    "pressure_bar": test.pressure_bar,
-                    "from_force_m2": float(P_hat[i0] / p_pa),
-                    "from_volume_m2": float(-S * slope[i0]),
-                    "volume_over_force": float(-S * slope[i0] / (P_hat[i0] / p_pa)),
-                }
-            )
-        n = test.n_points
-        cols["p"].append(np.full(n, test.pressure_bar))
-        cols["t"].append(t)
-        # unknown order (a catalogue table): no branch sign, the rows' order as steps; neither
-        # hysteresis nor a drift is then offered (their ``needs``)
-        order_known = test.compression is not None and test.step is not None
-        cols["sgn"].append(np.where(test.compression, 1.0, -1.0) if order_known else np.zeros(n))
-        cols["step"].append(test.step.astype(float) if order_known else np.arange(n, dtype=float))
-        cols["ti"].append(np.full(n, i))
-        cols["c"].append(c)
-        cols["F"].append(test.force_N)
-        cols["L"].append(piston)
-        cols["sdz"].append(sdz)
-        cols["sdL"].append(sdL)
-        cols["x"].append(test.height_m)
-        cols["comp"].append(test.compression if order_known else np.ones(n, bool))
+    parts = [_test_columns(test, i, rec, stand) for i, test in enumerate(rec.tests)]
+    area_check = [check for _, check in parts if check is not None]
+    cols = {k: [c[k] for c, _ in parts] for k in parts[0][0]}
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     R = np.eye(len(rec.tests))[cat["ti"].astype(int)]
     ctx = DesignContext(cat["t"], cat["p"], cat["sgn"], cat["step"], S)

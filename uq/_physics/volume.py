@@ -8,7 +8,7 @@ V(x, p_u) - V(x', p_u) between heights of one test, i.e. the volume-derived area
    V_c at the design height x_c and the charge overpressure p_c, with an uncertainty; it is drawn
    once per posterior draw (``charge_volume_draws``);
 2. how the volume at one fixed height changes with pressure: isobaric tests compare heights at
-   one pressure, never pressures at one height. CONTRACT.md's default takes V(x_c, p_u) not to
+   one pressure, never pressures at one height. The documented default (docs/design.md) takes V(x_c, p_u) not to
    change with p_u; an option gives dV/dp_u there (litres per bar), or a model whose potential
    fixes it (``dvdp="model"`` in uq._derived.design) supplies its own on the pressure grid.
 
@@ -85,7 +85,7 @@ def volume_statement(
     elif dvdp_m3_per_pa == 0:
         how = (
             f"ASSUMED: the volume at {height_m * 1e3:g} mm does not change with pressure (dV/dp_u = 0 there; "
-            "isobaric tests cannot tell, CONTRACT.md's default)"
+            "isobaric tests cannot tell; the documented default)"
         )
     else:
         how = (

@@ -548,7 +548,7 @@ def pressure_lever_m2(spring, effects: dict[str, float], height_m, p_bar: float)
 
 
 class ThermoSpring(N50Spring):
-    """An N-50-like spring whose force and volume derive from one potential (PHYSICS.md, refined view).
+    """An N-50-like spring whose force and volume derive from one potential (docs/thermo.md).
 
     G(x, p_u) = -p_u V0(x) - p_u^2 C(x)/2 + E(x): force P = -dG/dx = p_u V0' + p_u^2 C'/2 - E',
     volume V = -dG/dp_u = V0 + p_u C, and the Maxwell relation dP/dp_u = dV/dx holds exactly. With
@@ -556,12 +556,12 @@ class ThermoSpring(N50Spring):
     casing force -E'(x) = sum_{k<=2} e_k t^k (N), fitted by weighted least squares to Table 1's force
     and volume-derived area -S dL/dx at its 11 pressures and 19 heights (area residuals in force
     units, p_u (-S dL/dx); weights 1 / (0.5 % P + 20 N), the stand's budget). Table 1 breaks the
-    Maxwell relation at 1-5 bar (PHYSICS.md), so this is the closest conservative spring, not
+    Maxwell relation at 1-5 bar (reports/maxwell-table1), so this is the closest conservative spring, not
     Table 1 itself: force within about 1.5-3 % from 1 bar up.
 
     Absolute volume (known, unlike a real stand's): V0(x_max) = ``element_volume_at_xmax_m3``
     (the paper stand's assumed 4.2 L) and C(x0) = ``compliance_at_x0_m3_per_pa`` (default 0: the
-    volume at x0 does not change with pressure, which is CONTRACT.md's design assumption, exact
+    volume at x0 does not change with pressure, which is the design assumption of docs/design.md, exact
     here). Piston: L = a_L(p) - (V(x, p) - V(x0, p)) / S with Table 1's a_L (PCHIP, clamped
     outside 0.1..10 bar). Defined for 0.01..20 bar: a sealed test passes 10 bar.
 

@@ -78,16 +78,23 @@ class ThermoOrders:
         return self.K * (self.L + 1)
 
 
-#: chosen by PSIS-LOO on data/n50 (``select_orders``; docs/thermo.md)
-DEFAULT_ORDERS = ThermoOrders(4, 5)
+#: chosen by PSIS-LOO on data/n50 (``select_orders``; docs/thermo.md: G 4x7 -450.3, 4x8 -452.6
+#: +- 1.4, 5x7 -453.7 +- 3.3, 4x6 -484.6 +- 10.3, 4x5 -520.1 +- 13.8); a campaign with fewer tests
+#: gets a pressure degree its tests can fix (:func:`default_orders`)
+DEFAULT_ORDERS = ThermoOrders(4, 7)
 CANDIDATES = (
-    ThermoOrders(4, 2),
-    ThermoOrders(4, 3),
-    ThermoOrders(4, 4),
     ThermoOrders(4, 5),
-    ThermoOrders(5, 5),
     ThermoOrders(4, 6),
+    ThermoOrders(4, 7),
+    ThermoOrders(4, 8),
+    ThermoOrders(5, 7),
 )
+
+
+def default_orders(n_tests: int) -> ThermoOrders:
+    """``DEFAULT_ORDERS`` with a pressure degree of at most n_tests - 1 (the force has L + 1
+    functions of height, one per power of p_u: the tests must be able to tell them apart)."""
+    return ThermoOrders(DEFAULT_ORDERS.K, max(1, min(DEFAULT_ORDERS.L, n_tests - 1)))
 
 
 @dataclass(frozen=True)
@@ -345,7 +352,7 @@ class ThermoFit(PairFit):
 
 def fit_thermo(
     rec: Recordings,
-    orders: ThermoOrders = DEFAULT_ORDERS,
+    orders: ThermoOrders | None = None,
     *,
     seed: int = 0,
     settings: Settings = Settings(),
@@ -355,7 +362,8 @@ def fit_thermo(
     """The thermodynamic model's posterior by the one driver: optimistix MAP of the noise and the
     travel factor, emcee over them, exact draws of the potential's coefficients and the piston
     references, ArviZ data and the convergence verdict. ``stand``: the stand the recordings were
-    taken on (its pressure holding and gas volume enter the reading covariance and priors)."""
+    taken on (its pressure holding and gas volume enter the reading covariance and priors).
+    ``orders``: the potential's degrees (default: :func:`default_orders` of the campaign)."""
     if len(rec.tests) < 2:
         raise InputError(
             f"{rec.path}: the thermodynamic model relates force and volume through their pressure "
@@ -366,6 +374,7 @@ def fit_thermo(
             f"{rec.path}: force-only campaign: the thermodynamic model fits force and volume "
             "together and needs piston_* or volume_*"
         )
+    orders = default_orders(len(rec.tests)) if orders is None else orders
     post = fit_collapsed(
         MODEL,
         thermo_data(rec, orders, stand),

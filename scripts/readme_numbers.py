@@ -124,6 +124,32 @@ def run_block(*commands, requires=(), keep=None, statuses=(0, 1), slow=False) ->
     return Block("run", tuple(commands), tuple(requires), keep, tuple(statuses), slow)
 
 
+def maxwell_summary(rel: str) -> Callable[[], str]:
+    """The Maxwell check on Table 1 (scripts/maxwell_table1.py): r by pressure in the middle of the
+    stroke, and the reading."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        levels = d["interpretation"]["middle"]["mean_r_by_pressure"]
+        rows = ["| p_u bar | " + " | ".join(levels) + " |", "| --- |" + " --- |" * len(levels)]
+        rows.append(
+            "| r (middle of the stroke) | "
+            + " | ".join(f"{v:+.3f}" for v in levels.values())
+            + " |"
+        )
+        return (
+            f"From `{rel}` (`{d['command']}`):\n\n"
+            + "\n".join(rows)
+            + "\n\n"
+            + d["interpretation"]["words"]
+            + ".\n"
+        )
+
+    return make
+
+
 def report_block(summarise: Callable[[], str]) -> Block:
     return Block("report", summarise=summarise)
 
@@ -403,6 +429,13 @@ BLOCKS: dict[str, Block] = {
         slow=True,
     ),
     "diagnose-n50": run_block(f"diagnose {DATA}", keep=45, slow=True),
+    "thermo-n50": run_block(f"surface {DATA} --model thermodynamic", slow=True),
+    "thermo-spring": run_block(
+        "simulate --spring n50-thermo --seed 5 --out n50-thermo.csv",
+        "surface n50-thermo.csv --model thermodynamic",
+        slow=True,
+    ),
+    "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),
     "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),

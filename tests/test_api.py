@@ -135,3 +135,17 @@ def test_import_uq_loads_no_jax_and_leaves_x64_alone():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "" and "Warning" not in out.stderr
+
+
+def test_every_public_result_has_a_short_repr_and_a_summary(n50_fit):
+    """Results print in a line (not the 238k characters of a dataclass full of arrays) and give an
+    ArviZ-style summary table."""
+    import pandas as pd
+
+    bands = uq.campaign_bands(n50_fit, n_draws=200)
+    for obj in (n50_fit, n50_fit.tests[0], n50_fit.tests[0].posterior, bands, bands.tests[0]):
+        text = repr(obj)
+        assert len(text) < 300 and "\n" not in text, text[:300]
+    for obj in (n50_fit, n50_fit.tests[0], n50_fit.tests[0].posterior, bands):
+        assert isinstance(obj.summary(), pd.DataFrame) and len(obj.summary())
+    assert n50_fit.to_json()["tests"] and bands.to_json()["tests_at_x0"]

@@ -125,7 +125,7 @@ def test_bands_contain_truth_for_n50(n50_fit):
     # the scatter's 90 % interval at x0 is within a point of Table 1's 8.41 %
     sc = cb.scatter_at["x0"]
     assert sc["q05"] - 1.0 < 8.41 < sc["q95"] + 1.0
-    assert cb.seed == 1 and cb.summary()["feff_scatter_pct"]["at"]["x0"]["mean"] == sc["mean"]
+    assert cb.seed == 1 and cb.to_json()["feff_scatter_pct"]["at"]["x0"]["mean"] == sc["mean"]
 
 
 def test_bands_are_seeded(n50_fit):
@@ -293,7 +293,7 @@ def test_curve_bands_in_the_json_summary(paper_bands):
     cb = bands_from_coefficients(
         (5.0,), F, L, x_grid=X_GRID, x0_m=PAPER_X0_M, piston_area_m2=PAPER_PISTON_AREA_M2
     )
-    cv = cb.summary()["curve_bands"]
+    cv = cb.to_json()["curve_bands"]
     assert (
         len(cv["height_m"]) == 19
         and cv["height_m"][0] == pytest.approx(0.065)
@@ -302,4 +302,4 @@ def test_curve_bands_in_the_json_summary(paper_bands):
     assert "pointwise" in cv["pointwise"] and "whole curve" in cv["simultaneous"]
     row = cv["tests"][0]["feff_m2"]
     assert np.all(np.asarray(row["simultaneous_lo"]) < np.asarray(row["pointwise_q05"]))
-    assert "pointwise" in cb.summary()["intervals"]
+    assert "pointwise" in cb.to_json()["intervals"]

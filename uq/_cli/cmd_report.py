@@ -100,7 +100,7 @@ def command_report(args) -> int:
         print(f"WARNING (model): {w}", file=sys.stderr)
     print(f"report: {path}")
     if args.json:
-        emit_json(cf.to_json() | {"bands": cb.summary(), "report": str(path)}, args.json)
+        emit_json(cf.to_json() | {"bands": cb.to_json(), "report": str(path)}, args.json)
     if not cf.converged and args.strict:
         print(
             "WARNING: sampling did not converge for every test; --strict: exit 1", file=sys.stderr

@@ -50,7 +50,7 @@ SCATTER_MIN_BAR = 1.0  # the paper's Figure 4 / scatter: tests from 1 to 10 bar
 EXTRA_HEIGHT_M = 0.075  # Table 1 gives the paper's "8.51 % at x_min" at 75 mm
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Band:
     """Posterior mean and equal-tailed 90 % band on the grid (arrays of the grid's shape)."""
 
@@ -67,8 +67,11 @@ class Band:
         v = np.asarray(values)
         return (self.lo <= v) & (v <= self.hi)
 
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({np.size(self.mean)} points)"
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, repr=False)
 class SimultaneousBand(Band):
     """mean +/- critical sd: contains a whole draw curve (every grid height at once) for a
     ``level`` share of the draws it was built from. ``critical`` is the level-quantile of the
@@ -107,7 +110,7 @@ SIMULTANEOUS = {
 }
 
 
-@dataclass(eq=False, frozen=True)
+@dataclass(eq=False, frozen=True, repr=False)
 class PressureBands:
     """Bands of one test on the campaign grid ``x_m`` (SI: N, m, m^3, m^2, %)."""
 
@@ -133,8 +136,11 @@ class PressureBands:
     def pressure_Pa(self) -> float:
         return self.pressure_bar * BAR_PA
 
+    def __repr__(self) -> str:
+        return f"PressureBands({self.pressure_bar:g} bar, {self.force.mean.size} heights)"
 
-@dataclass(eq=False, frozen=True)
+
+@dataclass(eq=False, frozen=True, repr=False)
 class CampaignBands:
     x_m: np.ndarray  # (G,) height grid
     x0_m: float
@@ -154,7 +160,24 @@ class CampaignBands:
                 return t
         raise KeyError(pressure_bar)
 
-    def summary(self) -> dict:
+    def summary(self):
+        """The values at x0 of every test (mean, sd, q05, q95 of each banded quantity), a pandas
+        DataFrame indexed by (pressure, quantity)."""
+        import pandas as pd
+
+        rows = {(t.pressure_bar, name): est for t in self.tests for name, est in t.at_x0.items()}
+        return pd.DataFrame.from_dict(rows, orient="index").rename_axis(
+            ["pressure_bar", "quantity"]
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"CampaignBands({len(self.tests)} tests, {self.x_m.size} heights "
+            f"{self.x_m.min() * 1e3:g}..{self.x_m.max() * 1e3:g} mm, {self.n_draws} joint draws, "
+            f"reference {self.reference_bar:g} bar)"
+        )
+
+    def to_json(self) -> dict:
         """JSON-ready summary (SI, % where named): scatter and the x0 values of every test."""
         return {
             "n_draws": self.n_draws,

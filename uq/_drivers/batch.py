@@ -400,7 +400,7 @@ def _task_report(job: dict, out: Path) -> dict:
     cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
     cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
     page = write_report(cf, out, bands=cb)
-    emit_json(cf.to_json() | {"bands": cb.summary(), "report": page.name}, str(out / "fit.json"))
+    emit_json(cf.to_json() | {"bands": cb.to_json(), "report": page.name}, str(out / "fit.json"))
     return {
         "converged": cf.converged,
         "output": page.name,

@@ -306,3 +306,32 @@ def arrays(rec):
     L = np.concatenate([t.piston_m for t in tests])
     idx = np.concatenate([np.full(t.n_points, i) for i, t in enumerate(tests)])
     return x, p, F, L, idx
+
+
+def select_orders(fitter, rec, candidates, *, seed: int, settings, stand):
+    """Fit ``fitter(rec, orders, seed=, settings=, stand=)`` for each candidate and rank them by
+    PSIS-LOO per reading (ArviZ's compare); returns (the best fit with its ``selection``, rows)."""
+    import dataclasses
+    import warnings
+
+    import arviz as az
+
+    from uq._inference.loo import loglik_idata
+
+    fits = {o.label: fitter(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        cmp = az.compare({k: loglik_idata(f.loglik_loo) for k, f in fits.items()}, ic="loo")
+    rows = [
+        {
+            "orders": k,
+            "elpd_loo": float(r["elpd_loo"]),
+            "p_loo": float(r["p_loo"]),
+            "elpd_diff": float(r["elpd_diff"]),
+            "dse": float(r["dse"]),
+            "rank": int(r["rank"]),
+            "warning": bool(r["warning"]),
+        }
+        for k, r in cmp.iterrows()
+    ]
+    return dataclasses.replace(fits[cmp.index[0]], selection=tuple(rows)), rows

@@ -40,7 +40,6 @@ e: 10 kN; r: 1 m).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -401,32 +400,9 @@ def select_orders(
     stand: StandDescription = PAPER_STAND,
 ):
     """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows)."""
-    settings = settings or Settings()
-    fits = {
-        o.label: fit_surface(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates
-    }
-    import warnings
-
-    import arviz as az
-
-    from uq._inference.loo import loglik_idata
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        cmp = az.compare({k: loglik_idata(f.loglik_loo) for k, f in fits.items()}, ic="loo")
-    rows = [
-        {
-            "orders": k,
-            "elpd_loo": float(r["elpd_loo"]),
-            "p_loo": float(r["p_loo"]),
-            "elpd_diff": float(r["elpd_diff"]),
-            "dse": float(r["dse"]),
-            "rank": int(r["rank"]),
-            "warning": bool(r["warning"]),
-        }
-        for k, r in cmp.iterrows()
-    ]
-    return dataclasses.replace(fits[cmp.index[0]], selection=tuple(rows)), rows
+    return pair.select_orders(
+        fit_surface, rec, candidates, seed=seed, settings=settings or Settings(), stand=stand
+    )
 
 
 # ----------------------------------------------------------------------------- summaries

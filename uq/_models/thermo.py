@@ -36,7 +36,6 @@ least-squares plug-in).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -396,33 +395,10 @@ def select_orders(
     settings: Settings | None = None,
     stand: StandDescription = PAPER_STAND,
 ):
-    """Fit each candidate and rank by PSIS-LOO (ArviZ's compare); returns (best fit, rows)."""
-    import warnings
-
-    import arviz as az
-
-    from uq._inference.loo import loglik_idata
-
-    settings = settings or Settings()
-    fits = {
-        o.label: fit_thermo(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates
-    }
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        cmp = az.compare({k: loglik_idata(f.loglik_loo) for k, f in fits.items()}, ic="loo")
-    rows = [
-        {
-            "orders": k,
-            "elpd_loo": float(r["elpd_loo"]),
-            "p_loo": float(r["p_loo"]),
-            "elpd_diff": float(r["elpd_diff"]),
-            "dse": float(r["dse"]),
-            "rank": int(r["rank"]),
-            "warning": bool(r["warning"]),
-        }
-        for k, r in cmp.iterrows()
-    ]
-    return dataclasses.replace(fits[cmp.index[0]], selection=tuple(rows)), rows
+    """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows)."""
+    return pair.select_orders(
+        fit_thermo, rec, candidates, seed=seed, settings=settings or Settings(), stand=stand
+    )
 
 
 # ----------------------------------------------------------------------------- summary

@@ -360,3 +360,85 @@ def test_nested_mechanisms_the_larger_goes_first():
     assert (
         _to_remove(["hysteresis", "thermal_drift"], table) == "thermal_drift"
     )  # equal size: cheapest
+
+
+# ----------------------------------------------------------------------------- real data shapes
+
+
+def _force_only(rec: Recordings) -> Recordings:
+    """``rec`` as a stand that measures no volume writes it: no piston column."""
+    from dataclasses import replace
+
+    return replace(rec, tests=tuple(replace(t, piston_m=None) for t in rec.tests))
+
+
+def _catalogue(effects, seed=7, volume_at_bar=5.0):
+    """A data sheet: one compression pass at 3..7 bar every 10 mm, no recorded order, the
+    element's volume at ``volume_at_bar`` only (the stand's catalogue shape)."""
+    from uq._data.stand_description import PAPER_STAND
+    from uq._stand.shapes import catalogue
+
+    layout = Layout(pressures_bar=(3.0, 4.0, 5.0, 6.0, 7.0), step_m=0.010)
+    tests = catalogue(
+        simulate("n50-traditional", seed=seed, effects=effects, layout=layout),
+        "n50-traditional",
+        effects,
+        volume_at_bar=volume_at_bar,
+        x_max_m=layout.x_max_m,
+        element_volume_at_xmax_m3=PAPER_STAND.element_volume_at_xmax_m3,
+        piston_area_m2=54.82e-4,
+    )
+    return Recordings(
+        "catalogue",
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                None,
+                None,
+                None,
+                np.arange(t["height_m"].size),
+                volume_m3=t["volume_m3"],
+            )
+            for t in tests
+        ),
+    )
+
+
+def test_force_only_campaign_names_force_side_mechanism_without_volume_outputs():
+    """No piston column (most stands): the casing's own force is still found from the force at
+    several pressures; mechanisms only the volume shows are not offered, with the reason, and no
+    volume result is reported (none is made up from the empty piston rows)."""
+    res = _run(_force_only(_rec({"casing_force": -60.0}, layout=SMALL)))
+    names = [m["name"] for m in res["mechanisms"]]
+    assert names == ["casing_force"], names
+    assert _consistent(res["mechanisms"][0]["magnitude"], -60.0)
+    not_offered = res["selection"]["not_offered"]
+    for name in ("volume_excess", "elastic_casing", "thermal_drift"):
+        assert "piston or volume readings" in not_offered[name]
+    assert res["baseline"]["volume_rms_cm3"] is None and res["final"]["volume_rms_cm3"] is None
+    assert "volume" not in res["where"] and "piston" not in res["where"]["noise_scale_vs_budget"]
+    assert res["final"]["noise_check"]["piston_scale"] is None
+    assert res["final"]["pareto_k"]["n_terms"] == sum(
+        t.n_points for t in _rec({}, layout=SMALL).tests
+    )
+    json.dumps(res, allow_nan=False)
+
+
+def test_catalogue_table_names_the_growing_area_without_order_mechanisms():
+    """A catalogue table (one pass, order unknown, volume printed at 5 bar only) of a spring
+    whose area grows 2 %/bar: found with its magnitude; neither hysteresis nor a drift is
+    offered; the volume residuals are those of the 5 bar rows only. (A 12 % volume excess in the
+    same shape is seen, ratio 1.12 at x0, but with ten volume rows its ELPD gain is 3.5 SE, short
+    of the 4 SE asked: a catalogue's single volume column is little evidence.)"""
+    res = _run(_catalogue({"pressure_dependent_area": 0.02}))
+    assert [m["name"] for m in res["mechanisms"]] == ["pressure_dependent_area"]
+    assert _consistent(res["mechanisms"][0]["magnitude"], 0.02)
+    for name in ("hysteresis", "thermal_drift"):
+        assert "known recording order" in res["selection"]["not_offered"][name]
+    volume = res["where"]["volume"]
+    assert [g["pressure_bar"] for g in volume["by_pressure"]] == [5.0]
+    assert volume["by_branch"] == [] and volume["by_recording_order"] == []
+    assert res["final"]["pareto_k"]["n_terms"] == 5 * 10 + 10
+    json.dumps(res, allow_nan=False)

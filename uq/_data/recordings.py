@@ -178,7 +178,7 @@ COMMAND_NEEDS: dict[str, frozenset[str]] = {
     "report": frozenset({"piston", "order"}),
     "surface": frozenset({"piston", "order"}),
     "margin": frozenset({"piston", "order"}),
-    "diagnose": frozenset({"piston", "order"}),
+    "diagnose": frozenset(),  # force-only and one-pass campaigns: what they can identify is offered
     "batch": frozenset({"piston", "order"}),
 }
 

@@ -113,7 +113,7 @@ class Fit:
                 posterior.loglik["L"].reshape(theta.shape[0], -1),
             ],
             axis=1,
-        )
+        )[:, M.scored_rows(d)]
         ok = np.all(np.isfinite(ll), axis=1)
         self.ll, self.muF, self.muL, self.beta, self.sigma = (
             ll[ok],
@@ -151,13 +151,14 @@ class Scoring:
       points are split at random (seeded) into folds; each fold's points (their z and L rows
       together) are held out, the model refitted on the rest (MAP, Laplace draws, exact
       coefficient draws) and the held-out rows scored by their log predictive density.
-    Both are on the scale of the PSIS-LOO terms (one per row, 2n), so gains and their standard
-    errors are formed the same way.
+    Both are on the scale of the PSIS-LOO terms (one per recorded row: 2n, or n without a piston),
+    so gains and their standard errors are formed the same way.
     """
 
     def __init__(self, d, order: int, seed: int, n_folds: int = N_FOLDS):
         self.d, self.order, self.seed, self.n_folds = d, order, seed, n_folds
         self.n = int(np.asarray(d.force).size)
+        self.rows = M.scored_rows(d)  # the stacked (z, L) rows that were recorded
         self._scores: dict[tuple, object] = {}
 
     def _refit(self, names, held, seed) -> Fit:
@@ -171,9 +172,9 @@ class Scoring:
             counter = iter(range(1, self.n_folds + 1))
 
             def score(held):
-                rows = np.concatenate([held, held])
+                rows = np.concatenate([held, held])[self.rows]
                 f = self._refit(names, held, self.seed + 7919 * next(counter))
-                out = np.full(2 * self.n, np.nan)
+                out = np.full(self.rows.size, np.nan)
                 out[rows] = held_out_density(f.ll, np.flatnonzero(rows))
                 return out
 
@@ -185,7 +186,7 @@ class Scoring:
             key = ("row", tuple(sorted(fit.names)), i)
             if key not in self._scores:
                 held = np.zeros(2 * self.n, bool)
-                held[i] = True
+                held[self.rows[i]] = True
                 f = self._refit(fit.names, held, self.seed + 104729 + i)
                 self._scores[key] = float(held_out_density(f.ll, [i])[0])
             return self._scores[key]
@@ -230,14 +231,20 @@ def _residuals(fit: Fit, meta: dict, d) -> dict:
     var_noise_F = np.mean(sz**2 + (c * sL) ** 2, axis=0)
     var_noise_L = np.mean(sL**2, axis=0)
     rF = meta["force_N"] - fit.muF.mean(0)
-    rL = meta["piston_m"] - fit.muL.mean(0)
     sdF = np.sqrt(fit.muF.var(0) + var_noise_F)
+    if not meta["has_volume"]:  # force-only: no volume residuals
+        return {"force": (rF, rF / sdF)}
+    # NaN where a test has no volume readings (a catalogue's volume at one pressure)
+    rL = np.where(meta["volume_observed"], meta["piston_m"] - fit.muL.mean(0), np.nan)
     sdL = np.sqrt(fit.muL.var(0) + var_noise_L)
     return {"force": (rF, rF / sdF), "volume": (S * rL, rL / sdL)}
 
 
 def _group_stats(r, z, sel, unit_scale):
+    sel = sel & np.isfinite(z)  # volume: only the tests that have volume readings
     k = int(sel.sum())
+    if k == 0:
+        return {"n": 0}  # dropped by ``where``
     zs = z[sel]
     from scipy.stats import chi2
 
@@ -283,21 +290,29 @@ def where(fit: Fit, meta: dict, d) -> dict:
                 }
                 for i in range(6)
             ],
+            # a one-branch or one-pass campaign has no rebound group (an empty group has no mean)
             "by_branch": [
                 {"branch": b, **_group_stats(r, z, comp == (b == "compression"), scale)}
                 for b in ("compression", "rebound")
+                if np.any(comp == (b == "compression"))
             ],
+            # an unknown recording order (a catalogue table) has neither branches nor thirds
             "by_recording_order": [
                 {"part": name, **_group_stats(r, z, third == i, scale)}
                 for i, name in enumerate(("first third", "middle third", "last third"))
             ],
         }
-        g["rms"] = float(np.sqrt(np.mean(r**2)) * scale)
+        if not meta["order_known"]:
+            g["by_branch"], g["by_recording_order"] = [], []
+        g = {key: [gi for gi in groups if gi["n"]] for key, groups in g.items()}
+        g["rms"] = float(np.sqrt(np.nanmean(r**2)) * scale)
         out[q] = g
     out["regions_outside_band"] = _regions(res, meta)
     out["area_force_vs_volume_at_x0"] = meta["area_check"]
     k = np.exp(fit.theta[:, :2])
-    out["noise_scale_vs_budget"] = {"force": estimate(k[:, 0]), "piston": estimate(k[:, 1])}
+    out["noise_scale_vs_budget"] = {"force": estimate(k[:, 0])}
+    if meta["has_volume"]:
+        out["noise_scale_vs_budget"]["piston"] = estimate(k[:, 1])
     return out
 
 
@@ -338,7 +353,7 @@ def _regions(res, meta, min_run: int = 4) -> list[dict]:
 
 def _flagged(w: dict) -> list[str]:
     out = []
-    for q in ("force", "volume"):
+    for q in ("force", "volume")[: 1 + ("volume" in w)]:
         for key in ("by_pressure", "by_height", "by_branch", "by_recording_order"):
             for g in w[q][key]:
                 if g["flagged"]:
@@ -354,7 +369,7 @@ def _flagged(w: dict) -> list[str]:
                         f"{q} by {key[3:].replace('_', ' ')}: {lab} (mean residual {g['mean']:.3g} "
                         f"{'N' if q == 'force' else 'cm^3'}, {g['outside_90_pct']:.0f}% outside the 90% band)"
                     )
-    for q in ("force", "piston"):
+    for q in w["noise_scale_vs_budget"]:
         if w["noise_scale_vs_budget"][q]["q05"] > NOISE_EXCESS:
             out.append(f"{q} noise {w['noise_scale_vs_budget'][q]['mean']:.1f} x the error budget")
     return out
@@ -414,7 +429,7 @@ NEEDS_WORDS = {
 def capabilities(rec) -> set[str]:
     """What the campaign ``rec`` can identify (the words of ``Mechanism.needs``)."""
     have = set()
-    if rec.has_piston:
+    if rec.has_volume:  # piston coordinates, or a volume column on some test
         have.add("volume")
     if len(rec.tests) >= 2:
         have.add("pressures")
@@ -486,8 +501,8 @@ def _other_reading(name: str, magnitude: np.ndarray, rec) -> dict:
 
 def noise_check(w: dict) -> dict:
     """The model's own noise-scale check: its learned noise scales against the stand's budget."""
-    ns = w["noise_scale_vs_budget"]
-    fails = {q: ns[q]["q05"] > NOISE_EXCESS for q in ("force", "piston")}
+    ns = w["noise_scale_vs_budget"]  # force, and piston when recorded
+    fails = {q: ns[q]["q05"] > NOISE_EXCESS for q in ns}
     return {
         "passes": not any(fails.values()),
         "rule": (
@@ -495,7 +510,7 @@ def noise_check(w: dict) -> dict:
             f"exceed {NOISE_EXCESS:g} with 95 % posterior probability"
         ),
         "force_scale": ns["force"]["mean"],
-        "piston_scale": ns["piston"]["mean"],
+        "piston_scale": ns["piston"]["mean"] if "piston" in ns else None,
         "failing": [q for q, bad in fails.items() if bad],
     }
 
@@ -522,7 +537,7 @@ def _where_text(label: str, v) -> str:
 def _left(w: dict, top: int = 6) -> list[dict]:
     """Where a model's remaining misfit sits: the groups with the largest mean residual, by quantity."""
     out = []
-    for q, unit in (("force", "N"), ("volume", "cm^3")):
+    for q, unit in (("force", "N"), ("volume", "cm^3"))[: 1 + ("volume" in w)]:
         groups = []
         for key, lab in (
             ("by_pressure", "pressure_bar"),
@@ -662,7 +677,7 @@ def diagnose(
             "rms_N": rms[base],
             "elpd_loo": base.elpd,
             "elpd_loo_se": base.loo.se,
-            "volume_rms_cm3": w_base["volume"]["rms"],
+            "volume_rms_cm3": w_base["volume"]["rms"] if "volume" in w_base else None,
             "feff_order": order,
             "pareto_k": base.loo.pareto(),
             "noise_check": noise_check(w_base),
@@ -673,7 +688,7 @@ def diagnose(
             "rms_N": rms[final],
             "elpd_loo": final.elpd,
             "elpd_loo_se": final.loo.se,
-            "volume_rms_cm3": w_final["volume"]["rms"],
+            "volume_rms_cm3": w_final["volume"]["rms"] if "volume" in w_final else None,
             "model": ["traditional", *final.names],
             "pareto_k": final.loo.pareto(),
             "noise_check": check,
@@ -744,11 +759,15 @@ def _sample(fit: Fit, d, seed: int, settings: Settings):
 # ----------------------------------------------------------------------------- output
 
 
+def _volume_rms(v) -> str:
+    return "" if v is None else f", volume rms {v:.1f} cm^3"  # None: a force-only campaign
+
+
 def summary_text(res: dict) -> str:
     b, f = res["baseline"], res["final"]
     lines = [
-        f"traditional model (F_eff polynomial of order {b['feff_order']}): force rms {b['rms_N']:.1f} N, "
-        f"volume rms {b['volume_rms_cm3']:.1f} cm^3, ELPD-LOO {b['elpd_loo']:.1f}"
+        f"traditional model (F_eff polynomial of order {b['feff_order']}): force rms {b['rms_N']:.1f} N"
+        f"{_volume_rms(b['volume_rms_cm3'])}, ELPD-LOO {b['elpd_loo']:.1f}"
     ]
     if not res["mismatch_detected"]:
         lines.append(
@@ -781,13 +800,14 @@ def summary_text(res: dict) -> str:
     nc = f["noise_check"]
     pk = f["pareto_k"]
     lines.append(
-        f"final model ({' + '.join(f['model'])}): force rms {f['rms_N']:.1f} N, volume rms "
-        f"{f['volume_rms_cm3']:.1f} cm^3, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {pk['max']:.2f}, "
+        f"final model ({' + '.join(f['model'])}): force rms {f['rms_N']:.1f} N"
+        f"{_volume_rms(f['volume_rms_cm3'])}, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {pk['max']:.2f}, "
         f"{pk['n_over_0.7']} of {pk['n_terms']} over 0.7)"
     )
     lines.append(
-        f"noise-scale check of the final model: force scatter {nc['force_scale']:.1f} x, piston "
-        f"{nc['piston_scale']:.1f} x the stand's error budget: "
+        f"noise-scale check of the final model: force scatter {nc['force_scale']:.1f} x"
+        + ("" if nc["piston_scale"] is None else f", piston {nc['piston_scale']:.1f} x")
+        + " the stand's error budget: "
         + ("passes" if nc["passes"] else "FAILS")
     )
     if res.get("provisional"):
@@ -802,7 +822,7 @@ def summary_text(res: dict) -> str:
             for g in f["left"]
         ]
     ratios = [a["volume_over_force"] for a in res["where"]["area_force_vs_volume_at_x0"]]
-    if max(abs(r - 1.0) for r in ratios) > 0.05:
+    if ratios and max(abs(r - 1.0) for r in ratios) > 0.05:
         lines.append(
             "effective area at x0 from the volume (-S dL/dx) over that from the force (P/p_u), by pressure: "
             + ", ".join(

@@ -118,6 +118,8 @@ class Data(NamedTuple):
     area: jnp.ndarray  # piston area S, m^2 (scalar)
     #: (2n,) 1 = row informs the fit, 0 = held out (K-fold); stacked as (z rows, L rows).
     fit_w: jnp.ndarray
+    #: (2n,) 1 = row was recorded (a force-only campaign has no L rows): never fitted nor scored
+    observed: jnp.ndarray
     E_z: jnp.ndarray  # (n, ke) expanded columns of the z rows
     E_L: jnp.ndarray  # (n, ke) expanded columns of the L rows
     onehot: jnp.ndarray  # (ke, k) O: the model column of each expanded column
@@ -220,12 +222,18 @@ def hold_out(d: Data, held: np.ndarray) -> Data:
     held = np.asarray(held, bool)
     if held.size == np.asarray(d.force).size:
         held = np.concatenate([held, held])
-    fit_w = np.where(held, 0.0, 1.0)
+    fit_w = np.where(held, 0.0, np.asarray(d.observed))
     moments = _moments(
         *(np.asarray(a) for a in (d.E_z, d.E_L, decorrelated_force(d), d.piston, d.sd_z, d.sd_L)),
         fit_w,
     )
     return d._replace(fit_w=jnp.asarray(fit_w), moments_E=moments)
+
+
+def scored_rows(d: Data) -> np.ndarray:
+    """Indices of the stacked (z, L) rows that were recorded: every row, or the z rows of a
+    force-only campaign. Pointwise log-likelihoods are scored (LOO, K-fold) on these only."""
+    return np.flatnonzero(np.asarray(d.observed) > 0)
 
 
 def decorrelated_force(d: Data):
@@ -237,13 +245,23 @@ def _test_columns(
     test, i: int, rec: Recordings, stand: StandDescription
 ) -> tuple[dict, dict | None]:
     """One test's columns for ``prepare`` (the noise budget of z = P + cL and of L at every point,
-    from a quartic least-squares plug-in) and its area check at x0 (None without a piston)."""
-    S, has_piston = rec.piston_area_m2, rec.has_piston
+    from a quartic least-squares plug-in) and its area check at x0 (None without a volume).
+
+    The L rows are the piston coordinates; a test with a volume column instead (a catalogue's
+    volume at its stated pressure) has L = -V/S, its own reference absorbing V's origin, and no
+    pressure-holding coupling (c = 0: the volume was not read off the stand's piston); a test
+    with neither has no L rows (``obs`` 0: neither fitted nor scored)."""
+    S = rec.piston_area_m2
+    if test.piston_m is not None:
+        piston, source = test.piston_m, "piston"
+    elif test.volume_m3 is not None:
+        piston, source = -test.volume_m3 / S, "volume"
+    else:
+        piston, source = np.zeros(test.n_points), None
     u = test.height_m - rec.x0_m
     t = u / BASIS_SCALE_M
     deg = min(4, test.n_points - 2)
     V = np.vander(t, deg + 1, increasing=True)
-    piston = test.piston_m if has_piston else np.zeros(test.n_points)
     cf = np.linalg.lstsq(V, test.force_N, rcond=None)[0]
     cl = np.linalg.lstsq(V, piston, rcond=None)[0]
     dV = np.vander(t, deg, increasing=True) * np.arange(1, deg + 1) / BASIS_SCALE_M
@@ -266,8 +284,9 @@ def _test_columns(
         "sgn": np.where(test.compression, 1.0, -1.0) if order_known else np.zeros(n),
         "step": test.step.astype(float) if order_known else np.arange(n, dtype=float),
         "ti": np.full(n, i),
-        # force-only: no piston rows to decorrelate with (they are held out of the fit)
-        "c": feff * p_abs_bar * BAR_PA * S / v_gas if has_piston else np.zeros_like(feff),
+        # only a piston read during the pressure-holding error moves against the force
+        "c": feff * p_abs_bar * BAR_PA * S / v_gas if source == "piston" else np.zeros_like(feff),
+        "obs": np.full(n, 0.0 if source is None else 1.0),
         "F": test.force_N,
         "L": piston,
         "sdz": np.sqrt(
@@ -284,7 +303,7 @@ def _test_columns(
         "x": test.height_m,
         "comp": test.compression if order_known else np.ones(n, bool),
     }
-    if not has_piston:
+    if source is None:
         return cols, None
     i0 = np.argmin(np.abs(u))
     check = {
@@ -301,7 +320,6 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
 
     Noise formulas from ``stand`` (its error budget and gas volumes)."""
     S = rec.piston_area_m2
-    has_piston = rec.has_piston
     parts = [_test_columns(test, i, rec, stand) for i, test in enumerate(rec.tests)]
     area_check = [check for _, check in parts if check is not None]
     cols = {k: [c[k] for c, _ in parts] for k in parts[0][0]}
@@ -310,14 +328,14 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
     ctx = DesignContext(cat["t"], cat["p"], cat["sgn"], cat["step"], S)
     E_z, E_L, onehot, mask_idx, uses = _expanded(ctx, R, cat["c"])
     n_points = cat["F"].size
-    # force-only: the piston rows are held out of the fit for good
-    fit_w = np.concatenate([np.ones(n_points), np.full(n_points, 1.0 if has_piston else 0.0)])
+    # tests without piston or volume have no L rows; they are neither fitted nor scored
+    observed = np.concatenate([np.ones(n_points), cat["obs"]])
     prior_sd = np.concatenate(
         [np.full(K_MAX + 1, FEFF_PRIOR_SD), np.full(R.shape[1], REF_PRIOR_SD)]
         + [np.full(MECHANISMS[n].term.n_params, MECHANISMS[n].term.prior_sd) for n in LINEARS]
     )
     moments = _moments(
-        E_z, E_L, cat["F"] + cat["c"] * cat["L"], cat["L"], cat["sdz"], cat["sdL"], fit_w
+        E_z, E_L, cat["F"] + cat["c"] * cat["L"], cat["L"], cat["sdz"], cat["sdL"], observed
     )
     data = Data(
         *(
@@ -334,7 +352,8 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
                 cat["sdz"],
                 cat["sdL"],
                 S,
-                fit_w,
+                observed,
+                observed,
                 E_z,
                 E_L,
                 onehot,
@@ -354,7 +373,9 @@ def prepare(rec: Recordings, stand: StandDescription = PAPER_STAND) -> tuple[Dat
         "test": cat["ti"].astype(int),
         "force_N": cat["F"],
         "piston_m": cat["L"],
-        "has_piston": has_piston,
+        "has_volume": bool(cat["obs"].any()),
+        "volume_observed": cat["obs"] > 0,
+        "order_known": all(t.compression is not None and t.step is not None for t in rec.tests),
         "context": ctx,
         "area": S,
         "area_check": area_check,

@@ -148,7 +148,9 @@ def figure_residual_overlay(fit: SurfaceFit):
     return fig
 
 
-def write_surface_report(fit: SurfaceFit, result: dict, out_dir) -> Path:
+def write_surface_report(
+    fit: SurfaceFit, result: dict, out_dir, *, figure_format: str = "png"
+) -> Path:
     """``out_dir/surface.html`` (the template ``surface.html``) and its three PNG figures, from the
     fit and its :func:`uq._models.surface.summary` ``result``; returns the page's path."""
     out = Path(out_dir)

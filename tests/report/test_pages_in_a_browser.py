@@ -13,6 +13,7 @@ import re
 
 import pytest
 from browser import WINDOW, assert_real_page, page_stats, screenshot
+from figure_text import overlaps
 
 import uq
 from uq._derived.comparison import compare
@@ -71,6 +72,17 @@ def test_report_page(small_cubics, tmp_path, figure_format):
     _words_not_code(text)
 
 
+def _readable(*figures) -> None:
+    """No title or label of these figures on another (tests/figure_text.py)."""
+    from uq._report.html import _plt
+
+    for fig in figures:
+        try:
+            assert overlaps(fig) == [], fig.axes[0].get_title()
+        finally:
+            _plt().close(fig)
+
+
 def _comparison_checks(text: str, comparison: dict, name: str) -> None:
     """The page says which model the recordings prefer, as the comparison does, and its table
     holds both models' numbers."""
@@ -92,6 +104,7 @@ def _comparison_checks(text: str, comparison: dict, name: str) -> None:
 
 def test_thermodynamic_page(small_campaign, small_cubics, tmp_path):
     from uq._models.thermo import ThermoOrders
+    from uq._report import surface, thermo
     from uq._report.thermo import write_thermo_report
 
     fit = uq.fit_thermo(small_campaign, ThermoOrders(4, 3), seed=4, settings=QUICK)
@@ -109,11 +122,18 @@ def test_thermodynamic_page(small_campaign, small_cubics, tmp_path):
     for p, r in result["at_x0"].items():  # the Maxwell ratio at x0, per pressure
         assert f"<tr><th>{p}</th>" in text and f"{r['maxwell_ratio']['mean']:.3f}" in text
     _words_not_code(text)
+    _readable(
+        surface.figure_residual_overlay(fit, "thermodynamic"),
+        thermo.figure_areas(fit),
+        thermo.figure_maxwell(fit),
+        thermo.figure_piston_area(fit),
+    )
 
 
 @pytest.mark.slow
 def test_surface_page(small_campaign, small_cubics, tmp_path):
     from uq._models.surface import summary
+    from uq._report import surface
     from uq._report.surface import write_surface_report
 
     fit = uq.fit_surface(small_campaign, uq.Orders(3, 2, 2, 1, 1), seed=4, settings=QUICK)
@@ -123,6 +143,11 @@ def test_surface_page(small_campaign, small_cubics, tmp_path):
     text = page.read_text(encoding="utf-8")
     _comparison_checks(text, comparison, "surface")
     _words_not_code(text)
+    _readable(
+        surface.figure_pressure_area(fit),
+        surface.figure_spread(fit),
+        surface.figure_residual_overlay(fit),
+    )
 
 
 @pytest.fixture(scope="module")

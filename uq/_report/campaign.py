@@ -1,9 +1,9 @@
-"""``uq report FILE.csv --out DIR``: one self-contained HTML page (+ PNG figures) per campaign.
+"""``uq report FILE.csv --out DIR``: one self-contained HTML page (+ its figures) per campaign.
 
 The page redraws the paper's Figures 2-5 with credible bands, sets Tables 1 and 2 beside the
 posterior, gives the scatter of the effective area, the sampler's diagnostics and a section
-per pressure. Figures are embedded as base64 PNG and also written beside the page; every
-write is atomic (``uq._io.files``). The page is the template ``templates/report.html``
+per pressure. Figures are embedded (base64 PNG, or SVG with ``figure_format="svg"``) and also
+written beside the page; every write is atomic (``uq._io.files``). The page is the template ``templates/report.html``
 (``uq._report.html.render``); this module gives it numbers and figures, not markup.
 """
 
@@ -99,12 +99,12 @@ def _bands(ax, x, pointwise, simultaneous, scale, color, ls="-"):
     _fill(ax, x, pointwise, scale, color, alpha=0.4, ls=ls)
 
 
-def _band_key(ax, *, simultaneous: bool, points: str | None = None, extra=()) -> None:
+def _band_key(ax, *, simultaneous: bool, points: str | None = None) -> None:
     """A legend of what the shades and marks mean (colours are the pressures: the colour bar)."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    handles = [Line2D([], [], color="0.3", lw=LINE_PT, label="posterior mean"), *extra]
+    handles = [Line2D([], [], color="0.3", lw=LINE_PT, label="posterior mean")]
     handles.append(Patch(color="0.3", alpha=0.4, lw=0, label="pointwise 90 % band"))
     if simultaneous:
         handles.append(Patch(color="0.3", alpha=0.15, lw=0, label="simultaneous 90 % band"))

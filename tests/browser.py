@@ -58,9 +58,13 @@ def screenshot(html: Path, png: Path, window: tuple[int, int] = WINDOW) -> Path:
     return Path(png)
 
 
+MARGIN_PX = 10  # the right edge of the window that a page in the style sheet leaves blank
+
+
 def page_stats(png: Path) -> dict:
-    """What is on a screenshot: its size, the share of pixels that are not (near) white, and the
-    share that are coloured (figures, not only black text)."""
+    """What is on a screenshot: its size, the share of pixels that are not (near) white, the
+    share that are coloured (figures, not only black text), and the rows with ink in the
+    right-hand ``MARGIN_PX`` columns (text or tables running off the page)."""
     import matplotlib.image
 
     image = matplotlib.image.imread(png)[..., :3].astype(float)
@@ -73,15 +77,17 @@ def page_stats(png: Path) -> dict:
         "inked": float(inked.mean()),
         "coloured": float(coloured.mean()),
         "rows_inked": float(inked.any(axis=1).mean()),
+        "rows_off_the_page": int(inked[:, -MARGIN_PX:].any(axis=1).sum()),
     }
 
 
 def assert_real_page(png: Path, window: tuple[int, int] = WINDOW, figures: bool = True) -> dict:
     """The screenshot has the window's size, is not blank (ink on a good part of it, spread over
-    the page) and, with ``figures``, shows coloured figures."""
+    the page), nothing runs off its right edge and, with ``figures``, it shows coloured figures."""
     stats = page_stats(png)
     assert stats["size"] == window, stats
     assert stats["inked"] > 0.04 and stats["rows_inked"] > 0.3, f"a blank page? {stats}"
+    assert stats["rows_off_the_page"] == 0, f"text runs off the page? {stats}"
     if figures:
         assert stats["coloured"] > 0.0005, f"no figure drawn? {stats}"
     return stats

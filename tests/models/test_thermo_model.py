@@ -52,6 +52,28 @@ def test_identities_of_the_potential(thermo_fit):
         np.testing.assert_allclose(fit.volume_area_draws(x, p, beta=beta), dV / (2 * h), rtol=1e-5)
 
 
+def test_draws_on_a_grid_are_the_draws_point_by_point(thermo_fit):
+    """Every quantity evaluated on a (2, 3) grid of heights and pressures gives, draw by draw,
+    what it gives at each point alone (volume_area_draws, and so the Maxwell ratio, once
+    returned the draws and the points transposed)."""
+    fit, beta = thermo_fit, thermo_fit.flat_beta(50)
+    x = np.array([[0.08, 0.10, 0.12], [0.09, 0.11, 0.13]])
+    p = np.array([[2.0, 5.0, 8.0], [3.0, 4.0, 6.0]])
+    for fn in (
+        fit.potential_draws,
+        fit.force_draws,
+        fit.volume_change_draws,
+        fit.feff_draws,
+        fit.volume_area_draws,
+        fit.volume_pressure_draws,
+        fit.maxwell_ratio_draws,
+    ):
+        grid = fn(x, p, beta=beta)
+        alone = [fn(xi, pi, beta=beta) for xi, pi in zip(x.ravel(), p.ravel(), strict=True)]
+        assert grid.shape == (50, 2, 3), fn.__name__
+        np.testing.assert_allclose(grid, np.stack(alone, axis=-1).reshape(grid.shape), rtol=1e-12)
+
+
 def test_recovers_the_stands_potential_spring(thermo_fit):
     """On the stand's potential spring the force, the volume-derived area and the Maxwell ratio
     at three points lie inside the 99.9 % intervals, the sampler converged, and the piston area

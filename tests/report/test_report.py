@@ -156,17 +156,18 @@ def test_page_escapes_what_the_recordings_say(n50_fit, tmp_path, monkeypatch):
     import dataclasses
 
     from uq._report import campaign
+    from uq._report.html import _plt
 
-    png = b"\x89PNG\r\n\x1a\n"  # the figures are not under test here: skip drawing them
+    # the figures are not under test here: draw empty ones
     for name in (
-        "fig_force",
-        "fig_volume",
-        "fig_feff",
-        "fig_traditional",
-        "fig_scatter",
-        "fig_test",
+        "figure_force",
+        "figure_volume",
+        "figure_feff",
+        "figure_traditional",
+        "figure_scatter",
     ):
-        monkeypatch.setattr(campaign, name, lambda *a, **k: png)
+        monkeypatch.setattr(campaign, name, lambda *a, **k: _plt().figure(figsize=(1, 1)))
+    monkeypatch.setattr(campaign, "encoded_test_figure", lambda *a, **k: b"\x89PNG\r\n\x1a\n")
     evil = "<script>alert('x&y')</script>"
     rec = dataclasses.replace(n50_fit.recordings, path=str(tmp_path / "<script>r.csv"))
     fit = dataclasses.replace(n50_fit, recordings=rec)

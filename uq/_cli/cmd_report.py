@@ -18,13 +18,14 @@ from uq._derived.bands import campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
 from uq._report.campaign import MIN_DRAWS, read_comments, write_report
+from uq._report.html import FIGURE_FORMATS
 
 
 def configure_report(p) -> None:
     add_recordings(p)
     add_sampling(p)
     p.add_argument(
-        "--out", required=True, metavar="DIR", help="folder for report.html and its PNG figures"
+        "--out", required=True, metavar="DIR", help="folder for report.html and its figures"
     )
     p.add_argument(
         "--json",
@@ -36,6 +37,13 @@ def configure_report(p) -> None:
         type=positive_int,
         default=2000,
         help="joint posterior draws used for the bands (default 2000)",
+    )
+    p.add_argument(
+        "--figures",
+        choices=FIGURE_FORMATS,
+        default="png",
+        help="format of the figures, embedded in the page and written beside it: png (default) "
+        "or svg (vector: sharp at any zoom and in print)",
     )
     p.add_argument(
         "--surface",
@@ -74,6 +82,7 @@ def command_report(args) -> int:
         surface=surface,
         comparison=comparison,
         jobs=None,  # per-test figures in worker processes, one per CPU
+        figure_format=args.figures,
     )
     t_all = time.perf_counter() - t0
     print(

@@ -40,7 +40,9 @@ def configure_surface(p) -> None:
     p.add_argument(
         "--report",
         metavar="DIR",
-        help="write surface.html (heat maps, overlays, comparison) and its PNGs to DIR",
+        help="write the model's page and its PNGs to DIR: surface.html (heat maps, each test "
+        "against the surface, comparison), or thermodynamic.html with --model thermodynamic "
+        "(force and dV/dx by test, Maxwell ratio, implied piston area, comparison)",
     )
     p.add_argument(
         "--out",
@@ -61,15 +63,13 @@ def command_surface(args) -> int:
     )  # a bad --stand file or --walkers is refused before the recordings are read
     settings = settings_from(args)
     settings.require_walkers(len(THETA_NAMES))
-    if args.model == "thermodynamic":
+    if args.model == "thermodynamic" and args.out is not None:
         from uq._io.errors import InputError
 
-        for option, value in (("--report", args.report), ("--out", args.out)):
-            if value is not None:
-                raise InputError(
-                    f"option {option}: not yet with --model thermodynamic (its page and saved "
-                    "answer are the surface model's); use --json"
-                )
+        raise InputError(
+            "option --out: not yet with --model thermodynamic (the saved answer is the surface "
+            "model's); use --json or --report"
+        )
     rec = load(args)
     module = _thermo if args.model == "thermodynamic" else _surface
     if args.select:
@@ -89,9 +89,12 @@ def command_surface(args) -> int:
     for w in res["warnings"]:
         print(f"  warning: {w}")
     if args.report:
-        from uq._report.surface import write_surface_report
+        if args.model == "thermodynamic":
+            from uq._report.thermo import write_thermo_report as write_page
+        else:
+            from uq._report.surface import write_surface_report as write_page
 
-        print(f"  report: {write_surface_report(fit, res, args.report)}")
+        print(f"  report: {write_page(fit, res, args.report)}")
     if args.out:
         from uq._derived.margin import save_surface_answer
 

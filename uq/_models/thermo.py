@@ -302,8 +302,8 @@ class ThermoFit(PairFit):
             self.check_range(h, p)
         out = _force_pressure_slope(
             self.orders, self.geometry, h.ravel(), p.ravel(), self._coef(beta)
-        )
-        return out.reshape(-1, *h.shape)
+        )  # (points, draws)
+        return out.T.reshape(-1, *h.shape)
 
     def volume_pressure_draws(self, height_m, p_bar, *, check=True, beta=None):
         """dV/dp_u at fixed height, m^3/Pa, up to a function of p_u alone (the same at every

@@ -1,9 +1,9 @@
-"""``uq report FILE.csv --out DIR``: one self-contained HTML page (+ PNG figures) per campaign.
+"""``uq report FILE.csv --out DIR``: one self-contained HTML page (+ its figures) per campaign.
 
 The page redraws the paper's Figures 2-5 with credible bands, sets Tables 1 and 2 beside the
 posterior, gives the scatter of the effective area, the sampler's diagnostics and a section
-per pressure. Figures are embedded as base64 PNG and also written beside the page; every
-write is atomic (``uq._io.files``). The page is the template ``templates/report.html``
+per pressure. Figures are embedded (base64 PNG, or SVG with ``figure_format="svg"``) and also
+written beside the page; every write is atomic (``uq._io.files``). The page is the template ``templates/report.html``
 (``uq._report.html.render``); this module gives it numbers and figures, not markup.
 """
 
@@ -18,23 +18,20 @@ import numpy as np
 
 from uq._data.recordings import leading_comments
 from uq._data.reference import table1, table2
-from uq._derived.bands import CampaignBands, campaign_bands
+from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
-from uq._report.html import Figure, _plt, _png, render
+from uq._report.html import FIGURE_FORMATS, Figure, _plt, check_format, encode, render
 
 #: Names of the files write_report and the surface page write (uq._io.files.remove_stale prunes the rest).
-REPORT_FIGURES = (
-    "fig2_*.png",
-    "fig3_*.png",
-    "fig4_*.png",
-    "fig5_*.png",
-    "fig_*.png",
-    "test_*bar.png",
+REPORT_FIGURES = tuple(
+    f"{stem}.{ext}"
+    for ext in FIGURE_FORMATS
+    for stem in ("fig2_*", "fig3_*", "fig4_*", "fig5_*", "fig_*", "test_*bar")
 )
-SURFACE_OUTPUTS = ("surface_*.png", "surface.html")
+SURFACE_OUTPUTS = (*(f"surface_*.{ext}" for ext in FIGURE_FORMATS), "surface.html")
 MM = 1e3
 BRANCH_COLORS = {True: "tab:blue", False: "tab:orange"}  # compression, rebound
 #: Table 1 as printed: (name, unit, factor SI -> printed unit).
@@ -59,50 +56,188 @@ def read_comments(path) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- figures
+#
+# Each figure_* function returns a matplotlib figure; _draw_figures encodes it as PNG or SVG
+# (uq._report.html.encode). Tests by pressure share one colour map (viridis, cut before its pale
+# end so the last curve stays visible on white) with a colour bar, not a legend of ten entries.
+
+LINE_PT = 1.2  # width of the posterior-mean lines, points
 
 
-def _colors(pressures):
+def _pressure_colours(pressures):
+    """(colour per pressure, the ScalarMappable for a colour bar) from one colour map."""
     plt = _plt()
-    cmap = plt.get_cmap("viridis")
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import ListedColormap, Normalize
+
     p = np.asarray(pressures, float)
-    span = max(p.max() - p.min(), 1e-9)
-    return [cmap(0.9 * (v - p.min()) / span) for v in p]
+    cmap = ListedColormap(plt.get_cmap("viridis")(np.linspace(0.0, 0.9, 256)))
+    lo, hi = float(p.min()), float(p.max())
+    norm = Normalize(lo, hi if hi > lo else lo + 1.0)
+    return [cmap(norm(v)) for v in p], ScalarMappable(norm=norm, cmap=cmap)
+
+
+def _colour_bar(fig, axes, mappable, pressures) -> None:
+    """The pressure colour bar beside ``axes``, the tested pressures marked on it."""
+    bar = fig.colorbar(mappable, ax=axes, pad=0.015, fraction=0.04, aspect=30)
+    bar.set_label("overpressure p_u (bar); tested pressures marked")
+    for p in pressures:
+        bar.ax.axhline(p, color="k", lw=0.6)
 
 
 def _fill(ax, x, b, scale, color, alpha=0.25, label=None, line=True, ls="-"):
     ax.fill_between(x, b.lo * scale, b.hi * scale, color=color, alpha=alpha, lw=0)
     if line:
-        ax.plot(x, b.mean * scale, color=color, lw=1.2, ls=ls, label=label)
+        ax.plot(x, b.mean * scale, color=color, lw=LINE_PT, ls=ls, label=label)
 
 
-def _simultaneous(ax, x, b, scale, color):
-    """Dashed bounds of a simultaneous band (the whole curve inside with the band's probability)."""
-    for edge in (b.lo, b.hi):
-        ax.plot(x, edge * scale, color=color, lw=0.8, ls="--")
+def _bands(ax, x, pointwise, simultaneous, scale, color, ls="-"):
+    """Posterior-mean line, pointwise 90 % band (darker) and simultaneous 90 % band (lighter)."""
+    ax.fill_between(
+        x, simultaneous.lo * scale, simultaneous.hi * scale, color=color, alpha=0.15, lw=0
+    )
+    _fill(ax, x, pointwise, scale, color, alpha=0.4, ls=ls)
+
+
+def _band_key(ax, *, simultaneous: bool, points: str | None = None) -> None:
+    """A legend of what the shades and marks mean (colours are the pressures: the colour bar)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = [Line2D([], [], color="0.3", lw=LINE_PT, label="posterior mean")]
+    handles.append(Patch(color="0.3", alpha=0.4, lw=0, label="pointwise 90 % band"))
+    if simultaneous:
+        handles.append(Patch(color="0.3", alpha=0.15, lw=0, label="simultaneous 90 % band"))
+    if points:
+        handles.append(Line2D([], [], color="0.3", ls="", marker=".", label=points))
+    ax.legend(handles=handles, fontsize=7, loc="best")
 
 
 def _mark_x0(ax, x0_mm):
     ax.axvline(x0_mm, color="0.6", lw=0.6, ls=":")
 
 
-def fig_force(cf, cb: CampaignBands) -> bytes:
+def widest_band_pt(ax, widths) -> float:
+    """The widest of the bands ``widths`` (data units of ``ax``'s y axis) in points on the page
+    (the figure drawn: its layout fixes the axes' size)."""
+    y0, y1 = ax.get_ylim()
+    return float(np.max(widths)) * ax.bbox.height / abs(y1 - y0) * 72.0 / ax.figure.dpi
+
+
+def _band_note(ax, widths, factor: float, unit: str) -> str:
+    """What the reader can see of the bands (``widths`` in ``ax``'s y units; ``factor`` turns
+    them into ``unit``) at this scale, in words, for the figure's title."""
+    widest = float(np.max(widths)) * factor
+    pt = widest_band_pt(ax, widths)
+    if pt < LINE_PT:
+        seen = "thinner than the lines at this scale"
+    elif pt < 3 * LINE_PT:
+        seen = "hardly wider than the lines at this scale"
+    else:
+        seen = f"{pt:.0f} pt at this scale"
+    return f"the curves' 90 % bands are at most {widest:.3g} {unit} wide ({seen})"
+
+
+def _residual_grid(fig, gs, n: int, cols: int):
+    """``n`` small axes in the rows of ``gs`` below its first, sharing their x axis."""
+    axes = []
+    for i in range(n):
+        ax = fig.add_subplot(gs[1 + i // cols, i % cols], sharex=axes[0] if axes else None)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+        axes.append(ax)
+    return axes
+
+
+def _with_residuals(n: int):
+    """A figure with a main axes on top and a grid of ``n`` residual panels below it."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 5))
-    x = cb.x_m * MM
-    for tf, tb, c in zip(
-        cf.tests, cb.tests, _colors([t.pressure_bar for t in cb.tests]), strict=True
-    ):
-        _fill(ax, x, tb.force, 1e-3, c, label=f"{tb.pressure_bar:g} bar")
-        ax.plot(tf.test.height_m * MM, tf.test.force_N * 1e-3, ".", color=c, ms=3)
-    _mark_x0(ax, cb.x0_m * MM)
-    ax.set(
-        xlabel="height x (mm)",
-        ylabel="force P (kN)",
-        title="Fig. 2: force characteristics (eq. 8), pointwise 90 % bands",
+    cols = min(n, 6)
+    rows = -(-n // cols)
+    fig = plt.figure(figsize=(10.5, 4.8 + 1.55 * rows), layout="constrained")
+    gs = fig.add_gridspec(1 + rows, cols, height_ratios=[3.2] + [1.0] * rows)
+    return fig, fig.add_subplot(gs[0, :]), _residual_grid(fig, gs, n, cols)
+
+
+def _residual_panel(ax, x, h, r, curve: Band, pred: Band, scale, color, p_bar):
+    """Readings ``r`` minus the posterior-mean curve at heights ``h``, with the curve's 90 % band
+    (colour) and a new reading's (grey) minus the same mean, on the grid ``x``."""
+    ax.fill_between(
+        x,
+        (pred.lo - pred.mean) * scale,
+        (pred.hi - pred.mean) * scale,
+        color="0.5",
+        alpha=0.2,
+        lw=0,
     )
-    ax.legend(fontsize=7, ncol=2, title="p_u", title_fontsize=7)
+    ax.fill_between(
+        x,
+        (curve.lo - curve.mean) * scale,
+        (curve.hi - curve.mean) * scale,
+        color=color,
+        alpha=0.7,
+        lw=0,
+    )
+    ax.plot(h, r * scale, ".", color="k", ms=2.5)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_title(f"{p_bar:g} bar", fontsize=8)
+
+
+def _residual_key(fig) -> None:
+    """The residual panels' legend, below them."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = [
+        Line2D([], [], color="k", ls="", marker=".", label="readings"),
+        Patch(color="0.3", alpha=0.7, lw=0, label="the curve's 90 % band (its pressure's colour)"),
+        Patch(color="0.5", alpha=0.2, lw=0, label="a new reading's 90 % band"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+
+
+def _residual_labels(fig, axes, ylabel: str) -> None:
+    for a in axes:
+        a.set_xlabel("height x (mm)", fontsize=7)
+    axes[0].set_ylabel(ylabel, fontsize=7)
+    _residual_key(fig)
+
+
+def figure_force(cf, cb: CampaignBands):
+    """Figure 2 (eq. 8): force curves by pressure, readings and bands; below, per test, readings
+    and bands minus the posterior-mean curve (the bands are too narrow to see above)."""
+    fig, ax, res = _with_residuals(len(cb.tests))
+    x = cb.x_m * MM
+    colours, sm = _pressure_colours([t.pressure_bar for t in cb.tests])
+    for i, (tf, tb, c) in enumerate(zip(cf.tests, cb.tests, colours, strict=True)):
+        _fill(ax, x, tb.force, 1e-3, c, alpha=0.4)
+        ax.plot(tf.test.height_m * MM, tf.test.force_N * 1e-3, ".", color=c, ms=3)
+        mean_at = cubic(tf.flat("force").mean(0), tf.test.height_m - tf.x0_m)
+        r = tf.test.force_N - mean_at
+        _residual_panel(
+            res[i],
+            x,
+            tf.test.height_m * MM,
+            r,
+            tb.force,
+            tb.force_pred,
+            1.0,
+            c,
+            tb.pressure_bar,
+        )
+    _mark_x0(ax, cb.x0_m * MM)
+    ax.set(xlabel="height x (mm)", ylabel="force P (kN)")
     ax.grid(alpha=0.3)
-    return _png(fig)
+    _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
+    _residual_labels(fig, res, "reading − mean (N)")
+    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
+    note = _band_note(ax, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N")
+    ax.set_title(
+        "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n"
+        f"{note}; below: readings and bands minus the mean curve",
+        fontsize=9,
+    )
+    return fig
 
 
 def _dV_points(tf, tb, S):
@@ -111,103 +246,114 @@ def _dV_points(tf, tb, S):
     return S * (tf.test.piston_m - L_top)
 
 
-def fig_volume(cf, cb: CampaignBands) -> bytes:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 5))
+def figure_volume(cf, cb: CampaignBands):
+    """Figure 3 (eq. 10): volume increments by pressure; below, per test, the piston readings and
+    bands minus the posterior-mean L(x), as volume S ΔL."""
+    fig, ax, res = _with_residuals(len(cb.tests))
     x = cb.x_m * MM
-    for tf, tb, c in zip(
-        cf.tests, cb.tests, _colors([t.pressure_bar for t in cb.tests]), strict=True
-    ):
-        _fill(ax, x, tb.dV, 1e3, c, label=f"{tb.pressure_bar:g} bar")
-        ax.plot(
-            tf.test.height_m * MM, _dV_points(tf, tb, cb.piston_area_m2) * 1e3, ".", color=c, ms=3
-        )
-    _mark_x0(ax, cb.x0_m * MM)
-    ax.set(
-        xlabel="height x (mm)",
-        ylabel="volume increment ΔV (dm³ = litre)",
-        title="Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10), pointwise 90 % bands",
-    )
-    ax.legend(fontsize=7, ncol=2, title="p_u", title_fontsize=7)
-    ax.grid(alpha=0.3)
-    return _png(fig)
-
-
-def fig_feff(cf, cb: CampaignBands) -> bytes:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 5))
-    x = cb.x_m * MM
-    for tf, tb, c in zip(
-        cf.tests, cb.tests, _colors([t.pressure_bar for t in cb.tests]), strict=True
-    ):
-        if tb.pressure_bar not in cb.scatter_pressures_bar:
-            continue
-        _fill(ax, x, tb.feff, 1e4, c, label=f"{tb.pressure_bar:g} bar")
-        _simultaneous(ax, x, tb.simultaneous["feff"], 1e4, c)
-        ax.plot(
+    S = cb.piston_area_m2
+    colours, sm = _pressure_colours([t.pressure_bar for t in cb.tests])
+    for i, (tf, tb, c) in enumerate(zip(cf.tests, cb.tests, colours, strict=True)):
+        _fill(ax, x, tb.dV, 1e3, c, alpha=0.4)
+        ax.plot(tf.test.height_m * MM, _dV_points(tf, tb, S) * 1e3, ".", color=c, ms=3)
+        mean_at = cubic(tf.flat("piston").mean(0), tf.test.height_m - tf.x0_m)
+        r = S * (tf.test.piston_m - mean_at)
+        _residual_panel(
+            res[i],
+            x,
             tf.test.height_m * MM,
-            tf.test.force_N / (tb.pressure_bar * BAR_PA) * 1e4,
-            ".",
-            color=c,
-            ms=3,
+            r,
+            _scaled(tb.piston, S),
+            _scaled(tb.piston_pred, S),
+            1e6,
+            c,
+            tb.pressure_bar,
         )
     _mark_x0(ax, cb.x0_m * MM)
-    ax.set(
-        xlabel="height x (mm)",
-        ylabel="effective area F_eff = P / p_u (cm²)",
-        title="Fig. 4: effective area from the force, tests with p_u ≥ 1 bar,\n"
-        "pointwise 90 % bands (shaded), simultaneous 90 % bands (dashed)",
-    )
-    ax.legend(fontsize=7, ncol=2, title="p_u", title_fontsize=7)
+    ax.set(xlabel="height x (mm)", ylabel="volume increment ΔV (dm³ = litre)")
     ax.grid(alpha=0.3)
-    return _png(fig)
+    _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
+    _residual_labels(fig, res, "S (L − mean L) (cm³)")
+    fig.draw_without_rendering()
+    note = _band_note(ax, [np.max(t.dV.hi - t.dV.lo) * 1e3 for t in cb.tests], 1e3, "cm³")
+    ax.set_title(
+        "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean curves\n"
+        f"{note}; below: piston readings and bands minus the mean L(x), times S",
+        fontsize=9,
+    )
+    return fig
 
 
-def fig_traditional(cf, cb: CampaignBands) -> bytes:
+def _scaled(b: Band, factor: float) -> Band:
+    return Band(b.mean * factor, b.lo * factor, b.hi * factor)
+
+
+def figure_feff(cf, cb: CampaignBands):
+    """Figure 4 (eq. 1): F_eff = P / p_u of the tests with p_u >= 1 bar, by pressure, with
+    pointwise and simultaneous 90 % bands shaded."""
     plt = _plt()
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 5))
+    fig, ax = plt.subplots(figsize=(9, 5.4), layout="constrained")
     x = cb.x_m * MM
-    step = max(1, len(x) // 19)
-    for tb, c in zip(cb.tests, _colors([t.pressure_bar for t in cb.tests]), strict=True):
-        if tb.pressure_bar not in cb.scatter_pressures_bar:
-            continue
-        _fill(ax, x, tb.force, 1e-3, c, label=f"{tb.pressure_bar:g} bar")
-        ax.errorbar(
-            x[::step],
-            tb.trad_ref.mean[::step] * 1e-3,
-            yerr=[
-                (tb.trad_ref.mean - tb.trad_ref.lo)[::step] * 1e-3,
-                (tb.trad_ref.hi - tb.trad_ref.mean)[::step] * 1e-3,
-            ],
-            fmt="o",
-            color=c,
-            ms=3,
-            lw=0.8,
-        )
-        _fill(ax2, x, tb.spread_ref_pct, 1.0, c, label=f"{tb.pressure_bar:g} bar")
-        _simultaneous(ax2, x, tb.simultaneous["spread_ref_pct"], 1.0, c)
-    ax.set(
-        xlabel="height x (mm)",
-        ylabel="force (kN)",
-        title=f"Fig. 5: measured (lines) vs traditional (points), {cb.reference_bar:g}-bar volume curve",
+    shown = [
+        (tf, tb)
+        for tf, tb in zip(cf.tests, cb.tests, strict=True)
+        if tb.pressure_bar in cb.scatter_pressures_bar
+    ]
+    colours, sm = _pressure_colours([tb.pressure_bar for _, tb in shown])
+    for (tf, tb), c in zip(shown, colours, strict=True):
+        _bands(ax, x, tb.feff, tb.simultaneous["feff"], 1e4, c)
+        p_pa = tb.pressure_bar * BAR_PA
+        ax.plot(tf.test.height_m * MM, tf.test.force_N / p_pa * 1e4, ".", color=c, ms=2.5)
+    _mark_x0(ax, cb.x0_m * MM)
+    ax.set(xlabel="height x (mm)", ylabel="effective area F_eff = P / p_u (cm²)")
+    ax.set_title(
+        "Fig. 4: effective area from the force (eq. 1), tests with p_u ≥ 1 bar", fontsize=10
     )
+    ax.grid(alpha=0.3)
+    _band_key(ax, simultaneous=True, points="readings P / p_u")
+    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in shown])
+    return fig
+
+
+def figure_traditional(cf, cb: CampaignBands):
+    """Figure 5: the traditional force p_u (-S dL/dx) from the reference test's volume curve
+    against the measured force (left) and their relative difference (right), by pressure."""
+    plt = _plt()
+    from matplotlib.lines import Line2D
+
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 5.4), layout="constrained")
+    x = cb.x_m * MM
+    shown = [tb for tb in cb.tests if tb.pressure_bar in cb.scatter_pressures_bar]
+    colours, sm = _pressure_colours([tb.pressure_bar for tb in shown])
+    for tb, c in zip(shown, colours, strict=True):
+        _fill(ax, x, tb.force, 1e-3, c, alpha=0.4)
+        _fill(ax, x, tb.trad_ref, 1e-3, c, alpha=0.2, ls="--")
+        _bands(ax2, x, tb.spread_ref_pct, tb.simultaneous["spread_ref_pct"], 1.0, c)
+    fig.suptitle(
+        f"Fig. 5: traditional force p_u (−S dL/dx), with the {cb.reference_bar:g}-bar test's "
+        "volume curve, against the measured force",
+        fontsize=10,
+    )
+    ax.set(xlabel="height x (mm)", ylabel="force (kN)")
+    ax.set_title("force: measured and traditional", fontsize=9)
+    measured = Line2D([], [], color="0.3", lw=LINE_PT, label="measured P(x), posterior mean")
+    trad = Line2D([], [], color="0.3", lw=LINE_PT, ls="--", label="traditional, posterior mean")
+    ax.legend(handles=[measured, trad], fontsize=7, loc="best")
     ax2.axhline(0, color="k", lw=0.6)
-    ax2.set(
-        xlabel="height x (mm)",
-        ylabel="(traditional − measured) / measured (%)",
-        title="spread of the traditional force: pointwise (shaded) and simultaneous (dashed) 90 % bands",
-    )
+    ax2.set(xlabel="height x (mm)", ylabel="(traditional − measured) / measured (%)")
+    ax2.set_title("spread of the traditional force", fontsize=9)
+    _band_key(ax2, simultaneous=True)
     for a in (ax, ax2):
         _mark_x0(a, cb.x0_m * MM)
         a.grid(alpha=0.3)
-        a.legend(fontsize=7, ncol=2)
-    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.1, top=0.92, wspace=0.22)
-    return _png(fig)
+    _colour_bar(fig, [ax, ax2], sm, [tb.pressure_bar for tb in shown])
+    return fig
 
 
-def fig_scatter(cb: CampaignBands) -> bytes:
+def figure_scatter(cb: CampaignBands):
+    """The paper's scatter of F_eff across the tests with p_u >= 1 bar, with its band."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig, ax = plt.subplots(figsize=(8, 4.6), layout="constrained")
     x = cb.x_m * MM
     _fill(ax, x, cb.scatter, 1.0, "tab:purple", label="posterior mean and pointwise 90 % band")
     for label, v in cb.scatter_at.items():
@@ -235,17 +381,17 @@ def fig_scatter(cb: CampaignBands) -> bytes:
         label="paper: 8.41 % (x0), 26.3 % (x_max), 8.51 % ('x_min')",
     )
     _mark_x0(ax, cb.x0_m * MM)
-    ax.set(
-        xlabel="height x (mm)",
-        ylabel="half range / mean of F_eff (%)",
-        title=f"Scatter of F_eff across the {len(cb.scatter_pressures_bar)} tests with p_u ≥ 1 bar",
+    ax.set(xlabel="height x (mm)", ylabel="half range / mean of F_eff (%)")
+    ax.set_title(
+        f"Scatter of F_eff across the {len(cb.scatter_pressures_bar)} tests with p_u ≥ 1 bar",
+        fontsize=10,
     )
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
-    return _png(fig)
+    return fig
 
 
-def fig_test(t, force_mean, x0_m: float, tb, cb: CampaignBands) -> bytes:
+def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands):
     """Six panels for one test: force, residuals, piston, F_eff, traditional vs measured, spread.
 
     ``t`` the test's recordings (PressureTest), ``force_mean`` the posterior-mean force
@@ -355,7 +501,12 @@ def fig_test(t, force_mean, x0_m: float, tb, cb: CampaignBands) -> bytes:
         a.grid(alpha=0.3)
     fig.suptitle(f"test at p_u = {tb.pressure_bar:g} bar", fontsize=11)
     fig.subplots_adjust(left=0.06, right=0.99, bottom=0.07, top=0.92, wspace=0.25, hspace=0.3)
-    return _png(fig)
+    return fig
+
+
+def encoded_test_figure(t, force_mean, x0_m: float, tb, cb, figure_format: str) -> bytes:
+    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns)."""
+    return encode(figure_test(t, force_mean, x0_m, tb, cb), figure_format)
 
 
 def _ignore_interrupts() -> None:
@@ -392,14 +543,14 @@ class _TestFigures:
     """The per-test figures (the slow part of a report: about 1 s each), drawn by ``jobs``
     spawned worker processes while the page and the campaign figures are made in this one.
     Workers get plain data (recordings, mean coefficients, bands) and import only matplotlib and
-    this module, not JAX; the PNG bytes are the same as drawn here (tested)."""
+    this module, not JAX; the bytes (PNG or SVG) are the same as drawn here (tested)."""
 
     MIN_TESTS = 4  # below this, starting workers costs more than it saves
 
-    def __init__(self, cf, cb: CampaignBands, jobs: int):
+    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png"):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
-            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid)
+            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid, figure_format)
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
         self._pool, self._futures = None, []
@@ -415,10 +566,10 @@ class _TestFigures:
                     initializer=_ignore_interrupts,
                 )
                 # the workers start here (spawn launches them all at the first submit)
-                self._futures = [self._pool.submit(fig_test, *w) for w in self._work]
+                self._futures = [self._pool.submit(encoded_test_figure, *w) for w in self._work]
 
     def result(self, i: int) -> bytes:
-        return self._futures[i].result() if self._pool else fig_test(*self._work[i])
+        return self._futures[i].result() if self._pool else encoded_test_figure(*self._work[i])
 
     def __enter__(self):
         return self
@@ -553,7 +704,7 @@ def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
                 "rel_pct": 100 * np.mean(noise[:, 1]),
                 "sigma_L_mm": 1e3 * np.mean(noise[:, 2]),
                 "warnings": tf.convergence.messages(CLI_ADVICE) + tf.model_warnings(),
-                "figure": figures[f"test_{tf.pressure_bar:g}bar.png"],
+                "figure": figures[f"test_{tf.pressure_bar:g}bar"],
             }
         )
     return out
@@ -586,27 +737,31 @@ def _comments(rec, comments) -> list[str]:
     return comments
 
 
-def _draw_figures(cf, cb: CampaignBands, out: Path, test_pngs: _TestFigures) -> dict[str, Figure]:
-    """The page's figures, each also written to ``out`` as a PNG file, by file name."""
-    figs = [
-        Figure("fig2_force.png", fig_force(cf, cb), "Figure 2: force vs height"),
-        Figure("fig3_volume.png", fig_volume(cf, cb), "Figure 3: volume increment vs height"),
-        Figure("fig4_feff.png", fig_feff(cf, cb), "Figure 4: effective area vs height"),
-        Figure(
-            "fig5_traditional.png",
-            fig_traditional(cf, cb),
-            "Figure 5: traditional vs measured force",
-        ),
+def _draw_figures(
+    cf, cb: CampaignBands, out: Path, test_figures: _TestFigures, figure_format: str
+) -> dict[str, Figure]:
+    """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
+    the extension (``"fig2_force"``)."""
+    drawn = [
+        ("fig2_force", figure_force(cf, cb), "Figure 2: force vs height"),
+        ("fig3_volume", figure_volume(cf, cb), "Figure 3: volume increment vs height"),
+        ("fig4_feff", figure_feff(cf, cb), "Figure 4: effective area vs height"),
+        ("fig5_traditional", figure_traditional(cf, cb), "Figure 5: traditional vs measured force"),
     ]
     if cb.scatter is not None:
-        figs.append(Figure("fig_feff_scatter.png", fig_scatter(cb), "F_eff scatter vs height"))
-    figs += [
-        Figure(f"test_{tf.pressure_bar:g}bar.png", test_pngs.result(i), f"{tf.pressure_bar:g} bar")
-        for i, tf in enumerate(cf.tests)
-    ]
-    for f in figs:
-        write_bytes_atomic(out / f.name, f.png)
-    return {f.name: f for f in figs}
+        drawn.append(("fig_feff_scatter", figure_scatter(cb), "F_eff scatter vs height"))
+    figs = {
+        stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
+        for stem, fig, alt in drawn
+    }
+    for i, tf in enumerate(cf.tests):
+        stem = f"test_{tf.pressure_bar:g}bar"
+        figs[stem] = Figure(
+            f"{stem}.{figure_format}", test_figures.result(i), f"{tf.pressure_bar:g} bar"
+        )
+    for f in figs.values():
+        write_bytes_atomic(out / f.name, f.data)
+    return figs
 
 
 def write_report(
@@ -621,8 +776,9 @@ def write_report(
     comparison: dict | None = None,
     surface_page: str | None = None,
     jobs: int | None = 1,
+    figure_format: str = "png",
 ) -> Path:
-    """Write ``out_dir/report.html`` and its PNG figures, as ``uq report`` does; return the page's path.
+    """Write ``out_dir/report.html`` and its figures, as ``uq report`` does; return the page's path.
 
     ``cf`` is a :func:`uq.fit_campaign` result. The bands use ``draws`` joint posterior draws,
     subsampled with ``seed`` (default: the fit's seed, as ``uq report --seed N`` does); ``bands``
@@ -636,7 +792,9 @@ def write_report(
     with the same bytes either way. Workers are started by spawning (this process may hold a JAX
     runtime, which forking can deadlock), and a spawned worker imports the calling script again:
     with ``jobs`` other than 1, call ``write_report`` from a script only under
-    ``if __name__ == "__main__":``.
+    ``if __name__ == "__main__":``. ``figure_format``: "png" (default, at 90 dpi) or "svg"
+    (vector, for print and zoom; ``uq report --figures svg``); the page embeds the figures
+    either way and the same files are written beside it (the surface page's too).
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -649,6 +807,7 @@ def write_report(
 
     if draws < MIN_DRAWS:
         raise InputError(f"draws: at least {MIN_DRAWS} draws, got {draws}", param="draws")
+    check_format(figure_format)
     seed = cf.seed if seed is None else seed
     out = Path(out_dir)
     cb = bands if bands is not None else campaign_bands(cf, n_draws=draws, seed=seed)
@@ -659,23 +818,39 @@ def write_report(
             from uq._models.surface import summary
             from uq._report.surface import write_surface_report
 
-            surface_page = write_surface_report(surface, summary(surface, comparison), stage).name
-        with _TestFigures(cf, cb, (os.cpu_count() or 1) if jobs is None else jobs) as test_pngs:
-            page, names = _write_page(cf, cb, stage, test_pngs, comments, surface_page)
+            surface_page = write_surface_report(
+                surface, summary(surface, comparison), stage, figure_format=figure_format
+            ).name
+        n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
+        with _TestFigures(cf, cb, n_jobs, figure_format) as test_figures:
+            page, names = _write_page(
+                cf, cb, stage, test_figures, comments, surface_page, figure_format
+            )
     # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
-    stale = REPORT_FIGURES + (() if surface_page else SURFACE_OUTPUTS)
+    if surface is not None:  # this run's surface figures, in this run's format
+        stale = REPORT_FIGURES + tuple(
+            f"surface_*.{ext}" for ext in FIGURE_FORMATS if ext != figure_format
+        )
+    else:
+        stale = REPORT_FIGURES + (() if surface_page else SURFACE_OUTPUTS)
     remove_stale(out, stale, keep=names | {page.name})
     return out / page.name
 
 
 def _write_page(
-    cf, cb: CampaignBands, out: Path, test_pngs: _TestFigures, comments, surface_page
+    cf,
+    cb: CampaignBands,
+    out: Path,
+    test_figures: _TestFigures,
+    comments,
+    surface_page,
+    figure_format: str = "png",
 ) -> tuple[Path, set]:
     """report.html (the template ``report.html``) and its figures in ``out``; returns the page and
     the figures' file names."""
     rec = cf.recordings
     comments = _comments(rec, comments)
-    figures = _draw_figures(cf, cb, out, test_pngs)
+    figures = _draw_figures(cf, cb, out, test_figures, figure_format)
     lo, hi = rec.height_range_m
     t1_rows, n_out, n_cmp = _table1(cf)
     page = render(
@@ -706,5 +881,6 @@ def _write_page(
         at_x0=_at_x0(cb),
         sections=_sections(cf, cb, figures),
         figures=figures,
+        figure_format=figure_format,
     )
-    return write_text_atomic(out / "report.html", page), set(figures)
+    return write_text_atomic(out / "report.html", page), {f.name for f in figures.values()}

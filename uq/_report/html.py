@@ -1,13 +1,13 @@
 """What the HTML pages share: the jinja2 templates and their one renderer, matplotlib off-screen,
-PNG bytes, embedded figures.
+figure bytes (PNG or SVG), embedded figures.
 
 Every page (``report.html``, ``surface.html``, ``diagnose.html``, the batch ``index.html``) is a
 template in ``uq/_report/templates/``, rendered by :func:`render` with autoescaping on: a value
 put on a page is escaped unless it was deliberately marked safe (``markupsafe.Markup``), and a
 variable the template names but the caller did not give fails (``StrictUndefined``). The style
 sheet is ``templates/page.css``; an embedded figure is the ``img`` macro of ``templates/macros.html``
-given a :class:`Figure`. Imported by the report modules (``uq._report.campaign``, ``surface``,
-``diagnose``) and the batch driver; it imports nothing of uq, so any module may use it.
+given a :class:`Figure` (PNG or SVG, as a ``data:`` URI, so the page stands alone). Imported by the report modules (``uq._report.campaign``, ``surface``,
+``diagnose``) and the batch driver; of uq it imports only ``uq._io`` (the bottom layer).
 """
 
 from __future__ import annotations
@@ -34,25 +34,62 @@ def _plt():
     return plt
 
 
-def _png(fig) -> bytes:
-    """The figure as PNG bytes at ``DPI``; the figure is closed."""
+#: the figure formats a page can embed (``uq report --figures``)
+FIGURE_FORMATS = ("png", "svg")
+_MIME = {"png": "image/png", "svg": "image/svg+xml"}
+
+
+def check_format(figure_format: str) -> str:
+    """``figure_format`` if it is one of :data:`FIGURE_FORMATS`, else a one-line ``InputError``."""
+    if figure_format not in FIGURE_FORMATS:
+        from uq._io.errors import InputError
+
+        raise InputError(
+            f"figure_format: one of {', '.join(FIGURE_FORMATS)}, got {figure_format!r}",
+            param="figure_format",
+        )
+    return figure_format
+
+
+def encode(fig, figure_format: str = "png") -> bytes:
+    """The figure as PNG (at ``DPI``) or SVG bytes; the figure is closed.
+
+    SVG keeps text as paths (the page looks the same in every browser) and is reproducible: no
+    date in its metadata and a fixed salt for its element ids, so one figure gives the same bytes.
+    """
+    import matplotlib
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
+    with matplotlib.rc_context({"svg.hashsalt": "airspring-uq", "svg.fonttype": "path"}):
+        if figure_format == "svg":
+            fig.savefig(buf, format="svg", metadata={"Date": None})
+        else:
+            fig.savefig(buf, format=check_format(figure_format), dpi=DPI)
     _plt().close(fig)
     return buf.getvalue()
 
 
+def _png(fig) -> bytes:
+    """The figure as PNG bytes at ``DPI``; the figure is closed."""
+    return encode(fig, "png")
+
+
 @dataclass(frozen=True)
 class Figure:
-    """A PNG to embed (base64, so that the page stands alone) under its file name, with its alt text."""
+    """A figure to embed (base64, so that the page stands alone) under its file name (whose
+    extension, ``.png`` or ``.svg``, says its format), with its alt text."""
 
     name: str
-    png: bytes
+    data: bytes
     alt: str
 
     @property
+    def mime(self) -> str:
+        return _MIME[self.name.rsplit(".", 1)[-1]]
+
+    @property
     def base64(self) -> str:
-        return base64.b64encode(self.png).decode()
+        return base64.b64encode(self.data).decode()
 
 
 def sig4(v: float) -> str:

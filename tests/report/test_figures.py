@@ -1,0 +1,132 @@
+"""The report's figures: no text on top of other text, bands the reader can see, PNG or SVG.
+
+Overlaps are found with matplotlib's own renderer: every title, axis label and colour-bar label
+is laid out as on the page and their boxes must not intersect (nor a title another axes).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from figure_text import overlaps
+
+import uq
+from uq._derived.bands import campaign_bands
+from uq._report import campaign
+from uq._report.html import _plt, encode
+
+SMALL = uq.Layout(pressures_bar=(1.0, 3.0, 5.0, 8.0), step_m=0.01)
+QUICK = uq.Settings(max_steps=200)
+
+
+@pytest.fixture(scope="module")
+def small_fit():
+    fit = uq.fit_campaign(uq.simulate("n50", seed=4, layout=SMALL), seed=4, settings=QUICK)
+    return fit, campaign_bands(fit, n_draws=100, seed=0)
+
+
+def test_the_overlap_check_finds_two_long_titles_side_by_side():
+    plt = _plt()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(6, 3))
+    a.set_title("a long title that runs well over into the neighbouring panel")
+    b.set_title("and a second long title that starts under it")
+    assert any("title" in o for o in overlaps(fig))
+    plt.close(fig)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(6, 3), layout="constrained")
+    a.set_title("short")
+    b.set_title("short too")
+    assert overlaps(fig) == []
+    plt.close(fig)
+
+
+@pytest.mark.parametrize("name", ["force", "volume", "feff", "traditional", "scatter", "test"])
+def test_no_text_overlaps_in_a_figure(small_fit, name):
+    cf, cb = small_fit
+    if name == "scatter":
+        fig = campaign.figure_scatter(cb)
+    elif name == "test":
+        tf, tb = cf.tests[0], cb.tests[0]
+        fig = campaign.figure_test(tf.test, tf.flat("force").mean(0), tf.x0_m, tb, cb)
+    else:
+        fig = getattr(campaign, f"figure_{name}")(cf, cb)
+    try:
+        assert overlaps(fig) == []
+    finally:
+        _plt().close(fig)
+
+
+def test_widest_band_in_points_is_the_axes_scale():
+    """An axes 4 in tall showing 0..10: a band 1 unit wide is 4 * 72 / 10 = 28.8 pt."""
+    plt = _plt()
+    fig = plt.figure(figsize=(4, 4), dpi=100)
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.set_ylim(0, 10)
+    assert campaign.widest_band_pt(ax, [0.5, 1.0]) == pytest.approx(28.8)
+    plt.close(fig)
+
+
+def test_figures_2_and_3_say_how_wide_the_bands_are_and_show_residual_panels(small_fit):
+    cf, cb = small_fit
+    for name, unit in (("force", "N"), ("volume", "cm³")):
+        fig = getattr(campaign, f"figure_{name}")(cf, cb)
+        title = fig.axes[0].get_title()
+        widest = re.search(r"at most ([0-9.e+]+) (\S+) wide", title)
+        assert widest and widest.group(2) == unit, title
+        assert "minus the mean" in title
+        # one residual panel per test, titled by its pressure, centred on the mean curve
+        panels = [ax for ax in fig.axes if ax.get_title().endswith(" bar")]
+        assert [ax.get_title() for ax in panels] == [f"{t.pressure_bar:g} bar" for t in cb.tests]
+        _plt().close(fig)
+    force_widest = max(np.max(t.force.hi - t.force.lo) for t in cb.tests)
+    fig = campaign.figure_force(cf, cb)
+    assert f"at most {force_widest:.3g} N" in fig.axes[0].get_title()
+    _plt().close(fig)
+
+
+def test_figures_4_and_5_use_a_colour_bar_not_dashed_bounds(small_fit):
+    cf, cb = small_fit
+    for fn in (campaign.figure_feff, campaign.figure_traditional):
+        fig = fn(cf, cb)
+        bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+        assert len(bars) == 1 and "p_u (bar)" in bars[0].get_ylabel()
+        n = len(cb.scatter_pressures_bar)
+        assert len(bars[0].lines) == n  # the tested pressures marked on the bar
+        plots = [ax for ax in fig.axes if ax not in bars]
+        dashed = [ln for ax in plots for ln in ax.lines if ln.get_linestyle() == "--"]
+        # Figure 5 draws the traditional force dashed (one line per test), no dashed bounds
+        assert len(dashed) == (n if fn is campaign.figure_traditional else 0)
+        _plt().close(fig)
+
+
+def test_svg_figures_are_vector_and_reproducible(small_fit):
+    cf, cb = small_fit
+    one = encode(campaign.figure_feff(cf, cb), "svg")
+    two = encode(campaign.figure_feff(cf, cb), "svg")
+    assert one.lstrip().startswith(b"<?xml") and b"<svg" in one
+    assert one == two
+    # vector paths; the one bitmap is the colour bar's gradient (matplotlib rasterizes it)
+    assert one.count(b"<image") == 1
+
+
+def test_an_unknown_figure_format_is_refused(small_fit, tmp_path):
+    cf, _ = small_fit
+    with pytest.raises(uq.InputError, match="figure_format: one of png, svg, got 'jpg'"):
+        uq.write_report(cf, tmp_path / "r", draws=20, figure_format="jpg")
+    assert not (tmp_path / "r").exists()
+
+
+def test_report_with_svg_figures_replaces_the_png_ones(small_fit, tmp_path):
+    cf, cb = small_fit
+    out = tmp_path / "rep"
+    uq.write_report(cf, out, bands=cb)
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert len(pngs) == 5 + len(cf.tests)
+    page = uq.write_report(cf, out, bands=cb, figure_format="svg").read_text(encoding="utf-8")
+    assert not list(out.glob("*.png"))  # the earlier run's PNGs are not left to pass for these
+    svgs = sorted(p.name for p in out.glob("*.svg"))
+    assert svgs == [n.replace(".png", ".svg") for n in pngs]
+    assert page.count("data:image/svg+xml;base64,") == len(svgs)
+    assert "data:image/png" not in page
+    assert f"the same SVG files ({len(svgs)})" in page

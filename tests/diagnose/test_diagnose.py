@@ -406,11 +406,22 @@ def _catalogue(effects, seed=7, volume_at_bar=5.0):
     )
 
 
-def test_force_only_campaign_names_force_side_mechanism_without_volume_outputs():
+def test_force_only_campaign_names_force_side_mechanism_without_volume_outputs(tmp_path):
     """No piston column (most stands): the casing's own force is still found from the force at
     several pressures; mechanisms only the volume shows are not offered, with the reason, and no
-    volume result is reported (none is made up from the empty piston rows)."""
-    res = _run(_force_only(_rec({"casing_force": -60.0}, layout=SMALL)))
+    volume result is reported (none is made up from the empty piston rows), on the page either."""
+    from uq._diagnose.engine import diagnose
+    from uq._inference.sampler import Settings
+    from uq._report.diagnose import write_diagnose_report
+
+    diagnosis = diagnose(
+        _force_only(_rec({"casing_force": -60.0}, layout=SMALL)),
+        seed=1,
+        settings=Settings(min_steps=200, chunk=100, tau_multiple=30.0),
+    )
+    res = diagnosis.to_json()
+    page = write_diagnose_report(diagnosis, tmp_path).read_text()
+    assert "No volume results" in page and "volume rms" not in page
     names = [m["name"] for m in res["mechanisms"]]
     assert names == ["casing_force"], names
     assert _consistent(res["mechanisms"][0]["magnitude"], -60.0)

@@ -27,17 +27,26 @@ FIGURE = "diagnose_residuals"
 
 
 def _residual_figure(res):
-    """Force and volume residuals of the traditional and the final model, by height."""
+    """Force and volume residuals of the traditional and the final model, by height (force only
+    for a campaign without volume readings)."""
     plt = _plt()
     base, final, meta, d = res.baseline, res.final, res.meta, res.data
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True, layout="constrained")
+    quantities = (("force", 1.0, "N"), ("volume", 1e6, "cm³"))[: 1 + meta["has_volume"]]
+    fig, axes = plt.subplots(
+        len(quantities),
+        2,
+        figsize=(11, 3.5 * len(quantities) + 0.5),
+        sharex=True,
+        squeeze=False,
+        layout="constrained",
+    )
     cmap = plt.get_cmap("viridis")
     pmax = meta["pressure_bar"].max()
     for col, (fit, title) in enumerate(
         ((base, "traditional"), (final, " + ".join(["traditional", *final.names])))
     ):
         r = _residuals(fit, meta, d)
-        for row, (q, scale, unit) in enumerate((("force", 1.0, "N"), ("volume", 1e6, "cm³"))):
+        for row, (q, scale, unit) in enumerate(quantities):
             ax = axes[row, col]
             for pb in np.unique(meta["pressure_bar"]):
                 for comp, mk in ((True, "v"), (False, "^")):
@@ -53,7 +62,7 @@ def _residual_figure(res):
             ax.axhline(0, color="k", lw=0.6)
             ax.set_title(f"{q} residual, {title}", fontsize=9, wrap=True)
             ax.set_ylabel(f"{q} residual ({unit})")
-            if row == 1:
+            if row == len(quantities) - 1:
                 ax.set_xlabel("height x (mm)")
     axes[0, 0].legend(fontsize=6, ncol=2, title="▼ compression, ▲ rebound", title_fontsize=6)
     return fig

@@ -206,3 +206,33 @@ def test_sampling_bar_shows_no_made_up_total(monkeypatch):
     shown = tty.getvalue()
     assert "sampling" in shown and "step" in shown
     assert "5000" not in shown and "<" not in shown  # no total, no time remaining
+
+
+def test_ctrl_c_inside_a_finaliser_still_stops_the_command():
+    """A KeyboardInterrupt raised where Python cannot propagate it (a garbage-collection callback,
+    as JAX registers, or a finaliser) is printed as "Exception ignored" and lost; the command line
+    delivers it again, so the command still stops with its one line and exit 130."""
+    code = textwrap.dedent(
+        """
+        import time
+        from uq._cli.main import _interrupts_are_not_lost
+        _interrupts_are_not_lost()
+        _interrupts_are_not_lost()  # idempotent: main() may run more than once in a process
+        class Finalised:
+            def __del__(self):
+                raise KeyboardInterrupt
+        try:
+            Finalised()
+            for _ in range(200):
+                time.sleep(0.005)
+            print("lost")
+        except KeyboardInterrupt:
+            print("delivered")
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=_env(), timeout=60
+    )
+    assert proc.stdout.split() == ["delivered"] and "Exception ignored" not in proc.stderr, (
+        proc.stdout + proc.stderr
+    )

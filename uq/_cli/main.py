@@ -250,8 +250,35 @@ def _compile_cache() -> None:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
 
 
+def _interrupts_are_not_lost() -> None:
+    """A Ctrl-C that lands while Python runs a garbage-collection callback (JAX registers one) or a
+    finaliser raises KeyboardInterrupt there, where Python cannot propagate it: it prints
+    "Exception ignored in ..." and carries on as if nothing was pressed. Deliver it again to the
+    main thread instead, from another thread a moment later (raised here, it would be lost the same
+    way; if it lands in a callback again, it comes back here), so the command stops with its one
+    line and exit 130."""
+    import _thread
+    import threading
+
+    previous = sys.unraisablehook
+    if getattr(previous, "delivers_interrupts", False):
+        return
+
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            timer = threading.Timer(0.05, _thread.interrupt_main)
+            timer.daemon = True
+            timer.start()
+            return
+        previous(unraisable)
+
+    hook.delivers_interrupts = True
+    sys.unraisablehook = hook
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    _interrupts_are_not_lost()
     _compile_cache()  # before the command's module is imported: JAX reads the settings on its import
     parser = build_parser(argv)
     args = _parse(parser, argv)

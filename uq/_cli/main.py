@@ -89,6 +89,15 @@ PARAM_OPTIONS = {
     "pressure_bar": "--pressure-bar",
     "prob": "--prob",
     "tolerance_pct": "--tolerance-pct",
+    "alpha": "--alpha",
+    "sheet": "--sheet",
+    "absolute_pressure": "--absolute-pressure",
+    "piston_area_cm2": "--piston-area-cm2",
+    "x0_mm": "--x0-mm",
+    "compression": "--compression",
+    "p_atm_bar": "--p-atm-bar",
+    "pressure_tolerance_bar": "--pressure-tolerance-bar",
+    "stand": "--stand",
 }
 
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (
@@ -292,8 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         with _json_on_stdout(args):
             return int(getattr(importlib.import_module(args._module), f"command_{name}")(args) or 0)
     except InputError as exc:
-        if exc.param in PARAM_OPTIONS:
-            exc = exc.for_option(PARAM_OPTIONS[exc.param])
+        exc = exc.for_cli(PARAM_OPTIONS)
         return _fail(name, f"error: {exc}", EXIT_INPUT)
     except KeyboardInterrupt:
         return _fail(name, "interrupted", EXIT_INTERRUPTED)

@@ -247,7 +247,7 @@ def _check_value(name: str, row: int, c: Column, raw: float, si: float, offset_b
         if si <= 0:
             if offset_bar:
                 raise InputError(
-                    f"{at}: absolute pressure {shown} is not above atmospheric ({-offset_bar:g} bar, --absolute-pressure); "
+                    f"{at}: absolute pressure {shown} is not above atmospheric ({-offset_bar:g} bar, `absolute_pressure`); "
                     "tests run at a set overpressure above 0 bar"
                 )
             raise InputError(

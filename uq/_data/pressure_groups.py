@@ -95,7 +95,7 @@ def _by_set_pressure(cols, rows, pressure_bar, set_bar, tolerance) -> list[Group
     if bad.size:
         k = bad[np.argmin(rows[bad])]
         hint = (
-            "absolute pressure in one of the columns (then --absolute-pressure applies to both)?"
+            "absolute pressure in one of the columns (then `absolute_pressure` applies to both)?"
             if abs(off[k] - cols.p_atm_bar) < ATM_HINT_BAR
             else "a typo?"
         )

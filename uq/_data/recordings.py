@@ -213,34 +213,39 @@ def require_for(rec: Recordings, command: str) -> Recordings:
 
 
 def check_stand_options(piston_area_cm2: float, x0_mm: float) -> None:
-    """Validate the stand constants given as options (names the option on failure)."""
+    """Validate the stand constants given as options (names the parameter on failure; the CLI its option)."""
     if not (math.isfinite(piston_area_cm2) and piston_area_cm2 > 0):
         raise InputError(
-            f"option --piston-area-cm2: expected a positive area in cm^2, got {piston_area_cm2}"
+            f"piston_area_cm2: expected a positive area in cm^2, got {piston_area_cm2}",
+            param="piston_area_cm2",
         )
     if not (math.isfinite(x0_mm) and 1.0 <= x0_mm <= 5000.0):
         raise InputError(
-            f"option --x0-mm: expected a reference height in mm (1..5000), got {x0_mm}"
+            f"x0_mm: expected a reference height in mm (1..5000), got {x0_mm}",
+            param="x0_mm",
         )
 
 
 def check_reading_options(
     compression: str, p_atm_bar: float, pressure_tolerance_bar: float | None
 ) -> None:
-    """Validate the reading conventions given as options (names the option on failure)."""
+    """Validate the reading conventions given as options (names the parameter on failure; the CLI its option)."""
     if compression not in COMPRESSION_CONVENTIONS:
         raise InputError(
-            f"option --compression: expected positive or negative, got {compression!r}"
+            f"compression: expected positive or negative, got {compression!r}",
+            param="compression",
         )
     if not (math.isfinite(p_atm_bar) and 0.3 <= p_atm_bar <= 1.2):
         raise InputError(
-            f"option --p-atm-bar: expected the atmospheric pressure in bar (0.3..1.2), got {p_atm_bar}"
+            f"p_atm_bar: expected the atmospheric pressure in bar (0.3..1.2), got {p_atm_bar}",
+            param="p_atm_bar",
         )
     if pressure_tolerance_bar is not None and not (
         math.isfinite(pressure_tolerance_bar) and pressure_tolerance_bar > 0
     ):
         raise InputError(
-            f"option --pressure-tolerance-bar: expected a positive tolerance in bar, got {pressure_tolerance_bar}"
+            f"pressure_tolerance_bar: expected a positive tolerance in bar, got {pressure_tolerance_bar}",
+            param="pressure_tolerance_bar",
         )
 
 
@@ -378,7 +383,7 @@ def _recordings(
     clustered = measured and r.set_bar is None
     hint = (
         " (readings were grouped into tests by their measured pressures: add a set_pressure_* column, "
-        "or give a smaller --pressure-tolerance-bar)"
+        "or give a smaller `pressure_tolerance_bar`)"
         if clustered
         else ""
     )

@@ -60,7 +60,7 @@ def read_table(path: str, is_column, sheet: str | None = None) -> Table:
         return _workbook_table(path, raw, kind, sheet)
     if sheet is not None:
         raise InputError(
-            f"option --sheet {sheet}: {path} is CSV text, not a workbook (.xlsx, .ods)"
+            f"sheet: {sheet!r}: {path} is CSV text, not a workbook (.xlsx, .ods)", param="sheet"
         )
     return table_from_text(_decode(path, raw), path, is_column)
 
@@ -137,11 +137,13 @@ def _workbook_table(path: str, raw: bytes, engine: str, sheet: str | None) -> Ta
         if sheet is None and len(names) > 1:
             raise InputError(
                 f"{path}: the workbook has {len(names)} sheets ({', '.join(repr(n) for n in names)}); "
-                "choose the campaign's with --sheet NAME"
+                "choose the campaign's with `sheet`"
             )
         if sheet is not None and sheet not in names:
             raise InputError(
-                f"option --sheet {sheet}: {path} has no such sheet; its sheets are {', '.join(repr(n) for n in names)}"
+                f"sheet: {sheet!r}: {path} has no such sheet; its sheets are "
+                f"{', '.join(repr(n) for n in names)}",
+                param="sheet",
             )
         chosen = names[0] if sheet is None else sheet
         with warnings.catch_warnings():

@@ -154,9 +154,11 @@ def read_stand(path: str | Path) -> StandDescription:
         with path.open("rb") as f:
             raw = tomllib.load(f)
     except FileNotFoundError:
-        raise InputError(f"option --stand: {path}: no such file") from None
+        raise InputError(f"stand: {path}: no such file", param="stand") from None
     except IsADirectoryError:
-        raise InputError(f"option --stand: {path} is a directory, expected a TOML file") from None
+        raise InputError(
+            f"stand: {path} is a directory, expected a TOML file", param="stand"
+        ) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid TOML ({exc})") from None
     fields = {f.name for f in dataclasses.fields(StandDescription)}

@@ -241,7 +241,7 @@ def check(
 ) -> dict:
     """Apply the rule of the module docstring; returns the machine-readable verdict."""
     if not 0.0 < alpha < 1.0:
-        raise InputError(f"option --alpha: expected a probability in (0, 1), got {alpha:g}")
+        raise InputError(f"alpha: expected a probability in (0, 1), got {alpha:g}", param="alpha")
     matched = []
     for pt in points:
         hit = [p for p in result if abs(p - pt["pressure_bar"]) <= PRESSURE_ATOL_BAR]

@@ -13,19 +13,24 @@ class InputError(ValueError):
 
     ``param``: the library parameter the message is about (e.g. ``"load_N"``), when the message
     starts with it (``"load_N: expected a positive load in N"``). The library speaks of its own
-    parameters, never of command-line options; the ``uq`` command names its option instead
-    (:meth:`for_option`)."""
+    parameters, never of command-line options: a parameter named inside a message is written in
+    backticks (``"... or give a smaller `pressure_tolerance_bar`"``). The ``uq`` command names its
+    options instead (:meth:`for_cli`)."""
 
     def __init__(self, message: str, *, param: str | None = None):
         message = " ".join(str(message).split())  # one line, always
         super().__init__(message)
         self.param = param
 
-    def for_option(self, option: str) -> InputError:
-        """The same error worded for the command line: ``param:`` replaced by ``option --x:``."""
+    def for_cli(self, options: dict[str, str]) -> InputError:
+        """The same error worded for the command line, ``options`` mapping library parameters to
+        command-line options: a leading ``param:`` becomes ``option --x:`` and every backticked
+        parameter the option (``--x``)."""
         text = str(self)
-        if self.param and text.startswith(f"{self.param}:"):
-            text = f"option {option}:" + text[len(self.param) + 1 :]
+        if self.param in options and text.startswith(f"{self.param}:"):
+            text = f"option {options[self.param]}:" + text[len(self.param) + 1 :]
+        for name, option in options.items():
+            text = text.replace(f"`{name}`", option)
         return InputError(text)
 
 

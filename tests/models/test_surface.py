@@ -418,3 +418,27 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
         )
         assert np.allclose(np.asarray(got.mean), np.asarray(ref.mean), rtol=1e-7, atol=1e-9)
         assert np.allclose(np.asarray(got.chol), np.asarray(ref.chol), rtol=1e-7, atol=1e-9)
+
+
+def test_default_orders_follow_the_number_of_tests():
+    """A coarse grid gets a surface its tests can fix; 7 tests or more the default itself."""
+    from uq._models.surface import default_orders
+
+    for n in (7, 11, 40):
+        assert default_orders(n) == DEFAULT_ORDERS
+    assert default_orders(3) == Orders(3, 1, 3, 2, 2)
+    assert default_orders(5) == Orders(3, 3, 3, 2, 3)
+    for n in range(2, 8):
+        o = default_orders(n)
+        assert o.Lp + 2 <= n and o.Dl + 1 <= n
+
+
+def test_surface_on_a_coarse_grid(tmp_path):
+    """Three tested pressures: the surface is fitted (it was refused: 3 tests cannot fix degree 5
+    in pressure) and its force between them is near the truth."""
+    rec = _campaign(tmp_path, 3, Layout(pressures_bar=(1.0, 3.0, 5.0), step_m=0.01))
+    fit = fit_surface(rec, seed=3, settings=FAST)
+    assert fit.orders.Lp == 1 and fit.convergence.converged
+    force = fit.force_draws(np.array(X_CHECK), 2.0)
+    truth = float(SmoothSurfaceSpring().force_N(np.array(X_CHECK), 2.0))
+    assert abs(float(np.mean(force)) - truth) < 0.02 * truth

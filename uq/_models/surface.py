@@ -93,6 +93,17 @@ class Orders:
 #: chosen by PSIS-LOO on data/n50 (docs/surface.md): elpd_loo -262.3 against -299.0 (dse 13.8)
 #: for the next best (F_p 3x4, casing 3, D 2x2) and -431.2 for F_p 3x2, casing 2, D 1x1
 DEFAULT_ORDERS = Orders(3, 5, 3, 2, 3)
+
+
+def default_orders(n_tests: int) -> Orders:
+    """``DEFAULT_ORDERS`` with its pressure degrees capped by what ``n_tests`` tests can fix: the
+    force p_u F_p(x, p_u) + E(x) has Lp + 2 coefficients in pressure at a height (Lp <= n - 2),
+    the volume's D has Dl + 1 (Dl <= n - 1). Campaigns of 7 tests or more get ``DEFAULT_ORDERS``
+    itself; a coarse grid (3 to 5 pressures) a surface of lower degree in pressure."""
+    o = DEFAULT_ORDERS
+    return Orders(o.K, max(0, min(o.Lp, n_tests - 2)), o.Ke, o.Dk, max(0, min(o.Dl, n_tests - 1)))
+
+
 #: the small candidate set ranked by PSIS-LOO (``select_orders``, ``uq surface --select``)
 CANDIDATES = (
     Orders(3, 2, 2, 1, 1),
@@ -359,7 +370,7 @@ def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> Pa
 
 def fit_surface(
     rec: Recordings,
-    orders: Orders = DEFAULT_ORDERS,
+    orders: Orders | None = None,
     *,
     seed: int = 0,
     settings: Settings = Settings(),
@@ -370,8 +381,10 @@ def fit_surface(
     exact coefficient draws, ArviZ data and convergence verdict).
 
     ``stand`` is the stand the recordings were taken on: its pressure holding and p_atm enter
-    the reading covariance, its load cell and gas volume centre the noise priors."""
+    the reading covariance, its load cell and gas volume centre the noise priors. ``orders``:
+    the polynomial orders, by default :func:`default_orders` of the campaign's number of tests."""
     n_tests = len(rec.tests)
+    orders = default_orders(n_tests) if orders is None else orders
     if n_tests < orders.Lp + 1:
         raise InputError(
             f"{rec.path}: {n_tests} tests at different pressures cannot fix an effective area of "

@@ -20,7 +20,7 @@ binomial region for 90 % (Bonferroni over every count, false failure < 1e-3 over
 queries of one campaign share its noise, so only counts across replications are binomial;
 the pooled share is reported as a summary.
 
-``--tiny`` (tests): two replications of the smallest grid, three queries, 200 sampler steps.
+``--tiny`` (tests): one replication of the smallest grid, three queries, 200 sampler steps.
 """
 
 from __future__ import annotations
@@ -215,11 +215,11 @@ def main(argv=None) -> int:
         help="the truth: n50 (Table 1's cubics, PCHIP in pressure) or n50-smooth (smooth in pressure)",
     )
     ap.add_argument("--grids", nargs="+", choices=sorted(GRIDS), default=list(GRIDS))
-    ap.add_argument("--tiny", action="store_true", help="two replications, one grid, three queries")
+    ap.add_argument("--tiny", action="store_true", help="one replication, one grid, three queries")
     args = ap.parse_args(argv)
     settings, heights, grids, reps = Settings(), HEIGHTS_MM, args.grids, args.reps
     if args.tiny:
-        settings, heights, grids, reps = Settings(max_steps=200), (90.0, 150.0), ["1-3-5"], 2
+        settings, heights, grids, reps = Settings(max_steps=200), (90.0, 150.0), ["1-3-5"], 1
     import tempfile
 
     t0, results = time.time(), {}

@@ -27,6 +27,7 @@ RUN_BY = {
     "scripts/mkdocs_hooks.py": "tests/test_docs.py::test_api_reference_lists_every_public_name "
     "(and the mkdocs build of scripts/test.sh)",
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
+    "scripts/margin_coverage.py": "test_margin_coverage_tiny",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
     "scripts/sealed_coverage.py": "tests/derived/test_design.py::test_coverage_script_runs_with_tiny_settings",
     "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",
@@ -168,3 +169,14 @@ def test_maxwell_table1_reproduces_the_committed_report(tmp_path):
         assert (tmp_path / name).read_text() == committed.replace(
             "python scripts/maxwell_table1.py", f"python scripts/maxwell_table1.py --out {tmp_path}"
         ), name
+
+
+def test_margin_coverage_tiny(tmp_path):
+    """One coarse-grid campaign, both models, three queries: the JSON and the summary page."""
+    proc = _run("scripts/margin_coverage.py", "--tiny", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "coverage.json").read_text())
+    assert doc["replications"] == 1 and doc["spring"] == "n50"
+    assert {r["model"] for r in doc["rows"]} == {"surface", "cubics", "chosen"}
+    assert all(r["covered"] + r["refused"] <= 1 for r in doc["rows"])
+    assert "coarse pressure grids" in (tmp_path / "summary.md").read_text()

@@ -195,3 +195,75 @@ def test_template_refuses_a_missing_value():
         render(
             "diagnose.html", summary="s", mechanisms=[], baseline={"rms_N": 1.0, "elpd_loo": 2.0}
         )
+
+
+def test_paper_columns_only_for_the_paper_spring_or_a_given_reference(n50_fit, tmp_path):
+    """Table 1/2 and the scatter compare with the paper only for the N-50 reconstruction (auto) or
+    when asked; a reference file of stored point estimates takes its place; none, no columns."""
+    from pathlib import Path
+
+    from uq._data.reference import is_n50_reconstruction
+    from uq._derived.check import reference_from_points
+    from uq._report.campaign import _reference, _table1, _table2
+
+    ours = read_comments(n50_fit.recordings.path)
+    assert is_n50_reconstruction(ours)
+    assert _reference("auto", ours).is_paper
+    assert _reference("auto", ["# my spring, measured on 2026-11-20"]) is None
+    assert _reference("paper", []).is_paper and _reference(None, ours) is None
+    rows, n_out, n_cmp = _table1(n50_fit, None)
+    assert n_cmp == 0 and all(c["paper"] is None for r in rows for c in r["cells"])
+    assert all(r["paper_s"] != r["paper_s"] for r in _table2(n50_fit, None))  # NaN: nothing
+    points = Path(__file__).resolve().parents[2] / "fits" / "n50" / "table1_points.json"
+    ref = reference_from_points(points)
+    rows, n_out, n_cmp = _table1(n50_fit, ref)
+    assert n_cmp == 8 * len(n50_fit.tests) and rows[0]["cells"][0]["paper"] is not None
+    assert not ref.deviations  # the file has no s_P_N: Table 2 shows the data's own only
+
+    cb = campaign_bands(n50_fit, n_draws=300, seed=0)
+    page = write_report(
+        n50_fit, tmp_path / "none", bands=cb, reference=None, comments=["# my spring"]
+    ).read_text(encoding="utf-8")
+    assert "paper s_P" not in page and "paper (%)" not in page and "8.41 %" not in page
+    assert "No reference values to compare with" in page
+    page = write_report(n50_fit, tmp_path / "file", bands=cb, reference=ref).read_text(
+        encoding="utf-8"
+    )
+    assert page.count("table1_points.json ") == 8 * len(n50_fit.tests)
+    assert "Table 1 of the paper, converted to SI" in page and "paper s_P" not in page
+
+
+def test_footer_names_version_date_file_hash_and_stand(n50_fit, monkeypatch):
+    from uq._data.stand_description import PAPER_STAND
+    from uq._io.files import sha256_of
+    from uq._io.version import __version__
+    from uq._report.campaign import provenance
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")
+    rec = n50_fit.recordings
+    f = provenance(rec, PAPER_STAND)
+    assert f["version"] == __version__ and f["date"] == "2025-11-26 00:00 UTC"
+    assert f["sha256"] == sha256_of(rec.path) and len(f["sha256"]) == 64
+    assert "paper's stand" in f["stand"] and " = " not in f["stand"]
+    other = provenance(rec, PAPER_STAND.replace(load_cell_rel_sd=0.01))
+    assert "load_cell_rel_sd = 0.01" in other["stand"]
+
+
+def test_reference_option_refused_before_fitting(tmp_path, capsys, monkeypatch):
+    from pathlib import Path
+
+    import uq._models.cubic as cubic
+
+    monkeypatch.setattr(cubic, "fit_campaign", lambda *a, **k: pytest.fail("fitted"))
+    rc = main(
+        [
+            "report",
+            str(Path(__file__).resolve().parents[2] / "data" / "n50" / "recordings.csv"),
+            "--out",
+            str(tmp_path / "o"),
+            "--reference",
+            str(tmp_path / "missing.json"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert rc == 2 and "missing.json" in err and len(err.strip().splitlines()) == 1

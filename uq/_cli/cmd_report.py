@@ -50,7 +50,26 @@ def configure_report(p) -> None:
         action="store_true",
         help="also fit the surface model and write surface.html beside the report (adds about 30 s)",
     )
+    p.add_argument(
+        "--reference",
+        default="auto",
+        metavar="FILE|paper|none|auto",
+        help="what Tables 1 and 2 compare the posteriors with: a point-estimates JSON file (the format "
+        "uq check reads, with s_P_N and eps_P_pct per test for Table 2), the paper's tables, or nothing; "
+        "auto (default): the paper's tables for the bundled N-50 reconstruction, nothing otherwise",
+    )
     add_stand(p)
+
+
+def _reference(value: str):
+    """``--reference``: read before any fitting, so a bad file fails at once."""
+    if value in ("auto", "paper"):
+        return value
+    if value == "none":
+        return None
+    from uq._derived.check import reference_from_points
+
+    return reference_from_points(value)
 
 
 def command_report(args) -> int:
@@ -60,6 +79,7 @@ def command_report(args) -> int:
     if args.draws < MIN_DRAWS:
         raise InputError(f"option --draws: at least {MIN_DRAWS} draws, got {args.draws}")
     stand = stand_from(args)
+    reference = _reference(args.reference)
     rec = load(args)
     t0 = time.perf_counter()
     settings = settings_from(args)
@@ -83,6 +103,7 @@ def command_report(args) -> int:
         comparison=comparison,
         jobs=None,  # per-test figures in worker processes, one per CPU
         figure_format=args.figures,
+        reference=reference,
     )
     t_all = time.perf_counter() - t0
     print(

@@ -90,3 +90,49 @@ def table2() -> dict[float, tuple[float, float]]:
         float(r["pressure_bar"]): (float(r["s_P_N"]), float(r["eps_P_pct"]))
         for r in _rows("table2_force_deviations.csv")
     }
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """Values a report compares its posteriors with: per tested pressure, the cubic coefficients
+    of force and piston (SI, the paper's basis) and optionally the deviation measures (s_P in N,
+    eps_P in %). ``name`` says in a few words what they are (a column heading)."""
+
+    name: str
+    source: str
+    force: dict[float, np.ndarray]  # pressure_bar -> (a_P, b_P, c_P, d_P)
+    piston: dict[float, np.ndarray]  # pressure_bar -> (a_L, b_L, c_L, d_L)
+    deviations: dict[float, tuple[float, float]]  # pressure_bar -> (s_P N, eps_P %)
+    is_paper: bool = False
+
+    def at(self, table: dict, pressure_bar: float):
+        """The entry of ``table`` at a tested pressure (within 1e-6 bar), or None."""
+        for p, v in table.items():
+            if abs(p - pressure_bar) <= 1e-6:
+                return v
+        return None
+
+
+@cache
+def paper_reference() -> Reference:
+    """The paper's Tables 1 and 2 as a :class:`Reference`."""
+    t1 = table1()
+    return Reference(
+        name="paper",
+        source="Tables 1 and 2 of the paper",
+        force={float(p): t1.force[i] for i, p in enumerate(t1.pressures_bar)},
+        piston={float(p): t1.piston[i] for i, p in enumerate(t1.pressures_bar)},
+        deviations=table2(),
+        is_paper=True,
+    )
+
+
+#: the comment line uq simulate writes for the N-50 spring of Table 1 (uq._stand.simulator)
+N50_SPRING_WORDS = "N-50 balloon spring, true curves from Table 1 of the paper"
+
+
+def is_n50_reconstruction(comments) -> bool:
+    """The recordings are the virtual stand's reconstruction of the paper's N-50 spring (its
+    header says so): the one campaign the paper's own tables describe."""
+    text = "\n".join(comments)
+    return "RECONSTRUCTED" in text.upper() and N50_SPRING_WORDS in text

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from uq._data.reference import FORCE_NAMES, PISTON_NAMES
+from uq._data.reference import FORCE_NAMES, PISTON_NAMES, Reference
 from uq._io.errors import InputError
 
 BLOCKS = {"force": FORCE_NAMES, "piston": PISTON_NAMES}
@@ -151,6 +151,29 @@ def read_points(doc: dict, path: str) -> list[dict]:
                     row["cov"][block] = _matrix(cov, block, path, f"{label}.covariance.{block}")
         out.append(row)
     return out
+
+
+def reference_from_points(path: str | Path) -> Reference:
+    """A point-estimates file (the format ``uq check`` reads: docs/formats.md) as the values a
+    report compares with (``uq report --reference FILE``): the coefficients per test and, where a
+    test gives them, its deviation measures ``s_P_N`` and ``eps_P_pct``."""
+    doc = load_json(path, "reference file")
+    points = read_points(doc, str(path))
+    deviations = {}
+    for p, t, label in _tests(doc, str(path)):
+        if "s_P_N" in t and "eps_P_pct" in t:
+            deviations[p] = (
+                _number(t["s_P_N"], str(path), f"{label}.s_P_N"),
+                _number(t["eps_P_pct"], str(path), f"{label}.eps_P_pct"),
+            )
+    source = doc.get("source") if isinstance(doc.get("source"), str) else None
+    return Reference(
+        name=Path(path).name,
+        source=source or str(path),
+        force={r["pressure_bar"]: r["force"] for r in points},
+        piston={r["pressure_bar"]: r["piston"] for r in points},
+        deviations=deviations,
+    )
 
 
 def _matrix(cov: dict, block: str, path: str, key: str) -> np.ndarray:

@@ -39,6 +39,7 @@ import numpy as np
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
+from uq._io.files import sha256_of  # noqa: F401  (the saved answer's provenance; uq margin uses it)
 from uq._models.pair import refuse_extrapolation
 from uq._models.surface import SurfaceFit
 from uq._physics.quantities import BAR_PA
@@ -376,16 +377,6 @@ def surface_answer(
 ANSWER_KIND = "uq margin answer"
 ANSWER_FORMAT_VERSION = 1
 _ANSWER_NAMES = {"surface": "surface", "per-pressure cubics": "cubics"}
-
-
-def sha256_of(path) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def answer_idata(

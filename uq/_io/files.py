@@ -316,3 +316,14 @@ def write_figure_atomic(fig, path: str | os.PathLike, **kwargs) -> Path:
     kwargs.setdefault("dpi", 110)
     fig.savefig(buf, format="png", **kwargs)
     return write_bytes_atomic(path, buf.getvalue())
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    """The SHA-256 of a file's bytes, hex (the provenance of a result: which recordings it is of)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from uq._data.recordings import leading_comments
-from uq._data.reference import table1, table2
+from uq._data.reference import Reference, is_n50_reconstruction, paper_reference
 from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
@@ -350,8 +350,9 @@ def figure_traditional(cf, cb: CampaignBands):
     return fig
 
 
-def figure_scatter(cb: CampaignBands):
-    """The paper's scatter of F_eff across the tests with p_u >= 1 bar, with its band."""
+def figure_scatter(cb: CampaignBands, paper_values: bool = True):
+    """The paper's scatter of F_eff across the tests with p_u >= 1 bar, with its band (and the
+    paper's own values when ``paper_values``: the campaign is the paper's spring)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4.6), layout="constrained")
     x = cb.x_m * MM
@@ -372,14 +373,15 @@ def figure_scatter(cb: CampaignBands):
             xytext=(4, 6),
             fontsize=7,
         )
-    paper = [(cb.x0_m, 8.41), (cb.x_m.max(), 26.3), (cb.x_m.min(), 8.51)]
-    ax.plot(
-        [h * MM for h, _ in paper],
-        [v for _, v in paper],
-        "kx",
-        ms=7,
-        label="paper: 8.41 % (x0), 26.3 % (x_max), 8.51 % ('x_min')",
-    )
+    if paper_values:
+        paper = [(cb.x0_m, 8.41), (cb.x_m.max(), 26.3), (cb.x_m.min(), 8.51)]
+        ax.plot(
+            [h * MM for h, _ in paper],
+            [v for _, v in paper],
+            "kx",
+            ms=7,
+            label="paper: 8.41 % (x0), 26.3 % (x_max), 8.51 % ('x_min')",
+        )
     _mark_x0(ax, cb.x0_m * MM)
     ax.set(xlabel="height x (mm)", ylabel="half range / mean of F_eff (%)")
     ax.set_title(
@@ -582,20 +584,20 @@ class _TestFigures:
 # ----------------------------------------------------------------------------- HTML
 
 
-def _table1(cf) -> tuple[list[dict], int, int]:
-    """Table 1's rows (posterior mean, 90 % interval and the paper's value per coefficient, in the
-    paper's units), with how many paper values fall outside the interval, of how many compared."""
-    t1 = table1()
+def _table1(cf, ref: Reference | None) -> tuple[list[dict], int, int]:
+    """Table 1's rows (posterior mean, 90 % interval and the reference's value per coefficient, in
+    the paper's units), with how many reference values fall outside the interval, of how many
+    compared (none without a reference)."""
     n_out = n_cmp = 0
     rows = []
     for tf in cf.tests:
-        try:
-            i = t1.index(tf.pressure_bar)
-        except KeyError:
-            i = None
         cells = []
         draws = np.concatenate([tf.flat("force"), tf.flat("piston")], axis=1)
-        paper = None if i is None else np.concatenate([t1.force[i], t1.piston[i]])
+        paper = None
+        if ref is not None and ref.at(ref.force, tf.pressure_bar) is not None:
+            paper = np.concatenate(
+                [ref.at(ref.force, tf.pressure_bar), ref.at(ref.piston, tf.pressure_bar)]
+            )
         for k, (_, _, f) in enumerate(TABLE1_COLUMNS):
             d = draws[:, k] * f
             cell = {
@@ -615,12 +617,11 @@ def _table1(cf) -> tuple[list[dict], int, int]:
     return rows, n_out, n_cmp
 
 
-def _table2(cf) -> list[dict]:
-    t2 = table2()
+def _table2(cf, ref: Reference | None) -> list[dict]:
     rows = []
     for tf in cf.tests:
         s, e = tf.deviation_measures()
-        ps, pe = t2.get(float(tf.pressure_bar), (np.nan, np.nan))
+        ps, pe = (ref and ref.at(ref.deviations, tf.pressure_bar)) or (np.nan, np.nan)
         rows.append(
             {
                 "pressure_bar": tf.pressure_bar,
@@ -710,7 +711,8 @@ def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
     return out
 
 
-def _scatter(cb: CampaignBands) -> list[dict]:
+def _scatter(cb: CampaignBands, ref: Reference | None) -> list[dict]:
+    paper = PAPER_SCATTER_PCT if ref is not None and ref.is_paper else {}
     return [
         {
             "where": k,
@@ -718,10 +720,59 @@ def _scatter(cb: CampaignBands) -> list[dict]:
             "mean": v["mean"],
             "q05": v["q05"],
             "q95": v["q95"],
-            "paper": PAPER_SCATTER_PCT.get(k, "–"),
+            "paper": paper.get(k, "–"),
         }
         for k, v in cb.scatter_at.items()
     ]
+
+
+def _reference(reference, comments) -> Reference | None:
+    """What the page compares with (``write_report``'s ``reference``)."""
+    if isinstance(reference, Reference) or reference is None:
+        return reference
+    if reference == "paper" or (reference == "auto" and is_n50_reconstruction(comments)):
+        return paper_reference()
+    if reference == "auto":
+        return None
+    from uq._io.errors import InputError
+
+    raise InputError(
+        f"reference: expected 'auto', 'paper', None or a Reference, got {reference!r}",
+        param="reference",
+    )
+
+
+def provenance(rec, stand) -> dict:
+    """The footer of a page: uq's version, the date (``SOURCE_DATE_EPOCH`` when set, for
+    reproducible pages), the recordings' file and SHA-256, and the stand description used."""
+    import datetime
+
+    from uq._io.files import sha256_of
+    from uq._io.version import __version__
+
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    when = (
+        datetime.datetime.fromtimestamp(int(epoch), datetime.UTC)
+        if epoch and epoch.isdigit()
+        else datetime.datetime.now(datetime.UTC)
+    )
+    try:
+        digest = sha256_of(rec.path)
+    except OSError:
+        digest = None
+    changes = stand.changes()
+    return {
+        "version": __version__,
+        "date": when.strftime("%Y-%m-%d %H:%M UTC"),
+        "file": Path(rec.path).name,
+        "sha256": digest,
+        "stand": "the paper's stand (section 3.2: load cell 0.5 %, pressure held within 0.01 bar)"
+        if not changes
+        else "the paper's stand with "
+        + ", ".join(
+            f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in changes.items()
+        ),
+    }
 
 
 def _comments(rec, comments) -> list[str]:
@@ -738,7 +789,12 @@ def _comments(rec, comments) -> list[str]:
 
 
 def _draw_figures(
-    cf, cb: CampaignBands, out: Path, test_figures: _TestFigures, figure_format: str
+    cf,
+    cb: CampaignBands,
+    out: Path,
+    test_figures: _TestFigures,
+    figure_format: str,
+    ref: Reference | None = None,
 ) -> dict[str, Figure]:
     """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
     the extension (``"fig2_force"``)."""
@@ -749,7 +805,13 @@ def _draw_figures(
         ("fig5_traditional", figure_traditional(cf, cb), "Figure 5: traditional vs measured force"),
     ]
     if cb.scatter is not None:
-        drawn.append(("fig_feff_scatter", figure_scatter(cb), "F_eff scatter vs height"))
+        drawn.append(
+            (
+                "fig_feff_scatter",
+                figure_scatter(cb, ref is not None and ref.is_paper),
+                "F_eff scatter vs height",
+            )
+        )
     figs = {
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, fig, alt in drawn
@@ -777,6 +839,7 @@ def write_report(
     surface_page: str | None = None,
     jobs: int | None = 1,
     figure_format: str = "png",
+    reference: Reference | str | None = "auto",
 ) -> Path:
     """Write ``out_dir/report.html`` and its figures, as ``uq report`` does; return the page's path.
 
@@ -795,6 +858,12 @@ def write_report(
     ``if __name__ == "__main__":``. ``figure_format``: "png" (default, at 90 dpi) or "svg"
     (vector, for print and zoom; ``uq report --figures svg``); the page embeds the figures
     either way and the same files are written beside it (the surface page's too).
+    ``reference``: what Tables 1 and 2 and the scatter compare with: ``"auto"`` (default) the
+    paper's tables when the recordings are the virtual stand's reconstruction of the paper's N-50
+    spring (their header says so) and nothing otherwise, ``"paper"``, ``None``, or a
+    :class:`uq._data.reference.Reference` (``uq report --reference FILE``). The page's footer
+    names the uq version, the date (``SOURCE_DATE_EPOCH`` when set), the recordings' SHA-256 and
+    the stand description used.
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -824,7 +893,7 @@ def write_report(
         n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
         with _TestFigures(cf, cb, n_jobs, figure_format) as test_figures:
             page, names = _write_page(
-                cf, cb, stage, test_figures, comments, surface_page, figure_format
+                cf, cb, stage, test_figures, comments, surface_page, figure_format, reference
             )
     # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
     if surface is not None:  # this run's surface figures, in this run's format
@@ -845,14 +914,16 @@ def _write_page(
     comments,
     surface_page,
     figure_format: str = "png",
+    reference: Reference | str | None = "auto",
 ) -> tuple[Path, set]:
     """report.html (the template ``report.html``) and its figures in ``out``; returns the page and
     the figures' file names."""
     rec = cf.recordings
     comments = _comments(rec, comments)
-    figures = _draw_figures(cf, cb, out, test_figures, figure_format)
+    ref = _reference(reference, comments)
+    figures = _draw_figures(cf, cb, out, test_figures, figure_format, ref)
     lo, hi = rec.height_range_m
-    t1_rows, n_out, n_cmp = _table1(cf)
+    t1_rows, n_out, n_cmp = _table1(cf, ref)
     page = render(
         "report.html",
         name=Path(rec.path).name,
@@ -871,12 +942,15 @@ def _write_page(
         reference_bar=cb.reference_bar,
         reference_note=cb.reference_note,
         scatter_pressures=cb.scatter_pressures_bar,
-        scatter=_scatter(cb) if cb.scatter is not None else None,
+        scatter=_scatter(cb, ref) if cb.scatter is not None else None,
         table1_columns=[(n, u) for n, u, _ in TABLE1_COLUMNS],
         table1=t1_rows,
         n_out=n_out,
         n_compared=n_cmp,
-        table2=_table2(cf),
+        table2=_table2(cf, ref),
+        reference=ref,
+        paper=ref is not None and ref.is_paper,
+        footer=provenance(rec, cf.stand),
         diagnostics=_diagnostics(cf),
         at_x0=_at_x0(cb),
         sections=_sections(cf, cb, figures),

@@ -60,6 +60,7 @@ from uq._data.recordings import (
     write_recordings_csv,
 )
 from uq._data.reference import (
+    N50_SPRING_WORDS,
     PAPER_PISTON_AREA_M2,
     PAPER_PRESSURES_BAR,
     PAPER_X0_M,
@@ -97,7 +98,7 @@ class N50Spring:
     """
 
     name = "n50"
-    description = "N-50 balloon spring, true curves from Table 1 of the paper (eqs. 8, 9)"
+    description = f"{N50_SPRING_WORDS} (eqs. 8, 9)"
 
     def __init__(self) -> None:
         t = table1()

@@ -682,7 +682,7 @@ def test_zero_force_pressure_separates_gauge_from_absolute():
             assert abs(p0) < 0.4, (pressures, effects, p0)
             shifted = [dict(t, pressure_bar=t["pressure_bar"] + 1.01325) for t in tests]
             text = write_recordings_csv(shifted, piston=False).splitlines()
-            with pytest.raises(InputError, match="--absolute-pressure"):
+            with pytest.raises(InputError, match="`absolute_pressure`"):
                 _from_lines(text)
 
 

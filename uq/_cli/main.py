@@ -98,6 +98,12 @@ PARAM_OPTIONS = {
     "p_atm_bar": "--p-atm-bar",
     "pressure_tolerance_bar": "--pressure-tolerance-bar",
     "stand": "--stand",
+    "scheduler": "--scheduler",
+    "spring_name": "--spring",
+    "pressures_bar": "--pressures",
+    "step_m": "--step-mm",
+    "x_min_m": "--x-min-mm",
+    "x_max_m": "--x-max-mm",
 }
 
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (

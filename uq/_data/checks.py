@@ -42,8 +42,8 @@ def check_x0(name: str, tests, x0_mm: float) -> None:
     hi = max(float(t.height_m.max()) for t in tests) * 1e3
     if not lo - 1e-9 <= x0_mm <= hi + 1e-9:
         raise InputError(
-            f"{name}: option --x0-mm: the reference height {x0_mm:g} mm lies outside the recorded heights {lo:g}..{hi:g} mm; "
-            f"the coefficients would describe the element where it was never measured (try --x0-mm {0.5 * (lo + hi):g})"
+            f"{name}: `x0_mm` {x0_mm:g}: the reference height {x0_mm:g} mm lies outside the recorded heights {lo:g}..{hi:g} mm; "
+            f"the coefficients would describe the element where it was never measured (try `x0_mm` {0.5 * (lo + hi):g})"
         )
 
 
@@ -89,13 +89,13 @@ def check_force_sign(name: str, tests, negative_declared: bool, column: str) -> 
     first = where(name, int(t.rows[0]), column)
     if negative_declared:
         raise InputError(
-            f"{first}: option --compression negative: the {t.label} test's forces, sign reversed, are mostly negative "
+            f"{first}: `compression` negative: the {t.label} test's forces, sign reversed, are mostly negative "
             f"(median {med:.4g} N); the file already writes compression positive: drop the option"
         )
     raise InputError(
         f"{first}: the {t.label} test's forces are mostly negative (median {med:.4g} N), but compression is positive "
-        "in this format: recorded with compression negative (a load-frame convention)? say so with the option "
-        "--compression negative"
+        "in this format: recorded with compression negative (a load-frame convention)? say so with "
+        "`compression` negative"
     )
 
 
@@ -145,14 +145,14 @@ def check_gauge(name: str, tests, column: str, absolute_declared: bool, p_atm_ba
         return
     if absolute_declared and p0 < -0.5 * p_atm_bar:
         raise InputError(
-            f"{name}, column '{column}': option --absolute-pressure: after subtracting {p_atm_bar:g} bar the forces "
+            f"{name}, column '{column}': `absolute_pressure`: after subtracting {p_atm_bar:g} bar the forces "
             f"extrapolate to zero at p_u = {p0:.2f} bar, not near 0: the column holds gauge pressure already; drop the option"
         )
     if not absolute_declared and p0 > 0.5 * p_atm_bar:
         raise InputError(
             f"{name}, column '{column}': the forces extrapolate to zero at {p0:.2f} bar, not near 0 bar: the column holds "
             f"absolute pressure (about {p_atm_bar:g} bar too high)? pressures here are gauge (over atmospheric); "
-            "convert with the option --absolute-pressure"
+            "convert with `absolute_pressure`"
         )
 
 
@@ -190,7 +190,7 @@ def check_areas(
             slip = "in m instead of mm" if unit == "mm" else f"in a unit other than {unit}"
             raise InputError(
                 f"{first}, column '{col}': the {t.label} test's piston travel gives a volume-derived effective area S|dL/dx| of "
-                f"{a_volume * 1e4:.3g} cm^2, outside any air spring's ({rng}): piston coordinate {slip}, or a wrong --piston-area-cm2?"
+                f"{a_volume * 1e4:.3g} cm^2, outside any air spring's ({rng}): piston coordinate {slip}, or a wrong `piston_area_cm2`?"
             )
         _check_ratio(
             first,

@@ -102,7 +102,7 @@ def _by_set_pressure(cols, rows, pressure_bar, set_bar, tolerance) -> list[Group
         raise InputError(
             f"{where(cols.name, int(rows[k]), cols.column)}: measured {pressure_bar[k]:g} bar is {off[k]:.3g} bar off its "
             f"test's set {set_bar[k]:g} bar ({cols.set_column}), beyond the tolerance +-{tol[k]:.3g} bar "
-            f"(--pressure-tolerance-bar): {hint}"
+            f"(`pressure_tolerance_bar`): {hint}"
         )
     return [Group(float(s), np.flatnonzero(set_bar == s)) for s in np.unique(set_bar)]
 

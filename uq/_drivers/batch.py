@@ -480,7 +480,7 @@ def _client(scheduler: str | None, workers: int):
             return Client(scheduler, timeout="20s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(
-                f"option --scheduler {scheduler}: cannot connect: {_one_line(exc)}"
+                f"scheduler: {scheduler}: cannot connect: {_one_line(exc)}", param="scheduler"
             ) from None
     cluster = LocalCluster(
         n_workers=workers,

@@ -112,7 +112,8 @@ class N50Spring:
         lo, hi = self.pressure_range_bar
         if not lo - 1e-12 <= p_bar <= hi + 1e-12:
             raise InputError(
-                f"option --pressures: {p_bar:g} bar is outside Table 1's range {lo:g}..{hi:g} bar, where the n50 spring has no known curves"
+                f"pressures_bar: {p_bar:g} bar is outside Table 1's range {lo:g}..{hi:g} bar, where the n50 spring has no known curves",
+                param="pressures_bar",
             )
         return self._force(p_bar), self._piston(p_bar)
 
@@ -157,7 +158,9 @@ class TraditionalSpring(N50Spring):
     def _check(self, p_bar: float) -> None:
         lo, hi = self.pressure_range_bar
         if not lo <= p_bar <= hi:
-            raise InputError(f"option --pressures: {p_bar:g} bar is outside {lo:g}..{hi:g} bar")
+            raise InputError(
+                f"pressures_bar: {p_bar:g} bar is outside {lo:g}..{hi:g} bar", param="pressures_bar"
+            )
 
     def effective_area_m2(self, height_m, p_bar):
         self._check(p_bar)
@@ -198,7 +201,7 @@ class Layout:
         # Checked here, not only by the CLI, so no Layout can divide by zero or ask for 1e9 rows.
         if not (np.isfinite(self.step_m) and self.step_m > 0):
             raise InputError(
-                f"option --step-mm: expected a positive step in mm, got {self.step_m * 1e3:g}"
+                f"step_m: expected a positive step in mm, got {self.step_m * 1e3:g}", param="step_m"
             )
         if not (
             np.isfinite(self.x_min_m)
@@ -206,19 +209,22 @@ class Layout:
             and 0 < self.x_min_m < self.x_max_m
         ):
             raise InputError(
-                f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {self.x_min_m * 1e3:g}, {self.x_max_m * 1e3:g}"
+                f"`x_min_m`/`x_max_m`: need 0 < x_min < x_max, got {self.x_min_m * 1e3:g}, {self.x_max_m * 1e3:g}"
             )
         if (self.x_max_m - self.x_min_m) / self.step_m > MAX_STEPS_PER_BRANCH:
             raise InputError(
-                f"option --step-mm: {self.step_m * 1e3:g} mm cuts {self.x_min_m * 1e3:g}..{self.x_max_m * 1e3:g} mm into more than {MAX_STEPS_PER_BRANCH} steps"
+                f"step_m: {self.step_m * 1e3:g} mm cuts {self.x_min_m * 1e3:g}..{self.x_max_m * 1e3:g} mm into more than {MAX_STEPS_PER_BRANCH} steps",
+                param="step_m",
             )
         if not self.pressures_bar or len(self.pressures_bar) > MAX_TESTS:
             raise InputError(
-                f"option --pressures: expected 1 to {MAX_TESTS} overpressures, got {len(self.pressures_bar)}"
+                f"pressures_bar: expected 1 to {MAX_TESTS} overpressures, got {len(self.pressures_bar)}",
+                param="pressures_bar",
             )
         if not all(np.isfinite(p) and p > 0 for p in self.pressures_bar):
             raise InputError(
-                f"option --pressures: expected positive overpressures in bar, got {', '.join(f'{p:g}' for p in self.pressures_bar)}"
+                f"pressures_bar: expected positive overpressures in bar, got {', '.join(f'{p:g}' for p in self.pressures_bar)}",
+                param="pressures_bar",
             )
 
     def heights(self) -> tuple[np.ndarray, np.ndarray]:
@@ -226,7 +232,8 @@ class Layout:
         n = int(round((self.x_max_m - self.x_min_m) / self.step_m))
         if n < 3 or abs(n * self.step_m - (self.x_max_m - self.x_min_m)) > 1e-9:
             raise InputError(
-                f"option --step-mm: {self.step_m * 1e3:g} mm must divide the height range {self.x_min_m * 1e3:g}..{self.x_max_m * 1e3:g} mm into at least 3 steps"
+                f"step_m: {self.step_m * 1e3:g} mm must divide the height range {self.x_min_m * 1e3:g}..{self.x_max_m * 1e3:g} mm into at least 3 steps",
+                param="step_m",
             )
         down = self.x_max_m - self.step_m * np.arange(n + 1)
         up = down[::-1][1:]
@@ -307,7 +314,8 @@ def simulate(
     """
     if spring_name not in SPRINGS:
         raise InputError(
-            f"option --spring: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}"
+            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
+            param="spring_name",
         )
     effects = dict(effects or {})
     spring = (
@@ -611,7 +619,8 @@ class ThermoSpring(N50Spring):
         p = np.asarray(p_bar, float)
         if np.any(p < lo) or np.any(p > hi):
             raise InputError(
-                f"option --pressures: {float(np.ravel(p)[0]):g} bar is outside {lo:g}..{hi:g} bar"
+                f"pressures_bar: {float(np.ravel(p)[0]):g} bar is outside {lo:g}..{hi:g} bar",
+                param="pressures_bar",
             )
 
     def _t(self, height_m):

@@ -94,7 +94,7 @@ class SurfaceAnswer(_Ranges):
         self.fit = fit
 
     def _setup(self, orders, geometry, test_pressures_bar, beta, max_draws, noise):
-        from uq._models.surface import SCALE_C, SCALE_E, _sizes
+        from uq._models.surface import SCALE_C, SCALE_D, SCALE_E, _sizes
 
         self.orders, self.geometry, self.max_draws = orders, geometry, max_draws
         self.test_pressures_bar = np.asarray(test_pressures_bar, float)
@@ -103,8 +103,9 @@ class SurfaceAnswer(_Ranges):
             noise,
         )  # (C, D, k): what a saved file holds
         self.beta = _flat_draws(self.posterior_beta, max_draws)
-        nc, ne, _, _ = _sizes(orders, self.test_pressures_bar.size)
+        nc, ne, nd, _ = _sizes(orders, self.test_pressures_bar.size)
         self._c, self._e = self.beta[:, :nc] * SCALE_C, self.beta[:, nc : nc + ne] * SCALE_E
+        self._d = self.beta[:, nc + ne : nc + ne + nd] * SCALE_D
         self.label = f"surface model ({orders.label})"
 
     def force_draws(self, height_m, p_bar):
@@ -117,6 +118,20 @@ class SurfaceAnswer(_Ranges):
         fe = (self._c @ _tq(t, q, o.K, o.Lp).T).reshape(-1, *shape)
         E = (self._e @ _poly(t, o.Ke).T).reshape(-1, *shape)
         return p * BAR_PA * fe + E
+
+    def volume_area_draws(self, height_m, p_bar):
+        """The volume-derived area dV/dx = F_p + D, the same arithmetic as
+        ``SurfaceFit.volume_area_draws`` (tested equal to it), (S, *shape): with it a saved surface
+        answer is a design model (uq._derived.design) and answers design margins without a refit."""
+        from uq._models.surface import _tq
+
+        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
+        shape, g, o = h.shape, self.geometry, self.orders
+        t, q = g.t(h.ravel()), g.q(p.ravel())
+        area = self._c @ _tq(t, q, o.K, o.Lp).T
+        if o.Dk >= 0:
+            area = area + self._d @ _tq(t, q, o.Dk, o.Dl).T
+        return area.reshape(-1, *shape)
 
     def coefficient_names(self) -> list[str]:
         o = self.orders

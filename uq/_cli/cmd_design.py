@@ -307,7 +307,7 @@ def command_design(args) -> int:
     curves = None
     if args.out:
         curves = {
-            float(p): D.sealed_curve(model, _replace_charge(design, p), grid)
+            float(p): D.sealed_curve(model, design, grid, charge_bar=p)
             for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
         }
     _print_sealed(rec, model, doc)
@@ -331,12 +331,6 @@ def _advice():
     from uq._inference.convergence import CLI_ADVICE
 
     return CLI_ADVICE
-
-
-def _replace_charge(design, p: float):
-    from dataclasses import replace
-
-    return replace(design, charge_bar=float(p))
 
 
 def _reconstructed(path) -> bool:

@@ -212,6 +212,7 @@ class DesignGrid:
         self.area = np.asarray(model.volume_area_draws(X, P), float)
         self.dforce_dx = CubicSpline(self.heights, self.force, axis=1).derivative()(self.heights)
         self.n_draws = self.force.shape[0]
+        self._volumes = {}
         self.dvdp_at_c = None
         if hasattr(model, "volume_pressure_draws"):
             self.dvdp_at_c = np.asarray(
@@ -233,7 +234,15 @@ class DesignGrid:
         return v_c, n
 
     def volume(self, design: SealedDesign, v_c: np.ndarray):
-        """V(x, p_u) on the grid, (S, H, Pn) m^3, and its statement (uq._physics.volume)."""
+        """V(x, p_u) on the grid, (S, H, Pn) m^3, and its statement (uq._physics.volume); kept for
+        the next call with the same volume inputs (a chart's charges share it)."""
+        key = (design.charge_bar, design.volume_l, design.volume_sd_l, design.dvdp_l_per_bar)
+        key += (design.seed, float(np.sum(v_c)))
+        if key not in self._volumes:
+            self._volumes = {key: self._volume(design, v_c)}
+        return self._volumes[key]
+
+    def _volume(self, design: SealedDesign, v_c: np.ndarray):
         d = design.dvdp_l_per_bar
         dvdp, words = (
             (self.dvdp_at_c, f"{self.model.label}'s own")
@@ -276,16 +285,18 @@ def sealed_draws(
     heights = grid.heights if heights_m is None else np.asarray(heights_m, float).reshape(-1)
     v_c, n = grid.draw_inputs(design)
     vol = grid.volume(design, v_c)
+    # the gas law is solved height by height: the element is needed only at the asked heights and x_c
+    sub = np.unique([int(np.argmin(np.abs(grid.heights - x))) for x in (*heights, grid.height_m)])
     parts = []
     for lo in range(0, grid.n_draws, CHUNK_DRAWS):
         sl = slice(lo, lo + CHUNK_DRAWS)
         el = GridElement(
-            grid.heights,
+            grid.heights[sub],
             grid.pressures_pa,
-            grid.force[sl],
-            grid.dforce_dx[sl],
-            vol.volume_m3[sl],
-            grid.area[sl],
+            grid.force[sl][:, sub],
+            grid.dforce_dx[sl][:, sub],
+            vol.volume_m3[sl][:, sub],
+            grid.area[sl][:, sub],
         )
         x_c = np.array([grid.height_m])
         p_here = np.broadcast_to(p_c if p_c.ndim == 0 else p_c[sl], (el.n_draws,)) * BAR_PA
@@ -371,12 +382,16 @@ def transmissibility_summary(natural_Hz, forcing_Hz: float) -> dict:
     }
 
 
-def sealed_curve(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
+def sealed_curve(
+    model, design: SealedDesign, grid: DesignGrid | None = None, charge_bar: float | None = None
+) -> dict:
     """The sealed load-deflection curve with 90 % bands: overpressure (bar), load (N) and rate (N/m)
-    at the grid heights where every draw's path pressure stays within the tested pressures."""
+    at the grid heights where every draw's path pressure stays within the tested pressures.
+    ``charge_bar``: another charge at the design height, with the design's volume assumption (as
+    the frequency chart's charges)."""
     check_design(model, design)
     grid = grid or DesignGrid(model, design.height_m)
-    path, statement = sealed_draws(grid, design)
+    path, statement = sealed_draws(grid, design, charge_bar)
     ok = path.in_range.all(axis=0)
     out = {"height_m": grid.heights[ok]}
     a = (1.0 - LEVEL) / 2
@@ -609,6 +624,8 @@ def design_margin(
         raise InputError(
             f"option --rate-tolerance-pct: expected a positive percentage, got {rate_tolerance_pct:g}"
         )
+    if hasattr(model, "thinned") and grid is None:  # a saved answer's draws: at most DEFAULT_DRAWS
+        model = model.thinned(DEFAULT_DRAWS)
     p_need = pressure_needed(model, height_m, load_N)
     if not np.all(np.isfinite(p_need)):
         raise InputError(

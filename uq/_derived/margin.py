@@ -119,6 +119,23 @@ class SurfaceAnswer(_Ranges):
         E = (self._e @ _poly(t, o.Ke).T).reshape(-1, *shape)
         return p * BAR_PA * fe + E
 
+    def thinned(self, max_draws: int) -> SurfaceAnswer:
+        """The same answer on at most ``max_draws`` of its draws (thinned evenly)."""
+        new = SurfaceAnswer.__new__(SurfaceAnswer)
+        _Ranges.__init__(
+            new, height_range_m=self.height_range_m, pressure_range_bar=self.pressure_range_bar
+        )
+        new._setup(
+            self.orders,
+            self.geometry,
+            self.test_pressures_bar,
+            self.posterior_beta,
+            max_draws,
+            self.noise,
+        )
+        new.fit = getattr(self, "fit", None)
+        return new
+
     def volume_area_draws(self, height_m, p_bar):
         """The volume-derived area dV/dx = F_p + D, the same arithmetic as
         ``SurfaceFit.volume_area_draws`` (tested equal to it), (S, *shape): with it a saved surface
@@ -226,7 +243,14 @@ def as_answer(model):
 def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
     """Posterior draws of the overpressure (bar) at which the element carries ``load_N``."""
     model = as_answer(model)
-    model.check_range(height_m, model.pressure_range_bar[0], "height_m")
+    refuse_extrapolation(  # as _Ranges.check_range, for any model with the tested ranges
+        height_m,
+        model.pressure_range_bar[0],
+        model.height_range_m,
+        model.pressure_range_bar,
+        "height_m",
+        "the model",
+    )
     plo, phi = model.pressure_range_bar
     ps = np.linspace(plo, phi, N_P_GRID)
     P = model.force_draws(np.full_like(ps, height_m), ps)  # (S, G)

@@ -158,7 +158,7 @@ def configure_design(p) -> None:
     s.add_argument(
         "--out",
         metavar="DIR",
-        help="write the data sheet to DIR: design.html, design.csv, design.json and the figures",
+        help="folder for the data sheet: design.html, design.csv, design.json and the figures",
     )
     s.add_argument(
         "--figures",

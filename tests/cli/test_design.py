@@ -333,3 +333,24 @@ def test_same_seed_same_numbers(thermo_campaign, given_fit, tmp_path):
         assert run([*argv, "--json", tmp_path / f"{i}.json", "--quiet"]) == 0
         texts.append((tmp_path / f"{i}.json").read_bytes())
     assert texts[0] == texts[1]
+
+
+@pytest.mark.slow  # a thermodynamic fit: about 1-3 min on 2 cores
+def test_thermodynamic_model_with_its_own_dvdp(thermo_campaign, tmp_path):
+    """``--model thermodynamic --dvdp-l-per-bar model``: the potential's own dV/dp_u (gauge 0 at
+    x0, exact for this spring, whose volume at x0 does not change with pressure), stated as such;
+    the answers near the stand's truth; 'model' with the surface model refused."""
+    _, path, _, v_c = thermo_campaign
+    out = tmp_path / "t.json"
+    argv = ["design", path, "--height-mm", 112, "--charge-bar", 5, "--volume-l", f"{v_c:.6f}"]
+    argv += ["--model", "thermodynamic", "--dvdp-l-per-bar", "model", "--max-steps", 300]
+    assert run([*argv, "--json", out, "--quiet"]) == 0
+    res = json.loads(out.read_text())
+    assert res["dvdp_l_per_bar"] == "model" and res["model"].startswith("thermodynamic model")
+    assert "ASSUMED 0 at x0" in " ".join(res["assumptions"])
+    tr = _truth([0.112], charge_bar=5.0)
+    assert res["load_N"]["mean"] == pytest.approx(tr.force_N[0], rel=0.01)
+    assert res["rate_N_per_m"]["mean"] == pytest.approx(tr.rate_N_per_m[0], rel=0.03)
+    assert res["natural_frequency_Hz"]["mean"] == pytest.approx(
+        tr.natural_frequency_Hz[0], rel=0.02
+    )

@@ -245,7 +245,7 @@ class DesignGrid:
     def _volume(self, design: SealedDesign, v_c: np.ndarray):
         d = design.dvdp_l_per_bar
         dvdp, words = (
-            (self.dvdp_at_c, f"{self.model.label}'s own")
+            (self.dvdp_at_c, getattr(self.model, "dvdp_words", f"{self.model.label}'s own"))
             if d == "model"
             else (float(d) / L_PER_M3 / BAR_PA, "")
         )

@@ -106,6 +106,8 @@ def sheet(thermo_campaign, tmp_path_factory):
                     f"{v_c:.6f}",
                     "--forcing-hz",
                     4,
+                    "--charges-bar",
+                    "3,5,7,9",
                     "--json",
                     out / "result.json",
                     "--out",
@@ -219,6 +221,7 @@ def test_polytropic_range_reservoir_and_given_dvdp(thermo_campaign, given_fit, t
     dV/dp_u is stated as GIVEN and changes the rate in the direction the gas law says."""
     _, path, _, v_c = thermo_campaign
     base = ["design", path, "--height-mm", 112, "--charge-bar", 5, "--volume-l", f"{v_c:.6f}"]
+    base += ["--draws", 400, "--charges-bar", "3,5"]  # fewer draws and charges: quicker
     out = {}
     for name, extra in (
         ("range", ["--polytropic", "1.0..1.4"]),
@@ -317,6 +320,7 @@ def test_force_only_campaign_gives_isobaric_loads_and_says_why(tmp_path, no_fitt
 def test_json_dash_prints_only_json(thermo_campaign, given_fit, capsys):
     _, path, _, v_c = thermo_campaign
     argv = ["design", path, "--height-mm", 112, "--charge-bar", 5, "--volume-l", f"{v_c:.4f}"]
+    argv += ["--draws", 200, "--charges-bar", "5"]
     assert run([*argv, "--json", "-"]) == 0
     captured = capsys.readouterr()
     assert json.loads(captured.out)["charge_bar"] == 5.0
@@ -328,6 +332,7 @@ def test_same_seed_same_numbers(thermo_campaign, given_fit, tmp_path):
     _, path, _, v_c = thermo_campaign
     argv = ["design", path, "--height-mm", 112, "--charge-bar", 5, "--volume-l", f"{v_c:.4f}"]
     argv += ["--volume-sd-l", "0.05", "--polytropic", "1.0..1.4", "--charges-bar", "3,5"]
+    argv += ["--draws", 300]
     texts = []
     for i in range(2):
         assert run([*argv, "--json", tmp_path / f"{i}.json", "--quiet"]) == 0

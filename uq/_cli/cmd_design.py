@@ -270,8 +270,11 @@ def command_design(args) -> int:
     from uq._io.files import emit_json
 
     t0 = time.perf_counter()
+    from uq._models.thermo import THETA_NAMES
+
     stand = stand_from(args)
     settings = settings_from(args)
+    settings.require_walkers(len(THETA_NAMES))  # as uq surface, before the recordings are read
     rec = load(args, needs=("order",) if args.model == "surface" else ("piston", "order"))
     _check_before_fit(args, rec)
     x_c = args.height_mm * 1e-3
@@ -285,9 +288,7 @@ def command_design(args) -> int:
     if not rec.has_piston:
         return _force_only(args, rec, stand, heights, pressures, t0)
     from uq._derived.comparison import FITTERS
-    from uq._models.thermo import THETA_NAMES
 
-    settings.require_walkers(len(THETA_NAMES))  # as uq surface: the larger of the two models' needs
     fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
     model = (D.ThermoDesignModel if args.model == "thermodynamic" else D.SurfaceDesignModel)(
         fit, args.draws

@@ -46,7 +46,11 @@ def thermo_campaign(tmp_path_factory):
     argv = ["simulate", "--spring", "n50-thermo", "--pressures", "1,3,5,7,9"]
     assert run([*argv, "--step-mm", "10", "--seed", "11", "--out", path]) == 0
     fit = fit_surface(
-        read_recordings(path), Orders(3, 1, 2, 2, 1), seed=11, settings=Settings(max_steps=200)
+        read_recordings(path),
+        Orders(3, 1, 2, 2, 1),
+        seed=11,
+        settings=Settings(max_steps=200),
+        max_draws=1000,
     )
     v_c = sealed_truth("n50-thermo", np.array([0.112]), charge_bar=5.0).volume_c_m3 * 1e3
     return d, path, fit, v_c
@@ -108,6 +112,8 @@ def sheet(thermo_campaign, tmp_path_factory):
                     4,
                     "--charges-bar",
                     "3,5,7,9",
+                    "--draws",
+                    500,
                     "--json",
                     out / "result.json",
                     "--out",

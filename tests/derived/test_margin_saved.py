@@ -462,7 +462,8 @@ def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
     d = res.pop("design")
     assert_same(res, original)  # every existing key and number unchanged
     assert "natural frequency below 2.3 Hz with probability" in text and "stroke to 12000 N" in text
-    ans, _, _ = load_answer(fit)
+    full, _, _ = load_answer(fit)
+    ans = full.thinned(1000)  # the design margin's draws (at most 1000 of the saved ones)
     p = pressure_needed(ans, 0.110, 8000.0)
     h, dp = 1e-5, 1e-4
     idx = np.arange(p.size)
@@ -477,7 +478,9 @@ def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
     assert d["rate_N_per_m"]["mean"] == pytest.approx(k.mean(), rel=2e-4)
     f = np.sqrt(k * 9.80665 / 8000.0) / (2 * np.pi)
     assert d["frequency_below"]["probability"] == pytest.approx(np.mean(f < 2.3), abs=0.01)
-    assert d["charge_bar"] == pytest.approx(res["pressure_bar_needed"], rel=1e-9)
+    assert d["charge_bar"]["mean"] == pytest.approx(p.mean(), rel=1e-12)
+    e = res["pressure_bar_needed"]  # the margin's own, on all the saved draws
+    assert abs(d["charge_bar"]["mean"] - e["mean"]) < 0.2 * e["sd"]
     assert d["stroke_to_force_limit"]["direction"].startswith("compression")
     assert "ASSUMED" in " ".join(d["assumptions"])
 

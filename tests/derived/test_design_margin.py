@@ -134,3 +134,33 @@ def test_refusals():
 
     with pytest.raises(InputError, match="volume-derived area"):
         design_margin(ForceOnly(), X_C, W, d, 0.95)
+
+
+class Balloons(Cylinders):
+    """Areas that grow with pressure, quintic in p_u (the grids interpolate cubics exactly only)."""
+
+    @staticmethod
+    def _g(p):
+        return 1 + 0.03 * p + 0.002 * p**2 - 0.0003 * p**3 + 1e-5 * p**5
+
+    def force_draws(self, x, p):
+        return super().force_draws(x, p) * self._g(np.asarray(p, float))
+
+    def volume_area_draws(self, x, p):
+        return super().volume_area_draws(x, p) * self._g(np.asarray(p, float))
+
+
+def test_the_margins_coarse_grid_agrees_with_the_design_grid():
+    """MARGIN_PRESSURES (21) and the neighbourhood of x_c against the full DesignGrid (41 pressures,
+    every tested height): rate, frequency and stroke within 1e-4."""
+    from uq._derived.design import DesignGrid
+
+    m = Balloons()
+    d = SealedDesign(X_C, 5.0, 3.0, polytropic=1.4)
+    kw = dict(max_frequency_Hz=2.0, force_limit_N=18000.0)
+    coarse = design_margin(m, X_C, W, d, 0.95, **kw)
+    fine = design_margin(m, X_C, W, d, 0.95, grid=DesignGrid(m, X_C), **kw)
+    for key in ("rate_N_per_m", "natural_frequency_Hz"):
+        assert coarse[key]["mean"] == pytest.approx(fine[key]["mean"], rel=1e-4), key
+    a, b = coarse["stroke_to_force_limit"], fine["stroke_to_force_limit"]
+    assert a["stroke_m"]["mean"] == pytest.approx(b["stroke_m"]["mean"], rel=1e-4)

@@ -271,6 +271,35 @@ def surface_coverage_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def sealed_coverage_summary(rel: str) -> Callable[[], str]:
+    """scripts/sealed_coverage.py's counts: per scenario, covered of evaluable for each quantity."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        lines = [
+            f"From `{rel}` (`{d['command']}`; spring `{d['spring']}`, {d['replications']} replications, "
+            f"model orders {d['model_orders']}; {d['acceptance_rule']}, false failure < {d['false_failure_rate']:g}): "
+            f"**{'passed' if d['passed'] else 'FAILED'}**; rms z of the sealed readings against the widened band "
+            f"{d['reading_z_rms']:.2f}; {d['converged']} of {d['replications']} fits converged.",
+            "",
+            "| scenario | evaluable | accepted | "
+            + " | ".join(d["counts"][next(iter(d["counts"]))]["covered"])
+            + " |",
+            "| --- | --- | --- |" + " --- |" * len(d["counts"][next(iter(d["counts"]))]["covered"]),
+        ]
+        for name, c in d["counts"].items():
+            lo, hi = c["acceptance"]
+            cells = " | ".join(
+                f"{v}" + ("" if lo <= v <= hi else " (out)") for v in c["covered"].values()
+            )
+            lines.append(f"| {name} | {c['evaluable']} | {lo}-{hi} | {cells} |")
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def diagnose_proof_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         d = _load(rel)
@@ -434,6 +463,14 @@ BLOCKS: dict[str, Block] = {
         "simulate --spring n50-thermo --seed 5 --out n50-thermo.csv",
         "surface n50-thermo.csv --model thermodynamic",
         slow=True,
+    ),
+    "design-n50": run_block(
+        f"design {DATA} --height-mm 112 --charge-bar 5 --volume-l 3.4 --forcing-hz 5 "
+        "--out reports/n50-design",
+        slow=True,
+    ),
+    "sealed-coverage": report_block(
+        sealed_coverage_summary("reports/sealed-coverage/coverage.json")
     ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),

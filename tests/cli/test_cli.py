@@ -375,6 +375,22 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         ],  # 5 sampled parameters: >= 10 walkers
         "margin": ["margin", csv, "--height-mm", 110, "--load-N", 8000, "--max-steps", "300"],
         "diagnose": ["diagnose", csv, "--max-mechanisms", "0", *quick],
+        "design": [
+            "design",
+            csv,
+            "--height-mm",
+            110,
+            "--charge-bar",
+            5,
+            "--volume-l",
+            3.5,
+            "--charges-bar",
+            "4,6",
+            "--draws",
+            200,
+            "--max-steps",
+            "300",
+        ],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
         "batch": ["batch", d / "batch.csv", "--out", d / "batch"],
     }

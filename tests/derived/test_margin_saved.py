@@ -433,3 +433,90 @@ def test_stroke_runs_match_the_walk_they_replace():
             while hi < n - 1 and ok[s, hi + 1]:
                 hi += 1
             assert (a[s], b[s]) == (lo, hi)
+
+
+# ----------------------------------------------------------------------------- design margins (sealed spring)
+
+DESIGN = [
+    "--max-frequency-hz",
+    "2.3",
+    "--rate-target-N-per-m",
+    "150000",
+    "--force-limit-N",
+    "12000",
+]
+
+
+def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
+    """``uq margin --fit`` with the sealed spring's questions: the margin's keys stay as they were,
+    and the rate at the design height is (S3) evaluated directly on the saved draws (each draw at
+    its own charge pressure, derivatives by central differences), not through the design grid."""
+    from uq._derived.margin import load_answer, pressure_needed
+
+    fit, original, _ = surface_saved
+    out = tmp_path / "d.json"
+    argv = ["margin", "--fit", fit, *QUERY, *DESIGN, "--volume-l", "3.0", "--json", out]
+    assert run(argv) == 0
+    text = capsys.readouterr().out
+    res = json.loads(out.read_text())
+    d = res.pop("design")
+    assert_same(res, original)  # every existing key and number unchanged
+    assert "natural frequency below 2.3 Hz with probability" in text and "stroke to 12000 N" in text
+    full, _, _ = load_answer(fit)
+    ans = full.thinned(1000)  # the design margin's draws (at most 1000 of the saved ones)
+    p = pressure_needed(ans, 0.110, 8000.0)
+    h, dp = 1e-5, 1e-4
+    idx = np.arange(p.size)
+
+    def at(x, pp):  # draw s at its own pressure
+        return ans.force_draws(np.full(p.size, x), pp)[idx, idx]
+
+    Px = (at(0.110 + h, p) - at(0.110 - h, p)) / (2 * h)
+    Pp = (at(0.110, p + dp) - at(0.110, p - dp)) / (2 * dp * 1e5)
+    Vx = ans.volume_area_draws(np.full(p.size, 0.110), p)[idx, idx]
+    k = -Px + Pp * (p * 1e5 + 101325.0) * Vx / 3.0e-3
+    assert d["rate_N_per_m"]["mean"] == pytest.approx(k.mean(), rel=2e-4)
+    f = np.sqrt(k * 9.80665 / 8000.0) / (2 * np.pi)
+    assert d["frequency_below"]["probability"] == pytest.approx(np.mean(f < 2.3), abs=0.01)
+    assert d["charge_bar"]["mean"] == pytest.approx(p.mean(), rel=1e-12)
+    e = res["pressure_bar_needed"]  # the margin's own, on all the saved draws
+    assert abs(d["charge_bar"]["mean"] - e["mean"]) < 0.2 * e["sd"]
+    assert d["stroke_to_force_limit"]["direction"].startswith("compression")
+    assert "ASSUMED" in " ".join(d["assumptions"])
+
+
+def test_design_margins_need_the_volume(surface_saved, capsys):
+    fit = surface_saved[0]
+    assert run(["margin", "--fit", fit, *QUERY, "--max-frequency-hz", "2"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "--volume-l" in line and "water" in line
+
+
+def test_design_margin_time_from_the_saved_fit(surface_saved, capsys):
+    """Not an assertion on time (machines differ): the benchmark line the docs quote, printed."""
+    import os
+    import time
+
+    from uq._derived.design import SealedDesign, design_margin
+    from uq._derived.margin import load_answer
+
+    t0 = time.perf_counter()
+    ans, _, _ = load_answer(surface_saved[0])
+    t1 = time.perf_counter()
+    res = design_margin(
+        ans,
+        0.110,
+        8000.0,
+        SealedDesign(0.110, 5.0, 3.0),
+        0.95,
+        max_frequency_Hz=2.3,
+        rate_target_N_per_m=150000.0,
+        force_limit_N=12000.0,
+    )
+    t2 = time.perf_counter()
+    with capsys.disabled():
+        print(
+            f"\nbenchmark: design margin from a saved fit: load {t1 - t0:.2f} s, answer (frequency, rate, "
+            f"stroke) {t2 - t1:.2f} s, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+        )
+    assert res["frequency_below"]["max_frequency_Hz"] == 2.3

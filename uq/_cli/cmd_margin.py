@@ -67,6 +67,123 @@ def configure_margin(p) -> None:
         "tolerance_pct (empty cells take the options' values); the JSON is a list, one result a row",
     )
     add_stand(p)
+    _configure_design_margins(p)
+
+
+def _configure_design_margins(p) -> None:
+    """Design margins on the sealed spring (uq._derived.design.design_margin): the element carries
+    --load-N at --height-mm, charged and closed there."""
+    from uq._cli.cmd_design import POLYTROPIC_HELP, dvdp, polytropic
+    from uq._cli.common import nonnegative_float, positive_float
+
+    g = p.add_argument_group(
+        "design margins on the sealed spring (docs/design.md): charged at --height-mm to carry "
+        "--load-N there, then closed"
+    )
+    g.add_argument(
+        "--max-frequency-hz",
+        type=positive_float,
+        help="is the natural frequency below this, with probability --prob?",
+    )
+    g.add_argument(
+        "--rate-target-N-per-m",
+        type=positive_float,
+        help="is the sealed vertical rate within --rate-tolerance-pct of this, with probability --prob?",
+    )
+    g.add_argument(
+        "--rate-tolerance-pct",
+        type=positive_float,
+        default=10.0,
+        help="tolerance of --rate-target-N-per-m, %% (default 10)",
+    )
+    g.add_argument(
+        "--force-limit-N",
+        type=positive_float,
+        help="stroke from the design height along the sealed curve until the force reaches this "
+        "(compression if above the load, rebound if below), and the stroke held with probability --prob",
+    )
+    g.add_argument(
+        "--volume-l",
+        type=positive_float,
+        help="internal volume at --height-mm carrying --load-N, litres, measured (e.g. by filling with "
+        "water); required by the design margins",
+    )
+    g.add_argument(
+        "--volume-sd-l", type=nonnegative_float, default=0.0, help="its standard deviation, litres"
+    )
+    g.add_argument("--polytropic", type=polytropic, default=1.0, help=POLYTROPIC_HELP)
+    g.add_argument(
+        "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir volume, litres"
+    )
+    g.add_argument(
+        "--dvdp-l-per-bar",
+        type=dvdp,
+        default=0.0,
+        help="how the volume at --height-mm changes with pressure, L/bar (default 0, an assumption the "
+        "answer states)",
+    )
+
+
+DESIGN_OPTIONS = ("max_frequency_hz", "rate_target_N_per_m", "force_limit_N")
+
+
+def _design_asked(args) -> bool:
+    return any(getattr(args, o, None) is not None for o in DESIGN_OPTIONS)
+
+
+def _check_design_usage(args) -> None:
+    """The design margins' options, checked before anything is read or fitted."""
+    if not _design_asked(args):
+        return
+    if args.volume_l is None:
+        raise InputError(
+            "option --volume-l: the design margins need the element's internal volume at --height-mm "
+            "carrying --load-N (litres; measure it, e.g. by filling the element with water: the stand gives "
+            "only volume changes)"
+        )
+    if args.volume_sd_l > args.volume_l / 4:
+        raise InputError(
+            f"option --volume-sd-l: {args.volume_sd_l:g} L is more than a quarter of the volume "
+            f"{args.volume_l:g} L: measure V more closely"
+        )
+    if args.dvdp_l_per_bar == "model":
+        raise InputError(
+            "option --dvdp-l-per-bar: 'model' needs the thermodynamic model, which uq margin does not "
+            "answer with; give a number of litres per bar"
+        )
+    if args.model == "cubics":
+        raise InputError(
+            "option --model cubics: the design margins need the volume-derived area, which the "
+            "per-pressure cubics do not interpolate; use --model surface"
+        )
+
+
+def _design_answer(args, ans, q: dict) -> dict:
+    """One query's design margins (uq._derived.design.design_margin)."""
+    from uq._derived.design import SealedDesign, design_margin
+
+    design = SealedDesign(
+        q["height_mm"] * 1e-3,
+        1.0,  # replaced: each draw is charged to the pressure at which it carries the load
+        args.volume_l,
+        volume_sd_l=args.volume_sd_l,
+        polytropic=args.polytropic,
+        reservoir_l=args.reservoir_l,
+        dvdp_l_per_bar=args.dvdp_l_per_bar,
+        p_atm_bar=getattr(args, "p_atm_bar", 1.01325),
+        seed=args.seed,
+    )
+    return design_margin(
+        ans,
+        q["height_mm"] * 1e-3,
+        q["load_N"],
+        design,
+        q["prob"],
+        max_frequency_Hz=args.max_frequency_hz,
+        rate_target_N_per_m=args.rate_target_N_per_m,
+        rate_tolerance_pct=args.rate_tolerance_pct,
+        force_limit_N=args.force_limit_N,
+    )
 
 
 QUERY_COLUMNS = ("height_mm", "load_N", "prob", "pressure_bar", "tolerance_pct")
@@ -272,6 +389,7 @@ def command_margin(args) -> int:
     from uq._io.files import emit_json
 
     _check_usage(args)
+    _check_design_usage(args)
     queries = _queries_from(args)  # checked before the fit, not after
     if args.fit is not None:
         ans, info, meta = load_answer(args.fit)
@@ -303,6 +421,9 @@ def command_margin(args) -> int:
     results = [
         answer_query(ans, info, q) for q in queries
     ]  # every answer before anything is written
+    if _design_asked(args):
+        for q, r in zip(queries, results, strict=True):
+            r["design"] = _design_answer(args, ans, q)
     if args.fit is not None:
         print(
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
@@ -330,6 +451,9 @@ def command_margin(args) -> int:
         _print_table(source, ans, info, queries, results)
     elif queries:
         _print_one(source, ans, info, queries[0], results[0])
+    for q, r in zip(queries, results, strict=True):
+        if "design" in r:
+            _print_design(q, r["design"], len(queries) > 1)
     for w in diagnostics["warnings"]:
         print(f"  warning{' (from the saved fit)' if args.fit is not None else ''}: {w}")
     if queries or args.json is not None:
@@ -414,3 +538,42 @@ def _fit_and_choose(args, rec, stand):
     return fit_and_choose(
         rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand
     )
+
+
+def _print_design(q: dict, d: dict, several: bool) -> None:
+    def est(e, scale=1.0, fmt=".3f"):
+        return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
+
+    head = f"  row {q['row']}: " if several else "  "
+    print(
+        f"{head}sealed at {q['height_mm']:g} mm carrying {q['load_N']:g} N (charge {est(d['charge_bar'])} bar, "
+        f"{d['volume_l']:g} L): rate {est(d['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
+        f"{est(d['natural_frequency_Hz'])} Hz"
+    )
+    pr = q["prob"]
+    if "frequency_below" in d:
+        f = d["frequency_below"]
+        print(
+            f"    natural frequency below {f['max_frequency_Hz']:g} Hz with probability {f['probability']:.3f} "
+            f"({'meets' if f['meets_prob'] else 'does not meet'} {pr:g}); with probability {pr:g} below "
+            f"{f['frequency_for_prob_Hz']:.3f} Hz"
+        )
+    if "rate_within" in d:
+        r = d["rate_within"]
+        print(
+            f"    rate within {r['tolerance_pct']:g} % of {r['target_N_per_m'] * 1e-3:g} kN/m with probability "
+            f"{r['probability']:.3f} ({'meets' if r['meets_prob'] else 'does not meet'} {pr:g}); deviation "
+            f"{est(r['deviation_pct'], 1, '+.1f')} %"
+        )
+    if "stroke_to_force_limit" in d:
+        s = d["stroke_to_force_limit"]
+        held = s["stroke_for_prob_m"]
+        mean = f"{est(s['stroke_m'], 1e3, '.1f')} mm; " if s["stroke_m"] else ""
+        print(
+            f"    stroke to {s['force_limit_N']:g} N, {s['direction']}: {mean}"
+            + (
+                f"at least {held * 1e3:.1f} mm with probability {pr:g}"
+                if held is not None
+                else f"the limit is not reached within the tested range with probability {1 - s['prob_reached_in_tested_range']:.3f}"
+            )
+        )

@@ -57,6 +57,11 @@ COMMANDS = [
     ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
     ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
     (
+        "design",
+        "uq._cli.cmd_design",
+        "the sealed spring: load, rate and natural frequency with credible intervals, and a data sheet",
+    ),
+    (
         "diagnose",
         "uq._cli.cmd_diagnose",
         "locate the mismatch with the traditional model, name and model the missing physics",

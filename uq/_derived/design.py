@@ -29,6 +29,7 @@ same methods.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,10 @@ N_PRESSURES = 41
 CHUNK_DRAWS = 250  # draws per sealed-path solve: bounds the spline coefficients' memory
 LEVEL = 0.90
 N_CHART = 6
+MARGIN_SPAN_M = 0.008  # heights each side of the design height a design margin evaluates
+MARGIN_PRESSURES = (
+    21  # its pressure grid: the answer within 1e-4 of the 41-pressure grid's (tested), in < 2 s
+)
 
 
 class SurfaceDesignModel:
@@ -181,6 +186,8 @@ class DesignGrid:
     """The model's draws on a height x pressure grid around one design height (module docstring, 1).
 
     force, dforce_dx, area: (S, H, Pn); heights (H,) with ``height_m`` on it; pressures (Pn,), Pa.
+    ``span_m``: (lo, hi) within the tested heights to cover instead of all of them (at least
+    four grid heights: dP/dx is then still exact for a model cubic in x).
     """
 
     def __init__(
@@ -190,9 +197,12 @@ class DesignGrid:
         *,
         height_step_m: float = HEIGHT_STEP_M,
         n_pressures: int = N_PRESSURES,
+        span_m: tuple[float, float] | None = None,
     ):
         self.model, self.height_m = model, float(height_m)
         lo, hi = model.height_range_m
+        if span_m is not None:  # only part of the tested heights (a design margin's way)
+            lo, hi = max(lo, float(span_m[0])), min(hi, float(span_m[1]))
         plo, phi = model.pressure_range_bar
         self.heights = _heights(lo, hi, self.height_m, height_step_m)
         self.pressures_bar = np.linspace(plo, phi, n_pressures)
@@ -202,6 +212,7 @@ class DesignGrid:
         self.area = np.asarray(model.volume_area_draws(X, P), float)
         self.dforce_dx = CubicSpline(self.heights, self.force, axis=1).derivative()(self.heights)
         self.n_draws = self.force.shape[0]
+        self._volumes = {}
         self.dvdp_at_c = None
         if hasattr(model, "volume_pressure_draws"):
             self.dvdp_at_c = np.asarray(
@@ -223,10 +234,18 @@ class DesignGrid:
         return v_c, n
 
     def volume(self, design: SealedDesign, v_c: np.ndarray):
-        """V(x, p_u) on the grid, (S, H, Pn) m^3, and its statement (uq._physics.volume)."""
+        """V(x, p_u) on the grid, (S, H, Pn) m^3, and its statement (uq._physics.volume); kept for
+        the next call with the same volume inputs (a chart's charges share it)."""
+        key = (design.charge_bar, design.volume_l, design.volume_sd_l, design.dvdp_l_per_bar)
+        key += (design.seed, float(np.sum(v_c)))
+        if key not in self._volumes:
+            self._volumes = {key: self._volume(design, v_c)}
+        return self._volumes[key]
+
+    def _volume(self, design: SealedDesign, v_c: np.ndarray):
         d = design.dvdp_l_per_bar
         dvdp, words = (
-            (self.dvdp_at_c, f"{self.model.label}'s own")
+            (self.dvdp_at_c, getattr(self.model, "dvdp_words", f"{self.model.label}'s own"))
             if d == "model"
             else (float(d) / L_PER_M3 / BAR_PA, "")
         )
@@ -248,34 +267,44 @@ def sealed_draws(
 ) -> tuple[SealedPath, str]:
     """Per-draw sealed path (S, H) at ``heights_m`` (default: the grid's) for a charge at the design
     height (default ``design.charge_bar``; another charge pressure keeps the design's volume
-    assumption: V(x_c, p') = V_c + [V(x_c, p') - V(x_c, p_c)]), and the volume statement."""
+    assumption: V(x_c, p') = V_c + [V(x_c, p') - V(x_c, p_c)]), and the volume statement.
+    ``charge_bar`` may hold one charge pressure per posterior draw, (S,) (a design margin: the
+    pressure at which each draw carries the load); V_c is then the volume at each draw's own charge
+    (measured in the loaded state)."""
     if grid.height_m != design.height_m:
         raise ValueError("the grid was built for another design height")
-    p_c = design.charge_bar if charge_bar is None else float(charge_bar)
+    p_c = np.asarray(design.charge_bar if charge_bar is None else charge_bar, float)
+    if p_c.ndim not in (0, 1) or (p_c.ndim == 1 and p_c.size != grid.n_draws):
+        raise ValueError(f"charge_bar: a number or one per draw ({grid.n_draws}), got {p_c.shape}")
     plo, phi = grid.model.pressure_range_bar
-    if not plo - 1e-9 <= p_c <= phi + 1e-9:
+    if np.any(p_c < plo - 1e-9) or np.any(p_c > phi + 1e-9) or not np.all(np.isfinite(p_c)):
+        bad = p_c if p_c.ndim == 0 else p_c[(p_c < plo - 1e-9) | (p_c > phi + 1e-9)][0]
         raise InputError(
-            f"charge pressure {p_c:g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
+            f"charge pressure {float(bad):g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
         )
     heights = grid.heights if heights_m is None else np.asarray(heights_m, float).reshape(-1)
     v_c, n = grid.draw_inputs(design)
     vol = grid.volume(design, v_c)
+    # the gas law is solved height by height: the element is needed only at the asked heights and x_c
+    sub = np.unique([int(np.argmin(np.abs(grid.heights - x))) for x in (*heights, grid.height_m)])
     parts = []
     for lo in range(0, grid.n_draws, CHUNK_DRAWS):
         sl = slice(lo, lo + CHUNK_DRAWS)
         el = GridElement(
-            grid.heights,
+            grid.heights[sub],
             grid.pressures_pa,
-            grid.force[sl],
-            grid.dforce_dx[sl],
-            vol.volume_m3[sl],
-            grid.area[sl],
+            grid.force[sl][:, sub],
+            grid.dforce_dx[sl][:, sub],
+            vol.volume_m3[sl][:, sub],
+            grid.area[sl][:, sub],
         )
         x_c = np.array([grid.height_m])
-        v_charge = el.volume_m3(x_c, np.full((el.n_draws, 1), p_c * BAR_PA))[:, 0]
+        p_here = np.broadcast_to(p_c if p_c.ndim == 0 else p_c[sl], (el.n_draws,)) * BAR_PA
+        # one charge per draw (a design margin): V_c was measured in the loaded state, at that charge
+        v_charge = v_c[sl] if p_c.ndim == 1 else el.volume_m3(x_c, p_here[:, None])[:, 0]
         charge = Charge(
             grid.height_m,
-            p_c * BAR_PA,
+            p_here,
             v_charge,
             n[sl],
             design.reservoir_l / L_PER_M3,
@@ -353,12 +382,16 @@ def transmissibility_summary(natural_Hz, forcing_Hz: float) -> dict:
     }
 
 
-def sealed_curve(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
+def sealed_curve(
+    model, design: SealedDesign, grid: DesignGrid | None = None, charge_bar: float | None = None
+) -> dict:
     """The sealed load-deflection curve with 90 % bands: overpressure (bar), load (N) and rate (N/m)
-    at the grid heights where every draw's path pressure stays within the tested pressures."""
+    at the grid heights where every draw's path pressure stays within the tested pressures.
+    ``charge_bar``: another charge at the design height, with the design's volume assumption (as
+    the frequency chart's charges)."""
     check_design(model, design)
     grid = grid or DesignGrid(model, design.height_m)
-    path, statement = sealed_draws(grid, design)
+    path, statement = sealed_draws(grid, design, charge_bar)
     ok = path.in_range.all(axis=0)
     out = {"height_m": grid.heights[ok]}
     a = (1.0 - LEVEL) / 2
@@ -425,3 +458,288 @@ def design_document(
     out["sealed_curve"] = sealed_curve(model, design, grid)
     out["frequency_chart"] = frequency_chart(model, design, charges_bar, grid)
     return out
+
+
+# ----------------------------------------------------------------------------- other models
+
+
+class ThermoDesignModel:
+    """The thermodynamic model (uq._models.thermo.ThermoFit) as a design model: force P = -dG/dx,
+    volume-derived area dV/dx = -d2G/dx dp_u and its own dV/dp_u on one fixed set of at most
+    ``max_draws`` posterior draws. Its dV/dp_u is fixed up to a function of p_u alone (isobaric
+    tests compare heights, not pressures): the potential's gauge makes it 0 at x0, so
+    ``dvdp="model"`` assumes the volume at x0 does not change with pressure and takes the
+    differences between heights from the recordings (``dvdp_words``)."""
+
+    def __init__(self, fit, max_draws: int = DEFAULT_DRAWS):
+        self.fit = fit
+        self.beta = fit.flat_beta(max_draws)
+        self.height_range_m = tuple(float(v) for v in fit.height_range_m)
+        self.pressure_range_bar = tuple(float(v) for v in fit.pressure_range_bar)
+        self.label = f"thermodynamic model ({fit.orders.label})"
+        self.dvdp_words = (
+            f"{self.label}'s own, ASSUMED 0 at x0 = {fit.geometry.x0_m * 1e3:g} mm (the potential's "
+            "gauge: isobaric tests fix only how it differs between heights)"
+        )
+
+    def force_draws(self, height_m, p_bar):
+        return self.fit.force_draws(height_m, p_bar, beta=self.beta)
+
+    def volume_area_draws(self, height_m, p_bar):
+        return self.fit.volume_area_draws(height_m, p_bar, beta=self.beta)
+
+    def volume_pressure_draws(self, height_m, p_bar):
+        return self.fit.volume_pressure_draws(height_m, p_bar, beta=self.beta)
+
+
+def force_only_cubics(rec, *, seed: int = 0, stand=None, n_draws: int = DEFAULT_DRAWS):
+    """Isobaric force of a force-only campaign (no piston: no volume, so no sealed spring), as a
+    ``uq._derived.margin.CubicInterpolation`` (F_eff = P/p_u linear in p_u between tested pressures).
+
+    Per test, the force is a cubic in u = x - x0 (eq. 8) with the stand's error budget's shape, sd_k
+    proportional to sqrt(s0^2 + (r P_k)^2) (s0 = 10 N, r the load cell's relative error, P_k the
+    least-squares force), the common scale unknown (prior 1/sigma^2) and a flat prior on the
+    coefficients: the posterior is exactly Student-t and is drawn exactly (sigma^2 from its scaled
+    inverse chi-square, the coefficients from their Gaussian given it). No sampler: the design
+    sheet of a force-only campaign needs only these loads."""
+    from uq._data.stand_description import PAPER_STAND
+    from uq._derived.margin import CubicInterpolation
+    from uq._models.cubic import basis
+    from uq._physics.quantities import to_paper_basis
+
+    stand = PAPER_STAND if stand is None else stand
+    rng = np.random.default_rng(seed)
+    tests = sorted(rec.tests, key=lambda t: t.pressure_bar)
+    coefs = []
+    for t in tests:
+        u = t.height_m - rec.x0_m
+        X, y = np.asarray(basis(u)), np.asarray(t.force_N, float)
+        n, k = X.shape
+        if n <= k:
+            raise InputError(
+                f"{rec.path}: the test at {t.pressure_bar:g} bar has {n} points; a cubic needs at least 5"
+            )
+        P_ls = X @ np.linalg.lstsq(X, y, rcond=None)[0]  # the paper's least-squares cubic
+        w = 1.0 / (10.0**2 + (max(stand.load_cell_rel_sd, 1e-4) * np.abs(P_ls)) ** 2)
+        A = X.T @ (w[:, None] * X)
+        b_hat = np.linalg.solve(A, X.T @ (w * y))
+        r = y - X @ b_hat
+        s2 = float(np.sum(w * r**2) / (n - k))
+        sigma2 = s2 * (n - k) / rng.chisquare(n - k, n_draws)
+        L = np.linalg.cholesky(np.linalg.inv(A))
+        z = rng.standard_normal((n_draws, k))
+        draws = b_hat + np.sqrt(sigma2)[:, None] * (z @ L.T)
+        coefs.append(to_paper_basis(draws))
+    coef = np.stack(coefs, axis=1)
+    zi = rng.standard_normal((n_draws, max(len(tests) - 1, 1)))
+    p = np.array([t.pressure_bar for t in tests])
+    ans = CubicInterpolation.from_draws(
+        coef,
+        zi,
+        p,
+        rec.x0_m,
+        height_range_m=rec.height_range_m,
+        pressure_range_bar=(float(p.min()), float(p.max())),
+    )
+    ans.label = "per-test force cubics (force-only campaign; exact Student-t posterior)"
+    return ans
+
+
+# ----------------------------------------------------------------------------- the data sheet's tables
+
+
+def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -> list[dict]:
+    """The catalogue's isobaric table: per (pressure, height) the load P, the effective area
+    F_eff = P/p_u (eq. 1) and, for a model with a volume, the volume-derived area dV/dx and the
+    volume increment V(x, p_u) - V(x_ref, p_u) from ``reference_height_m`` (what the stand
+    measures: a change at one pressure), each {mean, sd, q05, q95}."""
+    xs = np.asarray(heights_m, float)
+    lo, hi = model.height_range_m
+    has_volume = hasattr(model, "volume_area_draws")
+    if has_volume:  # a fine grid through the table's heights and the reference, for the integral
+        fine = np.unique(np.concatenate([np.linspace(lo, hi, 91), xs, [reference_height_m]]))
+    rows = []
+    for p in np.asarray(pressures_bar, float):
+        P = np.asarray(model.force_draws(xs, np.full(xs.shape, p)), float)
+        if has_volume:
+            A = np.asarray(model.volume_area_draws(fine, np.full(fine.shape, p)), float)
+            anti = CubicSpline(fine, A, axis=1).antiderivative()
+            dV = anti(xs) - anti(np.array([reference_height_m]))
+            A_at = A[:, np.searchsorted(fine, xs)]
+        for j, x in enumerate(xs):
+            row = {
+                "pressure_bar": float(p),
+                "height_m": float(x),
+                "load_N": estimate(P[:, j]),
+                "feff_m2": estimate(P[:, j] / (p * BAR_PA)),
+            }
+            if has_volume:
+                row["volume_area_m2"] = estimate(A_at[:, j])
+                row["volume_increment_l"] = estimate(dV[:, j] * L_PER_M3)
+            rows.append(row)
+    return rows
+
+
+# ----------------------------------------------------------------------------- design margins
+
+
+def design_margin(
+    model,
+    height_m: float,
+    load_N: float,
+    design: SealedDesign,
+    prob: float = 0.95,
+    *,
+    max_frequency_Hz: float | None = None,
+    rate_target_N_per_m: float | None = None,
+    rate_tolerance_pct: float = 10.0,
+    force_limit_N: float | None = None,
+    grid: DesignGrid | None = None,
+) -> dict:
+    """Design margins on the sealed spring (``uq margin --max-frequency-hz/--rate-target-N-per-m/
+    --force-limit-N``): the spring carries ``load_N`` at ``height_m``, so each posterior draw is
+    charged there to the overpressure at which it carries the load (uq._derived.margin.
+    pressure_needed) and closed with the design's volume (measured in that loaded state),
+    polytropic exponent, reservoir and dV/dp_u assumption. Per draw: the sealed rate and natural
+    frequency there, and the stroke to ``force_limit_N`` along the sealed curve (compression when
+    the limit exceeds the load, rebound when below). Probabilities are over the posterior of the
+    mean characteristic and the design's drawn inputs (``design.seed``)."""
+    from uq._derived.margin import pressure_needed
+
+    if not 0.0 < prob < 1.0:
+        raise InputError(f"option --prob: expected a probability between 0 and 1, got {prob:g}")
+    if not hasattr(model, "volume_area_draws"):
+        raise InputError(
+            f"design margins need a model with the volume-derived area dV/dx; the {model.label} has none "
+            "(answer with the surface model: --model surface, or a fit saved by uq surface --out)"
+        )
+    for name, v in (
+        ("--max-frequency-hz", max_frequency_Hz),
+        ("--rate-target-N-per-m", rate_target_N_per_m),
+        ("--force-limit-N", force_limit_N),
+    ):
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise InputError(f"option {name}: expected a positive number, got {v:g}")
+    if not (np.isfinite(rate_tolerance_pct) and rate_tolerance_pct > 0):
+        raise InputError(
+            f"option --rate-tolerance-pct: expected a positive percentage, got {rate_tolerance_pct:g}"
+        )
+    if hasattr(model, "thinned") and grid is None:  # a saved answer's draws: at most DEFAULT_DRAWS
+        model = model.thinned(DEFAULT_DRAWS)
+    p_need = pressure_needed(model, height_m, load_N)
+    if not np.all(np.isfinite(p_need)):
+        raise InputError(
+            f"option --load-N: {load_N:g} N at {height_m * 1e3:g} mm lies at the edge of the tested pressures in part "
+            "of the posterior; choose a load further inside"
+        )
+    design = SealedDesign(
+        height_m,
+        float(np.mean(p_need)),
+        design.volume_l,
+        volume_sd_l=design.volume_sd_l,
+        polytropic=design.polytropic,
+        reservoir_l=design.reservoir_l,
+        dvdp_l_per_bar=design.dvdp_l_per_bar,
+        p_atm_bar=design.p_atm_bar,
+        seed=design.seed,
+    )
+    check_design(model, design)
+    if grid is None:
+        lo, hi = model.height_range_m
+        if force_limit_N is None:  # the rate at the design height needs only its neighbourhood
+            span = (height_m - MARGIN_SPAN_M, height_m + MARGIN_SPAN_M)
+        else:
+            span = (
+                (lo, height_m + MARGIN_SPAN_M)
+                if force_limit_N > load_N
+                else (height_m - MARGIN_SPAN_M, hi)
+            )
+        grid = DesignGrid(model, height_m, span_m=span, n_pressures=MARGIN_PRESSURES)
+    if grid.n_draws != p_need.size:
+        raise ValueError("the grid and the model hold different draws")
+    path, statement = sealed_draws(grid, design, charge_bar=p_need)
+    j = int(np.argmin(np.abs(grid.heights - height_m)))
+    load, rate = path.force_N[:, j], path.rate_N_per_m[:, j]
+    where = f"at {height_m * 1e3:g} mm carrying {load_N:g} N"
+    freq = natural_frequency_Hz(rate, load, where)
+    out = {
+        "charge_bar": estimate(p_need),
+        "load_check_N": estimate(load),
+        "rate_N_per_m": estimate(rate),
+        "natural_frequency_Hz": estimate(freq),
+        "volume_l": design.volume_l,
+        "volume_sd_l": design.volume_sd_l,
+        "polytropic": design.polytropic_range[0]
+        if design.polytropic_range[0] == design.polytropic_range[1]
+        else list(design.polytropic_range),
+        "reservoir_l": design.reservoir_l,
+        "dvdp_l_per_bar": design.dvdp_l_per_bar,
+        "assumptions": [
+            f"each posterior draw charged at {height_m * 1e3:g} mm to the overpressure at which it carries "
+            f"{load_N:g} N there, then closed",
+            statement.replace(f"and {design.charge_bar:g} bar", "in the loaded state"),
+            _polytropic_words(design),
+        ],
+    }
+    if max_frequency_Hz is not None:
+        p_below = float(np.mean(freq < max_frequency_Hz))
+        out["frequency_below"] = {
+            "max_frequency_Hz": max_frequency_Hz,
+            "probability": p_below,
+            "meets_prob": bool(p_below >= prob),
+            "frequency_for_prob_Hz": float(np.quantile(freq, prob)),
+        }
+    if rate_target_N_per_m is not None:
+        off = np.abs(rate / rate_target_N_per_m - 1.0) * 100.0
+        p_in = float(np.mean(off <= rate_tolerance_pct))
+        out["rate_within"] = {
+            "target_N_per_m": rate_target_N_per_m,
+            "tolerance_pct": rate_tolerance_pct,
+            "probability": p_in,
+            "meets_prob": bool(p_in >= prob),
+            "deviation_pct": estimate(100.0 * (rate / rate_target_N_per_m - 1.0)),
+        }
+    if force_limit_N is not None:
+        out["stroke_to_force_limit"] = _stroke_to_limit(path, j, force_limit_N, load_N, prob)
+    return out
+
+
+def _stroke_to_limit(path: SealedPath, j: int, limit_N: float, load_N: float, prob: float) -> dict:
+    """Per draw, the distance from the design height along the sealed curve to where the force
+    reaches ``limit_N`` (towards lower heights when the limit exceeds the load, else higher),
+    linear between grid heights; a draw whose curve does not reach it within the tested heights
+    and pressures has a stroke of at least the range (counted as not reached)."""
+    xs, F = path.height_m, path.force_N
+    step = -1 if limit_N > load_N else 1
+    idx = np.arange(j, -1, -1) if step < 0 else np.arange(j, xs.size)
+    sign = 1.0 if limit_N > load_N else -1.0
+    S = F.shape[0]
+    stroke = np.full(S, np.inf)
+    prev = F[:, idx[0]]
+    alive = np.ones(S, bool)
+    for a, b in itertools.pairwise(idx):
+        f = F[:, b]
+        alive &= np.isfinite(f)
+        hit = alive & np.isinf(stroke) & (sign * (f - limit_N) >= 0)
+        frac = np.where(hit, (limit_N - prev) / np.where(f != prev, f - prev, 1.0), 0.0)
+        stroke = np.where(hit, abs(xs[a] - xs[j]) + frac * abs(xs[b] - xs[a]), stroke)
+        prev = f
+    reached = np.isfinite(stroke)
+    direction = "compression (height falling)" if step < 0 else "rebound (height rising)"
+    available = abs(xs[idx[-1]] - xs[j])
+    big = 1e9
+    q = float(np.quantile(np.where(reached, stroke, big), 1.0 - prob))
+    return {
+        "force_limit_N": limit_N,
+        "direction": direction,
+        "prob_reached_in_tested_range": float(reached.mean()),
+        "stroke_m": estimate(stroke) if reached.all() else None,
+        "stroke_for_prob_m": None if q >= big else q,
+        "meaning": f"with probability {prob:g} the force stays within the limit over at least stroke_for_prob_m of "
+        f"{direction} from the design height; the tested heights give at most {available * 1e3:.1f} mm that way"
+        + (
+            ""
+            if reached.all()
+            else "; draws not reaching the limit within them count as longer strokes"
+        ),
+    }

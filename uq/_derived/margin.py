@@ -95,7 +95,7 @@ class SurfaceAnswer(_Ranges):
         self.fit = fit
 
     def _setup(self, orders, geometry, test_pressures_bar, beta, max_draws, noise):
-        from uq._models.surface import SCALE_C, SCALE_E, _sizes
+        from uq._models.surface import SCALE_C, SCALE_D, SCALE_E, _sizes
 
         self.orders, self.geometry, self.max_draws = orders, geometry, max_draws
         self.test_pressures_bar = np.asarray(test_pressures_bar, float)
@@ -104,8 +104,9 @@ class SurfaceAnswer(_Ranges):
             noise,
         )  # (C, D, k): what a saved file holds
         self.beta = _flat_draws(self.posterior_beta, max_draws)
-        nc, ne, _, _ = _sizes(orders, self.test_pressures_bar.size)
+        nc, ne, nd, _ = _sizes(orders, self.test_pressures_bar.size)
         self._c, self._e = self.beta[:, :nc] * SCALE_C, self.beta[:, nc : nc + ne] * SCALE_E
+        self._d = self.beta[:, nc + ne : nc + ne + nd] * SCALE_D
         self.label = f"surface model ({orders.label})"
 
     def force_draws(self, height_m, p_bar):
@@ -118,6 +119,37 @@ class SurfaceAnswer(_Ranges):
         fe = (self._c @ _tq(t, q, o.K, o.Lp).T).reshape(-1, *shape)
         E = (self._e @ _poly(t, o.Ke).T).reshape(-1, *shape)
         return p * BAR_PA * fe + E
+
+    def thinned(self, max_draws: int) -> SurfaceAnswer:
+        """The same answer on at most ``max_draws`` of its draws (thinned evenly)."""
+        new = SurfaceAnswer.__new__(SurfaceAnswer)
+        _Ranges.__init__(
+            new, height_range_m=self.height_range_m, pressure_range_bar=self.pressure_range_bar
+        )
+        new._setup(
+            self.orders,
+            self.geometry,
+            self.test_pressures_bar,
+            self.posterior_beta,
+            max_draws,
+            self.noise,
+        )
+        new.fit = getattr(self, "fit", None)
+        return new
+
+    def volume_area_draws(self, height_m, p_bar):
+        """The volume-derived area dV/dx = F_p + D, the same arithmetic as
+        ``SurfaceFit.volume_area_draws`` (tested equal to it), (S, *shape): with it a saved surface
+        answer is a design model (uq._derived.design) and answers design margins without a refit."""
+        from uq._models.surface import _tq
+
+        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
+        shape, g, o = h.shape, self.geometry, self.orders
+        t, q = g.t(h.ravel()), g.q(p.ravel())
+        area = self._c @ _tq(t, q, o.K, o.Lp).T
+        if o.Dk >= 0:
+            area = area + self._d @ _tq(t, q, o.Dk, o.Dl).T
+        return area.reshape(-1, *shape)
 
     def coefficient_names(self) -> list[str]:
         o = self.orders
@@ -212,7 +244,14 @@ def as_answer(model):
 def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
     """Posterior draws of the overpressure (bar) at which the element carries ``load_N``."""
     model = as_answer(model)
-    model.check_range(height_m, model.pressure_range_bar[0], "height_m")
+    refuse_extrapolation(  # as _Ranges.check_range, for any model with the tested ranges
+        height_m,
+        model.pressure_range_bar[0],
+        model.height_range_m,
+        model.pressure_range_bar,
+        "height_m",
+        "the model",
+    )
     plo, phi = model.pressure_range_bar
     ps = np.linspace(plo, phi, N_P_GRID)
     P = model.force_draws(np.full_like(ps, height_m), ps)  # (S, G)

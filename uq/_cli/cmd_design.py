@@ -1,0 +1,446 @@
+"""``uq design``: the sealed spring from one campaign (:mod:`uq._derived.design`): load, vertical rate
+and natural frequency at the design height with credible intervals, the catalogue's isobaric table,
+and with ``--out DIR`` the data sheet (:mod:`uq._report.design`: HTML + CSV + JSON + figures).
+
+A force-only campaign (no piston column) has no volume: the isobaric loads are given and one line
+says why the sealed outputs are omitted. Without ``--volume-l`` the sealed outputs are refused
+with one line saying what to measure.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from uq._cli.common import _option_type
+
+POLYTROPIC_HELP = (
+    "polytropic exponent n: 1 isothermal (slow strokes) .. 1.4 adiabatic (fast strokes), or a range "
+    "LO..HI (n drawn uniformly per posterior draw: the stroke's heat exchange unknown)"
+)
+
+
+def _polytropic(text: str):
+    """A value, or a range ``LO..HI`` within 1 .. 1.4."""
+    from uq._physics.sealed import POLYTROPIC_RANGE
+
+    parts = text.split("..")
+    if len(parts) > 2:
+        raise ValueError(f"expected a value or a range LO..HI, got '{text}'")
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise ValueError(f"expected a value or a range LO..HI, got '{text}'") from None
+    lo, hi = POLYTROPIC_RANGE
+    if not all(lo <= v <= hi for v in vals) or (len(vals) == 2 and vals[0] > vals[1]):
+        raise ValueError(
+            f"expected {lo:g} (isothermal) .. {hi:g} (adiabatic), or a range LO..HI within it, got '{text}'"
+        )
+    return vals[0] if len(vals) == 1 or vals[0] == vals[1] else (vals[0], vals[1])
+
+
+def _dvdp(text: str):
+    """Litres per bar, or ``model``."""
+    if text.strip() == "model":
+        return "model"
+    try:
+        v = float(text)
+    except ValueError:
+        raise ValueError(
+            f"expected litres per bar, or 'model' (with --model thermodynamic), got '{text}'"
+        ) from None
+    if v != v or v in (float("inf"), float("-inf")):
+        raise ValueError(f"expected a finite number of litres per bar, got '{text}'")
+    return v
+
+
+def _number_list(text: str) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise ValueError(f"expected comma-separated numbers, got '{text}'") from None
+    if not vals or not all(v > 0 and v != float("inf") for v in vals):
+        raise ValueError(f"expected comma-separated positive numbers, got '{text}'")
+    return vals
+
+
+polytropic = _option_type(_polytropic)
+dvdp = _option_type(_dvdp)
+number_list = _option_type(_number_list)
+polytropic.__name__, dvdp.__name__, number_list.__name__ = "value or range", "L/bar", "list"
+
+
+def configure_design(p) -> None:
+    from uq._cli.common import (
+        add_json,
+        add_recordings,
+        add_sampling,
+        add_stand,
+        nonnegative_float,
+        positive_float,
+        positive_int,
+    )
+
+    add_recordings(p)
+    add_sampling(p)
+    add_json(p)
+    g = p.add_argument_group("the sealed spring (docs/design.md)")
+    g.add_argument(
+        "--height-mm",
+        type=positive_float,
+        required=True,
+        help="design height x_c, mm: where the spring is charged and closed",
+    )
+    g.add_argument(
+        "--charge-bar",
+        type=positive_float,
+        required=True,
+        help="charge overpressure p_c at the design height, bar",
+    )
+    g.add_argument(
+        "--volume-l",
+        type=positive_float,
+        help="internal volume at the design height and charge pressure, litres, MEASURED (e.g. by "
+        "filling the element with water: the stand gives only volume changes); required for the "
+        "sealed outputs",
+    )
+    g.add_argument(
+        "--volume-sd-l",
+        type=nonnegative_float,
+        default=0.0,
+        help="standard deviation of --volume-l, litres (drawn per posterior draw; default 0: exact)",
+    )
+    g.add_argument("--polytropic", type=polytropic, default=1.0, help=POLYTROPIC_HELP)
+    g.add_argument(
+        "--reservoir-l",
+        type=nonnegative_float,
+        default=0.0,
+        help="extra reservoir volume joined to the element, litres",
+    )
+    g.add_argument(
+        "--dvdp-l-per-bar",
+        type=dvdp,
+        default=0.0,
+        help="how the volume at the design height changes with pressure, L/bar (isobaric tests cannot "
+        "tell; default 0, an assumption every output states), or 'model' for the thermodynamic model's own",
+    )
+    g.add_argument(
+        "--forcing-hz",
+        type=positive_float,
+        help="forcing frequency, Hz: also give the transmissibility and isolation there",
+    )
+    g.add_argument(
+        "--model",
+        choices=("surface", "thermodynamic"),
+        default="surface",
+        help="surface: force and volume surfaces (no dV/dp_u of its own); thermodynamic: force and "
+        "volume from one potential (offers --dvdp-l-per-bar model)",
+    )
+    s = p.add_argument_group("the data sheet")
+    s.add_argument(
+        "--charges-bar",
+        type=number_list,
+        help="charge pressures of the frequency chart, bar, comma-separated (default: the tested "
+        "pressures from 1 bar up, within the tested range)",
+    )
+    s.add_argument(
+        "--sheet-heights-mm",
+        type=number_list,
+        help="heights of the isobaric table, mm, comma-separated (default: every 10 mm of the tested "
+        "range and the design height)",
+    )
+    s.add_argument(
+        "--draws",
+        type=positive_int,
+        default=1000,
+        help="posterior draws behind every estimate (default 1000)",
+    )
+    s.add_argument(
+        "--out",
+        metavar="DIR",
+        help="folder for the data sheet: design.html, design.csv, design.json and the figures",
+    )
+    s.add_argument(
+        "--figures",
+        choices=("png", "svg"),
+        default="png",
+        help="format of the data sheet's figures (default png)",
+    )
+    add_stand(p)
+
+
+class _Ranges:
+    """What the options are checked against before the fit: the campaign's tested ranges."""
+
+    def __init__(self, rec, model: str):
+        p = [t.pressure_bar for t in rec.tests]
+        self.height_range_m = tuple(float(v) for v in rec.height_range_m)
+        self.pressure_range_bar = (float(min(p)), float(max(p)))
+        self.label = "the surface model" if model == "surface" else "the thermodynamic model"
+        self.volume_area_draws = None
+        if model == "thermodynamic":
+            self.volume_pressure_draws = None
+
+
+def _design_from(args, volume_l):
+    from uq._derived.design import SealedDesign
+
+    return SealedDesign(
+        args.height_mm * 1e-3,
+        args.charge_bar,
+        volume_l,
+        volume_sd_l=args.volume_sd_l,
+        polytropic=args.polytropic,
+        reservoir_l=args.reservoir_l,
+        dvdp_l_per_bar=args.dvdp_l_per_bar,
+        forcing_Hz=args.forcing_hz,
+        p_atm_bar=getattr(args, "p_atm_bar", 1.01325),
+        seed=args.seed,
+    )
+
+
+def _check_before_fit(args, rec) -> None:
+    """Every option checked against the campaign before the (minutes-long) fit; one line each."""
+    from uq._derived.design import check_design
+    from uq._io.errors import InputError
+
+    ranges = _Ranges(rec, args.model)
+    lo, hi = ranges.height_range_m
+    if not lo - 1e-9 <= args.height_mm * 1e-3 <= hi + 1e-9:
+        raise InputError(
+            f"option --height-mm: {args.height_mm:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm; "
+            "the model does not extrapolate"
+        )
+    plo, phi = ranges.pressure_range_bar
+    if not plo - 1e-9 <= args.charge_bar <= phi + 1e-9:
+        raise InputError(
+            f"option --charge-bar: {args.charge_bar:g} bar is outside the tested pressures {plo:g}..{phi:g} bar; "
+            "the model does not extrapolate"
+        )
+    for h in args.sheet_heights_mm or ():
+        if not lo - 1e-9 <= h * 1e-3 <= hi + 1e-9:
+            raise InputError(
+                f"option --sheet-heights-mm: {h:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
+            )
+    for c in args.charges_bar or ():
+        if not plo - 1e-9 <= c <= phi + 1e-9:
+            raise InputError(
+                f"option --charges-bar: {c:g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
+            )
+    if not rec.has_piston:
+        return  # force-only: isobaric loads only (the sealed options are not used)
+    if args.volume_l is None:
+        raise InputError(
+            "option --volume-l: required for the sealed spring: measure the element's internal volume at "
+            f"{args.height_mm:g} mm and {args.charge_bar:g} bar (e.g. fill it with water and weigh it; the stand "
+            "gives only volume changes) and give it in litres"
+        )
+    if args.volume_sd_l > args.volume_l / 4:
+        raise InputError(
+            f"option --volume-sd-l: {args.volume_sd_l:g} L is more than a quarter of the volume {args.volume_l:g} L; "
+            "a normal uncertainty would give non-positive volumes: measure V more closely"
+        )
+    if args.dvdp_l_per_bar == "model" and args.model != "thermodynamic":
+        raise InputError(
+            "option --dvdp-l-per-bar: 'model' needs --model thermodynamic (the surface model has no dV/dp_u "
+            "of its own); give a number of litres per bar"
+        )
+    check_design(ranges, _design_from(args, args.volume_l))
+
+
+def _default_heights(rec, x_c: float):
+    import numpy as np
+
+    lo, hi = rec.height_range_m
+    xs = np.arange(np.ceil(lo * 100 - 1e-9), np.floor(hi * 100 + 1e-9) + 1) / 100.0
+    return np.unique(np.round(np.concatenate([[lo, hi, x_c], xs]), 6))
+
+
+def _default_charges(rec):
+    p = sorted({t.pressure_bar for t in rec.tests})
+    top = [v for v in p if v >= 1.0]
+    return tuple(top if len(top) >= 2 else p)
+
+
+def command_design(args) -> int:
+    import numpy as np
+
+    from uq._cli.common import load, settings_from, stand_from
+    from uq._derived import design as D
+    from uq._io.files import emit_json
+
+    t0 = time.perf_counter()
+    from uq._models.thermo import THETA_NAMES
+
+    stand = stand_from(args)
+    settings = settings_from(args)
+    settings.require_walkers(len(THETA_NAMES))  # as uq surface, before the recordings are read
+    rec = load(args, needs=("order",) if args.model == "surface" else ("piston", "order"))
+    _check_before_fit(args, rec)
+    x_c = args.height_mm * 1e-3
+    heights = (
+        np.asarray(args.sheet_heights_mm, float) * 1e-3
+        if args.sheet_heights_mm
+        else _default_heights(rec, x_c)
+    )
+    pressures = sorted({t.pressure_bar for t in rec.tests})
+    charges = args.charges_bar or _default_charges(rec)
+    if not rec.has_piston:
+        return _force_only(args, rec, stand, heights, pressures, t0)
+    from uq._derived.comparison import FITTERS
+
+    fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
+    model = (D.ThermoDesignModel if args.model == "thermodynamic" else D.SurfaceDesignModel)(
+        fit, args.draws
+    )
+    design = _design_from(args, args.volume_l)
+    grid = D.DesignGrid(model, x_c)
+    doc = D.design_document(model, design, charges, grid)
+    doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
+    doc["source"] = {
+        "recordings": str(rec.path),
+        "n_tests": len(rec.tests),
+        "n_readings": int(rec.n_points),
+        "seed": args.seed,
+        "converged": bool(fit.convergence.converged),
+        "warnings": fit.convergence.messages(_advice()),
+    }
+    curves = None
+    if args.out:
+        curves = {
+            float(p): D.sealed_curve(model, design, grid, charge_bar=p)
+            for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
+        }
+    _print_sealed(rec, model, doc)
+    if args.out:
+        from uq._report.design import write_design_sheet
+
+        page = write_design_sheet(
+            doc,
+            args.out,
+            curves=curves,
+            reconstructed=_reconstructed(args.file),
+            figure_format=args.figures,
+        )
+        print(f"  data sheet: {page}")
+    print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    emit_json(doc, args.json)
+    return 1 if (args.strict and not fit.convergence.converged) else 0
+
+
+def _advice():
+    from uq._inference.convergence import CLI_ADVICE
+
+    return CLI_ADVICE
+
+
+def _reconstructed(path) -> bool:
+    from uq._report.campaign import read_comments
+
+    return any("RECONSTRUCTED" in c.upper() for c in read_comments(path))
+
+
+FORCE_ONLY_WHY = (
+    "sealed rate, natural frequency and sealed curve omitted: a force-only campaign (no piston_mm column) "
+    "has no volume-derived area dV/dx, which the gas law of the sealed spring needs"
+)
+
+
+def _force_only(args, rec, stand, heights, pressures, t0) -> int:
+    from uq._derived import design as D
+    from uq._inference.summary import estimate
+    from uq._io.files import emit_json
+
+    model = D.force_only_cubics(rec, seed=args.seed, stand=stand, n_draws=args.draws)
+    x_c = args.height_mm * 1e-3
+    load = model.force_draws([x_c], [args.charge_bar])[:, 0]
+    doc = {
+        "height_m": x_c,
+        "charge_bar": args.charge_bar,
+        "volume_l": args.volume_l,
+        "polytropic": args.polytropic
+        if not isinstance(args.polytropic, tuple)
+        else list(args.polytropic),
+        "reservoir_l": args.reservoir_l,
+        "load_N": estimate(load),
+        "rate_N_per_m": None,
+        "natural_frequency_Hz": None,
+        "omitted": FORCE_ONLY_WHY,
+        "model": model.label,
+        "n_draws": int(load.size),
+        "level": D.LEVEL,
+        "assumptions": [
+            "the load is the element's isobaric force at the design height and charge pressure",
+            model.label,
+        ],
+        "isobaric": D.isobaric_table(model, pressures, heights, x_c),
+        "source": {
+            "recordings": str(rec.path),
+            "n_tests": len(rec.tests),
+            "n_readings": int(rec.n_points),
+            "seed": args.seed,
+            "converged": True,
+            "warnings": [],
+        },
+    }
+    e = doc["load_N"]
+    print(
+        f"{rec.path}: force-only campaign, {len(rec.tests)} tests, {rec.n_points} readings ({model.label})"
+    )
+    print(
+        f"  isobaric load at {args.height_mm:g} mm and {args.charge_bar:g} bar: {e['mean']:.0f} N "
+        f"[{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
+    )
+    print(f"  {FORCE_ONLY_WHY}")
+    if args.out:
+        from uq._report.design import write_design_sheet
+
+        page = write_design_sheet(
+            doc,
+            args.out,
+            curves=None,
+            reconstructed=_reconstructed(args.file),
+            figure_format=args.figures,
+        )
+        print(f"  data sheet: {page}")
+    print(f"  {time.perf_counter() - t0:.1f} s")
+    emit_json(doc, args.json)
+    return 0
+
+
+def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
+    return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
+
+
+def _print_sealed(rec, model, doc) -> None:
+    n = doc["polytropic"]
+    n_words = f"n = {n:g}" if not isinstance(n, list) else f"n in {n[0]:g}..{n[1]:g}"
+    res = f", reservoir {doc['reservoir_l']:g} L" if doc["reservoir_l"] else ""
+    print(
+        f"{rec.path}: {model.label}, {len(rec.tests)} tests, {rec.n_points} readings; sealed at "
+        f"{doc['height_m'] * 1e3:g} mm, {doc['charge_bar']:g} bar, {doc['volume_l']:g} L, {n_words}{res}"
+    )
+    print(
+        f"  load {_est(doc['load_N'])} N, rate {_est(doc['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
+        f"{_est(doc['natural_frequency_Hz'], 1, '.3f')} Hz (mean [90 % interval])"
+    )
+    if "transmissibility" in doc:
+        t = doc["transmissibility"]
+        print(
+            f"  at {t['forcing_Hz']:g} Hz: transmissibility {_est(t['transmissibility'], 1, '.3f')}, isolation "
+            f"{_est(t['isolation_pct'], 1, '.1f')} % (undamped)"
+        )
+    statement = doc["assumptions"][0]
+    at = min(
+        (i for i in (statement.find(k) for k in ("ASSUMED", "GIVEN", "how the volume")) if i >= 0),
+        default=0,
+    )
+    print(f"  {statement[at:]}")
+    c = doc["sealed_curve"]
+    if len(c["height_m"]):
+        print(
+            f"  sealed curve {c['height_m'][0] * 1e3:g}..{c['height_m'][-1] * 1e3:g} mm"
+            + (f" ({c['omitted_reason']})" if c["omitted_reason"] else "")
+        )
+    for w in doc["source"]["warnings"]:
+        print(f"  warning: {w}", file=sys.stderr)

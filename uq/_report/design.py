@@ -1,0 +1,263 @@
+"""The data sheet of a sealed spring (``uq design --out DIR``): rendering only, from the document
+``uq design --json`` writes (:func:`uq._derived.design.design_document` plus the isobaric table)
+and the sealed curves of the chart's charge pressures.
+
+What a catalogue prints, each value as posterior mean and 90 % interval: the isobaric load at the
+tested pressures and chosen heights, the volume increment and the effective area; at the design
+height, per charge pressure, the sealed load, rate and natural frequency; figures of the sealed
+load-deflection curves with their bands and of the natural frequency against the load (the
+catalogue's most read chart). Every assumption (the volume, how it changes with pressure, the
+polytropic exponent) is stated on the page. A force-only campaign gets the isobaric loads and the
+line saying why the rest is omitted.
+
+Written whole or not at all (:func:`uq._io.files.staged_folder`): ``design.html`` (figures
+embedded), ``design.csv`` (every table, long format), ``design.json`` (the document) and the
+figures beside them. The template is ``templates/design.html``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from uq._io.files import dumps_json, remove_stale, staged_folder
+from uq._report.html import Figure, _plt, check_format, encode, render
+
+PAGE = "design.html"
+#: the files the sheet writes, by pattern (for pruning what an earlier run left)
+OUTPUTS = ("design_*.png", "design_*.svg", PAGE, "design.csv", "design.json")
+
+
+def _colours(n: int):
+    plt = _plt()
+    cmap = plt.get_cmap("viridis")
+    return [cmap(0.85 * i / max(n - 1, 1)) for i in range(n)]
+
+
+def figure_sealed_curves(doc: dict, curves: dict):
+    """The sealed load-deflection curves, one per charge pressure of the chart (charged at the
+    design height), each with its 90 % band; the design height dotted."""
+    plt = _plt()
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.0, 4.4), layout="constrained")
+    cols = _colours(len(curves))
+    for c, (p, cv) in zip(cols, sorted(curves.items()), strict=True):
+        x = np.asarray(cv["height_m"]) * 1e3
+        if x.size == 0:
+            continue
+        for a, key, scale in ((ax, "load_N", 1e-3), (ax2, "rate_N_per_m", 1e-3)):
+            b = cv[key]
+            a.fill_between(
+                x,
+                np.asarray(b["q05"]) * scale,
+                np.asarray(b["q95"]) * scale,
+                color=c,
+                alpha=0.3,
+                lw=0,
+            )
+            a.plot(x, np.asarray(b["mean"]) * scale, color=c, lw=1.2, label=f"{p:g} bar")
+    for a in (ax, ax2):
+        a.axvline(doc["height_m"] * 1e3, color="k", ls=":", lw=1)
+        a.set_xlabel("height x, mm")
+        a.grid(alpha=0.3)
+    ax.set_ylabel("sealed load, kN")
+    ax2.set_ylabel("sealed vertical rate, kN/m")
+    ax.set_title("Sealed load-deflection curves, 90 % bands", fontsize=10)
+    ax2.set_title("Sealed rate along the stroke, 90 % bands", fontsize=10)
+    ax.legend(title="charge", fontsize=7, title_fontsize=7, ncol=2)
+    return fig
+
+
+def figure_frequency_chart(doc: dict):
+    """Natural frequency against load at the design height, one point per charge pressure with
+    its 90 % intervals in both directions (the catalogue's chart)."""
+    plt = _plt()
+    rows = doc["frequency_chart"]["rows"]
+    fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
+    L = np.array([[r["load_N"][k] for k in ("mean", "q05", "q95")] for r in rows]) * 1e-3
+    F = np.array([[r["natural_frequency_Hz"][k] for k in ("mean", "q05", "q95")] for r in rows])
+    ax.fill_between(
+        L[:, 0], F[:, 1], F[:, 2], color="tab:blue", alpha=0.25, lw=0, label="90 % interval"
+    )
+    ax.errorbar(
+        L[:, 0],
+        F[:, 0],
+        xerr=[L[:, 0] - L[:, 1], L[:, 2] - L[:, 0]],
+        yerr=[F[:, 0] - F[:, 1], F[:, 2] - F[:, 0]],
+        fmt="o-",
+        color="tab:blue",
+        ms=4,
+        lw=1,
+        capsize=2,
+        label="posterior mean",
+    )
+    for r, x, y in zip(rows, L[:, 0], F[:, 0], strict=True):
+        ax.annotate(
+            f"{r['charge_bar']:g} bar",
+            (x, y),
+            textcoords="offset points",
+            xytext=(4, 5),
+            fontsize=7,
+        )
+    ax.set_xlabel("load carried at the design height, kN")
+    ax.set_ylabel("natural frequency, Hz")
+    ax.set_title(
+        f"Natural frequency vs load at {doc['height_m'] * 1e3:g} mm (charged and closed there)",
+        fontsize=10,
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return fig
+
+
+def figure_isobaric(doc: dict):
+    """The isobaric loads of the table against height, one line per pressure, 90 % bands."""
+    plt = _plt()
+    rows = doc["isobaric"]
+    ps = sorted({r["pressure_bar"] for r in rows})
+    fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
+    for c, p in zip(_colours(len(ps)), ps, strict=True):
+        rr = sorted((r for r in rows if r["pressure_bar"] == p), key=lambda r: r["height_m"])
+        x = np.array([r["height_m"] for r in rr]) * 1e3
+        m, lo, hi = (np.array([r["load_N"][k] for r in rr]) * 1e-3 for k in ("mean", "q05", "q95"))
+        ax.fill_between(x, lo, hi, color=c, alpha=0.3, lw=0)
+        ax.plot(x, m, "o-", color=c, ms=2.5, lw=1, label=f"{p:g} bar")
+    ax.axvline(doc["height_m"] * 1e3, color="k", ls=":", lw=1)
+    ax.set_xlabel("height x, mm")
+    ax.set_ylabel("isobaric load, kN")
+    ax.set_title("Isobaric load at the tested pressures, 90 % bands", fontsize=10)
+    ax.legend(fontsize=6, ncol=2)
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def _est_row(prefix: dict, quantity: str, unit: str, e: dict | None, scale: float = 1.0) -> dict:
+    row = dict(prefix, quantity=quantity, unit=unit)
+    for k in ("mean", "sd", "q05", "q95"):
+        row[k] = "" if e is None else f"{float(e[k]) * scale:.6g}"
+    return row
+
+
+CSV_COLUMNS = (
+    "table",
+    "pressure_bar",
+    "height_mm",
+    "charge_bar",
+    "quantity",
+    "unit",
+    "mean",
+    "sd",
+    "q05",
+    "q95",
+)
+
+
+def sheet_csv(doc: dict) -> str:
+    """Every table of the sheet in one long CSV: one estimate a row (mean, sd, 5 % and 95 %)."""
+    rows = []
+    for r in doc["isobaric"]:
+        pre = {
+            "table": "isobaric",
+            "pressure_bar": f"{r['pressure_bar']:g}",
+            "height_mm": f"{r['height_m'] * 1e3:g}",
+        }
+        rows.append(_est_row(pre, "load", "N", r["load_N"]))
+        rows.append(_est_row(pre, "effective_area_P_over_p", "cm2", r["feff_m2"], 1e4))
+        if "volume_area_m2" in r:
+            rows.append(_est_row(pre, "volume_derived_area_dV_dx", "cm2", r["volume_area_m2"], 1e4))
+            rows.append(
+                _est_row(pre, "volume_increment_from_design_height", "L", r["volume_increment_l"])
+            )
+    h = f"{doc['height_m'] * 1e3:g}"
+    if doc.get("rate_N_per_m") is not None:
+        for r in doc["frequency_chart"]["rows"]:
+            pre = {
+                "table": "sealed_at_design_height",
+                "height_mm": h,
+                "charge_bar": f"{r['charge_bar']:g}",
+            }
+            rows.append(_est_row(pre, "load", "N", r["load_N"]))
+            rows.append(_est_row(pre, "rate", "N/m", r["rate_N_per_m"]))
+            rows.append(_est_row(pre, "natural_frequency", "Hz", r["natural_frequency_Hz"]))
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n", restval="")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _isobaric_matrix(doc: dict, key: str, scale: float):
+    """(pressures bar, [(height mm, [estimate scaled per pressure])]) of one isobaric quantity."""
+    rows = doc["isobaric"]
+    hs = sorted({r["height_m"] for r in rows})
+    ps = sorted({r["pressure_bar"] for r in rows})
+    cell = {(r["height_m"], r["pressure_bar"]): r.get(key) for r in rows}
+    out = []
+    for h in hs:
+        line = []
+        for p in ps:
+            e = cell[(h, p)]
+            line.append(
+                None if e is None else {k: float(e[k]) * scale for k in ("mean", "q05", "q95")}
+            )
+        out.append((h * 1e3, line))
+    return ps, out
+
+
+def write_design_sheet(
+    doc: dict,
+    out_dir,
+    *,
+    curves: dict | None = None,
+    reconstructed: bool = False,
+    figure_format: str = "png",
+) -> Path:
+    """``out_dir/design.html`` with ``design.csv``, ``design.json`` and the figures (PNG or SVG),
+    written together into a staged folder and moved in at the end; returns the page's path."""
+    check_format(figure_format)
+    out = Path(out_dir)
+    sealed = doc.get("rate_N_per_m") is not None
+    figs = {"design_isobaric": (figure_isobaric(doc), "isobaric load against height by pressure")}
+    if sealed:
+        if curves:
+            figs["design_sealed"] = (
+                figure_sealed_curves(doc, curves),
+                "sealed load-deflection and rate curves with 90 % bands",
+            )
+        figs["design_frequency"] = (figure_frequency_chart(doc), "natural frequency against load")
+    figures = {
+        stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
+        for stem, (fig, alt) in figs.items()
+    }
+    tables = {
+        key: _isobaric_matrix(doc, key, scale)
+        for key, scale in (
+            ("load_N", 1e-3),
+            ("feff_m2", 1e4),
+            ("volume_area_m2", 1e4),
+            ("volume_increment_l", 1.0),
+        )
+        if key in doc["isobaric"][0]
+    }
+    page = render(
+        PAGE,
+        doc=doc,
+        sealed=sealed,
+        tables=tables,
+        figures=figures,
+        reconstructed=reconstructed,
+        source=doc["source"],
+        curve=doc.get("sealed_curve"),
+    )
+    with staged_folder(out, last=(PAGE,)) as stage:
+        for f in figures.values():
+            (stage / f.name).write_bytes(f.data)
+        (stage / "design.csv").write_text(sheet_csv(doc), encoding="utf-8")
+        (stage / "design.json").write_text(dumps_json(doc), encoding="utf-8")
+        (stage / PAGE).write_text(page, encoding="utf-8")
+    remove_stale(
+        out, OUTPUTS, keep={f.name for f in figures.values()} | {PAGE, "design.csv", "design.json"}
+    )
+    return out / PAGE

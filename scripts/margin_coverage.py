@@ -1,7 +1,8 @@
 """Coverage of the design-margin answers (``uq margin``) on coarse pressure grids, over the whole
-stroke. Writes reports/margin-coverage/coverage.json and summary.md.
+stroke. Writes coverage.json and summary.md into ``--out`` (default reports/margin-coverage/SPRING;
+committed: reports/margin-coverage/n50/summary.md and reports/margin-coverage/n50-smooth/summary.md).
 
-    .venv/bin/python scripts/margin_coverage.py --reps 20 [--out reports/margin-coverage] [--tiny]
+    .venv/bin/python scripts/margin_coverage.py --spring n50-smooth --reps 8 [--grids ...] [--tiny]
 
 Each replication: the virtual stand records the N-50 spring (Table 1's cubics at the tested
 pressures, PCHIP between them: the truth of data/n50) at a coarse grid of set pressures (3 to 5
@@ -207,7 +208,7 @@ def markdown(summary: dict, command: str, seconds: float) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--reps", type=int, default=20)
-    ap.add_argument("--out", default=str(ROOT / "reports" / "margin-coverage"))
+    ap.add_argument("--out", help="output folder (default reports/margin-coverage/SPRING)")
     ap.add_argument(
         "--spring",
         choices=("n50", "n50-smooth"),
@@ -237,7 +238,7 @@ def main(argv=None) -> int:
     command = "python scripts/margin_coverage.py " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
-    out = Path(args.out)
+    out = Path(args.out or ROOT / "reports" / "margin-coverage" / args.spring)
     out.mkdir(parents=True, exist_ok=True)
     write_text_atomic(
         out / "coverage.json",

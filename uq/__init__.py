@@ -102,6 +102,8 @@ _API = {
     "Orders": "_models.surface",
     "margin": "_derived.margin",
     "SurfaceAnswer": "_derived.margin",
+    "save_answer": "_derived.margin",
+    "load_answer": "_derived.margin",
     "diagnose": "_diagnose.engine",
     "check": ("_derived.check", "check_documents"),
     "StandDescription": "_data.stand_description",
@@ -110,6 +112,8 @@ _API = {
     "SealedDesign": "_derived.design",
     "SurfaceDesignModel": "_derived.design",
     "design_document": "_derived.design",
+    "design_margin": "_derived.design",
+    "ThermoDesignModel": "_derived.design",
     "simulate_sealed": "_stand.sealed_test",
 }
 

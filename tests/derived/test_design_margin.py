@@ -122,8 +122,11 @@ def test_given_dvdp_softens_as_the_gas_law_says():
 def test_refusals():
     m = Cylinders()
     d = SealedDesign(X_C, 5.0, 3.0)
-    with pytest.raises(InputError, match="--max-frequency-hz"):
+    from uq._cli.main import PARAM_OPTIONS
+
+    with pytest.raises(InputError, match="max_frequency_Hz") as exc:
         design_margin(m, X_C, W, d, 0.95, max_frequency_Hz=-1.0)
+    assert str(exc.value.for_cli(PARAM_OPTIONS)).startswith("option --max-frequency-hz:")
     with pytest.raises(InputError, match="load_N"):
         design_margin(m, X_C, 1e7, d, 0.95)  # not carried within the tested pressures
 

@@ -232,9 +232,9 @@ def test_frequency_transmissibility_and_refusals():
     assert np.allclose(T, [1.0, 1.0 / 3.0, 1.0 / 7.0])
     assert np.allclose(isolation_pct(T), [0.0, 200.0 / 3.0, 600.0 / 7.0])
     assert transmissibility(0.5, 1.0) == pytest.approx(4.0 / 3.0) and isolation_pct(4.0 / 3.0) < 0
-    with pytest.raises(InputError, match="--polytropic"):
+    with pytest.raises(InputError, match="^polytropic:"):
         check_polytropic(1.6)
-    with pytest.raises(InputError, match="--polytropic"):
+    with pytest.raises(InputError, match="^polytropic:"):
         sealed_path(potential_element(0.028), HEIGHTS, Charge(X_C, P_C, 3.3e-3, 0.9))
-    with pytest.raises(InputError, match="--volume-l"):
+    with pytest.raises(InputError, match="^volume_l:"):
         sealed_path(potential_element(0.028), HEIGHTS, Charge(X_C, P_C, -1e-3))

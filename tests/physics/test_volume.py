@@ -72,9 +72,9 @@ def test_charge_volume_draws():
     assert d.std() == pytest.approx(0.1e-3, rel=0.03)
     assert np.all(charge_volume_draws(3.3e-3, 0.0, 5, rng) == 3.3e-3)
     for v, sd, opt in (
-        (-1e-3, 0.0, "--volume-l"),
-        (3e-3, 1e-3, "--volume-sd-l"),
-        (3e-3, -1.0, "--volume-sd-l"),
+        (-1e-3, 0.0, "^volume_l:"),
+        (3e-3, 1e-3, "^volume_sd_l:"),
+        (3e-3, -1.0, "^volume_sd_l:"),
     ):
         with pytest.raises(InputError, match=opt):
             charge_volume_draws(v, sd, 10, rng)

@@ -109,6 +109,18 @@ PARAM_OPTIONS = {
     "step_m": "--step-mm",
     "x_min_m": "--x-min-mm",
     "x_max_m": "--x-max-mm",
+    "charge_bar": "--charge-bar",
+    "volume_l": "--volume-l",
+    "volume_sd_l": "--volume-sd-l",
+    "polytropic": "--polytropic",
+    "reservoir_l": "--reservoir-l",
+    "forcing_Hz": "--forcing-hz",
+    "dvdp_l_per_bar": "--dvdp-l-per-bar",
+    "rate_tolerance_pct": "--rate-tolerance-pct",
+    "max_frequency_Hz": "--max-frequency-hz",
+    "rate_target_N_per_m": "--rate-target-N-per-m",
+    "force_limit_N": "--force-limit-N",
+    "effects": "--effect",
 }
 
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (

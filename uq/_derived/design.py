@@ -124,44 +124,53 @@ def check_design(model, design: SealedDesign) -> None:
     (hlo, hhi), (plo, phi) = model.height_range_m, model.pressure_range_bar
     if not hlo - 1e-9 <= design.height_m <= hhi + 1e-9:
         raise InputError(
-            f"option --height-mm: {design.height_m * 1e3:g} mm is outside the tested heights "
-            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model does not extrapolate"
+            f"height_m: {design.height_m * 1e3:g} mm is outside the tested heights "
+            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model does not extrapolate",
+            param="height_m",
         )
     if not plo - 1e-9 <= design.charge_bar <= phi + 1e-9:
         raise InputError(
-            f"option --charge-bar: {design.charge_bar:g} bar is outside the tested pressures "
-            f"{plo:g}..{phi:g} bar; the model does not extrapolate"
+            f"charge_bar: {design.charge_bar:g} bar is outside the tested pressures "
+            f"{plo:g}..{phi:g} bar; the model does not extrapolate",
+            param="charge_bar",
         )
     if design.volume_l is None or not (np.isfinite(design.volume_l) and design.volume_l > 0):
         raise InputError(
-            "option --volume-l: the sealed spring needs the internal volume at the design height and "
+            "volume_l: the sealed spring needs the internal volume at the design height and "
             "charge pressure (litres; measure it, e.g. by filling the element with water: the stand gives "
-            "only volume changes)"
+            "only volume changes)",
+            param="volume_l",
         )
     lo, hi = design.polytropic_range
     if not (POLYTROPIC_RANGE[0] <= lo <= hi <= POLYTROPIC_RANGE[1]):
         raise InputError(
-            f"option --polytropic: expected a value or a range within {POLYTROPIC_RANGE[0]:g} (isothermal) .. "
-            f"{POLYTROPIC_RANGE[1]:g} (adiabatic), got {lo:g}..{hi:g}"
+            f"polytropic: expected a value or a range within {POLYTROPIC_RANGE[0]:g} (isothermal) .. "
+            f"{POLYTROPIC_RANGE[1]:g} (adiabatic), got {lo:g}..{hi:g}",
+            param="polytropic",
         )
     if not (np.isfinite(design.reservoir_l) and design.reservoir_l >= 0):
         raise InputError(
-            f"option --reservoir-l: expected a volume >= 0 L, got {design.reservoir_l:g}"
+            f"reservoir_l: expected a volume >= 0 L, got {design.reservoir_l:g}",
+            param="reservoir_l",
         )
     d = design.dvdp_l_per_bar
     if isinstance(d, str):
         if d != "model" or not hasattr(model, "volume_pressure_draws"):
             raise InputError(
-                f"option --dvdp-l-per-bar: '{d}': expected a number (L/bar), or 'model' for a model with its "
-                f"own dV/dp_u ({model.label} has none)"
+                f"dvdp_l_per_bar: '{d}': expected a number (L/bar), or 'model' for a model with its "
+                f"own dV/dp_u ({model.label} has none)",
+                param="dvdp_l_per_bar",
             )
     elif not np.isfinite(d):
-        raise InputError("option --dvdp-l-per-bar: expected a finite number of litres per bar")
+        raise InputError(
+            "dvdp_l_per_bar: expected a finite number of litres per bar", param="dvdp_l_per_bar"
+        )
     if design.forcing_Hz is not None and not (
         np.isfinite(design.forcing_Hz) and design.forcing_Hz > 0
     ):
         raise InputError(
-            f"option --forcing-hz: expected a positive frequency, got {design.forcing_Hz:g}"
+            f"forcing_Hz: expected a positive frequency, got {design.forcing_Hz:g}",
+            param="forcing_Hz",
         )
 
 
@@ -607,30 +616,34 @@ def design_margin(
     from uq._derived.margin import pressure_needed
 
     if not 0.0 < prob < 1.0:
-        raise InputError(f"option --prob: expected a probability between 0 and 1, got {prob:g}")
+        raise InputError(
+            f"prob: expected a probability between 0 and 1, got {prob:g}", param="prob"
+        )
     if not hasattr(model, "volume_area_draws"):
         raise InputError(
             f"design margins need a model with the volume-derived area dV/dx; the {model.label} has none "
-            "(answer with the surface model: --model surface, or a fit saved by uq surface --out)"
+            "(answer with the surface model, or a fit of it that uq surface saved)"
         )
     for name, v in (
-        ("--max-frequency-hz", max_frequency_Hz),
-        ("--rate-target-N-per-m", rate_target_N_per_m),
-        ("--force-limit-N", force_limit_N),
+        ("max_frequency_Hz", max_frequency_Hz),
+        ("rate_target_N_per_m", rate_target_N_per_m),
+        ("force_limit_N", force_limit_N),
     ):
         if v is not None and not (np.isfinite(v) and v > 0):
-            raise InputError(f"option {name}: expected a positive number, got {v:g}")
+            raise InputError(f"{name}: expected a positive number, got {v:g}", param=name)
     if not (np.isfinite(rate_tolerance_pct) and rate_tolerance_pct > 0):
         raise InputError(
-            f"option --rate-tolerance-pct: expected a positive percentage, got {rate_tolerance_pct:g}"
+            f"rate_tolerance_pct: expected a positive percentage, got {rate_tolerance_pct:g}",
+            param="rate_tolerance_pct",
         )
     if hasattr(model, "thinned") and grid is None:  # a saved answer's draws: at most DEFAULT_DRAWS
         model = model.thinned(DEFAULT_DRAWS)
     p_need = pressure_needed(model, height_m, load_N)
     if not np.all(np.isfinite(p_need)):
         raise InputError(
-            f"option --load-N: {load_N:g} N at {height_m * 1e3:g} mm lies at the edge of the tested pressures in part "
-            "of the posterior; choose a load further inside"
+            f"load_N: {load_N:g} N at {height_m * 1e3:g} mm lies at the edge of the tested pressures in part "
+            "of the posterior; choose a load further inside",
+            param="load_N",
         )
     design = SealedDesign(
         height_m,

@@ -551,7 +551,7 @@ def load_answer(path):
     path = str(path)
     if not Path(path).is_file():
         raise InputError(
-            f"{path}: no such file (option --fit names a file written by uq margin --save-fit or uq surface --out)"
+            f"{path}: no such file (saved answers are written by uq.save_answer, by uq margin and by uq surface)"
         )
     try:
         with xr.open_dataset(path, engine="h5netcdf") as root:
@@ -565,7 +565,7 @@ def load_answer(path):
     if attrs.get("uq_file_kind") != ANSWER_KIND:
         raise InputError(
             f"{path}: not a saved margin answer (no uq_file_kind = '{ANSWER_KIND}'); "
-            "write one with uq margin --save-fit or uq surface --out"
+            "write one with uq.save_answer, uq margin or uq surface"
         )
     version = int(attrs.get("uq_format_version", -1))
     if version != ANSWER_FORMAT_VERSION:

@@ -86,8 +86,9 @@ def check_polytropic(n) -> np.ndarray:
     lo, hi = POLYTROPIC_RANGE
     if not np.all(np.isfinite(a)) or np.any(a < lo - 1e-12) or np.any(a > hi + 1e-12):
         raise InputError(
-            f"option --polytropic: expected {lo:g} (isothermal) .. {hi:g} (adiabatic), got "
-            f"{np.ravel(a)[(np.ravel(a) < lo) | (np.ravel(a) > hi) | ~np.isfinite(np.ravel(a))][0]:g}"
+            f"polytropic: expected {lo:g} (isothermal) .. {hi:g} (adiabatic), got "
+            f"{np.ravel(a)[(np.ravel(a) < lo) | (np.ravel(a) > hi) | ~np.isfinite(np.ravel(a))][0]:g}",
+            param="polytropic",
         )
     return a
 
@@ -160,15 +161,20 @@ def sealed_path(
     n = _col(check_polytropic(charge.polytropic))
     v_r = float(charge.reservoir_m3)
     if not (np.isfinite(v_r) and v_r >= 0):
-        raise InputError(f"option --reservoir-l: expected a volume >= 0, got {v_r * 1e3:g} L")
+        raise InputError(
+            f"reservoir_l: expected a volume >= 0, got {v_r * 1e3:g} L", param="reservoir_l"
+        )
     v_c = _col(charge.volume_m3)
     if np.any(~np.isfinite(v_c)) or np.any(v_c <= 0):
         raise InputError(
-            f"option --volume-l: the internal volume must be positive, got {float(np.min(v_c)) * 1e3:g} L"
+            f"volume_l: the internal volume must be positive, got {float(np.min(v_c)) * 1e3:g} L",
+            param="volume_l",
         )
     p_c = _col(charge.overpressure_pa)
     if np.any(p_c + p_atm <= 0):
-        raise InputError("option --charge-bar: the absolute charge pressure must be positive")
+        raise InputError(
+            "charge_bar: the absolute charge pressure must be positive", param="charge_bar"
+        )
     # the element's volume is known up to a constant: V_c fixes it at the charge point
     v_shift = v_c - element.volume_m3(np.array([float(charge.height_m)]), p_c)
     log_k = np.log(p_c + p_atm) + n * np.log(v_c + v_r)

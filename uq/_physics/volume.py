@@ -46,16 +46,19 @@ def charge_volume_draws(volume_m3: float, sd_m3: float, n_draws: int, rng: np.ra
     posterior (the volume is measured apart from the isobaric campaign); sd 0 gives the value."""
     if not (np.isfinite(volume_m3) and volume_m3 > 0):
         raise InputError(
-            f"option --volume-l: expected a positive internal volume in litres, got {volume_m3 * L_PER_M3:g}"
+            f"volume_l: expected a positive internal volume in litres, got {volume_m3 * L_PER_M3:g}",
+            param="volume_l",
         )
     if not (np.isfinite(sd_m3) and sd_m3 >= 0):
         raise InputError(
-            f"option --volume-sd-l: expected a standard deviation >= 0 in litres, got {sd_m3 * L_PER_M3:g}"
+            f"volume_sd_l: expected a standard deviation >= 0 in litres, got {sd_m3 * L_PER_M3:g}",
+            param="volume_sd_l",
         )
     if sd_m3 > volume_m3 / 4:
         raise InputError(
-            f"option --volume-sd-l: {sd_m3 * L_PER_M3:g} L is more than a quarter of the volume "
-            f"{volume_m3 * L_PER_M3:g} L; a normal uncertainty would give non-positive volumes: measure V more closely"
+            f"volume_sd_l: {sd_m3 * L_PER_M3:g} L is more than a quarter of the volume "
+            f"{volume_m3 * L_PER_M3:g} L; a normal uncertainty would give non-positive volumes: measure V more closely",
+            param="volume_sd_l",
         )
     if sd_m3 == 0:
         return np.full(n_draws, float(volume_m3))

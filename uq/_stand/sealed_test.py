@@ -48,7 +48,8 @@ def make_spring(spring_name: str, piston_area_m2: float = PAPER_PISTON_AREA_M2):
     """The stand's spring object by name (``uq._stand.simulator.SPRINGS``)."""
     if spring_name not in SPRINGS:
         raise InputError(
-            f"option --spring: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}"
+            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
+            param="spring_name",
         )
     return SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
 
@@ -71,8 +72,9 @@ def true_volume_m3(
     bad = [k for k in effects if k not in SEALED_EFFECTS]
     if bad:
         raise InputError(
-            f"option --effect: {', '.join(bad)} has no sealed truth (a volume that is a function of height "
-            f"and pressure alone); a sealed test takes {', '.join(SEALED_EFFECTS)}"
+            f"effects: {', '.join(bad)} has no sealed truth (a volume that is a function of height "
+            f"and pressure alone); a sealed test takes {', '.join(SEALED_EFFECTS)}",
+            param="effects",
         )
     x = np.asarray(height_m, float)
     x0 = np.array(spring.x0_m)

@@ -149,3 +149,41 @@ def test_every_public_result_has_a_short_repr_and_a_summary(n50_fit):
     for obj in (n50_fit, n50_fit.tests[0], n50_fit.tests[0].posterior, bands):
         assert isinstance(obj.summary(), pd.DataFrame) and len(obj.summary())
     assert n50_fit.to_json()["tests"] and bands.to_json()["tests_at_x0"]
+
+
+def test_library_errors_never_name_command_line_options():
+    """Every InputError the library raises (outside uq/_cli) speaks of the library's parameters: a
+    notebook user has no ``--load-N``. The command line rewrites them (InputError.for_cli)."""
+    import ast
+    import re
+    from pathlib import Path
+
+    option = re.compile(r"(^|[\s(`'\"])--[a-z]")
+    root = Path(uq.__file__).parent
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if path.relative_to(root).parts[0] == "_cli":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "id", getattr(node.func, "attr", None)) == "InputError"
+            ):
+                continue
+            for part in ast.walk(node):
+                if isinstance(part, ast.Constant) and isinstance(part.value, str):
+                    if option.search(part.value):
+                        found.append(f"{path.relative_to(root)}:{node.lineno}: {part.value[:60]}")
+    assert not found, "\n".join(found)
+
+
+def test_cli_words_library_errors_with_its_options():
+    from uq._cli.main import PARAM_OPTIONS
+    from uq._io.errors import InputError
+
+    e = InputError("sheet: 'Daten': x.xlsx has no such sheet", param="sheet").for_cli(PARAM_OPTIONS)
+    assert str(e) == "option --sheet: 'Daten': x.xlsx has no such sheet"
+    e = InputError("x.csv: two clusters; give a smaller `pressure_tolerance_bar`").for_cli(
+        PARAM_OPTIONS
+    )
+    assert str(e) == "x.csv: two clusters; give a smaller --pressure-tolerance-bar"

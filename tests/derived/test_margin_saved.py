@@ -264,12 +264,8 @@ def test_queries_without_saved_fit_fits_once(campaign, cubics_saved, monkeypatch
             "pressure_bar",
             ["outside the tested pressures"],
         ),
-        (
-            "height_mm,load_N\n110,8000\n110,90000\n",
-            3,
-            "load_N",
-            ["outside what the tested pressures"],
-        ),
+        # a load the tested pressures cannot carry is the row's own refusal, not the file's:
+        # test_queries_row_the_model_cannot_answer_gets_its_own_refusal
         ("height_mm,load\n110,8000\n", 1, "load", ["unknown column"]),
     ],
 )
@@ -520,3 +516,21 @@ def test_design_margin_time_from_the_saved_fit(surface_saved, capsys):
             f"stroke) {t2 - t1:.2f} s, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
         )
     assert res["frequency_below"]["max_frequency_Hz"] == 2.3
+
+
+def test_queries_row_the_model_cannot_answer_gets_its_own_refusal(surface_saved, tmp_path, capsys):
+    """A row whose load the tested pressures cannot carry is refused on its own row (named by file
+    and row); the other rows are answered, and the JSON says which is which."""
+    fit, original, _ = surface_saved
+    q = tmp_path / "q.csv"
+    q.write_text("height_mm,load_N\n110,8000\n110,9000000\n100,9000\n")
+    out = tmp_path / "q.json"
+    assert run(["margin", "--fit", fit, "--queries", q, "--json", out]) == 0
+    res = json.loads(out.read_text())
+    assert [("refused" in r) for r in res] == [False, True, False]
+    assert "row 3" in res[1]["refused"] and "load_N" in res[1]["refused"]
+    assert res[1]["row"] == 3 and res[1]["load_N"] == 9000000.0
+    assert res[0]["pressure_bar_needed"]["mean"] > 0 and res[2]["pressure_bar_needed"]["mean"] > 0
+    captured = capsys.readouterr()
+    assert re.search(r"^\s+3\s+110\s+9e\+06\s+refused: ", captured.out, re.M)
+    assert "1 of 3 queries refused (rows 3)" in captured.err

@@ -3,6 +3,7 @@ the answering model, printing)."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -357,6 +358,22 @@ def answer_query(ans, info: dict, q: dict) -> dict:
         raise InputError(f"{_place(q, column)}:{rest}") from None
 
 
+def _answer_or_refusal(ans, info: dict, q: dict, per_row: bool) -> dict:
+    """:func:`answer_query`; for a row of a queries file a refusal is that row's answer
+    (``{"row", "height_m", "load_N", "refused"}``) instead of the end of the command."""
+    try:
+        return answer_query(ans, info, q)
+    except InputError as exc:
+        if not per_row:
+            raise
+        return {
+            "row": q["row"],
+            "height_m": q["height_mm"] * 1e-3,
+            "load_N": q["load_N"],
+            "refused": str(exc),
+        }
+
+
 def _check_usage(args) -> None:
     """Which sources and outputs go together; before anything is read."""
     from uq._cli.common import check_output_path
@@ -418,12 +435,13 @@ def command_margin(args) -> int:
             _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
         ans, info, diagnostics = _fit_and_choose(args, rec, stand)
         source = rec.path
-    results = [
-        answer_query(ans, info, q) for q in queries
-    ]  # every answer before anything is written
+    # every answer before anything is written; with a queries file each row gets its own answer
+    # or its own refusal (a row the model cannot answer does not abort the others)
+    results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]
     if _design_asked(args):
         for q, r in zip(queries, results, strict=True):
-            r["design"] = _design_answer(args, ans, q)
+            if "refused" not in r:
+                r["design"] = _design_answer(args, ans, q)
     if args.fit is not None:
         print(
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
@@ -456,6 +474,13 @@ def command_margin(args) -> int:
             _print_design(q, r["design"], len(queries) > 1)
     for w in diagnostics["warnings"]:
         print(f"  warning{' (from the saved fit)' if args.fit is not None else ''}: {w}")
+    refused = [q["row"] for q, r in zip(queries, results, strict=True) if "refused" in r]
+    if refused:
+        print(
+            f"uq margin: {len(refused)} of {len(queries)} queries refused (rows "
+            f"{', '.join(map(str, refused))}); the others are answered",
+            file=sys.stderr,
+        )
     if queries or args.json is not None:
         emit_json(results if args.queries else results[0], args.json)
     return 1 if (getattr(args, "strict", False) and not diagnostics["converged"]) else 0
@@ -517,6 +542,11 @@ def _print_table(source, ans, info, queries, results) -> None:
         "   row  height_mm    load_N  prob  p_needed_bar (90 %)        p_for_prob  force at p_bar (90 %)      stroke_mm"
     )
     for q, r in zip(queries, results, strict=True):
+        if "refused" in r:
+            print(
+                f"  {q['row']:>4}  {q['height_mm']:9g}  {q['load_N']:8g}  refused: {r['refused']}"
+            )
+            continue
         e = r["pressure_bar_needed"]
         force = stroke = ""
         if "force_at_pressure" in r:

@@ -184,3 +184,25 @@ def test_cubic_interpolation_coverage(tmp_path):
     lo = min(k for k in range(n + 1) if b.cdf(k) > 5e-4)
     hi = max(k for k in range(n + 1) if b.sf(k - 1) > 5e-4)
     assert lo <= sum(covered) <= hi, covered
+
+
+def test_pressure_needed_where_the_force_dips_away_from_the_load():
+    """A force that falls with pressure at low pressures (the 0.1-bar test's negative force near
+    x_max bends the cubics' interpolation) is no reason to refuse a load it reaches once; a load
+    it reaches at two pressures is refused with that cause."""
+
+    class Dip:
+        height_range_m, pressure_range_bar = (0.065, 0.155), (0.1, 10.0)
+
+        def force_draws(self, x, p):
+            p = np.asarray(p, float)
+            scale = np.linspace(0.99, 1.01, 50)[:, None]
+            return scale * (1000.0 * p + 800.0 / p)  # falls below 0.894 bar, rises above
+
+    d = pressure_needed(Dip(), 0.150, 9000.0)  # crossed once, near 8.9 bar
+    truth = [
+        (9000.0 / s + np.sqrt((9000.0 / s) ** 2 - 4 * 1000 * 800)) / 2000 for s in (0.99, 1.01)
+    ]
+    assert np.all((d >= min(truth) - 0.02) & (d <= max(truth) + 0.02))
+    with pytest.raises(InputError, match="more than one overpressure"):
+        pressure_needed(Dip(), 0.150, 5000.0)  # down through 5000 N below 1 bar, up again at 4.2

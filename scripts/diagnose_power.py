@@ -5,7 +5,7 @@
 (``--tiny --out DIR``: a small layout, short chains, two seeds on one rung of one mechanism, to
 check that the script runs; tests/test_scripts.py does so. Not a measurement.)
 
-For each mechanism of CONTRACT.md section 4 (uq._physics.mechanisms.MECHANISMS), campaigns of the
+For each mechanism of docs/formats.md section 3 (uq._physics.mechanisms.MECHANISMS), campaigns of the
 paper's layout (0.1, 1..10 bar, 155..65 mm in 5 mm steps, both branches) from the virtual stand
 (spring ``n50-traditional``, the paper's stand: Gaussian errors of the engine's own budget) with
 the mechanism concealed at a magnitude on a coarse ladder (factor 2 between rungs). On every
@@ -50,7 +50,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-#: mechanism -> ladder (units of CONTRACT.md section 4), factor 2 apart; START its first rung.
+#: mechanism -> ladder (units of docs/formats.md section 3), factor 2 apart; START its first rung.
 LADDERS = {
     "pressure_dependent_area": (0.0005, 0.001, 0.002, 0.004),
     "casing_force": (10.0, 20.0, 40.0, 80.0),

@@ -5,7 +5,7 @@
 (``--small --limit N --out DIR``: the first N campaigns on small layouts with short chains, to
 check that the script runs; tests/test_scripts.py does so. Not a proof.)
 
-For each mechanism of docs/formats.md section 3 (CONTRACT.md section 4), among them the elastic
+For each mechanism of docs/formats.md section 3, among them the elastic
 casing whose stored energy follows a potential (force and volume from one G(x, p_u), the Maxwell
 relation holds), at two magnitudes (clearly visible; near the detection limit), on two stand
 layouts (the paper's; pressures 0.5..6.5 bar, 70..150 mm in 2.5 mm steps), with several seeds;
@@ -48,7 +48,7 @@ MECHS = (
 MAGNITUDES = {  # (clearly visible, near the detection limit), units of docs/formats.md section 3
     "pressure_dependent_area": (0.01, 0.002),
     "casing_force": (200.0, 40.0),
-    # a casing whose energy follows a potential (CONTRACT.md section 4): Table 1 says about 0.02
+    # a casing whose energy follows a potential (docs/formats.md section 3): Table 1 says about 0.02
     "elastic_casing": (0.02, 0.002),
     "hysteresis": (0.02, 0.005),
     "force_offset": (56.3, 12.0),
@@ -353,7 +353,7 @@ def markdown(s: dict, results: list[dict]) -> str:
         "",
         f"Regenerate: `.venv/bin/python scripts/diagnose_proof.py --seeds {s.get('seeds', 'N')}`. Spring "
         "`n50-traditional` (obeys the traditional theory exactly) with effects concealed by the virtual "
-        "stand (the definitions of CONTRACT.md section 4; `elastic_casing`: a casing whose stored "
+        "stand (the definitions of docs/formats.md section 3; `elastic_casing`: a casing whose stored "
         "energy follows a potential, so force and volume obey the Maxwell relation).",
         "",
         f"Runs: {s['n_runs']}. Layouts: paper (0.1, 1..10 bar, 155..65 mm, 5 mm steps); alt (0.5..6.5 bar,"

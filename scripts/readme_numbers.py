@@ -16,7 +16,7 @@ Two kinds of blocks:
   and compares with the page (numbers within a small relative tolerance, timings masked): the
   quick commands in the fast suite, the slow ones under ``-m slow``.
 * ``report`` blocks summarise committed results in reports/ (calibration, surface coverage,
-  diagnose proof, benchmarks, the timings of the run blocks). They are cheap; ``--check``
+  diagnose proof and power, benchmarks, the timings of the run blocks). They are cheap; ``--check``
   recomputes them and fails when a page disagrees with reports/ (the test suite runs that).
 
 Usage (from the project root, with the project installed):
@@ -334,6 +334,61 @@ def diagnose_proof_summary(rel: str) -> Callable[[], str]:
             f"{cov.get('named_true', 0)}",
             f"- not always found: {', '.join(missed) or 'none'}",
         ]
+        shaped = fa.get("shaped", {})
+        if shaped:
+            lines.insert(
+                3,
+                "- clean campaigns in the shapes that leave mechanisms unidentifiable: "
+                + "; ".join(
+                    f"{shape}: mismatch detected in {v['mismatch_detected']} of {v['runs']}, "
+                    f"a mechanism named in {v['mechanism_named']}"
+                    for shape, v in shaped.items()
+                )
+                + " (one-branch: compression only; one-pass: a catalogue, one compression pass in "
+                "unknown order, the volume at one pressure)",
+            )
+        elastic = {k: v for k, v in det.items() if k.startswith("elastic_casing|")}
+        if elastic:
+            cov90 = d.get("coverage_90", {})
+            lines.append(
+                "- elastic casing (energy from a potential): found in "
+                + ", ".join(
+                    f"{v['named']} of {v['runs']} ({k.split('|', 1)[1].replace('|', ', ')}; truth in the "
+                    f"90 % interval in {cov90.get(k, {}).get('true_in_90', 0)} of {v['named']})"
+                    for k, v in elastic.items()
+                )
+            )
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+def diagnose_power_summary(rel: str) -> Callable[[], str]:
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        n, k = d["seeds_per_rung"], d["needed"]
+
+        def fmt(v):
+            return "-" if v is None else f"{v:g}"
+
+        lines = [
+            f"From `{rel}` (`{d.get('command', 'scripts/diagnose_power.py')}`; {d['n_campaigns']} "
+            f"campaigns, {n} seeds a rung, found = at least {k} of {n}; oracle: delta chi^2 with the "
+            f"true noise, alpha = {d['alpha']:.1e}):",
+            "",
+            "| mechanism | engine: largest rung failing | engine: smallest rung found | "
+            "oracle on the same campaigns: smallest rung found | oracle, exact 90 % power |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        for mech, v in d["mechanisms"].items():
+            ex = v.get("oracle_exact_90")
+            lines.append(
+                f"| {mech} | {fmt(v['engine_largest_failing'])} | {fmt(v['engine_smallest_passing'])} "
+                f"| {fmt(v['oracle_smallest_passing'])} | "
+                f"{'-' if ex is None else format(ex['magnitude_90'], '.3g')} |"
+            )
         return "\n".join(lines) + "\n"
 
     return make
@@ -486,6 +541,7 @@ BLOCKS: dict[str, Block] = {
         surface_coverage_summary("reports/surface-coverage/coverage.json")
     ),
     "diagnose-proof": report_block(diagnose_proof_summary("reports/diagnose-proof/summary.json")),
+    "diagnose-power": report_block(diagnose_power_summary("reports/diagnose-power/power.json")),
 }
 
 

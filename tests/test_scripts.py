@@ -22,6 +22,7 @@ RUN_BY = {
     "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
     "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
     "scripts/diagnose_proof.py": "test_diagnose_proof_small",
+    "scripts/diagnose_power.py": "test_diagnose_power_tiny",
     "scripts/readme_numbers.py": "tests/test_docs.py (--check, and every run block rerun)",
     "scripts/docs_figure.py": "test_docs_figure_from_a_small_report",
     "scripts/mkdocs_hooks.py": "tests/test_docs.py::test_api_reference_lists_every_public_name "
@@ -84,6 +85,92 @@ def test_diagnose_proof_small(tmp_path):
     assert len(results) == 1 and results[0]["key"].endswith("|small")
     assert json.loads((tmp_path / "summary.json").read_text())["n_runs"] == 1
     assert (tmp_path / "README.md").read_text().startswith("# uq diagnose: proof")
+
+
+def test_diagnose_proof_shapes_and_elastic_casing():
+    """The proof's campaigns include the elastic casing at two magnitudes on every layout and
+    seed, and clean one-branch and one-pass controls; the shapes are what they say (no rebound;
+    a catalogue read back without order or piston)."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import diagnose_proof as dp
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    from uq._data.recordings import recordings_from_text
+    from uq._data.stand_description import PAPER_STAND
+    from uq._stand.simulator import Layout, simulate
+
+    cases = dp.cases(1)
+    elastic = [c for c in cases if "elastic_casing" in c["effects"]]
+    assert {(c["layout"], c["level"]) for c in elastic} == {
+        (lay, lev) for lay in dp.LAYOUTS for lev in ("visible", "near-limit")
+    }
+    shaped = [c for c in cases if c.get("shape")]
+    assert sorted(c["shape"] for c in shaped) == sorted(dp.SHAPES * len(dp.LAYOUTS))
+    assert all(c["level"] == "clean" and not c["effects"] for c in shaped)
+    assert len({dp.key(c) for c in cases}) == len(cases)
+    layout = Layout(**dp.SMALL_LAYOUTS["paper"])
+    tests = simulate("n50-traditional", seed=1, layout=layout)
+    one = dp.shaped(tests, {"shape": "one-branch", "effects": {}}, PAPER_STAND, layout)
+    assert all(
+        t["compression"].all() and t["height_m"].size < s["height_m"].size
+        for t, s in zip(one, tests, strict=True)
+    )
+    text = dp.shaped(tests, {"shape": "one-pass", "effects": {}}, PAPER_STAND, layout)
+    rec = recordings_from_text(text, "catalogue")
+    assert not rec.order_known and not rec.has_piston and rec.has_volume
+    assert not rec.has_both_branches
+
+
+def test_diagnose_power_tiny(tmp_path):
+    proc = _run(
+        "scripts/diagnose_power.py",
+        "--tiny",
+        "--jobs",
+        1,
+        "--mechanisms",
+        "force_offset",
+        "--out",
+        tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "power.json").read_text())
+    assert d["seeds_per_rung"] == 2 and d["campaigns"]
+    assert {r["mechanism"] for r in d["campaigns"]} == {"force_offset"}
+    v = d["mechanisms"]["force_offset"]
+    assert v["oracle_exact_90"]["magnitude_90"] > 0
+    assert all(r["oracle_delta_chi2"] >= 0 for r in d["campaigns"])
+    assert (tmp_path / "README.md").read_text().startswith("# uq diagnose: power")
+
+
+def test_diagnose_power_oracle_null_and_power():
+    """The oracle's delta chi^2 is chi^2_k on clean campaigns (its mean is k, within 4 SE over
+    60 seeds) and above twice its threshold for a mechanism well above its limit: it is the likelihood-ratio test it
+    claims to be."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import diagnose_power as pw
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    import numpy as np
+    from scipy.stats import chi2
+
+    for mech in ("force_offset", "elastic_casing", "hysteresis"):
+        tests, _ = pw.campaign(mech, 0.0, 0, True)
+        oracle = pw.Oracle(mech, tests)
+        null = []
+        for seed in range(60):
+            tests, _ = pw.campaign(mech, 0.0, seed, True)
+            force = np.concatenate([t["force_N"] for t in tests])
+            piston = np.concatenate([t["piston_m"] for t in tests])
+            null.append(oracle.delta_chi2(force, piston))
+        k = oracle.k
+        assert abs(np.mean(null) - k) < 4 * np.sqrt(2 * k / 60), (mech, np.mean(null), k)
+        big = {"force_offset": 50.0, "elastic_casing": 0.02, "hysteresis": 0.05}[mech]
+        tests, _ = pw.campaign(mech, big, 0, True)
+        force = np.concatenate([t["force_N"] for t in tests])
+        piston = np.concatenate([t["piston_m"] for t in tests])
+        assert oracle.delta_chi2(force, piston) > 2 * chi2.isf(pw.alpha(), k)
 
 
 def test_docs_figure_from_a_small_report(tmp_path):

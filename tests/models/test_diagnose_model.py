@@ -118,3 +118,43 @@ def test_log_posterior_and_draws_equal_the_explicit_design(data, names, order):
         )
         np.testing.assert_allclose(muL[i], XL @ beta[i], rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(ll[i], gaussian_loglik(y, X @ beta[i], s), rtol=1e-9, atol=1e-9)
+
+
+def test_force_noise_keeps_the_whole_pressure_term_without_a_piston():
+    """z = P + cL cancels the pressure-holding error only where the piston was read on the stand
+    (c > 0); a test without piston (force only, or a catalogue's volume) has c = 0, so its force
+    budget keeps the whole dp F_eff term, not the DP_RESIDUAL_SHARE left after decorrelation
+    (before, a clean catalogue's 0.1-bar force looked 2x noisier than its budget)."""
+    from dataclasses import replace
+
+    from uq._data.recordings import PressureTest, Recordings
+    from uq._data.stand_description import PAPER_STAND
+    from uq._stand.simulator import Layout, simulate
+
+    tests = simulate("n50-traditional", seed=4, layout=Layout((0.1, 5.0), 0.155, 0.065, 0.01))
+    full = Recordings(
+        "with piston",
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                t["piston_m"],
+                t["compression"],
+                t["step"],
+                np.arange(t["step"].size),
+            )
+            for t in tests
+        ),
+    )
+    bare = replace(full, tests=tuple(replace(t, piston_m=None) for t in full.tests))
+    d_full, _ = M.prepare(full)
+    d_bare, _ = M.prepare(bare)
+    assert np.all(np.asarray(d_full.c) > 0) and np.all(np.asarray(d_bare.c) == 0)
+    p = np.asarray(d_full.p_bar)
+    # the same load-cell, displacement and floor terms; the pressure term differs by (1 - share^2)
+    P_hat = np.abs(np.asarray(d_full.force))  # within a few N of the fitted quartic
+    feff = P_hat / (p * BAR_PA)
+    dp = np.asarray(PAPER_STAND.pressure_sd_bar(p)) * BAR_PA * feff
+    extra = np.asarray(d_bare.sd_z) ** 2 - np.asarray(d_full.sd_z) ** 2
+    assert np.allclose(extra, (1 - M.DP_RESIDUAL_SHARE**2) * dp**2, rtol=0.05)

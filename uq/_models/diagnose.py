@@ -275,6 +275,10 @@ def _test_columns(
     p_abs_bar = test.pressure_bar + stand.p_atm_bar
     sdp_bar = float(stand.pressure_sd_bar(test.pressure_bar))
     n = test.n_points
+    # z = P + cL cancels the pressure-holding error but for DP_RESIDUAL_SHARE (c is a plug-in);
+    # with no piston read on the stand (a catalogue's volume, or force only) c = 0 and z = P keeps
+    # the whole pressure term
+    dp_share = DP_RESIDUAL_SHARE if source == "piston" else 1.0
     # unknown order (a catalogue table): no branch sign, the rows' order as steps; neither
     # hysteresis nor a drift is then offered (their ``needs``)
     order_known = test.compression is not None and test.step is not None
@@ -291,7 +295,7 @@ def _test_columns(
         "L": piston,
         "sdz": np.sqrt(
             (stand.load_cell_rel_sd * P_hat) ** 2
-            + (DP_RESIDUAL_SHARE * sdp_bar * BAR_PA * feff) ** 2
+            + (dp_share * sdp_bar * BAR_PA * feff) ** 2
             + (dPdx * stand.displacement_sd_m) ** 2
             + FLOOR_N**2
         ),

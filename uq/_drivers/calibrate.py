@@ -264,7 +264,7 @@ def calibrate(
         ranks.append(np.sum(thin < true, axis=0))
         conv.append(fit.convergence.converged)
         ps.append(p)
-        if truth == "n50":
+        if truth == "n50" and not recorded:  # a fresh test's readings need its own pressures
             pred.append(
                 _predictive_coverage(
                     fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng
@@ -290,13 +290,18 @@ def calibrate(
 
 def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> np.ndarray:
     """Share of a fresh replicate's force readings inside the 90 % predictive interval,
-    for the lowest and highest third of the forces; (2,)."""
+    for the lowest and highest third of the forces; (2,). With AR(1) holding errors the replicate
+    is the model's own (``posterior_predictive``: a fresh holding-error series at the same
+    heights, which the fresh test has)."""
     f, nz = fit.flat("force"), fit.flat("noise")
     idx = rng.choice(f.shape[0], size=min(n_draws, f.shape[0]), replace=False)
     u = fresh.height_m - fit.x0_m
-    mu = cubic(f[idx][:, None, :], u)  # (draws, n)
-    sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
-    y = mu + sd * rng.standard_normal(mu.shape)
+    if fit.variant == "ar1":
+        y = np.asarray(fit.idata.posterior_predictive["force_N"]).reshape(-1, u.size)[idx]
+    else:
+        mu = cubic(f[idx][:, None, :], u)  # (draws, n)
+        sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
+        y = mu + sd * rng.standard_normal(mu.shape)
     lo, hi = np.quantile(y, [0.05, 0.95], axis=0)
     inside = (lo <= fresh.force_N) & (fresh.force_N <= hi)
     order = np.argsort(fresh.force_N)

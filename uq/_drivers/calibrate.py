@@ -264,12 +264,12 @@ def calibrate(
         ranks.append(np.sum(thin < true, axis=0))
         conv.append(fit.convergence.converged)
         ps.append(p)
-        if truth == "n50" and not recorded:  # a fresh test's readings need its own pressures
-            pred.append(
-                _predictive_coverage(
-                    fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng
+        if truth == "n50":
+            fresh_seed = int(rng.integers(2**31))  # drawn either way: the same replications
+            if not recorded:  # a fresh test's readings need its own pressures
+                pred.append(
+                    _predictive_coverage(fit, _test_from_stand(fresh_seed, p, stand)[0], rng)
                 )
-            )
     return CalibrationResult(
         truth,
         noise,

@@ -265,11 +265,12 @@ def calibrate(
         conv.append(fit.convergence.converged)
         ps.append(p)
         if truth == "n50":
-            fresh_seed = int(rng.integers(2**31))  # drawn either way: the same replications
-            if not recorded:  # a fresh test's readings need its own pressures
-                pred.append(
-                    _predictive_coverage(fit, _test_from_stand(fresh_seed, p, stand)[0], rng)
-                )
+            cover = _predictive_coverage(
+                fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng
+            )
+            if not recorded:  # computed either way (the same random stream: the same
+                pred.append(cover)  # replications); with recorded pressure it would need the
+                # fresh test's own pressures, so it is not reported
     return CalibrationResult(
         truth,
         noise,

@@ -4,20 +4,26 @@ against dense numpy/scipy references; the exact draws against the closed-form po
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
 
 from uq._data.recordings import PressureTest
+from uq._data.reference import table1
 from uq._data.stand_description import PAPER_STAND
+from uq._drivers.calibrate import calibrate
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import ar1_precision
+from uq._inference.sampler import Settings
 from uq._models import cubic_pressure as CP
-from uq._models.cubic import FORCE_PRIOR_SD_N, PISTON_PRIOR_SD_M
+from uq._models.cubic import FORCE_PRIOR_SD_N, PISTON_PRIOR_SD_M, fit_test, fit_tests
 from uq._stand.shapes import record_pressure
 from uq._stand.simulator import Layout, simulate
 
 AREA = 54.82e-4
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _test(pressure=5.0, seed=1, stand=PAPER_STAND, recorded=False, step_mm=5.0):
@@ -218,3 +224,139 @@ def test_tridiagonal_form_equals_the_dense_woodbury(theta, short_ar_data):
     fast = CP._ar1_post(jnp.asarray(theta), d)[0]
     assert float(fast.log_marginal) == pytest.approx(float(dense.log_marginal), abs=1e-5)
     assert np.allclose(fast.mean, dense.mean, rtol=1e-6, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- fits
+
+FAST = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=4000)
+AR_STAND = PAPER_STAND.replace(pressure_error_corr=0.7)
+
+
+def _width90(fit):
+    d = np.concatenate([fit.flat("force"), fit.flat("piston")], axis=1)
+    q = np.quantile(d, [0.05, 0.95], axis=0)
+    return q[1] - q[0], q
+
+
+def _truth(pressure):
+    t1 = table1()
+    i = t1.index(pressure)
+    return np.concatenate([t1.force[i], t1.piston[i]])
+
+
+@pytest.fixture(scope="module")
+def ar_fits():
+    """One test from a stand whose holding errors are AR(1) with rho 0.7: the plain and the AR(1)
+    fit, and the stand's truth."""
+    t = _test(5.0, seed=11, stand=AR_STAND)
+    plain = fit_test(t, 0.112, seed=2, settings=FAST)
+    ar = fit_test(t, 0.112, seed=2, settings=FAST, ar1="on")
+    return t, plain, ar
+
+
+def test_ar1_recovers_rho_and_widens_the_piston_intervals(ar_fits):
+    _, plain, ar = ar_fits
+    assert ar.variant == "ar1" and ar.convergence.converged
+    rho = np.asarray(ar.idata.posterior["rho"]).ravel()
+    lo, hi = np.quantile(rho, [0.05, 0.95])
+    assert lo < 0.7 < hi and lo > 0.2  # the stand's 0.7, and clearly not independent
+    # the piston's scatter is almost all holding error (Boyle): correlated, it informs the cubic
+    # less than independent readings would, so the AR(1) intervals are wider
+    w_plain, w_ar = _width90(plain)[0], _width90(ar)[0]
+    assert np.all(w_ar[5:] > 1.3 * w_plain[5:])
+    q = _width90(ar)[1]
+    truth = _truth(5.0)
+    assert np.mean((q[0] <= truth) & (truth <= q[1])) >= 6 / 8
+    js = ar.to_json()
+    assert js["pressure_holding"]["model"] == "ar1"
+    assert set(js["pressure_holding"]) >= {"rho", "k_p", "V_gas_m3"}
+
+
+def test_auto_refits_only_the_flagged_tests(ar_fits):
+    """pressure_ar1="auto": the plain fit where the recording-order check passes, AR(1) where it
+    flags (the check on the plain fit of the AR stand's test flags its piston)."""
+    t, plain, _ = ar_fits
+    assert plain.model_warnings()  # the premise: the plain model's residuals are flagged
+    clean = _test(5.0, seed=12)
+    fits = fit_tests([clean, t], 0.112, seed=3, settings=FAST, ar1="auto")
+    alone = fit_tests([clean], 0.112, seed=3, settings=FAST)[0]
+    assert [f.variant for f in fits] == ["plain", "ar1"]
+    assert not alone.model_warnings()
+    assert np.array_equal(fits[0].flat("force"), alone.flat("force"))
+
+
+def test_measured_pressure_shrinks_the_intervals_and_covers():
+    """A stand that records its pressure: the covariate takes the holding error out of force and
+    piston; the piston's intervals shrink most (its scatter was almost all holding error)."""
+    t = _test(5.0, seed=21, recorded=True)
+    plain = fit_test(t, 0.112, seed=4, settings=FAST)
+    meas = fit_test(t, 0.112, seed=4, settings=FAST, pressure="measured")
+    assert meas.variant == "measured" and meas.convergence.converged
+    w_plain, w_meas = _width90(plain)[0], _width90(meas)[0]
+    assert np.all(w_meas[5:] < w_plain[5:] / 3)  # b_L..d_L
+    assert np.all(w_meas[:4] < w_plain[:4])  # the force's too
+    q = _width90(meas)[1]
+    truth = _truth(5.0)
+    assert np.mean((q[0] <= truth) & (truth <= q[1])) >= 6 / 8
+    V = np.asarray(meas.idata.posterior["V_gas_m3"]).ravel()
+    assert abs(V.mean() / PAPER_STAND.gas_volume_at_xmax_m3 - 1) < 0.05  # Boyle's volume found
+    assert not meas.model_warnings()
+
+
+def test_fast_coverage_with_ar1_on_the_rough_stand():
+    """Three replications of the rough stand's calibration with the AR(1) model (the full study
+    is reports/calibration-rough-stand-ar1): every quantity inside the binomial region."""
+    from uq._data.stand_description import read_stand
+
+    stand = read_stand(ROOT / "data" / "stands" / "slow-pressure-control.toml")
+    res = calibrate(3, truth="n50", seed=5, settings=FAST, stand=stand, ar1="on")
+    s = res.summary()
+    assert s["pressure_ar1"] == "on" and res.converged.all()
+    assert all(q["in_region90"] for q in s["quantities"].values()), s["quantities"]
+
+
+@pytest.mark.slow
+def test_full_ar1_coverage_on_the_rough_stand():
+    from uq._data.stand_description import read_stand
+
+    stand = read_stand(ROOT / "data" / "stands" / "slow-pressure-control.toml")
+    res = calibrate(60, truth="n50", seed=20201, stand=stand, ar1="on")
+    s = res.summary()
+    bad = [k for k, q in s["quantities"].items() if not q["in_region90"]]
+    assert not bad, s["quantities"]
+
+
+@pytest.mark.slow
+def test_full_measured_pressure_coverage():
+    res = calibrate(100, truth="n50", seed=20201, pressure="recorded")
+    s = res.summary()
+    bad = [k for k, q in s["quantities"].items() if not q["in_region90"]]
+    assert not bad, s["quantities"]
+
+
+def test_surface_model_uses_the_measured_pressure(tmp_path):
+    """The pair likelihood (surface, thermodynamic models): readings corrected by the measured
+    deviation, the holding term shrunk to the sensor's resolution. On the same readings with and
+    without the recorded pressures, the surface's coefficients are better determined with them,
+    and the gas volume is found from Boyle's correction."""
+    from uq._cli.main import main
+    from uq._data.recordings import read_recordings
+    from uq._models import pair
+    from uq._models.surface import fit_surface
+
+    common = ["simulate", "--seed", "4", "--pressures", "1,4,7,10", "--step-mm", "10"]
+    main([*common, "--out", str(tmp_path / "set.csv")])
+    main([*common, "--record-pressure", "both", "--out", str(tmp_path / "measured.csv")])
+    rec_set = read_recordings(tmp_path / "set.csv")
+    rec_meas = read_recordings(tmp_path / "measured.csv")
+    assert rec_meas.pressure_measured and not rec_set.pressure_measured
+    dp = pair.measured_deviation(rec_meas)
+    assert dp is not None and 50 < np.std(dp) < 2000  # Pa: the stand's 0.01 bar holding
+    settings = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)
+    plain = fit_surface(rec_set, seed=1, settings=settings)
+    meas = fit_surface(rec_meas, seed=1, settings=settings)
+    sd_plain = plain.flat_beta().std(0)
+    sd_meas = meas.flat_beta().std(0)
+    assert np.median(sd_meas / sd_plain) < 0.7
+    V0 = np.exp(meas.theta.reshape(-1, meas.theta.shape[-1])[:, 4])
+    assert abs(np.median(V0) / PAPER_STAND.gas_volume_at_xmax_m3 - 1) < 0.1

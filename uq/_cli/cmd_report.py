@@ -6,6 +6,7 @@ import sys
 import time
 
 from uq._cli.common import (
+    add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
@@ -51,6 +52,7 @@ def configure_report(p) -> None:
         help="also fit the surface model and write surface.html beside the report (adds about 30 s)",
     )
     add_stand(p)
+    add_pressure_ar1(p)
 
 
 def command_report(args) -> int:
@@ -63,7 +65,9 @@ def command_report(args) -> int:
     rec = load(args)
     t0 = time.perf_counter()
     settings = settings_from(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings, stand=stand)
+    cf = fit_campaign(
+        rec, seed=args.seed, settings=settings, stand=stand, pressure_ar1=args.pressure_ar1
+    )
     surface = comparison = None
     if args.surface:
         from uq._derived.comparison import fit_both

@@ -46,6 +46,31 @@ def latent_posterior(Z, y, v, U, Q, log_det_Q, prior_sd, weight=None) -> LinearP
     return posterior_from_moments(gram, rhs, yy, jnp.sum(w), log_det, prior_sd)
 
 
+def paired_ar1_precision(v, uf, ul, rho):
+    """Sigma^-1 (2n, 2n), dense, of the paired AR(1) covariance of ``paired_ar1_posterior``
+    (for pointwise densities), from the tridiagonal factor: D - B^T B, B = L^-1 U^T D."""
+    n = uf.shape[0]
+    D = 1.0 / v
+    c = 1.0 - rho**2
+    q_diag = jnp.full(n, 1.0 + rho**2).at[0].set(1.0).at[-1].set(1.0) / c
+    m_diag = q_diag + uf**2 * D[:n] + ul**2 * D[n:]
+    G = jnp.concatenate([jnp.diag(uf * D[:n]), jnp.diag(ul * D[n:])], axis=1)  # U^T D, (n, 2n)
+    _, B = _tridiagonal_cholesky_solve(m_diag, -rho / c, G)
+    return jnp.diag(D) - B.T @ B
+
+
+def ar1_series(rho, z):
+    """The stationary AR(1) series of unit variance driven by standard normal ``z`` (n,): z_0,
+    then rho x_(i-1) + sqrt(1 - rho^2) z_i (a scan, no factorisation)."""
+
+    def step(x, e):
+        x = rho * x + jnp.sqrt(1.0 - rho**2) * e
+        return x, x
+
+    _, rest = jax.lax.scan(step, z[0], z[1:])
+    return jnp.concatenate([z[:1], rest])
+
+
 def precision(v, U, Q):
     """Sigma^-1 (N, N), dense (for pointwise densities of short series)."""
     D, DU, chol = _factor(U, v, Q, jnp.ones_like(v))
@@ -54,21 +79,18 @@ def precision(v, U, Q):
 
 
 def block_conditional_logpdf(P, r, blocks):
-    """log p(r_b | r_rest) of each block b of a zero-mean Gaussian with precision P, (n_blocks,).
-
-    ``blocks`` (n_blocks, s) integer rows of each block. With P's block P_bb and (P r)_b, the
-    conditional is N(r_b - P_bb^-1 (P r)_b, P_bb^-1)."""
+    """log p(r_b | r_rest) of each 2-row block b of a zero-mean Gaussian with precision P,
+    (n_blocks,). ``blocks`` (n_blocks, 2) integer rows of each block. With P's block P_bb and
+    (P r)_b, the conditional is N(r_b - P_bb^-1 (P r)_b, P_bb^-1). The 2 x 2 algebra is written
+    out (no batched Cholesky factorisation: XLA on CPU can hang on those inside vmapped maps)."""
     Pr = P @ r
-    Pbb = P[blocks[:, :, None], blocks[:, None, :]]  # (nb, s, s)
-    g = Pr[blocks]  # (nb, s)
-    chol = jnp.linalg.cholesky(Pbb)
-    z = jax.vmap(lambda c, x: jax.scipy.linalg.solve_triangular(c, x, lower=True))(chol, g)
-    s = blocks.shape[1]
-    return (
-        -0.5 * jnp.sum(z**2, -1)
-        + jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), -1)
-        - 0.5 * s * LOG_2PI
-    )
+    a = P[blocks[:, 0], blocks[:, 0]]
+    b = P[blocks[:, 0], blocks[:, 1]]
+    d = P[blocks[:, 1], blocks[:, 1]]
+    g0, g1 = Pr[blocks[:, 0]], Pr[blocks[:, 1]]
+    det = a * d - b * b
+    quad = (d * g0**2 - 2.0 * b * g0 * g1 + a * g1**2) / det
+    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI
 
 
 def ar1_precision(rho, n: int):

@@ -53,10 +53,10 @@ from uq._inference.collapsed import CollapsedModel
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import (
     ar1_precision,
+    ar1_series,
     block_conditional_logpdf,
-    latent_posterior,
     paired_ar1_posterior,
-    precision,
+    paired_ar1_precision,
 )
 from uq._inference.linear import (
     LOG_2PI,
@@ -335,6 +335,17 @@ def ar1_parts(theta, d: AR1Data):
     return v, U, Q, ldQ, nat, (kp, V, rho)
 
 
+def _paired(theta, d: AR1Data):
+    """(v (2n,), uf (n,), ul (n,), rho): the independent variances and each reading's loading on
+    the holding-error series z (force, piston)."""
+    nat = C.natural_noise(theta[:3], jnp.mean(d.ref_force))
+    a2 = force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)
+    n = d.force.shape[0]
+    kp, V, rho = jnp.exp(theta[3]), jnp.exp(theta[4]), jnp.tanh(theta[5])
+    v = jnp.concatenate([a2, jnp.full(n, jnp.exp(2.0 * nat[2]))])
+    return v, d.lever * d.hold_sd * kp, jnp.full(n, -V * d.boyle * d.hold_sd * kp), rho
+
+
 def _ar1_post(theta, d: AR1Data):
     """The coefficients' posterior given theta: the tridiagonal O(n) form of the Woodbury terms
     (``paired_ar1_posterior``), checked against the dense ``latent_posterior`` in the tests."""
@@ -400,32 +411,34 @@ def _split_pair(P, r, blocks):
 def ar1_pointwise(theta, beta, d: AR1Data):
     """log p(reading_i | coefficients, noise, the test's other readings), split into force and
     piston by the chain rule (the errors are correlated: the readings do not factorise)."""
-    v, U, Q, _, _, _ = ar1_parts(theta, d)
+    v, uf, ul, rho = _paired(theta, d)
     r = jnp.concatenate([d.force, d.piston]) - _stack_design(d.X) @ beta
-    f, p = _split_pair(precision(v, U, Q), r, d.blocks)
+    f, p = _split_pair(paired_ar1_precision(v, uf, ul, rho), r, d.blocks)
     return {"force_N": f, "piston_m": p}
 
 
 def ar1_pointwise_loo(theta, d: AR1Data):
     """log p(force_i, piston_i | noise, the test's other readings), coefficients integrated out."""
-    v, U, Q, ldQ, _, _ = ar1_parts(theta, d)
+    v, uf, ul, rho = _paired(theta, d)
     Z = _stack_design(d.X)
     y = jnp.concatenate([d.force, d.piston])
-    P0 = precision(v, U, Q)
-    post = latent_posterior(Z, y, v, U, Q, ldQ, _coefficient_prior_sd())
+    P0 = paired_ar1_precision(v, uf, ul, rho)
+    post = _ar1_post(theta, d._replace(weight=jnp.ones_like(d.weight)))[0]
     G = jax.scipy.linalg.solve_triangular(post.chol, Z.T @ P0, lower=True)  # (k, 2n)
     return block_conditional_logpdf(P0 - G.T @ G, y, d.blocks)
 
 
 def ar1_predict(theta, beta, key, d: AR1Data):
     """A replicate: mean curves, a fresh AR(1) holding-error series, independent reading noise."""
-    v, U, _, _, _, (_, _, rho) = ar1_parts(theta, d)
+    v, uf, ul, rho = _paired(theta, d)
     n = d.force.shape[0]
-    i = jnp.arange(n)
-    R = rho ** jnp.abs(i[:, None] - i[None, :])
     k1, k2 = jax.random.split(key)
-    z = jnp.linalg.cholesky(R) @ jax.random.normal(k1, (n,))
-    y = _stack_design(d.X) @ beta + U @ z + jnp.sqrt(v) * jax.random.normal(k2, (2 * n,))
+    z = ar1_series(rho, jax.random.normal(k1, (n,)))
+    y = (
+        _stack_design(d.X) @ beta
+        + jnp.concatenate([uf * z, ul * z])
+        + jnp.sqrt(v) * jax.random.normal(k2, (2 * n,))
+    )
     return {"force_N": y[:n], "piston_m": y[n:]}
 
 

@@ -344,7 +344,7 @@ def test_surface_model_uses_the_measured_pressure(tmp_path):
     from uq._models import pair
     from uq._models.surface import fit_surface
 
-    common = ["simulate", "--seed", "4", "--pressures", "1,4,7,10", "--step-mm", "10"]
+    common = ["simulate", "--seed", "4", "--pressures", "1,2,4,6,8,10", "--step-mm", "10"]
     main([*common, "--out", str(tmp_path / "set.csv")])
     main([*common, "--record-pressure", "both", "--out", str(tmp_path / "measured.csv")])
     rec_set = read_recordings(tmp_path / "set.csv")
@@ -360,3 +360,27 @@ def test_surface_model_uses_the_measured_pressure(tmp_path):
     assert np.median(sd_meas / sd_plain) < 0.7
     V0 = np.exp(meas.theta.reshape(-1, meas.theta.shape[-1])[:, 4])
     assert abs(np.median(V0) / PAPER_STAND.gas_volume_at_xmax_m3 - 1) < 0.1
+
+
+def test_fit_cli_uses_the_recorded_pressure(tmp_path, capsys):
+    """uq fit on recordings with set_pressure_bar: the measured model, said in the summary and
+    the JSON (two tests at 10-mm steps, a short run)."""
+    import json
+
+    from uq._cli.main import main
+
+    csv = tmp_path / "rec.csv"
+    main(
+        [
+            "simulate", "--seed", "3", "--pressures", "2,6", "--step-mm", "10",
+            "--record-pressure", "both", "--out", str(csv),
+        ]
+    )  # fmt: skip
+    capsys.readouterr()
+    out = tmp_path / "fit.json"
+    assert main(["fit", str(csv), "--max-steps", "1500", "--json", str(out)]) in (0, 1)
+    text = capsys.readouterr().out
+    assert "measured pressure as a covariate" in text
+    tests = json.loads(out.read_text())["tests"]
+    assert [t["pressure_holding"]["model"] for t in tests] == ["measured", "measured"]
+    assert all(2e-3 < t["pressure_holding"]["V_gas_m3"]["mean"] < 1.2e-2 for t in tests)

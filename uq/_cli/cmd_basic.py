@@ -429,6 +429,20 @@ def command_fit(args) -> int:
             f"{t['pressure_bar']:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b['mean']:>8.3f} "
             f"{t['s_P_N']:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}"
         )
+    for t in result["tests"]:
+        ph = t.get("pressure_holding")
+        if ph and ph["model"] == "ar1":
+            r = ph["rho"]
+            print(
+                f"{t['pressure_bar']:g} bar: AR(1) pressure-holding errors, lag-one correlation "
+                f"rho = {r['mean']:.2f} (90 % [{r['q05']:.2f}, {r['q95']:.2f}])"
+            )
+        elif ph and ph["model"] == "measured":
+            v = ph["V_gas_m3"]
+            print(
+                f"{t['pressure_bar']:g} bar: measured pressure as a covariate, gas volume "
+                f"{1e3 * v['mean']:.2f} L (90 % [{1e3 * v['q05']:.2f}, {1e3 * v['q95']:.2f}])"
+            )
     for w in result["warnings"]:
         print(f"WARNING: {w}", file=sys.stderr)
     for w in result["model_warnings"]:

@@ -334,6 +334,7 @@ def test_full_measured_pressure_coverage():
     assert not bad, s["quantities"]
 
 
+@pytest.mark.slow  # two surface fits: about 40 s on an idle machine
 def test_surface_model_uses_the_measured_pressure(tmp_path):
     """The pair likelihood (surface, thermodynamic models): readings corrected by the measured
     deviation, the holding term shrunk to the sensor's resolution. On the same readings with and

@@ -34,14 +34,15 @@ def configure_calibrate(p) -> None:
         type=choice_list("set", "recorded"),
         default="set",
         help="comma list: set (the stand records set pressures only), recorded (it records each "
-        "reading's pressure with the paper's sensor, and the fit uses it as a covariate); n50 truth",
+        "reading's pressure with the paper's sensor, and the fit uses it as a covariate); n50 truth "
+        "(default: set)",
     )
     p.add_argument(
         "--pressure-ar1",
         type=choice_list("off", "on"),
         default="off",
         help="comma list: fit the pressure-holding errors as independent noise (off) or as an "
-        "AR(1) series in recording order (on); n50 truth",
+        "AR(1) series in recording order (on); n50 truth (default: off)",
     )
     p.add_argument("--seed", type=seed, default=20201, help="random seed")
     p.add_argument(

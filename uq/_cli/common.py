@@ -276,8 +276,8 @@ STAND_HELP = (
 
 PRESSURE_AR1_HELP = (
     "the pressure-holding errors when the recordings give no measured pressure: off (independent "
-    "noise, default), on (an AR(1) series in recording order, shared by force and piston), auto "
-    "(AR(1) for the tests whose residuals the recording-order check flags)"
+    "noise), on (an AR(1) series in recording order, shared by force and piston), auto (AR(1) for "
+    "the tests whose residuals the recording-order check flags) (default: off)"
 )
 
 

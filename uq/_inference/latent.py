@@ -71,13 +71,6 @@ def ar1_series(rho, z):
     return jnp.concatenate([z[:1], rest])
 
 
-def precision(v, U, Q):
-    """Sigma^-1 (N, N), dense (for pointwise densities of short series)."""
-    D, DU, chol = _factor(U, v, Q, jnp.ones_like(v))
-    B = jax.scipy.linalg.solve_triangular(chol, DU.T, lower=True)  # (m, N)
-    return jnp.diag(D) - B.T @ B
-
-
 def block_conditional_logpdf(P, r, blocks):
     """log p(r_b | r_rest) of each 2-row block b of a zero-mean Gaussian with precision P,
     (n_blocks,). ``blocks`` (n_blocks, 2) integer rows of each block. With P's block P_bb and

@@ -695,8 +695,8 @@ def fit_campaign(
         settings=settings,
         stand=stand,
         desc="sampling all tests",
-        pressure="measured" if recordings.pressure_measured else "set",
+        pressure="measured" if getattr(recordings, "pressure_measured", False) else "set",
         ar1=pressure_ar1,
-        piston_area_m2=recordings.piston_area_m2,
+        piston_area_m2=getattr(recordings, "piston_area_m2", PAPER_PISTON_AREA_M2),
     )
     return CampaignFit(recordings, fits, seed, stand)

@@ -190,6 +190,38 @@ def speed_table() -> str:
     return "\n".join(out) + "\n"
 
 
+def width_ratio_summary(rel: str) -> Callable[[], str]:
+    """Mean 90 % interval widths of the settings of one calibration run (the same replications),
+    and each setting's ratio to the first: how much recorded pressure shrinks the intervals."""
+
+    def make() -> str:
+        data = _load(rel)
+        if data is None:
+            return f"(no results: {rel} is missing)\n"
+        settings = data["settings"]
+        names = list(settings[0]["quantities"])
+        label = [
+            "recorded pressure" if s.get("pressure") == "recorded" else "set pressure only"
+            for s in settings
+        ]
+        out = [
+            f"Mean width of the central 90 % interval over the {settings[0]['replications']} "
+            f"replications of `{rel}` (SI units; the same simulated tests in every column):",
+            "",
+            "| quantity | " + " | ".join(label) + " | ratio |",
+            "| --- |" + " --- |" * (len(settings) + 1),
+        ]
+        for n in names:
+            w = [s["quantities"][n].get("mean_width90") for s in settings]
+            if any(v is None for v in w):
+                continue
+            ratio = w[-1] / w[0]
+            out.append(f"| {n} | " + " | ".join(f"{v:.4g}" for v in w) + f" | {ratio:.2f} |")
+        return "\n".join(out) + "\n"
+
+    return make
+
+
 def calibration_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         data = _load(rel)
@@ -231,8 +263,12 @@ def calibration_summary(rel: str) -> Callable[[], str]:
                 "".join(f", {k} {v:g}" for k, v in s["stand"].items()) if s.get("stand") else ""
             )
             holm_text = f"{min(holm):.3f}" if holm else "-"
+            model = s["noise_model"] + (
+                ", measured pressure" if s.get("pressure", "set") == "recorded" else ""
+            )
+            model += ", AR(1) holding errors" if s.get("pressure_ar1", "off") == "on" else ""
             out.append(
-                f"| {truth} | {s['noise_model']} | {s['replications']} | {s['converged_fraction']:.0%} "
+                f"| {truth} | {model} | {s['replications']} | {s['converged_fraction']:.0%} "
                 f"| {min(cov)}..{max(cov)} of {s['replications']} | {', '.join(outside) or 'none'} "
                 f"| {pmin[0]:.3f} ({pmin[1]}) | {holm_text} | {pred} |"
             )
@@ -536,6 +572,15 @@ BLOCKS: dict[str, Block] = {
     "calibration": report_block(calibration_summary("reports/calibration/calibration.json")),
     "calibration-rough-stand": report_block(
         calibration_summary("reports/calibration-rough-stand/calibration.json")
+    ),
+    "calibration-rough-stand-ar1": report_block(
+        calibration_summary("reports/calibration-rough-stand-ar1/calibration.json")
+    ),
+    "calibration-measured-pressure": report_block(
+        calibration_summary("reports/calibration-measured-pressure/calibration.json")
+    ),
+    "measured-pressure-widths": report_block(
+        width_ratio_summary("reports/calibration-measured-pressure/calibration.json")
     ),
     "surface-coverage": report_block(
         surface_coverage_summary("reports/surface-coverage/coverage.json")

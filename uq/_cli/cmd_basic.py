@@ -10,6 +10,7 @@ from uq._cli.common import (
     DEFAULT_PISTON_AREA_CM2,
     DEFAULT_SEED,
     add_json,
+    add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
@@ -18,6 +19,7 @@ from uq._cli.common import (
     load,
     positive_float,
     positive_int,
+    pressure_ar1,
     seed,
     settings_from,
     stand_from,
@@ -324,6 +326,7 @@ def configure_fit(p) -> None:
     add_sampling(p)
     add_json(p)
     add_stand(p)
+    add_pressure_ar1(p)
     p.add_argument(
         "--out",
         metavar="DIR",
@@ -354,6 +357,7 @@ CONFIG_KEYS = {
         "ensembles": ("ensembles", positive_int),
         "max_steps": ("max_steps", positive_int),
     },
+    "noise": {"pressure_ar1": ("pressure_ar1", pressure_ar1)},
 }
 DESCRIPTIVE_SECTIONS = ("model", "check")  # documentation for the reader; not options
 
@@ -404,7 +408,13 @@ def command_fit(args) -> int:
 
     stand = stand_from(args)
     rec = load(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings_from(args), stand=stand)
+    cf = fit_campaign(
+        rec,
+        seed=args.seed,
+        settings=settings_from(args),
+        stand=stand,
+        pressure_ar1=args.pressure_ar1,
+    )
     result = cf.to_json()
     print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {rec.x0_m * 1e3:g} mm")
     print(
@@ -419,6 +429,20 @@ def command_fit(args) -> int:
             f"{t['pressure_bar']:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b['mean']:>8.3f} "
             f"{t['s_P_N']:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}"
         )
+    for t in result["tests"]:
+        ph = t.get("pressure_holding")
+        if ph and ph["model"] == "ar1":
+            r = ph["rho"]
+            print(
+                f"{t['pressure_bar']:g} bar: AR(1) pressure-holding errors, lag-one correlation "
+                f"rho = {r['mean']:.2f} (90 % [{r['q05']:.2f}, {r['q95']:.2f}])"
+            )
+        elif ph and ph["model"] == "measured":
+            v = ph["V_gas_m3"]
+            print(
+                f"{t['pressure_bar']:g} bar: measured pressure as a covariate, gas volume "
+                f"{1e3 * v['mean']:.2f} L (90 % [{1e3 * v['q05']:.2f}, {1e3 * v['q95']:.2f}])"
+            )
     for w in result["warnings"]:
         print(f"WARNING: {w}", file=sys.stderr)
     for w in result["model_warnings"]:

@@ -29,6 +29,21 @@ def configure_calibrate(p) -> None:
         default="budget",
         help="comma list of force-noise models to fit: budget, constant",
     )
+    p.add_argument(
+        "--pressure",
+        type=choice_list("set", "recorded"),
+        default="set",
+        help="comma list: set (the stand records set pressures only), recorded (it records each "
+        "reading's pressure with the paper's sensor, and the fit uses it as a covariate); n50 truth "
+        "(default: set)",
+    )
+    p.add_argument(
+        "--pressure-ar1",
+        type=choice_list("off", "on"),
+        default="off",
+        help="comma list: fit the pressure-holding errors as independent noise (off) or as an "
+        "AR(1) series in recording order (on); n50 truth (default: off)",
+    )
     p.add_argument("--seed", type=seed, default=20201, help="random seed")
     p.add_argument(
         "--out",
@@ -50,19 +65,39 @@ def command_calibrate(args) -> int:
         raise InputError(
             "option --stand: only the n50 truth runs on a stand; use it with --truth n50"
         )
+
+    def items(text):
+        return [x.strip() for x in text.split(",") if x.strip()]
+
+    pressure_settings = [(pr, ar) for pr in items(args.pressure) for ar in items(args.pressure_ar1)]
+    if "prior" in truths and pressure_settings != [("set", "off")]:
+        raise InputError(
+            "options --pressure/--pressure-ar1: only the n50 truth records pressure or fits AR(1) "
+            "holding errors; use them with --truth n50"
+        )
     results = []
-    for truth in truths:
-        for noise in [n.strip() for n in args.noise.split(",") if n.strip()]:
-            res = C.calibrate(args.reps, truth=truth, noise=noise, seed=args.seed, stand=stand)
-            results.append(res)
-            s = res.summary()
-            worst = min(s["quantities"].items(), key=lambda kv: kv[1]["coverage90"])
-            print(
-                f"truth {truth:5s} noise {noise:8s}: {args.reps} reps in {res.seconds:.0f} s; 90 % coverage "
-                f"{min(q['coverage90'] for q in s['quantities'].values()):.2f}..{max(q['coverage90'] for q in s['quantities'].values()):.2f} "
-                f"(lowest: {worst[0]}); outside the 99 % region: "
-                f"{[k for k, q in s['quantities'].items() if not (q['in_region90'] and q['in_region50'])] or 'none'}"
-            )
+    for truth, noise, (pressure, ar1) in (
+        (t, n, s) for t in truths for n in items(args.noise) for s in pressure_settings
+    ):
+        res = C.calibrate(
+            args.reps,
+            truth=truth,
+            noise=noise,
+            seed=args.seed,
+            stand=stand,
+            pressure=pressure,
+            ar1=ar1,
+        )
+        results.append(res)
+        s = res.summary()
+        worst = min(s["quantities"].items(), key=lambda kv: kv[1]["coverage90"])
+        label = "" if (pressure, ar1) == ("set", "off") else f" pressure {pressure} ar1 {ar1}"
+        print(
+            f"truth {truth:5s} noise {noise:8s}{label}: {args.reps} reps in {res.seconds:.0f} s; 90 % coverage "
+            f"{min(q['coverage90'] for q in s['quantities'].values()):.2f}..{max(q['coverage90'] for q in s['quantities'].values()):.2f} "
+            f"(lowest: {worst[0]}); outside the 99 % region: "
+            f"{[k for k, q in s['quantities'].items() if not (q['in_region90'] and q['in_region50'])] or 'none'}"
+        )
     command = (
         "uq " + " ".join(sys.argv[1:])
         if sys.argv and sys.argv[0].endswith("uq")
@@ -87,14 +122,27 @@ def command_calibrate(args) -> int:
                 ax.axhline(res.ranks.shape[0] / 10, color="k", lw=0.8)
                 ax.set_title(res.names[j], fontsize=8)
                 ax.set_xticks([])
-            fig.suptitle(f"SBC ranks, truth {res.truth_kind}, noise {res.noise}", fontsize=9)
+            fig.suptitle(
+                f"SBC ranks, truth {res.truth_kind}, noise {res.noise}{_suffix(res, ', ')}",
+                fontsize=9,
+            )
             fig.tight_layout()
-            write_figure_atomic(fig, out / f"sbc_{res.truth_kind}_{res.noise}.png", dpi=80)
+            write_figure_atomic(fig, out / _figure_name(res), dpi=80)
             plt.close(fig)
         # rank histograms of settings an earlier run had and this one has not would pass for current
-        remove_stale(
-            out, ("sbc_*.png",), keep={f"sbc_{r.truth_kind}_{r.noise}.png" for r in results}
-        )
+        remove_stale(out, ("sbc_*.png",), keep={_figure_name(r) for r in results})
         print(f"wrote {out}/calibration.json, calibration.md and rank histograms")
     emit_json(result, args.json)
     return 0
+
+
+def _suffix(res, sep: str = "_") -> str:
+    """The pressure settings of a result in names, empty for the default (set, off)."""
+    parts = ([f"pressure-{res.pressure}"] if res.pressure != "set" else []) + (
+        ["ar1"] if res.ar1 == "on" else []
+    )
+    return "".join(sep + p for p in parts)
+
+
+def _figure_name(res) -> str:
+    return f"sbc_{res.truth_kind}_{res.noise}{_suffix(res)}.png"

@@ -6,6 +6,7 @@ import sys
 import time
 
 from uq._cli.common import (
+    add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
@@ -59,6 +60,7 @@ def configure_report(p) -> None:
         "auto (default): the paper's tables for the bundled N-50 reconstruction, nothing otherwise",
     )
     add_stand(p)
+    add_pressure_ar1(p)
 
 
 def _reference(value: str):
@@ -83,7 +85,9 @@ def command_report(args) -> int:
     rec = load(args)
     t0 = time.perf_counter()
     settings = settings_from(args)
-    cf = fit_campaign(rec, seed=args.seed, settings=settings, stand=stand)
+    cf = fit_campaign(
+        rec, seed=args.seed, settings=settings, stand=stand, pressure_ar1=args.pressure_ar1
+    )
     surface = comparison = None
     if args.surface:
         from uq._derived.comparison import fit_both

@@ -274,6 +274,24 @@ STAND_HELP = (
 )
 
 
+PRESSURE_AR1_HELP = (
+    "the pressure-holding errors when the recordings give no measured pressure: off (independent "
+    "noise), on (an AR(1) series in recording order, shared by force and piston), auto (AR(1) for "
+    "the tests whose residuals the recording-order check flags) (default: off)"
+)
+
+
+def pressure_ar1(text: str) -> str:
+    if text not in ("off", "on", "auto"):
+        raise argparse.ArgumentTypeError(f"expected off, on or auto, got '{text}'")
+    return text
+
+
+def add_pressure_ar1(p: argparse.ArgumentParser) -> None:
+    """``--pressure-ar1 off|on|auto`` (uq fit, uq report)."""
+    p.add_argument("--pressure-ar1", type=pressure_ar1, default="off", help=PRESSURE_AR1_HELP)
+
+
 def add_stand(p: argparse.ArgumentParser, help: str = STAND_HELP) -> None:
     """``--stand FILE.toml`` (one option for every command)."""
     p.add_argument("--stand", metavar="FILE.toml", help=help)

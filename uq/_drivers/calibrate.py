@@ -18,6 +18,13 @@ Truths:
   likelihood share an assumption.
 ``--noise constant`` refits with one force sd per test, to show what heteroscedastic noise
 modelled as constant does to the intervals (the default models do not do this).
+
+The pressure-holding error (uq._models.cubic_pressure), n50 truth only:
+* ``--pressure recorded``: the stand records each reading's pressure with the paper's sensor
+  (uq._stand.shapes.record_pressure) and the fit uses it as a covariate; the same replications
+  as ``--pressure set`` (the sensor has a random stream of its own), so the mean interval widths
+  of the two settings (``mean_width90``) show how much the measured pressure shrinks them.
+* ``--pressure-ar1 on``: the fit models the holding errors as an AR(1) series in recording order.
 """
 
 from __future__ import annotations
@@ -76,14 +83,26 @@ def _test_from_model(
 
 
 def _test_from_stand(
-    seed: int, pressure_bar: float, stand: StandDescription
+    seed: int, pressure_bar: float, stand: StandDescription, recorded: bool = False
 ) -> tuple[PressureTest, np.ndarray]:
-    t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)), stand=stand)[0]
+    tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)), stand=stand)
+    if recorded:
+        from uq._stand.shapes import record_pressure
+
+        tests = record_pressure(tests, seed)
+    t = tests[0]
     t1 = table1()
     i = t1.index(pressure_bar)
     steps = t["step"]
     test = PressureTest(
-        pressure_bar, t["height_m"], t["force_N"], t["piston_m"], t["compression"], steps, steps + 2
+        pressure_bar,
+        t["height_m"],
+        t["force_N"],
+        t["piston_m"],
+        t["compression"],
+        steps,
+        steps + 2,
+        t.get("measured_pressure_bar"),
     )
     return test, np.concatenate([t1.force[i], t1.piston[i]])
 
@@ -103,6 +122,9 @@ class CalibrationResult:
     # for the lowest and the highest third of the forces of each test, (reps, 2)
     predictive: np.ndarray | None = None
     stand: StandDescription = PAPER_STAND  # of the n50 truth's stand
+    width90: np.ndarray | None = None  # (reps, q) width of the central 90 % interval
+    pressure: str = "set"  # "recorded": the stand recorded each reading's pressure, the fit used it
+    ar1: str = "off"  # "on": the fit modelled AR(1) pressure-holding errors
 
     def summary(self) -> dict:
         n = self.inside90.shape[0]
@@ -111,6 +133,8 @@ class CalibrationResult:
         out = {
             "truth": self.truth_kind,
             "noise_model": self.noise,
+            "pressure": self.pressure,
+            "pressure_ar1": self.ar1,
             "replications": n,
             "stand": self.stand.changes(),
             "converged_fraction": float(self.converged.mean()),
@@ -136,6 +160,7 @@ class CalibrationResult:
                 "in_region90": _region(n, 0.9)[0]
                 <= int(self.inside90[:, j].sum())
                 <= _region(n, 0.9)[1],
+                "mean_width90": None if self.width90 is None else float(self.width90[:, j].mean()),
                 "sbc_rank_histogram": hist.tolist(),
                 "sbc_uniformity_p": p_sbc[j],
                 "sbc_uniformity_p_holm": p_holm[j],
@@ -179,12 +204,25 @@ def calibrate(
     settings: Settings | None = None,
     pressures=(1.0, 5.0, 10.0),
     stand: StandDescription = PAPER_STAND,
+    pressure: str = "set",
+    ar1: str = "off",
 ) -> CalibrationResult:
-    """``reps`` replications of one setting; ``stand`` is the virtual stand of the n50 truth."""
+    """``reps`` replications of one setting; ``stand`` is the virtual stand of the n50 truth;
+    ``pressure`` "recorded" records each reading's pressure (n50 truth) and fits with it as a
+    covariate; ``ar1`` "on" fits AR(1) pressure-holding errors (module docstring)."""
     if truth not in ("prior", "n50"):
         raise InputError(f"option --truth: expected 'prior' or 'n50', got '{truth}'")
     if noise not in ("budget", "constant"):
         raise InputError(f"option --noise: expected 'budget' or 'constant', got '{noise}'")
+    if pressure not in ("set", "recorded"):
+        raise InputError(f"option --pressure: expected 'set' or 'recorded', got '{pressure}'")
+    if ar1 not in ("off", "on"):
+        raise InputError(f"option --pressure-ar1: expected 'off' or 'on', got '{ar1}'")
+    if truth == "prior" and (pressure != "set" or ar1 != "off"):
+        raise InputError(
+            "options --pressure/--pressure-ar1: the prior truth draws its data from the plain "
+            "model; use them with --truth n50"
+        )
     if reps < 1:
         raise InputError(f"option --reps: at least 1 replication, got {reps}")
     if truth == "prior" and stand != PAPER_STAND:
@@ -194,7 +232,8 @@ def calibrate(
     settings = settings or Settings(min_steps=300, chunk=150)
     rng = np.random.default_rng(seed)
     names = list(QUANTITIES) + (list(NOISE_NAMES) if truth == "prior" and noise == "budget" else [])
-    in50, in90, ranks, conv, ps, pred = [], [], [], [], [], []
+    in50, in90, ranks, conv, ps, pred, widths = [], [], [], [], [], [], []
+    recorded = pressure == "recorded"
     t0 = time.perf_counter()
     for r in progress(range(reps), desc=f"calibrate {truth}, {noise}", unit="rep"):
         p = float(pressures[r % len(pressures)])
@@ -202,8 +241,16 @@ def calibrate(
             test, coef, noise_truth = _test_from_model(rng, p, 0.112)
             true = np.concatenate([coef, noise_truth]) if noise == "budget" else coef
         else:
-            test, true = _test_from_stand(int(rng.integers(2**31)), p, stand)
-        fit = fit_test(test, 0.112, seed=int(rng.integers(2**31)), settings=settings, noise=noise)
+            test, true = _test_from_stand(int(rng.integers(2**31)), p, stand, recorded)
+        fit = fit_test(
+            test,
+            0.112,
+            seed=int(rng.integers(2**31)),
+            settings=settings,
+            noise=noise,
+            pressure="measured" if recorded else "set",
+            ar1=ar1,
+        )
         draws = np.concatenate(
             [fit.flat("force"), fit.flat("piston")]
             + ([fit.flat("noise")] if len(names) > 8 else []),
@@ -212,16 +259,18 @@ def calibrate(
         q = np.quantile(draws, [0.05, 0.25, 0.75, 0.95], axis=0)
         in50.append((q[1] <= true) & (true <= q[2]))
         in90.append((q[0] <= true) & (true <= q[3]))
+        widths.append(q[3] - q[0])
         thin = draws[np.linspace(0, draws.shape[0] - 1, N_RANKS).astype(int)]
         ranks.append(np.sum(thin < true, axis=0))
         conv.append(fit.convergence.converged)
         ps.append(p)
         if truth == "n50":
-            pred.append(
-                _predictive_coverage(
-                    fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng
-                )
+            cover = _predictive_coverage(
+                fit, _test_from_stand(int(rng.integers(2**31)), p, stand)[0], rng
             )
+            if not recorded:  # computed either way (the same random stream: the same
+                pred.append(cover)  # replications); with recorded pressure it would need the
+                # fresh test's own pressures, so it is not reported
     return CalibrationResult(
         truth,
         noise,
@@ -234,18 +283,26 @@ def calibrate(
         time.perf_counter() - t0,
         np.array(pred) if pred else None,
         stand,
+        np.array(widths),
+        pressure,
+        ar1,
     )
 
 
 def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> np.ndarray:
     """Share of a fresh replicate's force readings inside the 90 % predictive interval,
-    for the lowest and highest third of the forces; (2,)."""
+    for the lowest and highest third of the forces; (2,). With AR(1) holding errors the replicate
+    is the model's own (``posterior_predictive``: a fresh holding-error series at the same
+    heights, which the fresh test has)."""
     f, nz = fit.flat("force"), fit.flat("noise")
     idx = rng.choice(f.shape[0], size=min(n_draws, f.shape[0]), replace=False)
     u = fresh.height_m - fit.x0_m
-    mu = cubic(f[idx][:, None, :], u)  # (draws, n)
-    sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
-    y = mu + sd * rng.standard_normal(mu.shape)
+    if fit.variant == "ar1":
+        y = np.asarray(fit.idata.posterior_predictive["force_N"]).reshape(-1, u.size)[idx]
+    else:
+        mu = cubic(f[idx][:, None, :], u)  # (draws, n)
+        sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
+        y = mu + sd * rng.standard_normal(mu.shape)
     lo, hi = np.quantile(y, [0.05, 0.95], axis=0)
     inside = (lo <= fresh.force_N) & (fresh.force_N <= hi)
     order = np.argsort(fresh.force_N)
@@ -274,8 +331,13 @@ def markdown(results: list[CalibrationResult], command: str) -> str:
             if s["stand"]
             else ""
         )
+        how = ""
+        if s["pressure"] == "recorded":
+            how += ", pressure recorded and used as a covariate"
+        if s["pressure_ar1"] == "on":
+            how += ", AR(1) pressure-holding errors"
         lines += [
-            f"## truth = {s['truth']}{on}, noise model = {s['noise_model']} ({n} replications, "
+            f"## truth = {s['truth']}{on}, noise model = {s['noise_model']}{how} ({n} replications, "
             f"{100 * s['converged_fraction']:.0f} % converged, {res.seconds:.0f} s)",
             "",
         ]
@@ -289,8 +351,8 @@ def markdown(results: list[CalibrationResult], command: str) -> str:
             ]
         lines += [
             f"| quantity | covered of {n} at 50 % (region {r50[0]}-{r50[1]}) | at 90 % (region {r90[0]}-{r90[1]}) "
-            "| SBC p | Holm p |",
-            "|---|---|---|---|---|",
+            "| SBC p | Holm p | mean 90 % width (SI) |",
+            "|---|---|---|---|---|---|",
         ]
         for name, q in s["quantities"].items():
             mark50 = "" if q["in_region50"] else " **outside**"
@@ -302,8 +364,9 @@ def markdown(results: list[CalibrationResult], command: str) -> str:
                 if q["sbc_uniformity_p_holm"] is not None and q["sbc_uniformity_p_holm"] < 0.01
                 else ""
             )
+            w = "-" if q["mean_width90"] is None else f"{q['mean_width90']:.4g}"
             lines.append(
-                f"| {name} | {q['covered50']}{mark50} | {q['covered90']}{mark90} | {p} | {ph} |"
+                f"| {name} | {q['covered50']}{mark50} | {q['covered90']}{mark90} | {p} | {ph} | {w} |"
             )
         lines.append("")
     return "\n".join(lines) + "\n"

@@ -31,7 +31,7 @@ import numpy as np
 import optimistix as optx
 
 from uq._data.recordings import PressureTest, Recordings
-from uq._data.reference import FORCE_NAMES, PISTON_NAMES
+from uq._data.reference import FORCE_NAMES, PAPER_PISTON_AREA_M2, PISTON_NAMES
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel, Posterior, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE, LIBRARY_ADVICE
@@ -261,9 +261,22 @@ class PressureFit:
     noise: np.ndarray  # (C, D, 3) sigma0_N, rel_force, sigma_L_m
     #: the recording-order check of the residuals (uq._models.residual_order): force, piston, alpha
     order_check: dict
+    #: the pressure-holding error: "plain" (in the noise), "measured" (measured pressure as a
+    #: covariate) or "ar1" (AR(1) in recording order); uq._models.cubic_pressure
+    variant: str = "plain"
 
     @classmethod
-    def of(cls, test, x0_m, lsq_force, lsq_piston, posterior: Posterior, ref_force_N, noise_model):
+    def of(
+        cls,
+        test,
+        x0_m,
+        lsq_force,
+        lsq_piston,
+        posterior: Posterior,
+        ref_force_N,
+        noise_model,
+        variant: str = "plain",
+    ):
         post = posterior.idata.posterior
 
         def stack(names):
@@ -273,15 +286,32 @@ class PressureFit:
         u = test.height_m - x0_m
         mean_noise = noise.reshape(-1, 3).mean(axis=0)
         design = np.asarray(basis(u))
+        readings = {"force": test.force_N, "piston": test.piston_m}
+        if variant == "measured":  # the readings the model fits: corrected by the measured pressure
+            from uq._models.cubic_pressure import measured_corrected
+
+            readings = measured_corrected(posterior.data, posterior.beta.reshape(-1, 10).mean(0))
         residuals = {
-            "force": test.force_N - cubic(force.reshape(-1, 4).mean(0), u),
-            "piston": test.piston_m - cubic(piston.reshape(-1, 4).mean(0), u),
+            "force": readings["force"] - cubic(force.reshape(-1, 4).mean(0), u),
+            "piston": readings["piston"] - cubic(piston.reshape(-1, 4).mean(0), u),
         }
         sd = {
             "force": np.sqrt(force_noise_var(mean_noise[0], mean_noise[1], ref_force_N)),
             "piston": np.full(u.shape, mean_noise[2]),
         }
-        check = {b: lag_one_check(residuals[b], sd[b], design) for b in ("force", "piston")}
+        designs = {"force": design, "piston": design}
+        if variant == "ar1":  # check what the AR(1) model leaves: Prais-Winsten innovations
+            from uq._models.cubic_pressure import ar1_order_whitening, prewhiten
+
+            theta_mean = posterior.theta.reshape(-1, posterior.theta.shape[-1]).mean(0)
+            rho, sd = ar1_order_whitening(posterior.data, theta_mean)
+            for b in ("force", "piston"):
+                residuals[b] = prewhiten(residuals[b] / sd[b], rho[b])
+                designs[b] = np.stack(
+                    [prewhiten(c, rho[b]) for c in (design / sd[b][:, None]).T], axis=1
+                )
+                sd[b] = np.ones(u.shape)
+        check = {b: lag_one_check(residuals[b], sd[b], designs[b]) for b in ("force", "piston")}
         return cls(
             test,
             x0_m,
@@ -294,6 +324,7 @@ class PressureFit:
             piston,
             noise,
             check | {"alpha": ORDER_ALPHA},
+            variant,
         )
 
     @property
@@ -382,7 +413,22 @@ class PressureFit:
             },
             "convergence": conv,
             "residual_order": self.order_check,
-        }
+        } | self._pressure_holding_json(var)
+
+    def _pressure_holding_json(self, var) -> dict:
+        """How the model treated the pressure-holding error, and its extra parameters."""
+        from uq._models.cubic_pressure import AR_EXTRA_NAMES, MEASURED_EXTRA_NAMES
+
+        if self.variant == "plain":
+            return {}
+        names = AR_EXTRA_NAMES if self.variant == "ar1" else MEASURED_EXTRA_NAMES
+        post = self.idata.posterior
+        block = {"model": self.variant}
+        for n in names:
+            block[n] = estimate(np.asarray(post[n])) | {
+                k: var[n][k] for k in ("r_hat", "ess_bulk") if k in var.get(n, {})
+            }
+        return {"pressure_holding": block}
 
     def __repr__(self) -> str:
         state = "converged" if self.convergence.converged else "NOT converged"
@@ -415,6 +461,10 @@ def test_seeds(seed: int, n: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
+PRESSURE_MODELS = ("set", "measured")
+AR1_CHOICES = ("off", "on", "auto")
+
+
 def fit_tests(
     tests,
     x0_m: float,
@@ -424,6 +474,9 @@ def fit_tests(
     noise: str = "budget",
     stand: StandDescription = PAPER_STAND,
     desc: str | None = None,
+    pressure: str = "set",
+    ar1: str = "off",
+    piston_area_m2: float = PAPER_PISTON_AREA_M2,
 ) -> list[PressureFit]:
     """Fit several tests at once: one emcee run samples every test's ensembles in lockstep
     (``fit_collapsed`` with a list of data), each test with its own independent ensembles,
@@ -434,21 +487,78 @@ def fit_tests(
     ``noise="constant"``: one force sd for the whole test, the common but wrong choice kept
     for the calibration suite's misspecification study (the total is still sampled; its split
     into floor and relative parts is then unidentified and follows the prior).
+
+    The pressure-holding error (uq._models.cubic_pressure): ``pressure="measured"`` uses each
+    reading's measured pressure (``PressureTest.measured_pressure_bar``) as a covariate; otherwise
+    ``ar1`` says whether the holding errors are an AR(1) series in recording order: "off" (in the
+    independent noise, the default), "on" (every test with a recording order), "auto" (the tests
+    whose residuals the recording-order check flags under the independent model are refitted
+    with it). Tests without piston readings, or without a recording order for AR(1), keep the
+    plain model. ``piston_area_m2``: the stand's S (Boyle's law moves the piston by dV / S).
     """
-    prepared = [_prepare(t, x0_m, noise, stand) for t in tests]
-    posts = fit_collapsed(
-        MODEL,
-        [p[0] for p in prepared],
-        seed=seed,
-        settings=settings,
-        max_draws=MAX_DRAWS,
-        seeds=test_seeds(seed, len(prepared)),
-        desc=desc,
-    )
-    return [
-        PressureFit.of(t, x0_m, lsq_f, lsq_l, post, ref, noise)
-        for t, (_, lsq_f, lsq_l, ref), post in zip(tests, prepared, posts, strict=True)
-    ]
+    from uq._models import cubic_pressure as CP
+
+    if pressure not in PRESSURE_MODELS:
+        raise ValueError(f"pressure must be one of {PRESSURE_MODELS}, got {pressure!r}")
+    if ar1 not in AR1_CHOICES:
+        raise ValueError(f"ar1 must be one of {AR1_CHOICES}, got {ar1!r}")
+    tests = list(tests)
+    seeds = test_seeds(seed, len(tests))
+
+    def variant_of(t) -> str:
+        if t.piston_m is None:
+            return "plain"
+        if pressure == "measured":
+            return "measured"
+        if ar1 == "on" and t.step is not None:
+            return "ar1"
+        return "plain"
+
+    def prepare(t, variant):
+        if variant == "measured":
+            return CP.measured_data(t, x0_m, noise, stand, piston_area_m2)
+        if variant == "ar1":
+            return CP.ar1_data(t, x0_m, noise, stand, piston_area_m2)
+        return _prepare(t, x0_m, noise, stand)
+
+    models = {"plain": MODEL, "measured": CP.MEASURED, "ar1": CP.AR1}
+    variants = [variant_of(t) for t in tests]
+
+    def run(indices, variant, label):
+        prepared = [prepare(tests[i], variant) for i in indices]
+        posts = fit_collapsed(
+            models[variant],
+            [p[0] for p in prepared],
+            seed=seed,
+            settings=settings,
+            max_draws=MAX_DRAWS,
+            seeds=[seeds[i] for i in indices],
+            desc=label,
+        )
+        return {
+            i: PressureFit.of(tests[i], x0_m, lsq_f, lsq_l, post, ref, noise, variant)
+            for i, (_, lsq_f, lsq_l, ref), post in zip(indices, prepared, posts, strict=True)
+        }
+
+    fits: dict[int, PressureFit] = {}
+    for variant in models:
+        idx = [i for i, v in enumerate(variants) if v == variant]
+        if idx:
+            fits |= run(
+                idx, variant, desc if variant == "plain" else f"{desc or 'sampling'} ({variant})"
+            )
+    if ar1 == "auto" and pressure != "measured":
+        flagged = [
+            i
+            for i, f in fits.items()
+            if f.variant == "plain"
+            and tests[i].step is not None
+            and tests[i].piston_m is not None
+            and f.model_warnings()
+        ]
+        if flagged:
+            fits |= run(flagged, "ar1", f"{desc or 'sampling'} (AR(1) where flagged)")
+    return [fits[i] for i in range(len(tests))]
 
 
 def fit_test(
@@ -459,9 +569,20 @@ def fit_test(
     settings: Settings = Settings(),
     noise: str = "budget",
     stand: StandDescription = PAPER_STAND,
+    pressure: str = "set",
+    ar1: str = "off",
 ) -> PressureFit:
     """One test's posterior (:func:`fit_tests` of one test)."""
-    return fit_tests([test], x0_m, seed=seed, settings=settings, noise=noise, stand=stand)[0]
+    return fit_tests(
+        [test],
+        x0_m,
+        seed=seed,
+        settings=settings,
+        noise=noise,
+        stand=stand,
+        pressure=pressure,
+        ar1=ar1,
+    )[0]
 
 
 @dataclass(eq=False, frozen=True, repr=False)
@@ -548,11 +669,15 @@ def fit_campaign(
     seed: int = 0,
     settings: Settings = Settings(),
     stand: StandDescription = PAPER_STAND,
+    pressure_ar1: str = "off",
 ) -> CampaignFit:
     """Fit every test of a campaign: one emcee run samples all tests in lockstep, each with its
     own ensembles and convergence checks (:func:`fit_tests`). ``stand``: the stand the recordings
     were taken on (its load cell centres the prior of the relative force noise). ``uq fit`` is
-    this plus :meth:`CampaignFit.to_json`.
+    this plus :meth:`CampaignFit.to_json`. Recordings with measured pressures
+    (``Recordings.pressure_measured``) use them as a covariate of the pressure-holding error;
+    otherwise ``pressure_ar1`` ("off", "on", "auto") models the holding errors as an AR(1) series
+    in recording order (:func:`fit_tests`).
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -570,5 +695,8 @@ def fit_campaign(
         settings=settings,
         stand=stand,
         desc="sampling all tests",
+        pressure="measured" if getattr(recordings, "pressure_measured", False) else "set",
+        ar1=pressure_ar1,
+        piston_area_m2=getattr(recordings, "piston_area_m2", PAPER_PISTON_AREA_M2),
     )
     return CampaignFit(recordings, fits, seed, stand)

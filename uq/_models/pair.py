@@ -19,6 +19,14 @@ are the logs of (s0 [N], r, k_p, sL [m], V0 [m^3]) with priors centred on the st
 stand.load_cell_rel_sd, 0.5), log k_p ~ N(0, 0.5), log sL ~ N(log 1e-4, 1.5), log V0 ~
 N(log stand.gas_volume_at_xmax_m3, 0.5). Coefficients are standardised, beta ~ N(0, I).
 
+With measured pressures (a ``set_pressure_*`` column) the readings are corrected instead,
+force - dp_hat F_hat and piston + V0 dp_hat / (p_abs S) with dp_hat each reading's measured
+deviation less its test's common offset (``measured_deviation``, ``readings``): linear in the
+readings given V0, so still conjugate; dp_i in the covariance then shrinks to the sensor's
+resolution (k_p and the coupling become negligible), and V0 is identified by the correction. The
+sensor's common offset that remains per test is not modelled here (the per-pressure cubics carry
+it: uq._models.cubic_pressure).
+
 Given the noise the coefficients are Gaussian; the Gram matrix of the whitened pair is formed from
 a :class:`uq._inference.linear.GramPlan` of the fixed designs with per-reading weights, so a log
 posterior costs a few weighted sums, not a (2n x k) product.
@@ -73,13 +81,31 @@ class PairData(NamedTuple):
     prior_mean: jnp.ndarray  # (5,) prior centres of the noise logs
     gram: GramPlan  # the Gram matrix's plan (``posterior``)
     weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out
+    #: (n,) measured pressure deviation of each reading, Pa (``measured_deviation``; zeros when
+    #: the recordings give set pressures only): the readings are corrected by it (``readings``)
+    dp_meas: jnp.ndarray
 
 
-def pair_data(Xf, Xl, F, L, phat, lever, p_bar, area, stand: StandDescription) -> PairData:
-    """The pair likelihood's arrays from the designs, the readings and plug-in noise references."""
+def pair_data(
+    Xf, Xl, F, L, phat, lever, p_bar, area, stand: StandDescription, dp_meas=None
+) -> PairData:
+    """The pair likelihood's arrays from the designs, the readings and plug-in noise references.
+
+    ``dp_meas`` (n,) Pa: each reading's measured pressure deviation (``measured_deviation``), or
+    None. Where given, the readings are corrected by it and the pressure-holding term of the
+    covariance shrinks to the sensor's resolution (uq._stand.shapes: 1 Pa, a uniform rounding
+    error of sd 1/sqrt(12) Pa)."""
     from uq._physics.quantities import BAR_PA
+    from uq._stand.shapes import SENSOR_RESOLUTION_PA
 
     p_bar = np.asarray(p_bar, float)
+    measured = dp_meas is not None
+    dp_meas = np.zeros(np.shape(F)) if dp_meas is None else np.asarray(dp_meas, float)
+    hold_pa = (
+        np.full(np.shape(F), SENSOR_RESOLUTION_PA / np.sqrt(12.0))
+        if measured
+        else stand.pressure_sd_bar(p_bar) * BAR_PA
+    )
     return PairData(
         jnp.asarray(Xf),
         jnp.asarray(Xl),
@@ -87,13 +113,42 @@ def pair_data(Xf, Xl, F, L, phat, lever, p_bar, area, stand: StandDescription) -
         jnp.asarray(L),
         jnp.asarray(phat),
         jnp.asarray(lever),
-        jnp.asarray(stand.pressure_sd_bar(p_bar) * BAR_PA),
+        jnp.asarray(hold_pa),
         jnp.asarray((p_bar + stand.p_atm_bar) * BAR_PA),
         jnp.asarray(area),
         jnp.asarray(noise_prior_mean(stand)),
         gram_plan([[(Xf, Xf)], [(Xl, Xl)], [(Xl, Xf), (Xf, Xl)]]),
         jnp.ones(np.size(F)),
+        jnp.asarray(dp_meas),
     )
+
+
+def measured_deviation(rec):
+    """Each reading's measured pressure deviation (Pa), in ``arrays`` order, or None when the
+    recordings give set pressures only: measured - set less the test's common offset's prior mean
+    (``uq._models.cubic_pressure.common_offset``: the sensor's gain error and the series' mean).
+    The common offset that remains (sd ``common_offset``'s second value, about 0.015 % of p_u from
+    5 bar up) is not modelled here, unlike in the per-pressure cubics."""
+    if not rec.pressure_measured:
+        return None
+    from uq._models.cubic_pressure import common_offset
+    from uq._physics.quantities import BAR_PA
+
+    out = []
+    for t in rec.tests:
+        dp_hat = (np.asarray(t.measured_pressure_bar, float) - t.pressure_bar) * BAR_PA
+        out.append(
+            dp_hat - common_offset(dp_hat, t.pressure_bar * BAR_PA, ordered=t.step is not None)[0]
+        )
+    return np.concatenate(out)
+
+
+def readings(noise, d: PairData):
+    """The readings corrected by the measured pressure deviations (unchanged without them): the
+    force less dp F_hat (the plug-in lever dP/dp_u), the piston plus V0 dp / (p_abs S) (Boyle, with
+    the sampled gas volume V0): linear in the readings given the noise, so beta stays conjugate."""
+    V0 = jnp.exp(noise[4])
+    return d.F - d.feff_hat * d.dp_meas, d.L + V0 * d.dp_meas / (d.p_abs_pa * d.area)
 
 
 def cov_factors(noise, d: PairData):
@@ -118,10 +173,11 @@ def posterior(noise, d: PairData, scale=1.0):
     reading (weight 0) drops out of every sum.
     """
     L11, L21, L22 = cov_factors(noise, d)
+    F, L = readings(noise, d)
     w = d.weight
     s = L21 / (L11 * L22)
-    yf = d.F / L11
-    yl = (d.L - L21 * yf) / L22
+    yf = F / L11
+    yl = (L - L21 * yf) / L22
     gram = weighted_gram(
         d.gram, (w * (1.0 / L11**2 + s**2), w * scale**2 / L22**2, -w * scale * s / L22)
     )
@@ -144,8 +200,9 @@ def draw(noise, key, d: PairData, scale=1.0):
 def pointwise(noise, beta, d: PairData, scale=1.0):
     """Log-likelihood of each (force, piston) reading at one draw, (n,)."""
     L11, L21, L22 = cov_factors(noise, d)
-    r1 = (d.F - d.Xf @ beta) / L11
-    r2 = (d.L - scale * (d.Xl @ beta) - L21 * r1) / L22
+    F, L = readings(noise, d)
+    r1 = (F - d.Xf @ beta) / L11
+    r2 = (L - scale * (d.Xl @ beta) - L21 * r1) / L22
     return -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI
 
 
@@ -153,9 +210,10 @@ def predict(noise, beta, key, d: PairData, scale=1.0):
     """A replicate of every reading: the mean surfaces plus the correlated reading noise."""
     L11, L21, L22 = cov_factors(noise, d)
     z = jax.random.normal(key, (2, d.F.shape[0]))
+    F, L = readings(noise, d)  # the replicate is of the readings as read: at the same pressures
     return {
-        "force_N": d.Xf @ beta + L11 * z[0],
-        "piston_m": scale * (d.Xl @ beta) + L21 * z[0] + L22 * z[1],
+        "force_N": d.Xf @ beta + (d.F - F) + L11 * z[0],
+        "piston_m": scale * (d.Xl @ beta) + (d.L - L) + L21 * z[0] + L22 * z[1],
     }
 
 
@@ -184,9 +242,10 @@ def pointwise_loo(noise, d: PairData, scale=1.0):
     the coefficients' leave-one-out is exact. Same ELPD, far smaller Pareto k.
     """
     L11, L21, L22 = cov_factors(noise, d)
-    yf = d.F / L11
+    F, L = readings(noise, d)
+    yf = F / L11
     xf = d.Xf / L11[:, None]
-    yl = (d.L - L21 * yf) / L22
+    yl = (L - L21 * yf) / L22
     xl = (scale * d.Xl - L21[:, None] * xf) / L22[:, None]
     post = posterior(noise, d, scale)
     X, y = jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])

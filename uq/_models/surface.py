@@ -365,7 +365,7 @@ def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> Pa
     g = geometry_of(rec)
     x, p, F, L, idx = pair.arrays(rec)
     _, phat, feff, Xf, Xl = _reference(orders, g, x, p, F, L, idx, len(rec.tests))
-    return pair_data(Xf, Xl, F, L, phat, feff, p, g.area_m2, stand)
+    return pair_data(Xf, Xl, F, L, phat, feff, p, g.area_m2, stand, pair.measured_deviation(rec))
 
 
 def fit_surface(

@@ -218,7 +218,7 @@ def thermo_data(rec: Recordings, orders: ThermoOrders, stand: StandDescription) 
     beta, *_ = np.linalg.lstsq(A, np.concatenate([F * wf, L * wl]), rcond=None)
     phat = np.abs(Xf @ beta)
     lever = np.abs(_force_pressure_slope(orders, g, x, p, beta[: orders.n_potential]))
-    return pair_data(Xf, Xl, F, L, phat, lever, p, g.area_m2, stand)
+    return pair_data(Xf, Xl, F, L, phat, lever, p, g.area_m2, stand, pair.measured_deviation(rec))
 
 
 def _force_pressure_slope(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, coef):

@@ -121,6 +121,11 @@ PARAM_OPTIONS = {
     "rate_target_N_per_m": "--rate-target-N-per-m",
     "force_limit_N": "--force-limit-N",
     "effects": "--effect",
+    "truth": "--truth",
+    "noise": "--noise",
+    "pressure": "--pressure",
+    "ar1": "--pressure-ar1",
+    "reps": "--reps",
 }
 
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (

@@ -211,23 +211,26 @@ def calibrate(
     ``pressure`` "recorded" records each reading's pressure (n50 truth) and fits with it as a
     covariate; ``ar1`` "on" fits AR(1) pressure-holding errors (module docstring)."""
     if truth not in ("prior", "n50"):
-        raise InputError(f"option --truth: expected 'prior' or 'n50', got '{truth}'")
+        raise InputError(f"truth: expected 'prior' or 'n50', got '{truth}'", param="truth")
     if noise not in ("budget", "constant"):
-        raise InputError(f"option --noise: expected 'budget' or 'constant', got '{noise}'")
+        raise InputError(f"noise: expected 'budget' or 'constant', got '{noise}'", param="noise")
     if pressure not in ("set", "recorded"):
-        raise InputError(f"option --pressure: expected 'set' or 'recorded', got '{pressure}'")
+        raise InputError(
+            f"pressure: expected 'set' or 'recorded', got '{pressure}'", param="pressure"
+        )
     if ar1 not in ("off", "on"):
-        raise InputError(f"option --pressure-ar1: expected 'off' or 'on', got '{ar1}'")
+        raise InputError(f"ar1: expected 'off' or 'on', got '{ar1}'", param="ar1")
     if truth == "prior" and (pressure != "set" or ar1 != "off"):
         raise InputError(
-            "options --pressure/--pressure-ar1: the prior truth draws its data from the plain "
-            "model; use them with --truth n50"
+            "`pressure`/`ar1`: the prior truth draws its data from the plain model; use them "
+            "with the n50 `truth`"
         )
     if reps < 1:
-        raise InputError(f"option --reps: at least 1 replication, got {reps}")
+        raise InputError(f"reps: at least 1 replication, got {reps}", param="reps")
     if truth == "prior" and stand != PAPER_STAND:
         raise InputError(
-            "option --stand: only the n50 truth runs on a stand; the prior truth draws its data from the model"
+            "stand: only the n50 truth runs on a stand; the prior truth draws its data from the model",
+            param="stand",
         )
     settings = settings or Settings(min_steps=300, chunk=150)
     rng = np.random.default_rng(seed)

@@ -49,6 +49,18 @@ def test_cli_refuses_height(tmp_path, capsys):
     assert "outside the tested heights" in capsys.readouterr().err
 
 
+def test_cli_thermodynamic_answer_is_not_saved(tmp_path, capsys):
+    from uq._cli.main import main
+
+    argv = ["margin", "data/n50/recordings.csv", "--model", "thermodynamic"]
+    assert main([*argv, "--save-fit", str(tmp_path / "t.nc")]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "option --save-fit: not with --model thermodynamic" in err
+        and not (tmp_path / "t.nc").exists()
+    )
+
+
 @pytest.mark.slow
 def test_cli_json(tmp_path):
     from uq._cli.main import main

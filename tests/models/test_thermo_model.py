@@ -108,3 +108,23 @@ def test_refuses_force_only_and_single_pressure():
     rec = uq.simulate("n50-thermo", seed=23, layout=uq.Layout(pressures_bar=(5.0,), step_m=0.01))
     with pytest.raises(uq.InputError, match="two or more pressures"):
         uq.fit_thermo(rec, ORDERS)
+
+
+def test_margins_answered_by_the_thermodynamic_model(thermo_fit):
+    """``uq margin --model thermodynamic``: the pressure that carries the spring's true force at a
+    height between the tested pressures, its force band and stroke, from the potential's draws;
+    the truth (the stand's potential spring) inside the 99.9 % interval."""
+    from uq._derived.margin import ThermoAnswer, choose_model, margin
+
+    ans, info = choose_model(thermo_fit, forced="thermodynamic")
+    assert isinstance(ans, ThermoAnswer) and info["name"] == "thermodynamic"
+    spring = SPRINGS["n50-thermo"]()
+    x, p = 0.100, 4.0
+    load = float(spring.force_N(np.array(x), p))
+    res = margin(ans, x, load, 0.95, pressure_bar=p, tolerance_pct=10.0, model_info=info)
+    e = res["pressure_bar_needed"]
+    assert e["q05"] - 3 * e["sd"] <= p <= e["q95"] + 3 * e["sd"]
+    assert res["model"]["name"] == "thermodynamic" and "usable_stroke" in res
+    assert abs(res["force_at_pressure"]["force_N"]["mean"] - load) < 0.01 * load
+    area = ans.volume_area_draws(np.array(x), p)
+    assert area.shape[0] == ans.beta.shape[0] and np.all(area > 0)

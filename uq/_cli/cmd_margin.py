@@ -49,7 +49,8 @@ def configure_margin(p) -> None:
         default=None,
         help="which model answers: auto (default) fits the surface model and the per-pressure cubics and "
         "takes the one PSIS-LOO prefers by more than 2 SE (the surface when indistinguishable); "
-        "surface or cubics skip the comparison",
+        "surface, thermodynamic (one potential for force and volume: docs/thermo.md) or cubics "
+        "skip the comparison",
     )
     p.add_argument(
         "--save-fit",
@@ -149,8 +150,8 @@ def _check_design_usage(args) -> None:
         )
     if args.dvdp_l_per_bar == "model":
         raise InputError(
-            "option --dvdp-l-per-bar: 'model' needs the thermodynamic model, which uq margin does not "
-            "answer with; give a number of litres per bar"
+            "option --dvdp-l-per-bar: 'model' is not offered for design margins (the charge moves "
+            "with each draw's required pressure); give a number of litres per bar"
         )
     if args.model == "cubics":
         raise InputError(
@@ -389,6 +390,11 @@ def _check_usage(args) -> None:
             raise InputError(
                 "option --save-fit: not with --fit (the saved fit is already saved); give FILE.csv to fit and save"
             )
+        if args.model == "thermodynamic":
+            raise InputError(
+                "option --save-fit: not with --model thermodynamic (a saved answer holds the surface "
+                "model or the per-pressure cubics)"
+            )
         if args.save_fit == "-":
             raise InputError(
                 "option --save-fit: needs a file name (NetCDF is not written to stdout)"
@@ -424,11 +430,14 @@ def command_margin(args) -> int:
         stand = stand_from(
             args
         )  # a bad --stand file or --walkers is refused before the recordings are read
-        if args.model in ("auto", "surface"):
+        if args.model in ("auto", "surface", "thermodynamic"):
             from uq._cli.common import settings_from
             from uq._models.surface import NOISE_NAMES
+            from uq._models.thermo import THETA_NAMES
 
-            settings_from(args).require_walkers(len(NOISE_NAMES))
+            settings_from(args).require_walkers(
+                len(THETA_NAMES) if args.model == "thermodynamic" else len(NOISE_NAMES)
+            )
         rec = load(args)
         tested = [t.pressure_bar for t in rec.tests]
         for q in queries:

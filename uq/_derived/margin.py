@@ -47,7 +47,7 @@ from uq._physics.quantities import BAR_PA
 N_P_GRID = 801
 N_CUBIC_DRAWS = 2000
 SURFACE_NOISE = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3")
-MODEL_CHOICES = ("auto", "surface", "cubics")
+MODEL_CHOICES = ("auto", "surface", "thermodynamic", "cubics")
 
 
 class _Ranges:
@@ -67,6 +67,25 @@ class _Ranges:
         refuse_extrapolation(
             height_m, p_bar, self.height_range_m, self.pressure_range_bar, param, "the model"
         )
+
+
+class ThermoAnswer(_Ranges):
+    """The thermodynamic model (uq._models.thermo.ThermoFit) as a margin answer: its force
+    P = -dG/dx and volume-derived area on one fixed set of at most ``max_draws`` posterior draws
+    (``uq margin --model thermodynamic``; not saved to a file)."""
+
+    name = "thermodynamic"
+
+    def __init__(self, fit, max_draws: int = 4000):
+        super().__init__(fit.recordings)
+        self.fit, self.beta = fit, fit.flat_beta(max_draws)
+        self.label = f"thermodynamic model ({fit.orders.label})"
+
+    def force_draws(self, height_m, p_bar):
+        return self.fit.force_draws(height_m, p_bar, beta=self.beta)
+
+    def volume_area_draws(self, height_m, p_bar):
+        return self.fit.volume_area_draws(height_m, p_bar, beta=self.beta)
 
 
 def _flat_draws(beta, max_draws):
@@ -376,6 +395,14 @@ def choose_model(
 ):
     """(answer, model description) from the PSIS-LOO comparison, or the user's ``--model``."""
     info = {"comparison": comparison}
+    if forced == "thermodynamic":
+        ans = ThermoAnswer(fit)
+        return ans, {
+            "name": ans.name,
+            "label": ans.label,
+            **info,
+            "why": "chosen by the user (model thermodynamic); no comparison made",
+        }
     if forced == "cubics" or (
         forced == "auto" and comparison and comparison["better"] == "per-pressure cubics"
     ):
@@ -701,7 +728,7 @@ def margin(
 
 
 def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, stand=None):
-    """Fit what ``model`` ("auto", "surface" or "cubics") needs and choose the answering model
+    """Fit what ``model`` ("auto", "surface", "thermodynamic" or "cubics") needs and choose the answering model
     (:func:`choose_model`); returns (answer, model description, merged sampler diagnostics).
     With "auto" both models are fitted with the same settings and compared
     (``uq._derived.comparison``)."""
@@ -718,6 +745,10 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
         fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=stand)
     elif model == "surface":
         fit = fit_surface(rec, seed=seed, settings=settings, stand=stand)
+    elif model == "thermodynamic":
+        from uq._models.thermo import fit_thermo
+
+        fit = fit_thermo(rec, seed=seed, settings=settings, stand=stand)
     else:
         cub = fit_campaign(rec, seed=seed, settings=settings, stand=stand)
     warnings, converged = [], True

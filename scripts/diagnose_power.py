@@ -98,23 +98,9 @@ def campaign(mech: str, magnitude: float, seed: int, tiny: bool):
 
 
 def recordings(tests):
-    from uq._data.recordings import PressureTest, Recordings
+    from uq._stand.simulator import recordings_from_tests
 
-    return Recordings(
-        "power",
-        tuple(
-            PressureTest(
-                t["pressure_bar"],
-                t["height_m"],
-                t["force_N"],
-                t["piston_m"],
-                t["compression"],
-                t["step"],
-                np.arange(t["step"].size),
-            )
-            for t in tests
-        ),
-    )
+    return recordings_from_tests(tests, "power")
 
 
 # ----------------------------------------------------------------------------- the oracle

@@ -175,11 +175,11 @@ def shaped(tests: list[dict], case: dict, stand, layout) -> list[dict] | str:
 
 
 def run_case(case: dict) -> dict:
-    from uq._data.recordings import PressureTest, Recordings, recordings_from_text
+    from uq._data.recordings import recordings_from_text
     from uq._data.stand_description import PAPER_STAND
     from uq._diagnose.engine import diagnose
     from uq._inference.sampler import Settings
-    from uq._stand.simulator import Layout, simulate
+    from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
     stand = PAPER_STAND.replace(**case.get("stand", {}))
     layouts, settings = (
@@ -203,21 +203,7 @@ def run_case(case: dict) -> dict:
     rec = (
         recordings_from_text(tests, "proof-catalogue")
         if isinstance(tests, str)
-        else Recordings(
-            "proof",
-            tuple(
-                PressureTest(
-                    t["pressure_bar"],
-                    t["height_m"],
-                    t["force_N"],
-                    t["piston_m"],
-                    t["compression"],
-                    t["step"],
-                    np.arange(t["step"].size),
-                )
-                for t in tests
-            ),
-        )
+        else recordings_from_tests(tests, "proof")
     )
     t0 = time.time()
     res = diagnose(rec, seed=case["seed"], settings=settings).to_json()

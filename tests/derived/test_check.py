@@ -344,25 +344,10 @@ def test_threshold_is_bonferroni_chi2():
 
 
 def _simulated(seed: int, pressures=(1.0, 5.0, 10.0)):
-    from uq._data.recordings import PressureTest, Recordings
-    from uq._stand.simulator import Layout, simulate
+    from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
     tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=pressures))
-    return Recordings(
-        f"simulated seed {seed}",
-        tuple(
-            PressureTest(
-                t["pressure_bar"],
-                t["height_m"],
-                t["force_N"],
-                t["piston_m"],
-                t["compression"],
-                t["step"],
-                np.arange(t["step"].size),
-            )
-            for t in tests
-        ),
-    )
+    return recordings_from_tests(tests, f"simulated seed {seed}")
 
 
 def _check_fit(cf, tmp_path: Path, tag: str) -> bool:

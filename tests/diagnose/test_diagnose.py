@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from uq._data.recordings import PressureTest, Recordings
-from uq._stand.simulator import Layout, simulate
+from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
 ALT = Layout(pressures_bar=(0.5, 2.5, 4.5, 6.5), x_max_m=0.150, x_min_m=0.070, step_m=0.0025)
 SMALL = Layout(pressures_bar=(1.0, 3.0, 5.0, 7.0, 9.0))
@@ -22,23 +22,7 @@ def _rec(effects, seed=7, layout=Layout(), x0=0.112, area=54.82e-4):
     tests = simulate(
         "n50-traditional", seed=seed, effects=effects, layout=layout, piston_area_m2=area
     )
-    return Recordings(
-        "test",
-        tuple(
-            PressureTest(
-                t["pressure_bar"],
-                t["height_m"],
-                t["force_N"],
-                t["piston_m"],
-                t["compression"],
-                t["step"],
-                np.arange(t["step"].size),
-            )
-            for t in tests
-        ),
-        x0_m=x0,
-        piston_area_m2=area,
-    )
+    return recordings_from_tests(tests, "test", x0_m=x0, piston_area_m2=area)
 
 
 def _consistent(mag: dict, truth: float) -> bool:
@@ -201,21 +185,7 @@ def test_same_seed_gives_byte_identical_json(tmp_path):
 
 def _rec_stand(effects, stand, seed=7, layout=SMALL):
     tests = simulate("n50-traditional", seed=seed, effects=effects, layout=layout, stand=stand)
-    return Recordings(
-        "test",
-        tuple(
-            PressureTest(
-                t["pressure_bar"],
-                t["height_m"],
-                t["force_N"],
-                t["piston_m"],
-                t["compression"],
-                t["step"],
-                np.arange(t["step"].size),
-            )
-            for t in tests
-        ),
-    )
+    return recordings_from_tests(tests, "test")
 
 
 def test_pressure_error_cancels_in_the_decorrelated_force():

@@ -127,26 +127,11 @@ def test_force_noise_keeps_the_whole_pressure_term_without_a_piston():
     (before, a clean catalogue's 0.1-bar force looked 2x noisier than its budget)."""
     from dataclasses import replace
 
-    from uq._data.recordings import PressureTest, Recordings
     from uq._data.stand_description import PAPER_STAND
-    from uq._stand.simulator import Layout, simulate
+    from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
     tests = simulate("n50-traditional", seed=4, layout=Layout((0.1, 5.0), 0.155, 0.065, 0.01))
-    full = Recordings(
-        "with piston",
-        tuple(
-            PressureTest(
-                t["pressure_bar"],
-                t["height_m"],
-                t["force_N"],
-                t["piston_m"],
-                t["compression"],
-                t["step"],
-                np.arange(t["step"].size),
-            )
-            for t in tests
-        ),
-    )
+    full = recordings_from_tests(tests, "with piston")
     bare = replace(full, tests=tuple(replace(t, piston_m=None) for t in full.tests))
     d_full, _ = M.prepare(full)
     d_bare, _ = M.prepare(bare)

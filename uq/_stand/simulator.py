@@ -55,6 +55,7 @@ from scipy.interpolate import PchipInterpolator
 
 from uq._data.recordings import (
     DEFAULT_PISTON_AREA_CM2,
+    PressureTest,
     Recordings,
     recordings_from_text,
     write_recordings_csv,
@@ -353,6 +354,29 @@ def simulate(
             )
         )
     return tests
+
+
+def recordings_from_tests(tests: list[dict], name: str = "simulated", **fields) -> Recordings:
+    """The stand's tests (:func:`simulate`) as :class:`uq.Recordings` as they are: unrounded and
+    unchecked, in recording order (a study's truth to the last bit; :func:`simulate_recordings`
+    gives what ``uq simulate`` writes and a reader reads). ``fields``: other fields of
+    Recordings (``x0_m``, ``piston_area_m2``)."""
+    return Recordings(
+        name,
+        tuple(
+            PressureTest(
+                t["pressure_bar"],
+                t["height_m"],
+                t["force_N"],
+                t["piston_m"],
+                t["compression"],
+                t["step"],
+                np.arange(t["step"].size),
+            )
+            for t in tests
+        ),
+        **fields,
+    )
 
 
 def simulate_recordings(

@@ -592,6 +592,33 @@ def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -
 # ----------------------------------------------------------------------------- design margins
 
 
+def _check_margin_args(
+    model, prob, max_frequency_Hz, rate_target_N_per_m, rate_tolerance_pct, force_limit_N
+) -> None:
+    """:func:`design_margin`'s refusals, before anything is computed."""
+    if not 0.0 < prob < 1.0:
+        raise InputError(
+            f"prob: expected a probability between 0 and 1, got {prob:g}", param="prob"
+        )
+    if not hasattr(model, "volume_area_draws"):
+        raise InputError(
+            f"design margins need a model with the volume-derived area dV/dx; the {model.label} has none "
+            "(answer with the surface model, or a fit of it that uq surface saved)"
+        )
+    for name, v in (
+        ("max_frequency_Hz", max_frequency_Hz),
+        ("rate_target_N_per_m", rate_target_N_per_m),
+        ("force_limit_N", force_limit_N),
+    ):
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise InputError(f"{name}: expected a positive number, got {v:g}", param=name)
+    if not (np.isfinite(rate_tolerance_pct) and rate_tolerance_pct > 0):
+        raise InputError(
+            f"rate_tolerance_pct: expected a positive percentage, got {rate_tolerance_pct:g}",
+            param="rate_tolerance_pct",
+        )
+
+
 def design_margin(
     model,
     height_m: float,
@@ -615,27 +642,9 @@ def design_margin(
     mean characteristic and the design's drawn inputs (``design.seed``)."""
     from uq._derived.margin import pressure_needed
 
-    if not 0.0 < prob < 1.0:
-        raise InputError(
-            f"prob: expected a probability between 0 and 1, got {prob:g}", param="prob"
-        )
-    if not hasattr(model, "volume_area_draws"):
-        raise InputError(
-            f"design margins need a model with the volume-derived area dV/dx; the {model.label} has none "
-            "(answer with the surface model, or a fit of it that uq surface saved)"
-        )
-    for name, v in (
-        ("max_frequency_Hz", max_frequency_Hz),
-        ("rate_target_N_per_m", rate_target_N_per_m),
-        ("force_limit_N", force_limit_N),
-    ):
-        if v is not None and not (np.isfinite(v) and v > 0):
-            raise InputError(f"{name}: expected a positive number, got {v:g}", param=name)
-    if not (np.isfinite(rate_tolerance_pct) and rate_tolerance_pct > 0):
-        raise InputError(
-            f"rate_tolerance_pct: expected a positive percentage, got {rate_tolerance_pct:g}",
-            param="rate_tolerance_pct",
-        )
+    _check_margin_args(
+        model, prob, max_frequency_Hz, rate_target_N_per_m, rate_tolerance_pct, force_limit_N
+    )
     if hasattr(model, "thinned") and grid is None:  # a saved answer's draws: at most DEFAULT_DRAWS
         model = model.thinned(DEFAULT_DRAWS)
     p_need = pressure_needed(model, height_m, load_N)

@@ -19,7 +19,7 @@ Truths:
 ``--noise constant`` refits with one force sd per test, to show what heteroscedastic noise
 modelled as constant does to the intervals (the default models do not do this).
 
-The pressure-holding error (uq._models.cubic_pressure), n50 truth only:
+The pressure-holding error (uq._models.cubic, its pressure-holding section), n50 truth only:
 * ``--pressure recorded``: the stand records each reading's pressure with the paper's sensor
   (uq._stand.shapes.record_pressure) and the fit uses it as a covariate; the same replications
   as ``--pressure set`` (the sensor has a random stream of its own), so the mean interval widths

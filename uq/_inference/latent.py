@@ -10,7 +10,7 @@ Sigma = diag(v) + U Q^-1 U^T. By the Woodbury identity and the matrix determinan
 so the coefficients' Gaussian posterior (``uq._inference.linear.posterior_from_moments``) needs
 only an m x m Cholesky factor, and beta stays conjugate (exact draws) whatever the latent's
 correlation. The per-pressure cubic with an AR(1) pressure-holding error (z = the holding errors
-in recording order, Q tridiagonal) is one use (``uq._models.cubic_pressure``).
+in recording order, Q tridiagonal) is one use (``uq._models.cubic``, its pressure-holding section).
 
 ``weight`` (the readings' rows, 1 fitted, 0 held out) sets D's held-out entries to zero: the
 result is then the density of the fitted rows alone (the latent still integrated out).
@@ -19,8 +19,11 @@ All functions are pure and jittable.
 
 from __future__ import annotations
 
+import numpy as np
+
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import LOG_2PI, LinearPosterior, posterior_from_moments
+from uq._stand.shapes import SENSOR_GAIN_SD, SENSOR_RESOLUTION_PA
 
 
 def _factor(U, v, Q, w):
@@ -156,3 +159,24 @@ def paired_ar1_posterior(Z, y, v, uf, ul, rho, prior_sd, weight=None) -> LinearP
         + jnp.sum(w) * LOG_2PI
     )
     return post._replace(log_marginal=jnp.where(quad >= 0.0, log_marginal, -jnp.inf))
+
+
+def common_offset(dp_hat_pa, p_pa: float, *, ordered: bool = True):
+    """Prior mean and sd (Pa) of the common offset delta in dp_hat = dp + delta.
+
+    delta ~ N(0, (p_u SENSOR_GAIN_SD)^2) (the sensor's gain error); dp a stationary AR(1) series
+    with the sample variance and lag-one correlation of dp_hat (iid when the order is unknown).
+    Returns the Gaussian posterior of delta given dp_hat, (mean, sd)."""
+    dp_hat = np.asarray(dp_hat_pa, float)
+    n = dp_hat.size
+    var = max(float(np.var(dp_hat, ddof=1)) if n > 1 else 0.0, SENSOR_RESOLUTION_PA**2)
+    rho = 0.0
+    if ordered and n > 2:
+        c = dp_hat - dp_hat.mean()
+        den = float(np.sum(c * c))
+        rho = float(np.clip(np.sum(c[1:] * c[:-1]) / den, -0.9, 0.95)) if den > 0 else 0.0
+    Q = np.asarray(ar1_precision(rho, n)[0]) / var
+    one = np.ones(n)
+    gain_var = max((p_pa * SENSOR_GAIN_SD) ** 2, SENSOR_RESOLUTION_PA**2)
+    post_var = 1.0 / (1.0 / gain_var + one @ Q @ one)
+    return post_var * float(one @ Q @ dp_hat), float(np.sqrt(post_var))

@@ -25,7 +25,7 @@ deviation less its test's common offset (``measured_deviation``, ``readings``): 
 readings given V0, so still conjugate; dp_i in the covariance then shrinks to the sensor's
 resolution (k_p and the coupling become negligible), and V0 is identified by the correction. The
 sensor's common offset that remains per test is not modelled here (the per-pressure cubics carry
-it: uq._models.cubic_pressure).
+it: uq._models.cubic, its pressure-holding section).
 
 Given the noise the coefficients are Gaussian; the Gram matrix of the whitened pair is formed from
 a :class:`uq._inference.linear.GramPlan` of the fixed designs with per-reading weights, so a log
@@ -126,12 +126,12 @@ def pair_data(
 def measured_deviation(rec):
     """Each reading's measured pressure deviation (Pa), in ``arrays`` order, or None when the
     recordings give set pressures only: measured - set less the test's common offset's prior mean
-    (``uq._models.cubic_pressure.common_offset``: the sensor's gain error and the series' mean).
+    (``uq._inference.latent.common_offset``: the sensor's gain error and the series' mean).
     The common offset that remains (sd ``common_offset``'s second value, about 0.015 % of p_u from
     5 bar up) is not modelled here, unlike in the per-pressure cubics."""
     if not rec.pressure_measured:
         return None
-    from uq._models.cubic_pressure import common_offset
+    from uq._inference.latent import common_offset
     from uq._physics.quantities import BAR_PA
 
     out = []

@@ -47,9 +47,11 @@ def test_report_on_n50_fixture(n50_fit, tmp_path):
         assert f"test_{p:g}bar.png" in page
 
 
-def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path):
+def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path, monkeypatch):
     """write_report's worker processes (the default on a multi-core machine) change nothing:
-    every PNG and the page are byte for byte those of jobs=1."""
+    every PNG and the page are byte for byte those of jobs=1 (the footer's date fixed, as
+    SOURCE_DATE_EPOCH does for a reproducible page: the two pages may be written a minute apart)."""
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")
     cb = campaign_bands(n50_fit, n_draws=200, seed=0)
     write_report(n50_fit, tmp_path / "one", bands=cb, jobs=1)
     write_report(n50_fit, tmp_path / "two", bands=cb, jobs=2)

@@ -75,18 +75,10 @@ def bench_test(
                 f"{recordings}: no test at {pressure_bar:g} bar (option --pressure-bar); it has {have} bar"
             ) from None
     from uq._data.reference import PAPER_X0_M
-    from uq._stand.simulator import Layout, simulate
+    from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
-    t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))[0]
-    test = PressureTest(
-        t["pressure_bar"],
-        t["height_m"],
-        t["force_N"],
-        t["piston_m"],
-        t["compression"],
-        t["step"],
-        np.arange(t["step"].size),
-    )
+    tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)))
+    test = recordings_from_tests(tests).tests[0]
     return test, PAPER_X0_M, f"{pressure_bar:g} bar test of the virtual stand (n50, seed {seed})"
 
 

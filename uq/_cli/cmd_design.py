@@ -267,7 +267,6 @@ def command_design(args) -> int:
 
     from uq._cli.common import load, settings_from, stand_from
     from uq._derived import design as D
-    from uq._io.files import emit_json
 
     t0 = time.perf_counter()
     from uq._models.thermo import THETA_NAMES
@@ -312,19 +311,9 @@ def command_design(args) -> int:
             for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
         }
     _print_sealed(rec, model, doc)
-    if args.out:
-        from uq._report.design import write_design_sheet
-
-        page = write_design_sheet(
-            doc,
-            args.out,
-            curves=curves,
-            reconstructed=_reconstructed(args.file),
-            figure_format=args.figures,
-        )
-        print(f"  data sheet: {page}")
-    print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
-    emit_json(doc, args.json)
+    _sheet_and_json(
+        args, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
+    )
     return 1 if (args.strict and not fit.convergence.converged) else 0
 
 
@@ -349,7 +338,6 @@ FORCE_ONLY_WHY = (
 def _force_only(args, rec, stand, heights, pressures, t0) -> int:
     from uq._derived import design as D
     from uq._inference.summary import estimate
-    from uq._io.files import emit_json
 
     model = D.force_only_cubics(rec, seed=args.seed, stand=stand, n_draws=args.draws)
     x_c = args.height_mm * 1e-3
@@ -392,20 +380,27 @@ def _force_only(args, rec, stand, heights, pressures, t0) -> int:
         f"[{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
     )
     print(f"  {FORCE_ONLY_WHY}")
+    _sheet_and_json(args, doc, None, f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
+    """The data sheet (``--out``), the timing line and the JSON, for both kinds of campaign."""
+    from uq._io.files import emit_json
+
     if args.out:
         from uq._report.design import write_design_sheet
 
         page = write_design_sheet(
             doc,
             args.out,
-            curves=None,
+            curves=curves,
             reconstructed=_reconstructed(args.file),
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")
-    print(f"  {time.perf_counter() - t0:.1f} s")
+    print(f"  {timing}")
     emit_json(doc, args.json)
-    return 0
 
 
 def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:

@@ -1409,6 +1409,15 @@ AR1 = CollapsedModel(
 )
 
 
+def collapsed_model(data) -> CollapsedModel:
+    """The model bundle whose data ``data`` is (a fit's ``posterior.data``), for refits."""
+    kinds = ((ForceData, FORCE_ONLY), (MeasuredData, MEASURED), (AR1Data, AR1), (CubicData, MODEL))
+    for kind, model in kinds:
+        if isinstance(data, kind):
+            return model
+    raise TypeError(f"not the data of a per-pressure cubic: {type(data).__name__}")
+
+
 def prewhiten(residuals, rho: float):
     """Prais-Winsten transform of a series with AR(1) errors of lag-one correlation ``rho``:
     e_0 sqrt(1 - rho^2), e_i - rho e_(i-1) (independent errors of the same innovation sd)."""

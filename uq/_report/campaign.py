@@ -800,7 +800,7 @@ def omitted_lines(cf, cb: CampaignBands) -> list[str]:
             f"The {', '.join(f'{p:g}' for p in vol)} bar volume curve comes from the volume column: "
             "L = −V / S (eq. 10), its reference arbitrary (a_L means nothing on its own)."
         )
-    if not cf.recordings.order_known:
+    if not getattr(cf.recordings, "order_known", True):
         lines.append(
             "One pass in unknown order (no branch and step columns): no compression/rebound "
             "markers or hysteresis, and no recording-order check of the residuals."

@@ -398,6 +398,35 @@ def read_fit_config(path) -> dict:
     return values
 
 
+def omitted_lines(rec, result: dict) -> list[str]:
+    """What a fit of a force-only or one-pass campaign leaves out, one line each (``uq fit``'s
+    summary): the volume results of force-only tests, the volume column's use, the order check."""
+    lines = []
+    tests = result["tests"]
+    force_only = [t["pressure_bar"] for t in tests if "piston" in t.get("omitted", {})]
+    from_volume = [t["pressure_bar"] for t in tests if "piston_from" in t]
+    if force_only:
+        which = "every test" if len(force_only) == len(tests) else _bars(force_only)
+        lines.append(
+            f"volume results omitted ({which}): force-only, no piston_* or volume_* column "
+            "(no piston coordinate, volume increment or volume-derived area)"
+        )
+    if from_volume:
+        lines.append(
+            f"piston coefficients of {_bars(from_volume)} from the volume column: L = -V / S "
+            f"(S = {rec.piston_area_m2 * 1e4:g} cm^2), a_L's reference arbitrary"
+        )
+    if not rec.order_known:
+        lines.append(
+            "recording-order check skipped: one pass in unknown order (no branch and step columns)"
+        )
+    return lines
+
+
+def _bars(pressures) -> str:
+    return ", ".join(f"{p:g}" for p in pressures) + " bar"
+
+
 def command_fit(args) -> int:
     if args.file is None:
         raise InputError(
@@ -422,13 +451,16 @@ def command_fit(args) -> int:
     )
     for t in result["tests"]:
         a = t["force"]["a_P"]
-        b = t["piston"]["b_L"]
-        rmax = max(v["r_hat"] for v in (t["force"] | t["piston"]).values())
-        emin = min(v["ess_bulk"] for v in (t["force"] | t["piston"]).values())
+        blocks = t["force"] | t.get("piston", {})
+        b = f"{t['piston']['b_L']['mean']:>8.3f}" if "piston" in t else f"{'-':>8}"
+        rmax = max(v["r_hat"] for v in blocks.values())
+        emin = min(v["ess_bulk"] for v in blocks.values())
         print(
-            f"{t['pressure_bar']:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b['mean']:>8.3f} "
+            f"{t['pressure_bar']:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b} "
             f"{t['s_P_N']:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}"
         )
+    for line in omitted_lines(rec, result):
+        print(line)
     for t in result["tests"]:
         ph = t.get("pressure_holding")
         if ph and ph["model"] == "ar1":
@@ -436,6 +468,12 @@ def command_fit(args) -> int:
             print(
                 f"{t['pressure_bar']:g} bar: AR(1) pressure-holding errors, lag-one correlation "
                 f"rho = {r['mean']:.2f} (90 % [{r['q05']:.2f}, {r['q95']:.2f}])"
+            )
+        elif ph and ph["model"] == "measured" and "V_gas_m3" not in ph:
+            o = ph["pressure_offset_Pa"]
+            print(
+                f"{t['pressure_bar']:g} bar: measured pressure as a covariate of the force, sensor "
+                f"offset {o['mean']:.0f} Pa (90 % [{o['q05']:.0f}, {o['q95']:.0f}])"
             )
         elif ph and ph["model"] == "measured":
             v = ph["V_gas_m3"]

@@ -18,7 +18,7 @@ from uq._cli.common import (
 from uq._derived.bands import campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
-from uq._report.campaign import MIN_DRAWS, read_comments, write_report
+from uq._report.campaign import MIN_DRAWS, omitted_lines, read_comments, write_report
 from uq._report.html import FIGURE_FORMATS
 
 
@@ -83,6 +83,10 @@ def command_report(args) -> int:
     stand = stand_from(args)
     reference = _reference(args.reference)
     rec = load(args)
+    if args.surface:  # refused before fitting: what the surface model cannot yet do without
+        from uq._data.recordings import COMMAND_NEEDS, require
+
+        require(rec, COMMAND_NEEDS["surface"])
     t0 = time.perf_counter()
     settings = settings_from(args)
     cf = fit_campaign(
@@ -121,12 +125,20 @@ def command_report(args) -> int:
         print(
             f"F_eff scatter across {', '.join(f'{p:g}' for p in cb.scatter_pressures_bar)} bar (half range / mean): {parts}"
         )
-    print(f"traditional force from {cb.reference_note}")
+    if cb.has_volume:
+        print(f"traditional force from {cb.reference_note}")
+    for line in omitted_lines(cf, cb):
+        print(line)
     for t in cb.tests:
         a = t.at_x0
+        trad = ""
+        if "spread_ref_pct" in a:
+            trad = f", traditional {a['spread_ref_pct']['mean']:+6.1f} %"
+        if "spread_own_pct" in a:
+            trad += f" (own volume curve {a['spread_own_pct']['mean']:+6.1f} %)"
         print(
-            f"  {t.pressure_bar:>5g} bar at x0: P = {a['force_N']['mean']:9.1f} N, F_eff = {a['feff_m2']['mean']:.5f} m^2, "
-            f"traditional {a['spread_ref_pct']['mean']:+6.1f} % (own volume curve {a['spread_own_pct']['mean']:+6.1f} %)"
+            f"  {t.pressure_bar:>5g} bar at x0: P = {a['force_N']['mean']:9.1f} N, "
+            f"F_eff = {a['feff_m2']['mean']:.5f} m^2{trad}"
         )
     for w in cf.warnings(CLI_ADVICE):
         print(f"WARNING: {w}", file=sys.stderr)

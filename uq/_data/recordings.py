@@ -174,12 +174,12 @@ class Recordings:
 #: What each command cannot yet work without: "piston" (piston coordinates in every test) and
 #: "order" (branch and step). One table, so a command that learns to do without is one edit here.
 COMMAND_NEEDS: dict[str, frozenset[str]] = {
-    "fit": frozenset({"piston", "order"}),
-    "report": frozenset({"piston", "order"}),
+    "fit": frozenset(),  # force-only tests: the force block; one pass: no order check
+    "report": frozenset(),
     "surface": frozenset({"piston", "order"}),
     "margin": frozenset({"piston", "order"}),
     "diagnose": frozenset(),  # force-only and one-pass campaigns: what they can identify is offered
-    "batch": frozenset({"piston", "order"}),
+    "batch": frozenset(),
 }
 
 

@@ -108,29 +108,52 @@ SIMULTANEOUS = {
     "spread_own_pct": "spread_own_pct",
     "spread_ref_pct": "spread_ref_pct",
 }
+#: The quantities that need the test's own volume curve (None for a force-only test), and those
+#: that need the reference test's (None when no test of the campaign has a volume curve).
+OWN_VOLUME = (
+    "piston",
+    "piston_pred",
+    "dV",
+    "feff_volume",
+    "trad_own",
+    "spread_own",
+    "spread_own_pct",
+)
+REF_VOLUME = ("trad_ref", "spread_ref", "spread_ref_pct")
+FORCE_ONLY_WHY = "force-only (no piston_* or volume_* column)"
+NO_VOLUME_WHY = "no test has a piston_* or volume_* column (force-only campaign)"
 
 
 @dataclass(eq=False, frozen=True, repr=False)
 class PressureBands:
-    """Bands of one test on the campaign grid ``x_m`` (SI: N, m, m^3, m^2, %)."""
+    """Bands of one test on the campaign grid ``x_m`` (SI: N, m, m^3, m^2, %).
+
+    A force-only test (no piston_* or volume_* column) has None for every ``OWN_VOLUME``
+    quantity; when no test of the campaign has a volume curve, the ``REF_VOLUME`` ones are None
+    too (``at_x0`` and ``simultaneous`` then lack them as well)."""
 
     pressure_bar: float
     x_max_m: float
     force: Band  # mean curve P(x), N
     force_pred: Band  # posterior predictive of a new reading, N
-    piston: Band  # mean curve L(x), m
-    piston_pred: Band  # predictive, m
-    dV: Band  # volume increment S [L(x) - L(x_max)], m^3
     feff: Band  # P / p_u, m^2
-    feff_volume: Band  # -S dL/dx from the own volume curve, m^2
-    trad_own: Band  # p_u (-S dL/dx), own volume curve, N
-    trad_ref: Band  # p_u (-S dL_ref/dx), reference test's volume curve, N
-    spread_own: Band  # trad_own - P, N
-    spread_own_pct: Band  # 100 (trad_own - P) / P, %
-    spread_ref: Band  # trad_ref - P, N
-    spread_ref_pct: Band  # 100 (trad_ref - P) / P, %
+    piston: Band | None = None  # mean curve L(x), m
+    piston_pred: Band | None = None  # predictive, m
+    dV: Band | None = None  # volume increment S [L(x) - L(x_max)], m^3
+    feff_volume: Band | None = None  # -S dL/dx from the own volume curve, m^2
+    trad_own: Band | None = None  # p_u (-S dL/dx), own volume curve, N
+    trad_ref: Band | None = None  # p_u (-S dL_ref/dx), reference test's volume curve, N
+    spread_own: Band | None = None  # trad_own - P, N
+    spread_own_pct: Band | None = None  # 100 (trad_own - P) / P, %
+    spread_ref: Band | None = None  # trad_ref - P, N
+    spread_ref_pct: Band | None = None  # 100 (trad_ref - P) / P, %
     at_x0: dict = field(default_factory=dict)  # name -> {"mean","sd","q05","q95"} at x0
     simultaneous: dict = field(default_factory=dict)  # name in SIMULTANEOUS -> SimultaneousBand
+
+    @property
+    def has_volume(self) -> bool:
+        """The test has its own volume curve (piston_* or volume_* column)."""
+        return self.dV is not None
 
     @property
     def pressure_Pa(self) -> float:
@@ -146,8 +169,9 @@ class CampaignBands:
     x0_m: float
     piston_area_m2: float
     tests: list[PressureBands]
-    reference_bar: float  # pressure of the test whose volume curve gives the traditional force
-    reference_note: str  # how the reference test was chosen
+    #: pressure of the test whose volume curve gives the traditional force (None: no test has one)
+    reference_bar: float | None
+    reference_note: str  # how the reference test was chosen, or why there is none
     scatter_pressures_bar: list[float]  # tests entering the F_eff scatter
     scatter: Band | None  # half range / mean of F_eff across those tests, % (None if < 2 tests)
     scatter_at: dict  # label -> {"height_m", "mean", "sd", "q05", "q95"} (%)
@@ -170,11 +194,17 @@ class CampaignBands:
             ["pressure_bar", "quantity"]
         )
 
+    @property
+    def has_volume(self) -> bool:
+        """Some test has a volume curve (so the traditional force can be formed)."""
+        return self.reference_bar is not None
+
     def __repr__(self) -> str:
+        ref = f"{self.reference_bar:g} bar" if self.has_volume else "none: force only"
         return (
             f"CampaignBands({len(self.tests)} tests, {self.x_m.size} heights "
             f"{self.x_m.min() * 1e3:g}..{self.x_m.max() * 1e3:g} mm, {self.n_draws} joint draws, "
-            f"reference {self.reference_bar:g} bar)"
+            f"reference {ref})"
         )
 
     def to_json(self) -> dict:
@@ -192,7 +222,22 @@ class CampaignBands:
             "tests_at_x0": [{"pressure_bar": t.pressure_bar} | t.at_x0 for t in self.tests],
             "intervals": "q05/q95 in tests_at_x0 and feff_scatter_pct are pointwise 90 % intervals (one height at a time)",
             "curve_bands": self.curve_bands(),
+        } | self._omitted()
+
+    def _omitted(self) -> dict:
+        """Why volume quantities are missing (force-only tests), as ``{"omitted": {...}}``."""
+        without = [t.pressure_bar for t in self.tests if not t.has_volume]
+        if not without:
+            return {}
+        out = {
+            "own_volume": f"{', '.join(f'{p:g}' for p in without)} bar: {FORCE_ONLY_WHY}: no L(x), "
+            "volume increment, -S dL/dx, or traditional force from the test's own volume curve"
         }
+        if not self.has_volume:
+            out["traditional_force"] = (
+                f"{NO_VOLUME_WHY}: no traditional force p_u (-S dL/dx) and no spread"
+            )
+        return {"omitted": out}
 
     def curve_bands(self, n_heights: int = 19) -> dict:
         """Pointwise and simultaneous 90 % bands of F_eff and the spread on ``n_heights`` heights."""
@@ -201,6 +246,8 @@ class CampaignBands:
         for t in self.tests:
             row = {"pressure_bar": t.pressure_bar}
             for name, key in SIMULTANEOUS.items():
+                if name not in t.simultaneous:  # a volume quantity of a force-only test
+                    continue
                 pw, sim = getattr(t, name), t.simultaneous[name]
                 row[key] = {
                     "mean": pw.mean[idx],
@@ -241,8 +288,24 @@ def _slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
     return cubic_slope(np.asarray(coef, float)[..., None, :], np.asarray(u, float))
 
 
-def choose_reference(pressures_bar, preferred: float = REFERENCE_BAR) -> tuple[int, str]:
-    """Index of the test whose volume curve gives the traditional force, and why it was chosen."""
+def choose_reference(
+    pressures_bar, preferred: float = REFERENCE_BAR, has_volume=None
+) -> tuple[int | None, str]:
+    """Index of the test whose volume curve gives the traditional force, and why it was chosen;
+    only tests with a volume curve (``has_volume`` (T,) bool, default all) can be chosen, and
+    with none the index is None and the reason says so."""
+    p_all = np.asarray(pressures_bar, float)
+    vol = np.ones(p_all.size, bool) if has_volume is None else np.asarray(has_volume, bool)
+    if not vol.any():
+        return None, NO_VOLUME_WHY
+    i, note = _choose(p_all[vol], preferred)
+    if not vol.all():
+        only = ", ".join(f"{v:g}" for v in p_all[vol])
+        note += f" (tests with a volume curve: {only} bar)"
+    return int(np.flatnonzero(vol)[i]), note
+
+
+def _choose(pressures_bar, preferred: float) -> tuple[int, str]:
     p = np.asarray(pressures_bar, float)
     hit = np.flatnonzero(np.isclose(p, preferred, atol=1e-9))
     if hit.size:
@@ -280,7 +343,9 @@ def bands_from_coefficients(
     """Bands from coefficient draws.
 
     pressures_bar (T,); force, piston (T, D, 4) paper-basis coefficients (SI, u in m), draw i
-    of every test forming joint draw i (D = 1 for point values such as Table 1); noise
+    of every test forming joint draw i (D = 1 for point values such as Table 1); a force-only
+    test has NaN piston coefficients (the volume quantities of its bands are then None), and
+    ``piston`` None means no test has any; noise
     (T, D, 3) = sigma0_N, rel_force, sigma_L_m or None (predictive bands then equal the mean
     bands); noise_ref_force (T, G): the force level F_ref of the relative noise term on the grid,
     as the fit used it (its least-squares curve; default: each draw's own |force|); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
@@ -289,12 +354,13 @@ def bands_from_coefficients(
     """
     p_bar = np.asarray(pressures_bar, float)
     force = np.asarray(force, float)
-    piston = np.asarray(piston, float)
     T = force.shape[0]
+    piston = np.full(force.shape, np.nan) if piston is None else np.asarray(piston, float)
+    has_vol = np.all(np.isfinite(piston), axis=(1, 2))
     x = np.asarray(x_grid, float)
     S = float(piston_area_m2)
     x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
-    ref, note = choose_reference(p_bar, reference_bar)
+    ref, note = choose_reference(p_bar, reference_bar, has_vol)
     quantities = _curve_quantities(
         p_bar,
         force,
@@ -313,9 +379,22 @@ def bands_from_coefficients(
         summaries[name] = (arr.mean(axis=1), np.quantile(arr, [a, 1.0 - a], axis=1))
     tests = []
     for t in range(T):
-        B = {name: Band(m[t], q[0, t], q[1, t]) for name, (m, q) in summaries.items()}
-        sim = {name: SimultaneousBand.of(quantities[name][t], level) for name in SIMULTANEOUS}
-        at0 = _at_x0(p_bar[t], force[t], piston[t, :, 1], piston[ref, :, 1], S)
+        present = [
+            n
+            for n in quantities
+            if (n not in OWN_VOLUME or has_vol[t]) and (n not in REF_VOLUME or ref is not None)
+        ]
+        B = {n: Band(summaries[n][0][t], *summaries[n][1][:, t]) for n in present}
+        sim = {
+            n: SimultaneousBand.of(quantities[n][t], level) for n in SIMULTANEOUS if n in present
+        }
+        at0 = _at_x0(
+            p_bar[t],
+            force[t],
+            piston[t, :, 1] if has_vol[t] else None,
+            None if ref is None else piston[ref, :, 1],
+            S,
+        )
         tests.append(
             PressureBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B)
         )
@@ -336,7 +415,7 @@ def bands_from_coefficients(
         float(x0_m),
         S,
         tests,
-        float(p_bar[ref]),
+        None if ref is None else float(p_bar[ref]),
         note,
         [float(v) for v in p_bar[sel]],
         scatter,
@@ -355,9 +434,9 @@ def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_f
     L_top = _poly(piston, np.atleast_1d(u_top))  # (T, D, T): column t is test t's x_max
     L_top = L_top[np.arange(T), :, np.arange(T)][..., None]  # (T, D, 1)
     p_pa = (p_bar * BAR_PA)[:, None, None]
-    feff_vol = -S * dLdx
+    feff_vol = -S * dLdx  # NaN for a force-only test
     trad_own = p_pa * feff_vol
-    trad_ref = p_pa * feff_vol[ref][None]
+    trad_ref = p_pa * (feff_vol[ref][None] if ref is not None else np.full_like(feff_vol, np.nan))
     if noise is not None:
         nz = np.asarray(noise, float)
         f_ref = (
@@ -389,19 +468,21 @@ def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_f
 
 
 def _at_x0(p_bar: float, force, b_L, b_L_ref, S: float) -> dict:
-    """Values at x0 exactly (from the coefficients, whatever the grid): force (D, 4), b_L (D,)."""
+    """Values at x0 exactly (from the coefficients, whatever the grid): force (D, 4), b_L (D,)
+    of the test and of the reference test (None: no volume curve, those values left out)."""
     a_P = force[:, 0]
-    tr_own0 = p_bar * BAR_PA * (-S * b_L)
-    tr_ref0 = p_bar * BAR_PA * (-S * b_L_ref)
-    return {
-        "force_N": estimate(a_P),
-        "feff_m2": estimate(a_P / (p_bar * BAR_PA)),
-        "feff_volume_m2": estimate(-S * b_L),
-        "trad_own_N": estimate(tr_own0),
-        "trad_ref_N": estimate(tr_ref0),
-        "spread_own_pct": estimate(100.0 * (tr_own0 - a_P) / a_P),
-        "spread_ref_pct": estimate(100.0 * (tr_ref0 - a_P) / a_P),
-    }
+    out = {"force_N": estimate(a_P), "feff_m2": estimate(a_P / (p_bar * BAR_PA))}
+    if b_L is not None:
+        tr_own0 = p_bar * BAR_PA * (-S * b_L)
+        out |= {"feff_volume_m2": estimate(-S * b_L), "trad_own_N": estimate(tr_own0)}
+    if b_L_ref is not None:
+        tr_ref0 = p_bar * BAR_PA * (-S * b_L_ref)
+        out["trad_ref_N"] = estimate(tr_ref0)
+    if b_L is not None:
+        out["spread_own_pct"] = estimate(100.0 * (tr_own0 - a_P) / a_P)
+    if b_L_ref is not None:
+        out["spread_ref_pct"] = estimate(100.0 * (tr_ref0 - a_P) / a_P)
+    return out
 
 
 def _scatter(p_bar, force, feff, heights: dict, x0_m: float, level: float):
@@ -463,12 +544,15 @@ def campaign_bands(
     for t, n in zip(cf.tests, draws, strict=True):
         idx = subsample(n, D, rng)
         F.append(t.flat("force")[idx])
-        L.append(t.flat("piston")[idx])
-        N.append(t.flat("noise")[idx])
+        volume = getattr(t, "has_piston", True)  # False: a force-only test, NaN piston and sigma_L
+        L.append(t.flat("piston")[idx] if volume else np.full((idx.size, 4), np.nan))
+        noise = t.flat("noise")[idx]
+        N.append(noise if volume else np.pad(noise, ((0, 0), (0, 1)), constant_values=np.nan))
+    any_volume = any(getattr(t, "has_piston", True) for t in cf.tests)
     cb = bands_from_coefficients(
         [t.pressure_bar for t in cf.tests],
         np.stack(F),
-        np.stack(L),
+        np.stack(L) if any_volume else None,
         x_grid=x,
         x0_m=rec.x0_m,
         piston_area_m2=rec.piston_area_m2,

@@ -8,7 +8,9 @@ in the same units (e.g. ``fits/n50/table1_points.json``, Table 1 of the paper).
 The rule
 --------
 Every test in POINTS must be in RESULT (matched by ``pressure_bar``); tests only in RESULT
-are not checked. For each checked test and each block b in (force, piston), with posterior
+are not checked. For each checked test and each block b in (force, piston) that both files give
+(a force-only result has no piston block; POINTS may give none: each block left out is listed
+under ``not_checked`` with its reason and printed in one line), with posterior
 mean m_b and posterior covariance S_b of the four coefficients, point estimate x_b and the
 point estimate's own sampling covariance C_b (optional ``covariance`` of the POINTS test),
 
@@ -135,6 +137,8 @@ def read_points(doc: dict, path: str) -> list[dict]:
     for p, t, label in tests:
         row = {"pressure_bar": p, "label": label, "cov": {}}
         for block, names in BLOCKS.items():
+            if block == "piston" and block not in t:  # a force-only stand's estimates
+                continue
             b = _get(t, block, path, f"{label}.{block}")
             row[block] = np.array(
                 [
@@ -171,7 +175,7 @@ def reference_from_points(path: str | Path) -> Reference:
         name=Path(path).name,
         source=source or str(path),
         force={r["pressure_bar"]: r["force"] for r in points},
-        piston={r["pressure_bar"]: r["piston"] for r in points},
+        piston={r["pressure_bar"]: r["piston"] for r in points if "piston" in r},
         deviations=deviations,
     )
 
@@ -193,10 +197,18 @@ def _missing(path: str, key: str):
 
 
 def read_result(doc: dict, path: str) -> dict[float, dict]:
-    """RESULT -> {pressure: {"label", block: {"mean", "sd", "q05", "q95" (4,), "cov" (4, 4)}}}."""
+    """RESULT -> {pressure: {"label", block: {"mean", "sd", "q05", "q95" (4,), "cov" (4, 4)}}}.
+
+    A force-only test (``uq fit`` of a campaign without piston_* or volume_* column) has no
+    "piston" block and says why under "omitted"; its row then has no "piston" and
+    ``"omitted": {"piston": why}``. A test missing its piston block without saying why is refused.
+    """
     out = {}
     for p, t, label in _tests(doc, path):
         row = {"label": label}
+        omitted = t.get("omitted") if isinstance(t.get("omitted"), dict) else {}
+        if "piston" not in t and isinstance(omitted.get("piston"), str):
+            row["omitted"] = {"piston": omitted["piston"]}
         cov = _get(
             t,
             "covariance",
@@ -208,6 +220,8 @@ def read_result(doc: dict, path: str) -> dict[float, dict]:
             ),
         )
         for block, names in BLOCKS.items():
+            if block in row.get("omitted", {}):
+                continue
             b = _get(t, block, path, f"{label}.{block}")
             est = {k: np.empty(4) for k in ("mean", "sd", "q05", "q95")}
             for j, n in enumerate(names):
@@ -274,9 +288,21 @@ def check(
                 f"{points_path}: {pt['label']}: no test at {pt['pressure_bar']:g} bar in {result_path} (it has: {have} bar)"
             )
         matched.append((pt, result[hit[0]]))
-    n_blocks = len(matched) * len(BLOCKS)
+    pairs, not_checked = [], []
+    for pt, res in matched:
+        for block in BLOCKS:
+            if block in pt and block in res:
+                pairs.append((pt, res, block))
+            elif block in pt:
+                why = res.get("omitted", {}).get(block, "no such block")
+                not_checked.append(_not_checked(pt, block, f"{result_path} has none ({why})"))
+            elif block in res:
+                not_checked.append(_not_checked(pt, block, f"{points_path} gives none"))
+    if not pairs:
+        raise InputError(f"{points_path}: no block to check: {result_path} and it share none")
+    n_blocks = len(pairs)
     thr = threshold(alpha, n_blocks)
-    blocks = [_block(pt, res[block], block, thr) for pt, res in matched for block in BLOCKS]
+    blocks = [_block(pt, res[block], block, thr) for pt, res, block in pairs]
     exact = [f"{b['pressure_bar']:g} bar {b['block']}" for b in blocks if not b["point_covariance"]]
     return {
         "result": str(result_path),
@@ -293,8 +319,14 @@ def check(
         "blocks_treated_as_exact": exact,
         "agree": all(b["agree"] for b in blocks),
         "n_disagree": sum(not b["agree"] for b in blocks),
+        "n_tests": len(matched),
         "blocks": blocks,
+        "not_checked": not_checked,
     }
+
+
+def _not_checked(pt: dict, block: str, why: str) -> dict:
+    return {"pressure_bar": pt["pressure_bar"], "block": block, "reason": why}
 
 
 def _assumption(exact: list[str], n_blocks: int) -> str:
@@ -425,9 +457,14 @@ def summary(verdict: dict) -> str:
                 f"[90% {_fmt(c['q05'])}, {_fmt(c['q95'])}], {c['z']:+.1f} sd{flag}"
             )
     worst = max(verdict["blocks"], key=lambda b: b["mahalanobis2"])
-    n_tests = verdict["n_blocks"] // len(BLOCKS)
+    n_tests = verdict.get("n_tests", verdict["n_blocks"] // len(BLOCKS))
+    shape = (
+        f"{n_tests} tests x 2 blocks"
+        if verdict["n_blocks"] == n_tests * len(BLOCKS)
+        else f"{n_tests} tests, {verdict['n_blocks']} blocks"
+    )
     head = (
-        f"uq check: {verdict['against']} against {verdict['result']}: {n_tests} tests x 2 blocks, "
+        f"uq check: {verdict['against']} against {verdict['result']}: {shape}, "
         f"alpha {verdict['alpha']:g}, threshold d^2 <= {verdict['threshold2']:.2f} "
         f"(chi2_4 at 1 - {verdict['alpha']:g}/{verdict['n_blocks']})"
     )
@@ -438,4 +475,15 @@ def summary(verdict: dict) -> str:
     )
     tail = f"{state}; largest d^2 {worst['mahalanobis2']:.2f} ({worst['pressure_bar']:g} bar {worst['block']})"
     note = f"point-estimate uncertainty: {verdict['point_uncertainty']}"
-    return "\n".join([head, note, *lines, tail])
+    return "\n".join([head, note, *_not_checked_lines(verdict), *lines, tail])
+
+
+def _not_checked_lines(verdict: dict) -> list[str]:
+    """One line per block and reason left unchecked (e.g. the piston of a force-only result)."""
+    by_reason: dict[tuple[str, str], list[float]] = {}
+    for n in verdict.get("not_checked", []):
+        by_reason.setdefault((n["block"], n["reason"]), []).append(n["pressure_bar"])
+    return [
+        f"NOT CHECKED {block} ({', '.join(f'{p:g}' for p in ps)} bar): {why}"
+        for (block, why), ps in by_reason.items()
+    ]

@@ -54,7 +54,7 @@ def _part(loo: Loo, n_coefficients: int, loglik) -> dict:
 
 def _cubic_refit(cubic_fit, settings: Settings, seed: int):
     """``refit(j)``: log p(reading j | its test's other readings), the test refitted without it."""
-    from uq._models.cubic import MODEL
+    from uq._models.cubic import collapsed_model
 
     offsets = np.cumsum([0] + [t.test.n_points for t in cubic_fit.tests])
 
@@ -62,9 +62,10 @@ def _cubic_refit(cubic_fit, settings: Settings, seed: int):
         ti = int(np.searchsorted(offsets, j, side="right") - 1)
         i = j - int(offsets[ti])
         data = cubic_fit.tests[ti].posterior.data
+        model = collapsed_model(data)  # the test's own variant (force-only, measured, ...)
         held = np.arange(data.force.shape[0]) == i
         post = fit_collapsed(
-            MODEL, MODEL.hold_out(data, held), seed=seed + j, settings=settings, predictive=False
+            model, model.hold_out(data, held), seed=seed + j, settings=settings, predictive=False
         )
         return float(held_out_density(post.loglik_total(), [i])[0])
 
@@ -78,7 +79,8 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
     name = surface_fit.short_name
     cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
-    n_s, n_c = surface_fit.beta.shape[-1], 8 * len(cubic_fit.tests)
+    n_s = surface_fit.beta.shape[-1]
+    n_c = sum(8 if getattr(t, "has_piston", True) else 4 for t in cubic_fit.tests)
     loo_s = psis(surface_fit.loglik_loo)
     loo_c = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
     k_psis = float(np.max(loo_c.pareto_k))

@@ -348,7 +348,9 @@ def _recordings(job: dict):
 
     o = job["options"]
     kw = {k: o[k] for k in READING_OPTIONS if k in o}
-    return require_for(read_recordings(job["file"], **kw), "batch")
+    # what each task needs (COMMAND_NEEDS of its command): a force-only campaign's surface task
+    # is refused in its row's one line while the surface model needs piston coordinates
+    return require_for(read_recordings(job["file"], **kw), job["task"])
 
 
 def _settings(job: dict):

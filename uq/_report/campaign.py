@@ -243,21 +243,23 @@ def figure_force(cf, cb: CampaignBands):
 def _dV_points(tf, tb, S):
     """Recorded volume increments S [L_k - L(x_max)] with the posterior-mean curve's L(x_max)."""
     L_top = np.mean(cubic(tf.flat("piston"), tb.x_max_m - tf.x0_m))
-    return S * (tf.test.piston_m - L_top)
+    return S * (tf.piston_m - L_top)
 
 
 def figure_volume(cf, cb: CampaignBands):
     """Figure 3 (eq. 10): volume increments by pressure; below, per test, the piston readings and
-    bands minus the posterior-mean L(x), as volume S ΔL."""
-    fig, ax, res = _with_residuals(len(cb.tests))
+    bands minus the posterior-mean L(x), as volume S ΔL. Only the tests with a volume curve
+    (force-only tests have none)."""
+    pairs = [(tf, tb) for tf, tb in zip(cf.tests, cb.tests, strict=True) if tb.has_volume]
+    fig, ax, res = _with_residuals(len(pairs))
     x = cb.x_m * MM
     S = cb.piston_area_m2
-    colours, sm = _pressure_colours([t.pressure_bar for t in cb.tests])
-    for i, (tf, tb, c) in enumerate(zip(cf.tests, cb.tests, colours, strict=True)):
+    colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
+    for i, ((tf, tb), c) in enumerate(zip(pairs, colours, strict=True)):
         _fill(ax, x, tb.dV, 1e3, c, alpha=0.4)
         ax.plot(tf.test.height_m * MM, _dV_points(tf, tb, S) * 1e3, ".", color=c, ms=3)
         mean_at = cubic(tf.flat("piston").mean(0), tf.test.height_m - tf.x0_m)
-        r = S * (tf.test.piston_m - mean_at)
+        r = S * (tf.piston_m - mean_at)
         _residual_panel(
             res[i],
             x,
@@ -272,10 +274,10 @@ def figure_volume(cf, cb: CampaignBands):
     _mark_x0(ax, cb.x0_m * MM)
     ax.set(xlabel="height x (mm)", ylabel="volume increment ΔV (dm³ = litre)")
     ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
+    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
     _residual_labels(fig, res, "S (L − mean L) (cm³)")
     fig.draw_without_rendering()
-    note = _band_note(ax, [np.max(t.dV.hi - t.dV.lo) * 1e3 for t in cb.tests], 1e3, "cm³")
+    note = _band_note(ax, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³")
     ax.set_title(
         "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean curves\n"
         f"{note}; below: piston readings and bands minus the mean L(x), times S",
@@ -393,11 +395,14 @@ def figure_scatter(cb: CampaignBands, paper_values: bool = True):
     return fig
 
 
-def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands):
+def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None):
     """Six panels for one test: force, residuals, piston, F_eff, traditional vs measured, spread.
 
     ``t`` the test's recordings (PressureTest), ``force_mean`` the posterior-mean force
-    coefficients (paper basis): plain data, so that the figure can be drawn in another process.
+    coefficients (paper basis), ``piston_m`` the L readings its volume block fitted (default
+    ``t.piston_m``; L = -V / S for a volume column): plain data, so that the figure can be drawn
+    in another process. A force-only test's volume panels say so instead; a test in unknown order
+    (no branch and step) shows its readings without branch markers.
     """
     plt = _plt()
     fig, axs = plt.subplots(2, 3, figsize=(14, 7.6))
@@ -405,8 +410,12 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands):
     h = t.height_m * MM
     comp = t.compression
     p_pa = tb.pressure_bar * BAR_PA
+    piston_m = t.piston_m if piston_m is None else piston_m
 
     def points(ax, y):
+        if comp is None:  # one pass in unknown order: no branches to tell apart
+            ax.plot(h, y, "o", ms=3.5, color="k", mfc="none", label="readings (order unknown)")
+            return
         for is_comp, name in ((True, "compression"), (False, "rebound")):
             m = comp == is_comp
             if m.any():
@@ -453,14 +462,18 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands):
     )
 
     ax = axs[0, 2]
-    _fill(ax, x, tb.piston_pred, MM, "0.5", alpha=0.2, line=False)
-    _fill(ax, x, tb.piston, MM, "tab:green", alpha=0.5)
-    points(ax, t.piston_m * MM)
+    if tb.has_volume:
+        _fill(ax, x, tb.piston_pred, MM, "0.5", alpha=0.2, line=False)
+        _fill(ax, x, tb.piston, MM, "tab:green", alpha=0.5)
+        points(ax, piston_m * MM)
+    else:
+        _absent(ax, "no volume: force-only test\n(no piston_* or volume_* column)", x)
     ax.set(xlabel="height x (mm)", ylabel="piston coordinate L (mm)", title="piston (eq. 9)")
 
     ax = axs[1, 0]
     _fill(ax, x, tb.feff, 1e4, "tab:green", label="P / p_u (force)")
-    _fill(ax, x, tb.feff_volume, 1e4, "tab:red", label="−S dL/dx (own volume curve)", ls="--")
+    if tb.has_volume:
+        _fill(ax, x, tb.feff_volume, 1e4, "tab:red", label="−S dL/dx (own volume curve)", ls="--")
     ax.plot(h, t.force_N / p_pa * 1e4, ".", color="k", ms=3, label="recorded P / p_u")
     ax.set(
         xlabel="height x (mm)",
@@ -471,33 +484,41 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands):
 
     ax = axs[1, 1]
     _fill(ax, x, tb.force, 1e-3, "tab:green", label="measured P(x)")
-    _fill(ax, x, tb.trad_own, 1e-3, "tab:red", label="p_u (−S dL/dx), own volume", ls="--")
-    _fill(
-        ax,
-        x,
-        tb.trad_ref,
-        1e-3,
-        "tab:purple",
-        label=f"p_u (−S dL/dx), {cb.reference_bar:g}-bar volume",
-        ls=":",
-    )
+    if tb.has_volume:
+        _fill(ax, x, tb.trad_own, 1e-3, "tab:red", label="p_u (−S dL/dx), own volume", ls="--")
+    if tb.trad_ref is not None:
+        _fill(
+            ax,
+            x,
+            tb.trad_ref,
+            1e-3,
+            "tab:purple",
+            label=f"p_u (−S dL/dx), {cb.reference_bar:g}-bar volume",
+            ls=":",
+        )
+    else:
+        _absent(ax, "no traditional force:\nno test has a volume curve", x, y=0.15)
     ax.set(xlabel="height x (mm)", ylabel="force (kN)", title="traditional vs measured force")
     ax.legend(fontsize=7)
 
     ax = axs[1, 2]
-    _fill(ax, x, tb.spread_own, 1.0, "tab:red", label="own volume curve", ls="--")
-    _fill(
-        ax,
-        x,
-        tb.spread_ref,
-        1.0,
-        "tab:purple",
-        label=f"{cb.reference_bar:g}-bar volume curve",
-        ls=":",
-    )
+    if tb.has_volume:
+        _fill(ax, x, tb.spread_own, 1.0, "tab:red", label="own volume curve", ls="--")
+    if tb.spread_ref is not None:
+        _fill(
+            ax,
+            x,
+            tb.spread_ref,
+            1.0,
+            "tab:purple",
+            label=f"{cb.reference_bar:g}-bar volume curve",
+            ls=":",
+        )
+        ax.legend(fontsize=7)
+    else:
+        _absent(ax, "no spread: no test has a volume curve", x)
     ax.axhline(0, color="k", lw=0.6)
     ax.set(xlabel="height x (mm)", ylabel="traditional − measured force (N)", title="spread")
-    ax.legend(fontsize=7)
     for a in axs.flat:
         _mark_x0(a, cb.x0_m * MM)
         a.grid(alpha=0.3)
@@ -506,9 +527,18 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands):
     return fig
 
 
-def encoded_test_figure(t, force_mean, x0_m: float, tb, cb, figure_format: str) -> bytes:
+def _absent(ax, words: str, x, y: float = 0.5) -> None:
+    """A panel whose quantity the test does not have: the reason, at height ``y`` of it (axes
+    fraction), over the grid's heights ``x`` (mm)."""
+    ax.text(0.5, y, words, ha="center", va="center", transform=ax.transAxes, fontsize=9)
+    ax.set_xlim(x[0], x[-1])
+
+
+def encoded_test_figure(
+    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None
+) -> bytes:
     """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns)."""
-    return encode(figure_test(t, force_mean, x0_m, tb, cb), figure_format)
+    return encode(figure_test(t, force_mean, x0_m, tb, cb, piston_m), figure_format)
 
 
 def _ignore_interrupts() -> None:
@@ -552,7 +582,7 @@ class _TestFigures:
     def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png"):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
-            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid, figure_format)
+            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid, figure_format, _piston(tf))
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
         self._pool, self._futures = None, []
@@ -590,15 +620,25 @@ def _table1(cf, ref: Reference | None) -> tuple[list[dict], int, int]:
     compared (none without a reference)."""
     n_out = n_cmp = 0
     rows = []
+    columns = _table1_columns(cf)
     for tf in cf.tests:
         cells = []
-        draws = np.concatenate([tf.flat("force"), tf.flat("piston")], axis=1)
+        volume = getattr(tf, "has_piston", True)
+        nan = np.full_like(tf.flat("force"), np.nan)
+        draws = np.concatenate([tf.flat("force"), tf.flat("piston") if volume else nan], axis=1)
         paper = None
         if ref is not None and ref.at(ref.force, tf.pressure_bar) is not None:
+            piston = ref.at(ref.piston, tf.pressure_bar)
             paper = np.concatenate(
-                [ref.at(ref.force, tf.pressure_bar), ref.at(ref.piston, tf.pressure_bar)]
+                [
+                    ref.at(ref.force, tf.pressure_bar),
+                    piston if piston is not None else np.full(4, np.nan),
+                ]
             )
-        for k, (_, _, f) in enumerate(TABLE1_COLUMNS):
+        for k, (_, _, f) in enumerate(TABLE1_COLUMNS[:columns]):
+            if k >= 4 and not volume:  # a force-only test has no piston coefficients
+                cells.append(None)
+                continue
             d = draws[:, k] * f
             cell = {
                 "mean": d.mean(),
@@ -607,7 +647,7 @@ def _table1(cf, ref: Reference | None) -> tuple[list[dict], int, int]:
                 "paper": None,
                 "out": False,
             }
-            if paper is not None:
+            if paper is not None and np.isfinite(paper[k]):
                 cell["paper"] = pv = paper[k] * f
                 cell["out"] = out = not cell["lo"] <= pv <= cell["hi"]
                 n_cmp += 1
@@ -615,6 +655,16 @@ def _table1(cf, ref: Reference | None) -> tuple[list[dict], int, int]:
             cells.append(cell)
         rows.append({"pressure_bar": tf.pressure_bar, "cells": cells})
     return rows, n_out, n_cmp
+
+
+def _table1_columns(cf) -> int:
+    """How many of TABLE1_COLUMNS the page shows: the piston's too when some test has them."""
+    return 8 if any(getattr(t, "has_piston", True) for t in cf.tests) else 4
+
+
+def _piston(tf):
+    """The L readings a test's volume block fitted (None for a force-only test)."""
+    return getattr(tf, "piston_m", None) if getattr(tf, "has_piston", True) else None
 
 
 def _table2(cf, ref: Reference | None) -> list[dict]:
@@ -660,25 +710,34 @@ def _diagnostics(cf) -> list[dict]:
 
 
 def _at_x0(cb: CampaignBands) -> list[dict]:
-    """Per test, (mean, q05, q95) at x0 of the columns of the values-at-x0 table."""
-    cols = (
-        ("force_N", 1.0),
-        ("feff_m2", 1e4),
-        ("feff_volume_m2", 1e4),
-        ("trad_own_N", 1.0),
-        ("spread_own_pct", 1.0),
-        ("trad_ref_N", 1.0),
-        ("spread_ref_pct", 1.0),
-    )
+    """Per test, (mean, q05, q95) at x0 of the columns of the values-at-x0 table (None where the
+    test has no such value: a force-only test's own-volume columns)."""
     return [
         {
             "pressure_bar": t.pressure_bar,
             "cells": [
-                {q: t.at_x0[k][q] * scale for q in ("mean", "q05", "q95")} for k, scale in cols
+                {q: t.at_x0[k][q] * scale for q in ("mean", "q05", "q95")} if k in t.at_x0 else None
+                for k, scale, _ in _at_x0_columns(cb)
             ],
         }
         for t in cb.tests
     ]
+
+
+def _at_x0_columns(cb: CampaignBands) -> list[tuple[str, float, str]]:
+    """(key, scale, heading) of the values-at-x0 table: the volume columns only when some test
+    has a volume curve."""
+    cols = [("force_N", 1.0, "P(x0) (N)"), ("feff_m2", 1e4, "P/p_u (cm²)")]
+    if cb.has_volume:
+        ref = f"{cb.reference_bar:g}"
+        cols += [
+            ("feff_volume_m2", 1e4, "−S dL/dx (cm²)"),
+            ("trad_own_N", 1.0, "traditional, own volume (N)"),
+            ("spread_own_pct", 1.0, "spread (%)"),
+            ("trad_ref_N", 1.0, f"traditional, {ref}-bar volume (N)"),
+            ("spread_ref_pct", 1.0, "spread (%)"),
+        ]
+    return cols
 
 
 def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
@@ -688,27 +747,65 @@ def _sections(cf, cb: CampaignBands, figures: dict) -> list[dict]:
         a = tb.at_x0
         s, e = tf.deviation_measures()
         noise = tf.flat("noise")
+        comp = tf.test.compression
+
+        def mean(key, scale=1.0, a=a):
+            return a[key]["mean"] * scale if key in a else None
+
         out.append(
             {
                 "pressure_bar": tf.pressure_bar,
                 "n_points": tf.test.n_points,
-                "n_compression": int(tf.test.compression.sum()),
-                "n_rebound": int((~tf.test.compression).sum()),
+                "order_known": comp is not None,
+                "n_compression": None if comp is None else int(comp.sum()),
+                "n_rebound": None if comp is None else int((~comp).sum()),
                 "force": a["force_N"],
                 "feff_cm2": a["feff_m2"]["mean"] * 1e4,
-                "feff_volume_cm2": a["feff_volume_m2"]["mean"] * 1e4,
-                "spread_own_pct": a["spread_own_pct"]["mean"],
-                "spread_ref_pct": a["spread_ref_pct"]["mean"],
+                "feff_volume_cm2": mean("feff_volume_m2", 1e4),
+                "spread_own_pct": mean("spread_own_pct"),
+                "spread_ref_pct": mean("spread_ref_pct"),
+                "volume_from": getattr(tf, "piston_source", "piston"),
                 "s_P": s,
                 "eps_P": e,
                 "sigma0": np.mean(noise[:, 0]),
                 "rel_pct": 100 * np.mean(noise[:, 1]),
-                "sigma_L_mm": 1e3 * np.mean(noise[:, 2]),
+                "sigma_L_mm": 1e3 * np.mean(noise[:, 2]) if noise.shape[1] > 2 else None,
                 "warnings": tf.convergence.messages(CLI_ADVICE) + tf.model_warnings(),
                 "figure": figures[f"test_{tf.pressure_bar:g}bar"],
             }
         )
     return out
+
+
+def omitted_lines(cf, cb: CampaignBands) -> list[str]:
+    """What the report leaves out of a force-only or one-pass campaign, and why: one line each
+    (the page's notes and ``uq report``'s summary)."""
+    lines = []
+    without = [tb.pressure_bar for tb in cb.tests if not tb.has_volume]
+    if without and not cb.has_volume:
+        lines.append(
+            "Volume results omitted: force-only campaign (no piston_* or volume_* column), so no "
+            "volume increment (Figure 3), no volume-derived area −S dL/dx, no traditional force "
+            "or its spread (Figure 5)."
+        )
+    elif without:
+        lines.append(
+            f"Volume results of the {', '.join(f'{p:g}' for p in without)} bar tests omitted: "
+            "force-only tests (no piston or volume readings); their traditional force uses the "
+            f"{cb.reference_bar:g}-bar test's volume curve."
+        )
+    vol = [tf.pressure_bar for tf in cf.tests if getattr(tf, "piston_source", None) == "volume"]
+    if vol:
+        lines.append(
+            f"The {', '.join(f'{p:g}' for p in vol)} bar volume curve comes from the volume column: "
+            "L = −V / S (eq. 10), its reference arbitrary (a_L means nothing on its own)."
+        )
+    if not getattr(cf.recordings, "order_known", True):
+        lines.append(
+            "One pass in unknown order (no branch and step columns): no compression/rebound "
+            "markers or hysteresis, and no recording-order check of the residuals."
+        )
+    return lines
 
 
 def _scatter(cb: CampaignBands, ref: Reference | None) -> list[dict]:
@@ -798,12 +895,18 @@ def _draw_figures(
 ) -> dict[str, Figure]:
     """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
     the extension (``"fig2_force"``)."""
-    drawn = [
-        ("fig2_force", figure_force(cf, cb), "Figure 2: force vs height"),
-        ("fig3_volume", figure_volume(cf, cb), "Figure 3: volume increment vs height"),
-        ("fig4_feff", figure_feff(cf, cb), "Figure 4: effective area vs height"),
-        ("fig5_traditional", figure_traditional(cf, cb), "Figure 5: traditional vs measured force"),
-    ]
+    drawn = [("fig2_force", figure_force(cf, cb), "Figure 2: force vs height")]
+    if any(tb.has_volume for tb in cb.tests):
+        drawn.append(("fig3_volume", figure_volume(cf, cb), "Figure 3: volume increment vs height"))
+    drawn.append(("fig4_feff", figure_feff(cf, cb), "Figure 4: effective area vs height"))
+    if cb.has_volume:
+        drawn.append(
+            (
+                "fig5_traditional",
+                figure_traditional(cf, cb),
+                "Figure 5: traditional vs measured force",
+            )
+        )
     if cb.scatter is not None:
         drawn.append(
             (
@@ -943,7 +1046,9 @@ def _write_page(
         reference_note=cb.reference_note,
         scatter_pressures=cb.scatter_pressures_bar,
         scatter=_scatter(cb, ref) if cb.scatter is not None else None,
-        table1_columns=[(n, u) for n, u, _ in TABLE1_COLUMNS],
+        table1_columns=[(n, u) for n, u, _ in TABLE1_COLUMNS[: _table1_columns(cf)]],
+        at_x0_columns=[h for _, _, h in _at_x0_columns(cb)],
+        omitted=omitted_lines(cf, cb),
         table1=t1_rows,
         n_out=n_out,
         n_compared=n_cmp,

@@ -113,6 +113,18 @@ def test_check_of_a_force_only_result_checks_the_force_and_says_the_piston_is_no
     not_checked = [ln for ln in out.splitlines() if ln.startswith("NOT CHECKED piston")]
     assert len(not_checked) == 1 and "has none (force-only test" in not_checked[0]
     assert "OK: all agree" in out
+    if kind == "catalogue":  # a_L of L = -V/S is an arbitrary reference: not checked, b_L..d_L are
+        shifted = json.loads(json.dumps(points))
+        next(t for t in shifted["tests"] if t["pressure_bar"] == 5.0)["piston"]["a_L"] += 1.0
+        (tmp_path / "shifted.json").write_text(json.dumps(shifted))
+        code, out = _run(["check", d / "fit.json", "--against", tmp_path / "shifted.json"])
+        assert code == 0 and "NOT CHECKED a_L (5 bar): the arbitrary reference" in out, out
+        bent = json.loads(json.dumps(points))
+        b5 = next(t for t in bent["tests"] if t["pressure_bar"] == 5.0)["piston"]
+        b5["b_L"] *= 1.05
+        (tmp_path / "bent.json").write_text(json.dumps(bent))
+        code, out = _run(["check", d / "fit.json", "--against", tmp_path / "bent.json"])
+        assert code == 1 and "DISAGREE 5 bar piston" in out, out
     # POINTS without piston entries: the force alone; a piston in the result is named unchecked
     for t in points["tests"]:
         del t["piston"]

@@ -202,6 +202,8 @@ def read_result(doc: dict, path: str) -> dict[float, dict]:
     A force-only test (``uq fit`` of a campaign without piston_* or volume_* column) has no
     "piston" block and says why under "omitted"; its row then has no "piston" and
     ``"omitted": {"piston": why}``. A test missing its piston block without saying why is refused.
+    A test whose piston block comes from a volume column keeps its "piston_from" (its a_L is the
+    arbitrary reference of L = -V/S, so :func:`check` leaves a_L out of that block).
     """
     out = {}
     for p, t, label in _tests(doc, path):
@@ -209,6 +211,8 @@ def read_result(doc: dict, path: str) -> dict[float, dict]:
         omitted = t.get("omitted") if isinstance(t.get("omitted"), dict) else {}
         if "piston" not in t and isinstance(omitted.get("piston"), str):
             row["omitted"] = {"piston": omitted["piston"]}
+        if isinstance(t.get("piston_from"), str):  # L = -V/S from a volume column: a_L arbitrary
+            row["piston_from"] = t["piston_from"]
         cov = _get(
             t,
             "covariance",
@@ -302,7 +306,10 @@ def check(
         raise InputError(f"{points_path}: no block to check: {result_path} and it share none")
     n_blocks = len(pairs)
     thr = threshold(alpha, n_blocks)
-    blocks = [_block(pt, res[block], block, thr) for pt, res, block in pairs]
+    blocks = [
+        _block(pt, res[block], block, alpha, n_blocks, _checked(res, block))
+        for pt, res, block in pairs
+    ]
     exact = [f"{b['pressure_bar']:g} bar {b['block']}" for b in blocks if not b["point_covariance"]]
     return {
         "result": str(result_path),
@@ -339,11 +346,23 @@ def _assumption(exact: list[str], n_blocks: int) -> str:
     )
 
 
-def _block(pt: dict, r: dict, block: str, thr: float) -> dict:
-    """One test's block: distance under S + C, per-coefficient z on the same combined scale."""
+VOLUME_REFERENCE = "the arbitrary reference of L = -V/S (a piston block made from a volume column)"
+
+
+def _checked(res: dict, block: str) -> np.ndarray:
+    """The coefficients of ``block`` the check compares: all four, but b_L..d_L of a piston block
+    made from a volume column (its a_L is the arbitrary reference of L = -V/S)."""
+    return np.arange(1, 4) if block == "piston" and "piston_from" in res else np.arange(4)
+
+
+def _block(pt: dict, r: dict, block: str, alpha: float, n_blocks: int, idx: np.ndarray) -> dict:
+    """One test's block: distance under S + C over the coefficients ``idx`` (chi-square with
+    len(idx) degrees of freedom), per-coefficient z on the same combined scale."""
     c = pt.get("cov", {}).get(block)
     total = r["cov"] + (c if c is not None else 0.0)
-    d2 = mahalanobis2(pt[block], r["mean"], total)
+    df = len(idx)
+    thr = threshold(alpha, n_blocks, df)
+    d2 = mahalanobis2(pt[block][idx], r["mean"][idx], total[np.ix_(idx, idx)])
     point_sd = np.sqrt(np.diag(c)) if c is not None else np.zeros(4)
     coefs = {
         n: {
@@ -365,10 +384,11 @@ def _block(pt: dict, r: dict, block: str, thr: float) -> dict:
         "mahalanobis2": d2,
         "threshold2": thr,
         "threshold": math.sqrt(thr),
-        "p_value": float(chi2.sf(d2, 4)),
+        "p_value": float(chi2.sf(d2, df)),
         "agree": bool(d2 <= thr),
+        "df": df,
         "coefficients": coefs,
-    }
+    } | ({"unchecked": {BLOCKS[block][0]: VOLUME_REFERENCE}} if df < 4 else {})
 
 
 def lsq_covariance(u_m, sd) -> np.ndarray:
@@ -451,6 +471,7 @@ def summary(verdict: dict) -> str:
         )
         for n, c in b["coefficients"].items():
             flag = "  <- outside" if not c["q05"] <= c["point"] <= c["q95"] else ""
+            flag = "  (not checked)" if n in b.get("unchecked", {}) else flag
             own = f" +/- {c['point_sd']:.3g}" if b["point_covariance"] else " (exact)"
             lines.append(
                 f"    {n}: point {_fmt(c['point'])}{own}, posterior {_fmt(c['mean'])} "
@@ -483,6 +504,9 @@ def _not_checked_lines(verdict: dict) -> list[str]:
     by_reason: dict[tuple[str, str], list[float]] = {}
     for n in verdict.get("not_checked", []):
         by_reason.setdefault((n["block"], n["reason"]), []).append(n["pressure_bar"])
+    for b in verdict["blocks"]:
+        for name, why in b.get("unchecked", {}).items():
+            by_reason.setdefault((name, why), []).append(b["pressure_bar"])
     return [
         f"NOT CHECKED {block} ({', '.join(f'{p:g}' for p in ps)} bar): {why}"
         for (block, why), ps in by_reason.items()

@@ -69,6 +69,7 @@ def test_force_only_density_is_the_force_block_of_the_full_model():
         assert np.allclose(posterior_cov(post), posterior_cov(pf), rtol=1e-8)
 
 
+@pytest.mark.slow  # the exact density test above proves the equivalence; this samples both
 def test_force_only_posterior_equals_the_full_models_force_posterior():
     """Sampled: a_P..d_P, sigma0 and r of the force-only fit and of the full fit on the same
     readings agree within 5 Monte Carlo standard errors (means) and 10 % (sds)."""

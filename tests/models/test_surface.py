@@ -433,6 +433,7 @@ def test_default_orders_follow_the_number_of_tests():
         assert o.Lp + 2 <= n and o.Dl + 1 <= n
 
 
+@pytest.mark.slow  # the fast suite fits a coarse grid in test_scripts' test_margin_coverage_tiny
 def test_surface_on_a_coarse_grid(tmp_path):
     """Three tested pressures: the surface is fitted (it was refused: 3 tests cannot fix degree 5
     in pressure) and its force between them is near the truth."""

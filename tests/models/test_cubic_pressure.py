@@ -302,6 +302,23 @@ def test_model_covariance_is_the_stands_generator_covariance():
     assert np.allclose(model_cov * np.outer(s, s), stand_cov * np.outer(s, s), atol=1e-12)
 
 
+def test_ar1_sigma_L_prior_is_centred_on_what_the_budget_leaves_besides_the_holding():
+    """The AR(1) model's sigma_L holds the calipers and the displacement sensor (through the
+    piston's slope), not the holding error the plain model's 1 mm centre stands for."""
+    from uq._stand.simulator import N50Spring
+
+    t = _test(5.0, seed=1)
+    d = CP.ar1_data(t, 0.112, "budget", PAPER_STAND, AREA)[0]
+    slope = N50Spring().piston_slope(t.height_m, 5.0)
+    want = np.hypot(
+        PAPER_STAND.caliper_sd_m, PAPER_STAND.displacement_sd_m * np.sqrt(np.mean(slope**2))
+    )
+    assert np.exp(float(d.prior_mean[2])) == pytest.approx(want, rel=0.01)  # about 0.1 mm
+    assert np.array_equal(np.asarray(d.prior_mean[:2]), CP.noise_prior_mean(PAPER_STAND)[:2])
+    exact = PAPER_STAND.replace(caliper_sd_m=0.0, displacement_sd_m=0.0)
+    assert float(CP.ar1_data(t, 0.112, "budget", exact, AREA)[0].prior_mean[2]) == np.log(1e-6)
+
+
 # ----------------------------------------------------------------------------- fits
 
 FAST = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=4000)

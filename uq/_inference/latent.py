@@ -1,4 +1,4 @@
-"""Linear-Gaussian coefficients under noise with a low-dimensional latent part (Woodbury).
+"""Linear-Gaussian coefficients under noise with a low-dimensional latent part.
 
 For y = Z beta + U z + e with e ~ N(0, diag(v)) independent, z ~ N(0, Q^-1) a latent Gaussian
 of precision Q (m x m), and beta ~ N(0, diag(tau^2)), the readings' covariance given the noise is
@@ -9,11 +9,19 @@ Sigma = diag(v) + U Q^-1 U^T. By the Woodbury identity and the matrix determinan
 
 so the coefficients' Gaussian posterior (``uq._inference.linear.posterior_from_moments``) needs
 only an m x m Cholesky factor, and beta stays conjugate (exact draws) whatever the latent's
-correlation. The per-pressure cubic with an AR(1) pressure-holding error (z = the holding errors
-in recording order, Q tridiagonal) is one use (``uq._models.cubic``, its pressure-holding section).
+correlation (``latent_posterior``, the dense reference).
 
-``weight`` (the readings' rows, 1 fitted, 0 held out) sets D's held-out entries to zero: the
-result is then the density of the fitted rows alone (the latent still integrated out).
+The per-pressure cubic with an AR(1) pressure-holding error (z = the holding errors in recording
+order; ``uq._models.cubic``, its pressure-holding section) does not use that form: D - D U M^-1
+U^T D subtracts numbers of the order of (reading / sd)^2, which lose every digit where a reading's
+independent sd is tiny beside the reading (a piston coordinate of 0.3 m, the latent taking all
+of its scatter). It whitens instead (``paired_ar1_whiten``): the Kalman filter of the latent
+series turns the readings and the design into innovations over their sds, W y and W Z with
+W^T W = Sigma^-1, in one O(n) scan in which nothing cancels, and the conjugate posterior is that
+of the whitened regression.
+
+``weight`` (the readings' rows, 1 fitted, 0 held out) leaves the held-out rows out: the result is
+then the density of the fitted rows alone (the latent still integrated out).
 All functions are pure and jittable.
 """
 

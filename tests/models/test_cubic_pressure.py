@@ -258,10 +258,9 @@ def test_whitened_density_stays_exact_where_woodbury_cancels(short_ar_data):
     dense = _dense_log_marginal(Z, y, Sigma, np.diag(_prior_cov()))
     post = CP._ar1_post(jnp.asarray(theta), d)[0]
     assert float(post.log_marginal) == pytest.approx(dense, rel=1e-7)
-    draws = jax.vmap(lambda k: CP.ar1_draw(jnp.asarray(theta), k, d))(
-        jax.random.split(jax.random.PRNGKey(0), 50)
-    )
-    assert np.all(np.isfinite(np.asarray(draws)))
+    # exact draws are mean + (chol^T)^-1 N(0, I): finite when these are
+    assert np.all(np.isfinite(np.asarray(post.mean))) and np.all(np.isfinite(np.asarray(post.chol)))
+    assert np.all(np.diag(np.asarray(post.chol)) > 0)
 
 
 def test_model_covariance_is_the_stands_generator_covariance():
@@ -409,17 +408,15 @@ def test_fast_coverage_with_ar1_on_the_rough_stand():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    reason="reports/calibration-rough-stand-ar1: 78-85 of 100, a_P, d_P, a_L, c_L just below the "
-    "region (6 fits not converged, non-finite draws in at least one): docs/validation.md",
-    strict=False,
-)
 def test_full_ar1_coverage_on_the_rough_stand():
+    """reports/calibration-rough-stand-ar1 (the same call): every fit converged, every 90 %
+    coverage inside the binomial region."""
     from uq._data.stand_description import read_stand
 
     stand = read_stand(ROOT / "data" / "stands" / "slow-pressure-control.toml")
     res = calibrate(100, truth="n50", seed=20201, stand=stand, ar1="on")
     s = res.summary()
+    assert res.converged.all()
     bad = [k for k, q in s["quantities"].items() if not q["in_region90"]]
     assert not bad, s["quantities"]
 

@@ -94,6 +94,23 @@ def test_failed_rule_is_named_when_max_steps_is_reached():
     assert any("effective sample size" in p.message() for p in ch.problems), ch.problems
 
 
+def test_non_finite_draws_fail_the_verdict_loudly():
+    """A NaN in a reported variable (e.g. a coefficient drawn where the model's numerics failed)
+    is its own failed rule, named with the count, not an undefined R-hat among many."""
+    from uq._inference.convergence import Failure, convergence
+
+    s = Settings(n_walkers=8, n_ensembles=4, min_steps=200, chunk=100, max_steps=2000)
+    ch = run_ensembles(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=4, settings=s)
+    a = ch.samples[..., 0].copy()
+    assert convergence({"a": a}, ch).converged
+    a[1, 5] = np.nan
+    verdict = convergence({"a": a}, ch)
+    assert not verdict.converged
+    (bad,) = [p for p in verdict.problems if p.failure is Failure.NONFINITE]
+    assert bad.message().startswith(f"a: 1 of {a.size} draws are not finite")
+    assert not Failure.NONFINITE.extends_run
+
+
 def test_starts_are_overdispersed_across_four_ensembles():
     """Walkers start several posterior widths wide, drawn afresh per ensemble, and valid."""
 

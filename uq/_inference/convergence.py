@@ -11,6 +11,8 @@ The rules (per sampled problem; ``uq._inference.sampler`` extends a run until th
               failure is reported but does not extend the run). With independence proposals in
               the move mixture only the lower bound applies: there a high acceptance means the
               proposal fits the posterior, not that the steps are tiny.
+* finite:     every draw of every reported variable is finite (a NaN or infinity is a failure of
+              the model's numerics, never of the run's length: reported, never silently averaged).
 
 A run's verdict is a frozen :class:`Convergence` (optimistix's ``Solution.result`` style): a tuple
 of :class:`Problem`, each a :class:`Failure` member with the numbers that failed. Its messages do
@@ -70,11 +72,15 @@ class Failure(enum.Enum):
         "acceptance fraction {value:.2f} outside {lo:g}-{hi:g}: the sampler is stuck or the "
         "posterior is badly scaled; check the model and start"
     )
+    NONFINITE = (
+        "{name}: {count} of {total} draws are not finite: the model's numerics failed there and "
+        "the posterior is unusable; report it as a bug"
+    )
 
     @property
     def extends_run(self) -> bool:
         """Whether running longer can cure it (the acceptance fraction does not change with length)."""
-        return self is not Failure.ACCEPTANCE
+        return self not in (Failure.ACCEPTANCE, Failure.NONFINITE)
 
 
 @dataclass(frozen=True)
@@ -230,6 +236,16 @@ def acceptance_problems(acc: np.ndarray, accept_range: tuple[float, float]) -> l
     return [_problem(Failure.ACCEPTANCE, value=float(acc.mean()), lo=lo, hi=hi)]
 
 
+def nonfinite_problems(posterior: dict) -> list[Problem]:
+    """One NONFINITE problem per reported variable with any NaN or infinite draw."""
+    out = []
+    for n, arr in posterior.items():
+        bad = ~np.isfinite(np.asarray(arr, float))
+        if bad.any():
+            out.append(_problem(Failure.NONFINITE, name=n, count=int(bad.sum()), total=bad.size))
+    return out
+
+
 def failed_rules(chains, settings, full: bool = True) -> tuple[list[Problem], int]:
     """The rules that fail on the sampled parameters of ``chains`` (``uq._inference.sampler.Chains``),
     and the run length they ask for.
@@ -279,7 +295,7 @@ def convergence(posterior: dict, chains) -> Convergence:
             "ess_bulk": _worst([d["ess_bulk"] for d in ds], min),
             "ess_tail": _worst([d["ess_tail"] for d in ds], min),
         }
-    problems = list(chains.problems)
+    problems = list(chains.problems) + nonfinite_problems(posterior)
     for p in rule_problems(diag) + acceptance_problems(chains.acceptance, chains.accept_range):
         if p not in problems:
             problems.append(p)

@@ -1,4 +1,4 @@
-"""Linear-Gaussian coefficients under noise with a low-dimensional latent part (Woodbury).
+"""Linear-Gaussian coefficients under noise with a low-dimensional latent part.
 
 For y = Z beta + U z + e with e ~ N(0, diag(v)) independent, z ~ N(0, Q^-1) a latent Gaussian
 of precision Q (m x m), and beta ~ N(0, diag(tau^2)), the readings' covariance given the noise is
@@ -9,11 +9,19 @@ Sigma = diag(v) + U Q^-1 U^T. By the Woodbury identity and the matrix determinan
 
 so the coefficients' Gaussian posterior (``uq._inference.linear.posterior_from_moments``) needs
 only an m x m Cholesky factor, and beta stays conjugate (exact draws) whatever the latent's
-correlation. The per-pressure cubic with an AR(1) pressure-holding error (z = the holding errors
-in recording order, Q tridiagonal) is one use (``uq._models.cubic``, its pressure-holding section).
+correlation (``latent_posterior``, the dense reference).
 
-``weight`` (the readings' rows, 1 fitted, 0 held out) sets D's held-out entries to zero: the
-result is then the density of the fitted rows alone (the latent still integrated out).
+The per-pressure cubic with an AR(1) pressure-holding error (z = the holding errors in recording
+order; ``uq._models.cubic``, its pressure-holding section) does not use that form: D - D U M^-1
+U^T D subtracts numbers of the order of (reading / sd)^2, which lose every digit where a reading's
+independent sd is tiny beside the reading (a piston coordinate of 0.3 m, the latent taking all
+of its scatter). It whitens instead (``paired_ar1_whiten``): the Kalman filter of the latent
+series turns the readings and the design into innovations over their sds, W y and W Z with
+W^T W = Sigma^-1, in one O(n) scan in which nothing cancels, and the conjugate posterior is that
+of the whitened regression.
+
+``weight`` (the readings' rows, 1 fitted, 0 held out) leaves the held-out rows out: the result is
+then the density of the fitted rows alone (the latent still integrated out).
 All functions are pure and jittable.
 """
 
@@ -51,15 +59,10 @@ def latent_posterior(Z, y, v, U, Q, log_det_Q, prior_sd, weight=None) -> LinearP
 
 def paired_ar1_precision(v, uf, ul, rho):
     """Sigma^-1 (2n, 2n), dense, of the paired AR(1) covariance of ``paired_ar1_posterior``
-    (for pointwise densities), from the tridiagonal factor: D - B^T B, B = L^-1 U^T D."""
-    n = uf.shape[0]
-    D = 1.0 / v
-    c = 1.0 - rho**2
-    q_diag = jnp.full(n, 1.0 + rho**2).at[0].set(1.0).at[-1].set(1.0) / c
-    m_diag = q_diag + uf**2 * D[:n] + ul**2 * D[n:]
-    G = jnp.concatenate([jnp.diag(uf * D[:n]), jnp.diag(ul * D[n:])], axis=1)  # U^T D, (n, 2n)
-    _, B = _tridiagonal_cholesky_solve(m_diag, -rho / c, G)
-    return jnp.diag(D) - B.T @ B
+    (for pointwise densities): W^T W with W the whitening of ``paired_ar1_whiten`` (positive
+    definite by construction, whatever the scales)."""
+    W, _ = paired_ar1_whiten(jnp.eye(2 * uf.shape[0]), v, uf, ul, rho)
+    return W.T @ W
 
 
 def ar1_series(rho, z):
@@ -99,66 +102,73 @@ def ar1_precision(rho, n: int):
     return Q, -(n - 1) * jnp.log(c)
 
 
-def _tridiagonal_cholesky_solve(diag, off, B):
-    """Lower Cholesky factor of the symmetric tridiagonal matrix (``diag`` (n,), constant
-    sub-diagonal ``off``) and L^-1 B for B (n, k), in one pass: O(n k). Returns (l (n,) the
-    factor's diagonal, L^-1 B)."""
-
-    def step(carry, inp):
-        l_prev, x_prev = carry
-        m, b = inp
-        s = off / l_prev
-        l = jnp.sqrt(m - s**2)
-        x = (b - s * x_prev) / l
-        return (l, x), (l, x)
-
-    l0 = jnp.sqrt(diag[0])
-    x0 = B[0] / l0
-    _, (ls, xs) = jax.lax.scan(step, (l0, x0), (diag[1:], B[1:]))
-    return jnp.concatenate([l0[None], ls]), jnp.concatenate([x0[None], xs])
-
-
-def paired_ar1_posterior(Z, y, v, uf, ul, rho, prior_sd, weight=None) -> LinearPosterior:
-    """``latent_posterior`` for the AR(1) latent of the paired readings, in O(n k).
+def paired_ar1_whiten(cols, v, uf, ul, rho, weight=None):
+    """Whitened columns W cols (2n, m) and log det Sigma of the paired AR(1) covariance, by the
+    Kalman filter of the latent series (one scalar state, the readings of row i taken one at a
+    time: force i, then piston i).
 
     Rows 0..n-1 and n..2n-1 are the two readings of n rows (force, piston); latent z_i (a
     stationary AR(1) series, unit variance, lag-one correlation rho) enters row i with weight
-    uf_i and row n + i with ul_i: U = [diag(uf); diag(ul)]. Then M = R^-1 + diag(uf^2 D_f +
-    ul^2 D_l) is tridiagonal, and U^T D Z = uf D_f Z_f + ul D_l Z_l row by row, so the Woodbury
-    terms need one tridiagonal factorisation (a scan) instead of dense products. The same result
-    as ``latent_posterior(Z, y, v, U, ar1_precision(rho, n))`` (tests/models/test_cubic_pressure.py).
-    """
+    uf_i and row n + i with ul_i, and each reading has its own independent variance v. W is the
+    inverse of Sigma's Cholesky factor in the filter's order: each reading's innovation (reading
+    minus its prediction from the earlier readings) over its sd. Every step is a convex
+    combination or a ratio of positive numbers, so nothing cancels: unlike the Woodbury form
+    D - D U M^-1 U^T D, which subtracts numbers of the order of (reading / sd)^2 (10^20 for a
+    piston coordinate of 0.3 m and an independent sd of 0.01 um, a corner the sampler reaches
+    when the latent explains all of the piston's scatter) and there returned garbage, with
+    spurious modes of high density and non-finite draws. ``weight`` (2n,): readings with weight
+    0 are held out (no innovation, no determinant term: the density of the others, the latent
+    still integrated out); a positive weight w gives the reading variance v / w."""
     n = uf.shape[0]
-    w = jnp.ones_like(y) if weight is None else weight
-    D = w / v
+    w = jnp.ones(2 * n) if weight is None else weight
+    present = w > 0
+    var = jnp.where(present, v / jnp.where(present, w, 1.0), 1.0)
     c = 1.0 - rho**2
-    q_diag = jnp.full(n, 1.0 + rho**2).at[0].set(1.0).at[-1].set(1.0) / c
-    m_diag = q_diag + uf**2 * D[:n] + ul**2 * D[n:]
-    G = (uf * D[:n])[:, None] * Z[:n] + (ul * D[n:])[:, None] * Z[n:]  # (n, k)
-    g = uf * D[:n] * y[:n] + ul * D[n:] * y[n:]
-    l, AB = _tridiagonal_cholesky_solve(m_diag, -rho / c, jnp.concatenate([G, g[:, None]], 1))
-    A, a = AB[:, :-1], AB[:, -1]
-    gram = Z.T @ (D[:, None] * Z) - A.T @ A
-    rhs = Z.T @ (D * y) - A.T @ a
-    yy = jnp.sum(D * y**2) - a @ a
-    log_det = jnp.sum(w * jnp.log(v)) + 2.0 * jnp.sum(jnp.log(l)) + (n - 1) * jnp.log(c)
-    post = posterior_from_moments(gram, rhs, yy, jnp.sum(w), log_det, prior_sd)
-    # y^T Sigma^-1 y - m^T A m is a difference of numbers of the order of (reading / noise)^2,
-    # 10^10 and more for a piston coordinate of 0.3 m read to 0.01 mm: its rounding error can
-    # exceed the result. The same quantity in residual form, (y - Z m)^T Sigma^-1 (y - Z m) +
-    # m^T T^-1 m, is of the order of the number of readings and keeps its precision.
-    r = y - Z @ post.mean
-    gr = uf * D[:n] * r[:n] + ul * D[n:] * r[n:]
-    _, ar = _tridiagonal_cholesky_solve(m_diag, -rho / c, gr[:, None])
-    quad = jnp.sum(D * r**2) - jnp.sum(ar**2) + jnp.sum((post.mean / prior_sd) ** 2)
+
+    def update(a, P, x, h, s2, on):
+        S = h * h * P + s2
+        innovation = x - h * a
+        e = jnp.where(on, innovation / jnp.sqrt(S), 0.0)
+        a = jnp.where(on, a + (P * h / S) * innovation, a)
+        P = jnp.where(on, P * s2 / S, P)
+        return a, P, e, jnp.where(on, jnp.log(S), 0.0)
+
+    def step(carry, inp):
+        a, P = carry
+        xf, xl, vf, vl, hf, hl, of, ol = inp
+        a, P, ef, ldf = update(a, P, xf, hf, vf, of)
+        a, P, el, ldl = update(a, P, xl, hl, vl, ol)
+        return (rho * a, rho * rho * P + c), (ef, el, ldf + ldl)
+
+    inputs = (cols[:n], cols[n:], var[:n], var[n:], uf, ul, present[:n], present[n:])
+    a0 = jnp.zeros(cols.shape[1:], dtype=cols.dtype)
+    _, (ef, el, ld) = jax.lax.scan(step, (a0, jnp.ones((), dtype=cols.dtype)), inputs)
+    return jnp.concatenate([ef, el], axis=0), jnp.sum(ld)
+
+
+def paired_ar1_posterior(Z, y, v, uf, ul, rho, prior_sd, weight=None) -> LinearPosterior:
+    """``latent_posterior`` for the AR(1) latent of the paired readings (``paired_ar1_whiten``):
+    the design and readings whitened in one O(n k) pass, then the ordinary conjugate posterior
+    of the whitened regression. The same result as ``latent_posterior(Z, y, v, U,
+    ar1_precision(rho, n))`` where both are accurate (tests/models/test_cubic_pressure.py), and
+    accurate where the Woodbury form is not."""
+    w = jnp.ones_like(y) if weight is None else weight
+    W, log_det = paired_ar1_whiten(jnp.concatenate([Z, y[:, None]], 1), v, uf, ul, rho, w)
+    Zw, yw = W[:, :-1], W[:, -1]
+    n_obs = jnp.sum(w > 0)
+    post = posterior_from_moments(Zw.T @ Zw, Zw.T @ yw, yw @ yw, n_obs, log_det, prior_sd)
+    # yw^T yw - m^T A m is a difference of large numbers (the readings over their sd, squared);
+    # the same quantity in residual form, |yw - Zw m|^2 + |m / prior_sd|^2, keeps its precision.
+    rw = yw - Zw @ post.mean
+    quad = rw @ rw + jnp.sum((post.mean / prior_sd) ** 2)
     log_marginal = -0.5 * (
         quad
         + log_det
         + jnp.sum(jnp.log(prior_sd**2))
         + 2.0 * jnp.sum(jnp.log(jnp.diag(post.chol)))
-        + jnp.sum(w) * LOG_2PI
+        + n_obs * LOG_2PI
     )
-    return post._replace(log_marginal=jnp.where(quad >= 0.0, log_marginal, -jnp.inf))
+    return post._replace(log_marginal=log_marginal)
 
 
 def common_offset(dp_hat_pa, p_pa: float, *, ordered: bool = True):

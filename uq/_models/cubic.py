@@ -23,6 +23,7 @@ paper's basis (a + b u + c u^2 + d u^3, SI units).
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -55,7 +56,7 @@ from uq._inference.sampler import Settings
 from uq._inference.summary import estimate
 from uq._models.residual_order import ALPHA as ORDER_ALPHA
 from uq._models.residual_order import ORDER_UNKNOWN, lag_one_check, order_warnings
-from uq._physics.cubic import cubic
+from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var, to_paper_basis
 
 MAX_DRAWS = 8000  # retained posterior samples per test after thinning
@@ -996,12 +997,13 @@ def fit_campaign(
 #
 #     Sigma = diag(sigma_F^2, sigma_L^2) + u u^T o R(rho),    u = [lever k_p s_p ; -V/(p_abs S) k_p s_p]
 #
-# (R_ij = rho^|i-j|), i.e. Sigma = D + U R U^T with U = [diag(b); diag(c)], and the latent's
-# precision R^-1 is tridiagonal. ``uq._inference.latent`` integrates it out exactly (Woodbury,
-# an n x n Cholesky factor), so the coefficients stay conjugate. Sampled: (psi, eta, log sigma_L)
-# as in the plain model, log k_p ~ N(0, 0.5^2), log V ~ N(log V_s, 0.5^2), and atanh(rho) with rho
-# uniform on (-1, 1). sigma0 and sigma_L are then what is left besides the pressure holding
-# (displacement, calipers).
+# (R_ij = rho^|i-j|), i.e. Sigma = D + U R U^T with U = [diag(b); diag(c)]. ``uq._inference.latent``
+# integrates the latent out exactly by whitening (the Kalman filter of the series, one O(n) scan:
+# W with W^T W = Sigma^-1 applied to readings and design), so the coefficients stay conjugate.
+# Sampled: (psi, eta, log sigma_L) as in the plain model, log k_p ~ N(0, 0.5^2), log V ~
+# N(log V_s, 0.5^2), and atanh(rho) with rho uniform on (-1, 1). sigma0 and sigma_L are then what
+# is left besides the pressure holding (displacement, calipers), and sigma_L's prior is centred on
+# that remainder of the stand's budget (``ar1_noise_prior_mean``), not on the plain model's 1 mm.
 
 #: The pressure sensor the measured model assumes (the paper's, section 3.2: 0.1 % accuracy, read
 #: as a gain error common to a test; its 1 Pa resolution is negligible). The virtual stand's
@@ -1212,6 +1214,22 @@ class AR1Data(NamedTuple):
     blocks: jnp.ndarray  # (n, 2) int: rows (i, n + i) of reading i in the stacked vectors
 
 
+def ar1_noise_prior_mean(stand: StandDescription, lsq_piston, u) -> np.ndarray:
+    """Prior centres of (log sigma0, log r, log sigma_L) for the AR(1) model: the plain model's,
+    except sigma_L's. The plain model centres sigma_L on 1 mm, the scale of the holding error's
+    piston term it lumps into the noise (Boyle's law: 1 to 6 mm on the paper's stand); here that
+    term is the latent series, and what is left is the stand's calipers and displacement sensor
+    (the latter through the piston's slope dL/dx, from the least-squares cubic at the readings):
+    sqrt(caliper_sd^2 + (displacement_sd rms dL/dx)^2), never under 1 um (log 0 has no prior).
+    With the 1 mm centre the weakly identified white part took variance from the series at low
+    pressure (0.34 mm fitted where the stand's is 0.08 mm)."""
+    slope = cubic_slope(np.asarray(lsq_piston, float), np.asarray(u, float))
+    left = math.hypot(stand.caliper_sd_m, stand.displacement_sd_m * math.sqrt(np.mean(slope**2)))
+    out = noise_prior_mean(stand)
+    out[2] = math.log(max(left, 1e-6))
+    return out
+
+
 def ar1_data(test, x0_m: float, noise: str, stand: StandDescription, area_m2: float):
     """The AR(1) model's arrays for one test in recording order (``cubic._prepare``'s tuple)."""
     data, lsq_f, lsq_l, ref = _prepare(test, x0_m, noise, stand)
@@ -1224,7 +1242,9 @@ def ar1_data(test, x0_m: float, noise: str, stand: StandDescription, area_m2: fl
         data.piston,
         data.ref_force,
         jnp.asarray(
-            np.concatenate([noise_prior_mean(stand), [0.0, np.log(stand.gas_volume_at_xmax_m3)]])
+            np.concatenate(
+                [ar1_noise_prior_mean(stand, lsq_l, u), [0.0, np.log(stand.gas_volume_at_xmax_m3)]]
+            )
         ),
         data.weight,
         jnp.asarray(cubic(lsq_f, u) / p_pa),
@@ -1261,8 +1281,8 @@ def _paired(theta, d: AR1Data):
 
 
 def _ar1_post(theta, d: AR1Data):
-    """The coefficients' posterior given theta: the tridiagonal O(n) form of the Woodbury terms
-    (``paired_ar1_posterior``), checked against the dense ``latent_posterior`` in the tests."""
+    """The coefficients' posterior given theta: the whitened O(n) form (``paired_ar1_posterior``),
+    checked against the dense ``latent_posterior`` and a dense Cholesky factor in the tests."""
     nat = natural_noise(theta[:3], jnp.mean(d.ref_force))
     a2 = force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)
     n = d.force.shape[0]
@@ -1289,7 +1309,7 @@ def ar1_log_prior(theta, d: AR1Data):
 
 
 #: Sampled parameters farther than this many prior sds from their prior centre are refused: the
-#: prior gives them no weight, and the Woodbury terms lose their precision there.
+#: prior gives them no weight (and 1 - rho^2 would lose its digits beyond |atanh rho| = 4).
 PRIOR_BOX_SD = 8.0
 
 

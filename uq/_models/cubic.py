@@ -54,7 +54,7 @@ from uq._inference.linear import (
 from uq._inference.sampler import Settings
 from uq._inference.summary import estimate
 from uq._models.residual_order import ALPHA as ORDER_ALPHA
-from uq._models.residual_order import lag_one_check, order_warnings
+from uq._models.residual_order import ORDER_UNKNOWN, lag_one_check, order_warnings
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var, to_paper_basis
 
@@ -248,6 +248,171 @@ MODEL = CollapsedModel(
 )
 
 
+# ----------------------------------------------------------------------------- force only
+# A test without piston readings or volume (a force-only stand): the force block of ``MODEL``
+# alone. Given the noise, MODEL's force and piston blocks are independent and the piston's noise
+# sigma_L has its own prior, so the force coefficients' and (sigma0, r)'s posterior here is the
+# same distribution as MODEL's on the same forces (tests/models/test_cubic_force.py checks it).
+# With measured pressures the readings are corrected as in ``MEASURED``'s force rows,
+# force_i + lever_i delta = P(x_i) + lever_i dp_hat_i + e_F,i, the sensor's common offset delta one
+# extra coefficient (prior: ``common_offset``); the stand's gas volume moves only the piston, so it
+# is not a parameter here.
+
+FORCE_NOISE_NAMES = NOISE_NAMES[:2]
+#: Why a force-only test has no piston block (``uq fit --json``'s "omitted", the report's line).
+NO_VOLUME = (
+    "force-only test: no piston_* or volume_* column, so no piston coordinate, volume increment "
+    "or volume-derived effective area"
+)
+#: How a test with a volume column gets its piston block (``uq fit --json``'s "piston_from").
+VOLUME_AS_PISTON = (
+    "from the volume_* column: L = -V / S (eq. 10, S the stand's piston area), the test's piston "
+    "reference arbitrary (a_L has no meaning of its own)"
+)
+FORCE_SAMPLER_NAMES = SAMPLER_NAMES[:2]
+
+
+class ForceData(NamedTuple):
+    """One test's arrays for the force-only model (n readings, k = 4 or 5 coefficients)."""
+
+    X: jnp.ndarray  # (n, k) scaled basis [1, t, t^2, t^3] (and -lever: the common offset)
+    force: jnp.ndarray  # (n,) as read, N
+    y: jnp.ndarray  # (n,) what the linear model fits: force less lever * dp (measured pressure)
+    ref_force: jnp.ndarray  # (n,) force level of the relative noise term, N
+    prior_mean: jnp.ndarray  # (2,) prior centres of log sigma0 and log r
+    weight: jnp.ndarray  # (n,) 1 = fitted, 0 = held out
+    prior_sd: jnp.ndarray  # (k,) coefficients' prior sds
+    offset_mean: jnp.ndarray  # () prior mean of the common offset already taken out (Pa), or 0
+
+
+def _force_noise(theta, d: ForceData):
+    psi, eta = theta[0], theta[1]
+    log_s0 = psi - 0.5 * jnp.logaddexp(0.0, -eta)
+    log_r = psi - 0.5 * jnp.logaddexp(0.0, eta) - jnp.log(jnp.mean(d.ref_force))
+    nat = jnp.stack([log_s0, log_r])
+    return jnp.sqrt(force_noise_var(jnp.exp(log_s0), jnp.exp(log_r), d.ref_force)), nat
+
+
+def _force_post(theta, d: ForceData):
+    sigma_f, nat = _force_noise(theta, d)
+    return linear_posterior(d.X, d.y, sigma_f, d.prior_sd, d.weight), nat
+
+
+def force_log_prob(theta, d: ForceData):
+    """Log posterior of (psi, eta), coefficients integrated out; theta (2,)."""
+    post, nat = _force_post(theta, d)
+    z = (nat - d.prior_mean) / NOISE_PRIOR_SD[:2]
+    return -0.5 * jnp.sum(z**2) + post.log_marginal
+
+
+def force_draw(theta, key, d: ForceData):
+    return draw_exact(_force_post(theta, d)[0], key)
+
+
+def force_pointwise(theta, beta, d: ForceData):
+    return {"force_N": gaussian_loglik(d.y, d.X @ beta, _force_noise(theta, d)[0])}
+
+
+def force_predict(theta, beta, key, d: ForceData):
+    """A replicate of the forces as read (at the measured pressures)."""
+    sigma_f = _force_noise(theta, d)[0]
+    n = d.force.shape[0]
+    return {"force_N": d.X @ beta + (d.force - d.y) + sigma_f * jax.random.normal(key, (n,))}
+
+
+def force_pointwise_loo(theta, d: ForceData):
+    return loo_given_noise(d.X, d.y, _force_noise(theta, d)[0], d.prior_sd)
+
+
+def force_start(d: ForceData) -> np.ndarray:
+    X, y = np.asarray(d.X), np.asarray(d.y)
+    res = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    sd = np.sqrt(np.sum(res**2) / max(y.size - X.shape[1], 1))
+    return np.array([np.log(sd + 1e-9), 0.0])
+
+
+def force_report(theta, beta, d: ForceData) -> dict:
+    theta = np.asarray(theta)
+    psi, eta = theta[:, 0], theta[:, 1]
+    ref = float(np.mean(np.asarray(d.ref_force)))
+    sigma0 = np.exp(psi - 0.5 * np.logaddexp(0.0, -eta))
+    rel = np.exp(psi - 0.5 * np.logaddexp(0.0, eta) - np.log(ref))
+    force = to_paper_basis(beta[:, :4])
+    out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
+    out |= {"sigma0_N": sigma0, "rel_force": rel}
+    if beta.shape[1] > 4:
+        out["pressure_offset_Pa"] = float(d.offset_mean) + beta[:, 4]
+    return out
+
+
+def force_observed(d: ForceData) -> dict:
+    return {"force_N": np.asarray(d.force)}
+
+
+FORCE_ONLY = CollapsedModel(
+    name="per-pressure cubic of the force (eq. 8), force-only test",
+    theta_names=FORCE_SAMPLER_NAMES,
+    log_prob=force_log_prob,
+    draw_linear=force_draw,
+    pointwise=force_pointwise,
+    start=force_start,
+    report=force_report,
+    predict=force_predict,
+    observed=force_observed,
+    pointwise_loo=force_pointwise_loo,
+    hold_out=hold_out,
+)
+
+
+def force_data(
+    test: PressureTest, x0_m: float, noise: str, stand: StandDescription, measured: bool = False
+):
+    """The force-only model's arrays for one test, ``(data, lsq_force, None, ref_force)`` as
+    ``_prepare``; ``measured``: the readings' measured pressures are a covariate (``MEASURED``'s
+    force rows, with the sensor's common offset as a fifth coefficient)."""
+    if noise not in ("budget", "constant"):
+        raise ValueError(f"noise must be 'budget' or 'constant', got {noise!r}")
+    u = test.height_m - x0_m
+    X = basis(u)
+    y = np.asarray(test.force_N, float)
+    prior_sd = np.full(4, FORCE_PRIOR_SD_N)
+    offset_mean = 0.0
+    if measured:
+        p_pa = test.pressure_bar * BAR_PA
+        dp_hat = (np.asarray(test.measured_pressure_bar, float) - test.pressure_bar) * BAR_PA
+        offset_mean, offset_sd = common_offset(dp_hat, p_pa, ordered=test.step is not None)
+        lever = cubic(least_squares(u, test.force_N), u) / p_pa
+        y = y - lever * (dp_hat - offset_mean)
+        X = jnp.concatenate([X, -jnp.asarray(lever)[:, None]], axis=1)
+        prior_sd = np.append(prior_sd, offset_sd)
+    lsq_f = least_squares(u, y)
+    ref = noise_reference(lsq_f, u, noise)
+    data = ForceData(
+        X,
+        jnp.asarray(test.force_N),
+        jnp.asarray(y),
+        jnp.asarray(ref),
+        jnp.asarray(noise_prior_mean(stand)[:2]),
+        jnp.ones(u.size),
+        jnp.asarray(prior_sd),
+        jnp.asarray(offset_mean),
+    )
+    return data, lsq_f, None, ref
+
+
+def piston_coordinate(test: PressureTest, piston_area_m2: float):
+    """The piston coordinate L (m) a test's volume block fits, and where it comes from:
+    ``(test.piston_m, "piston")``; for a test with a ``volume_*`` column instead (a catalogue's
+    volume at its stated pressure) ``(-V / S, "volume")``, since dV = V(x_max) - V(x) =
+    S [L(x) - L(x_max)] (eq. 10) makes L = const - V / S, the constant being the test's arbitrary
+    piston reference (as in ``uq._models.diagnose``); ``(None, None)`` for a force-only test."""
+    if test.piston_m is not None:
+        return test.piston_m, "piston"
+    if test.volume_m3 is not None:
+        return -np.asarray(test.volume_m3, float) / piston_area_m2, "volume"
+    return None, None
+
+
 # ----------------------------------------------------------------------------- results
 
 
@@ -261,23 +426,34 @@ def noise_reference(lsq_force, u, noise: str) -> np.ndarray:
 @dataclass(eq=False, frozen=True, repr=False)
 class PressureFit:
     """Posterior of one test: the driver's :class:`~uq._inference.collapsed.Posterior` and what the
-    test's quantities need. Draw arrays are (chains, draws, ...) in the paper's basis, SI."""
+    test's quantities need. Draw arrays are (chains, draws, ...) in the paper's basis, SI.
+
+    A force-only test (no piston_* and no volume_* column) has no volume block: ``piston``,
+    ``lsq_piston`` and ``piston_m`` are None, ``noise`` holds sigma0_N and rel_force only, and
+    ``has_piston`` is False. A test with a volume column fits L = -V / S (``piston_source``
+    "volume", :func:`piston_coordinate`), so every volume quantity works on it unchanged."""
 
     test: PressureTest
     x0_m: float
     lsq_force: np.ndarray  # (4,)
-    lsq_piston: np.ndarray  # (4,)
+    lsq_piston: np.ndarray | None  # (4,), None for a force-only test
     posterior: Posterior
     ref_force_N: np.ndarray  # (n,) force level of the relative noise term at each point
     noise_model: str  # "budget" or "constant" (fit_test's noise)
     force: np.ndarray  # (C, D, 4) a_P..d_P
-    piston: np.ndarray  # (C, D, 4) a_L..d_L
-    noise: np.ndarray  # (C, D, 3) sigma0_N, rel_force, sigma_L_m
-    #: the recording-order check of the residuals (uq._models.residual_order): force, piston, alpha
+    piston: np.ndarray | None  # (C, D, 4) a_L..d_L, None for a force-only test
+    noise: np.ndarray  # (C, D, 3) sigma0_N, rel_force, sigma_L_m (C, D, 2 without the piston)
+    #: the recording-order check of the residuals (uq._models.residual_order): force, piston,
+    #: alpha; for a test in unknown order {"alpha", "skipped": why}
     order_check: dict
     #: the pressure-holding error: "plain" (in the noise), "measured" (measured pressure as a
     #: covariate) or "ar1" (AR(1) in recording order); the pressure-holding section below
     variant: str = "plain"
+    #: where the volume block's L readings come from: "piston" (piston_* column), "volume"
+    #: (L = -V / S from a volume_* column) or None (force-only test)
+    piston_source: str | None = "piston"
+    #: the L readings (m) the volume block fits, as read (None for a force-only test)
+    piston_m: np.ndarray | None = None
 
     @classmethod
     def of(
@@ -292,36 +468,25 @@ class PressureFit:
         variant: str = "plain",
     ):
         post = posterior.idata.posterior
+        has_piston = lsq_piston is not None
 
         def stack(names):
             return np.stack([np.asarray(post[n]) for n in names], axis=-1)
 
-        force, piston, noise = stack(FORCE_NAMES), stack(PISTON_NAMES), stack(NOISE_NAMES)
-        u = test.height_m - x0_m
-        mean_noise = noise.reshape(-1, 3).mean(axis=0)
-        design = np.asarray(basis(u))
-        readings = {"force": test.force_N, "piston": test.piston_m}
-        if variant == "measured":  # the readings the model fits: corrected by the measured pressure
-            readings = measured_corrected(posterior.data, posterior.beta.reshape(-1, 10).mean(0))
-        residuals = {
-            "force": readings["force"] - cubic(force.reshape(-1, 4).mean(0), u),
-            "piston": readings["piston"] - cubic(piston.reshape(-1, 4).mean(0), u),
-        }
-        sd = {
-            "force": np.sqrt(force_noise_var(mean_noise[0], mean_noise[1], ref_force_N)),
-            "piston": np.full(u.shape, mean_noise[2]),
-        }
-        designs = {"force": design, "piston": design}
-        if variant == "ar1":  # check what the AR(1) model leaves: Prais-Winsten innovations
-            theta_mean = posterior.theta.reshape(-1, posterior.theta.shape[-1]).mean(0)
-            rho, sd = ar1_order_whitening(posterior.data, theta_mean)
-            for b in ("force", "piston"):
-                residuals[b] = prewhiten(residuals[b] / sd[b], rho[b])
-                designs[b] = np.stack(
-                    [prewhiten(c, rho[b]) for c in (design / sd[b][:, None]).T], axis=1
-                )
-                sd[b] = np.ones(u.shape)
-        check = {b: lag_one_check(residuals[b], sd[b], designs[b]) for b in ("force", "piston")}
+        force = stack(FORCE_NAMES)
+        piston = stack(PISTON_NAMES) if has_piston else None
+        noise = stack(NOISE_NAMES if has_piston else FORCE_NOISE_NAMES)
+        piston_m = np.asarray(posterior.data.piston, float) if has_piston else None
+        source = None
+        if has_piston:
+            source = "piston" if test.piston_m is not None else "volume"
+        blocks = ("force", "piston") if has_piston else ("force",)
+        if test.step is None:
+            check = {"skipped": ORDER_UNKNOWN}
+        else:
+            check = cls._order_check(
+                test, x0_m, posterior, ref_force_N, variant, force, piston, noise, piston_m, blocks
+            )
         return cls(
             test,
             x0_m,
@@ -335,7 +500,46 @@ class PressureFit:
             noise,
             check | {"alpha": ORDER_ALPHA},
             variant,
+            source,
+            piston_m,
         )
+
+    @staticmethod
+    def _order_check(
+        test, x0_m, posterior, ref_force_N, variant, force, piston, noise, piston_m, blocks
+    ) -> dict:
+        """The recording-order check of each block's residuals under the fitted model."""
+        u = test.height_m - x0_m
+        mean_noise = noise.reshape(-1, noise.shape[-1]).mean(axis=0)
+        design = np.asarray(basis(u))
+        readings = {"force": test.force_N, "piston": piston_m}
+        beta_mean = posterior.beta.reshape(-1, posterior.beta.shape[-1]).mean(0)
+        if variant == "measured" and "piston" in blocks:  # corrected by the measured pressure
+            readings = measured_corrected(posterior.data, beta_mean)
+        elif variant == "measured":  # force only: the offset is the fifth coefficient
+            d = posterior.data
+            readings = {"force": np.asarray(d.y) - np.asarray(d.X)[:, 4] * beta_mean[4]}
+        residuals = {"force": readings["force"] - cubic(force.reshape(-1, 4).mean(0), u)}
+        sd = {"force": np.sqrt(force_noise_var(mean_noise[0], mean_noise[1], ref_force_N))}
+        if "piston" in blocks:
+            residuals["piston"] = readings["piston"] - cubic(piston.reshape(-1, 4).mean(0), u)
+            sd["piston"] = np.full(u.shape, mean_noise[2])
+        designs = {b: design for b in blocks}
+        if variant == "ar1":  # check what the AR(1) model leaves: Prais-Winsten innovations
+            theta_mean = posterior.theta.reshape(-1, posterior.theta.shape[-1]).mean(0)
+            rho, sd = ar1_order_whitening(posterior.data, theta_mean)
+            for b in blocks:
+                residuals[b] = prewhiten(residuals[b] / sd[b], rho[b])
+                designs[b] = np.stack(
+                    [prewhiten(c, rho[b]) for c in (design / sd[b][:, None]).T], axis=1
+                )
+                sd[b] = np.ones(u.shape)
+        return {b: lag_one_check(residuals[b], sd[b], designs[b]) for b in blocks}
+
+    @property
+    def has_piston(self) -> bool:
+        """The test has a volume block (piston_* or volume_* column); False: force only."""
+        return self.piston is not None
 
     @property
     def pressure_bar(self) -> float:
@@ -370,7 +574,9 @@ class PressureFit:
 
     def mean_residuals(self, block: str) -> np.ndarray:
         """Readings minus the posterior-mean curve of ``block`` ("force" N or "piston" m), (n,)."""
-        y = self.test.force_N if block == "force" else self.test.piston_m
+        if block == "piston" and not self.has_piston:
+            raise ValueError(f"the {self.test.label} test is force-only: it has no piston block")
+        y = self.test.force_N if block == "force" else self.piston_m
         return y - cubic(self.flat(block).mean(0), self.test.height_m - self.x0_m)
 
     def deviation_measures(self) -> tuple[float, float]:
@@ -389,10 +595,13 @@ class PressureFit:
         return self.posterior.summary()
 
     def to_json(self, advice: str = CLI_ADVICE) -> dict:
-        """One entry of ``tests`` in ``uq fit --json`` (docs/formats.md)."""
+        """One entry of ``tests`` in ``uq fit --json`` (docs/formats.md). A force-only test has no
+        "piston" blocks (estimates, least squares, covariance) and says why under "omitted"; a
+        test whose L comes from a volume column says so under "piston_from"."""
         conv = self.convergence.to_json(advice, variables=False)
         var = self.convergence.variables
         s_P, eps_P = self.deviation_measures()
+        noise_names = NOISE_NAMES if self.has_piston else FORCE_NOISE_NAMES
 
         def block(draws, names):
             return {
@@ -401,29 +610,38 @@ class PressureFit:
                 for i, n in enumerate(names)
             }
 
-        return {
+        out = {
             "pressure_bar": self.pressure_bar,
             "n_points": self.test.n_points,
             "force": block(self.force, FORCE_NAMES),
-            "piston": block(self.piston, PISTON_NAMES),
+        }
+        if self.has_piston:
+            out["piston"] = block(self.piston, PISTON_NAMES)
+        out |= {
             "s_P_N": s_P,
             "eps_P_pct": eps_P,
             "noise": {
                 n: estimate(self.noise[..., i])
                 | {"r_hat": var[n]["r_hat"], "ess_bulk": var[n]["ess_bulk"]}
-                for i, n in enumerate(NOISE_NAMES)
+                for i, n in enumerate(noise_names)
             },
             "least_squares": {
-                "force": dict(zip(FORCE_NAMES, self.lsq_force.tolist(), strict=True)),
-                "piston": dict(zip(PISTON_NAMES, self.lsq_piston.tolist(), strict=True)),
+                "force": dict(zip(FORCE_NAMES, self.lsq_force.tolist(), strict=True))
             },
-            "covariance": {
-                "force": np.cov(self.flat("force"), rowvar=False),
-                "piston": np.cov(self.flat("piston"), rowvar=False),
-            },
+            "covariance": {"force": np.cov(self.flat("force"), rowvar=False)},
             "convergence": conv,
             "residual_order": self.order_check,
-        } | self._pressure_holding_json(var)
+        }
+        if self.has_piston:
+            out["least_squares"]["piston"] = dict(
+                zip(PISTON_NAMES, self.lsq_piston.tolist(), strict=True)
+            )
+            out["covariance"]["piston"] = np.cov(self.flat("piston"), rowvar=False)
+        else:
+            out["omitted"] = {"piston": NO_VOLUME}
+        if self.piston_source == "volume":
+            out["piston_from"] = VOLUME_AS_PISTON
+        return out | self._pressure_holding_json(var)
 
     def _pressure_holding_json(self, var) -> dict:
         """How the model treated the pressure-holding error, and its extra parameters."""
@@ -433,7 +651,7 @@ class PressureFit:
         names = AR_EXTRA_NAMES if self.variant == "ar1" else MEASURED_EXTRA_NAMES
         post = self.idata.posterior
         block = {"model": self.variant}
-        for n in names:
+        for n in (n for n in names if n in post):  # a force-only test has no gas volume
             block[n] = estimate(np.asarray(post[n])) | {
                 k: var[n][k] for k in ("r_hat", "ess_bulk") if k in var.get(n, {})
             }
@@ -447,17 +665,30 @@ class PressureFit:
         )
 
 
-def _prepare(test: PressureTest, x0_m: float, noise: str, stand: StandDescription):
+def _prepare(
+    test: PressureTest,
+    x0_m: float,
+    noise: str,
+    stand: StandDescription,
+    piston_area_m2: float = PAPER_PISTON_AREA_M2,
+):
+    """``MODEL``'s arrays for one test (L from its piston or volume column, :func:`piston_coordinate`)
+    and ``(lsq_force, lsq_piston, ref_force)``."""
     if noise not in ("budget", "constant"):
         raise ValueError(f"noise must be 'budget' or 'constant', got {noise!r}")
+    piston, _ = piston_coordinate(test, piston_area_m2)
+    if piston is None:
+        raise ValueError(
+            f"the {test.label} test is force-only: fit it with FORCE_ONLY (force_data)"
+        )
     u = test.height_m - x0_m
     lsq_f = least_squares(u, test.force_N)
-    lsq_l = least_squares(u, test.piston_m)
+    lsq_l = least_squares(u, piston)
     ref_force = noise_reference(lsq_f, u, noise)
     data = CubicData(
         basis(u),
         jnp.asarray(test.force_N),
-        jnp.asarray(test.piston_m),
+        jnp.asarray(piston),
         jnp.asarray(ref_force),
         jnp.asarray(noise_prior_mean(stand)),
         jnp.ones(np.size(test.force_N)),
@@ -502,8 +733,12 @@ def fit_tests(
     ``ar1`` says whether the holding errors are an AR(1) series in recording order: "off" (in the
     independent noise, the default), "on" (every test with a recording order), "auto" (the tests
     whose residuals the recording-order check flags under the independent model are refitted
-    with it). Tests without piston readings, or without a recording order for AR(1), keep the
-    plain model. ``piston_area_m2``: the stand's S (Boyle's law moves the piston by dV / S).
+    with it). Tests without a recording order keep the plain model for AR(1). Force-only tests (no
+    piston_* and no volume_* column) are fitted by ``FORCE_ONLY`` (the force block; with measured
+    pressures as its covariate under ``pressure="measured"``); a test with a volume column fits
+    L = -V / S (:func:`piston_coordinate`) with the plain model (its volume was not read off the
+    stand's piston, so the pressure-holding terms do not apply to it). ``piston_area_m2``: the
+    stand's S (Boyle's law moves the piston by dV / S; a volume column's L = -V / S).
     """
 
     if pressure not in PRESSURE_MODELS:
@@ -514,7 +749,9 @@ def fit_tests(
     seeds = test_seeds(seed, len(tests))
 
     def variant_of(t) -> str:
-        if t.piston_m is None:
+        if t.piston_m is None and t.volume_m3 is None:  # force only
+            return "force-measured" if pressure == "measured" else "force"
+        if t.piston_m is None:  # L from a volume column: not read off the stand's piston
             return "plain"
         if pressure == "measured":
             return "measured"
@@ -527,9 +764,19 @@ def fit_tests(
             return measured_data(t, x0_m, noise, stand, piston_area_m2)
         if variant == "ar1":
             return ar1_data(t, x0_m, noise, stand, piston_area_m2)
-        return _prepare(t, x0_m, noise, stand)
+        if variant in ("force", "force-measured"):
+            return force_data(t, x0_m, noise, stand, measured=variant == "force-measured")
+        return _prepare(t, x0_m, noise, stand, piston_area_m2)
 
-    models = {"plain": MODEL, "measured": MEASURED, "ar1": AR1}
+    models = {
+        "plain": MODEL,
+        "measured": MEASURED,
+        "ar1": AR1,
+        "force": FORCE_ONLY,
+        "force-measured": FORCE_ONLY,
+    }
+    #: the pressure-holding treatment PressureFit.variant records for each model key
+    holding = {"force": "plain", "force-measured": "measured"}
     variants = [variant_of(t) for t in tests]
 
     def run(indices, variant, label):
@@ -544,7 +791,9 @@ def fit_tests(
             desc=label,
         )
         return {
-            i: PressureFit.of(tests[i], x0_m, lsq_f, lsq_l, post, ref, noise, variant)
+            i: PressureFit.of(
+                tests[i], x0_m, lsq_f, lsq_l, post, ref, noise, holding.get(variant, variant)
+            )
             for i, (_, lsq_f, lsq_l, ref), post in zip(indices, prepared, posts, strict=True)
         }
 

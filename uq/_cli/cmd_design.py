@@ -337,10 +337,9 @@ FORCE_ONLY_WHY = (
 
 def _force_only(args, rec, stand, heights, pressures, t0) -> int:
     from uq._derived import design as D
-    from uq._derived.margin import force_only_cubics
     from uq._inference.summary import estimate
 
-    model = force_only_cubics(rec, seed=args.seed, stand=stand, n_draws=args.draws)
+    model = D.force_only_cubics(rec, seed=args.seed, stand=stand, n_draws=args.draws)
     x_c = args.height_mm * 1e-3
     load = model.force_draws([x_c], [args.charge_bar])[:, 0]
     doc = {

@@ -7,17 +7,11 @@ from __future__ import annotations
 import time
 
 from uq._cli.common import add_stand, stand_from
-from uq._derived.comparison import FITTERS
+from uq._derived.comparison import FITTERS, not_comparable
 from uq._derived.comparison import words as comparison_words
 from uq._models import surface as _surface
 from uq._models import thermo as _thermo
 from uq._models.thermo import THETA_NAMES
-
-#: why ``uq surface`` makes no comparison for a campaign without piston readings
-NO_COMPARISON = (
-    "no PSIS-LOO comparison with the per-pressure cubics: it is made per (force, piston) reading, and "
-    "this campaign has no piston readings"
-)
 
 
 def configure_surface(p) -> None:
@@ -83,15 +77,16 @@ def command_surface(args) -> int:
     else:
         fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
-    if not rec.has_piston and not args.no_compare:
-        print(f"{rec.path}: {NO_COMPARISON}")
+    no_comparison = None if args.no_compare else not_comparable(rec)
+    if no_comparison:
+        print(f"{rec.path}: {no_comparison}")
     elif not args.no_compare:
         _, _, comparison = fit_both(
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     res = fit.to_json(comparison)
-    if not rec.has_piston and not args.no_compare:
-        res["comparison_omitted"] = NO_COMPARISON
+    if no_comparison:
+        res["comparison_omitted"] = no_comparison
     if args.model == "thermodynamic":
         _print_thermo(rec, fit, res, comparison)
     else:

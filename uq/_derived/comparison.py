@@ -53,32 +53,55 @@ def _part(loo: Loo, n_coefficients: int, loglik) -> dict:
 
 
 def _cubic_refit(cubic_fit, settings: Settings, seed: int):
-    """``refit(j)``: log p(reading j | its test's other readings), the test refitted without it."""
-    from uq._models.cubic import MODEL
+    """``refit(j)``: log p(reading j | its test's other readings), the test refitted without it
+    (with the test's own variant of the cubics: the force-only one for a test without piston)."""
+    from uq._models import cubic
 
+    models = {m.name: m for m in (cubic.MODEL, cubic.MEASURED, cubic.AR1, cubic.FORCE_ONLY)}
     offsets = np.cumsum([0] + [t.test.n_points for t in cubic_fit.tests])
 
     def refit(j: int) -> float:
         ti = int(np.searchsorted(offsets, j, side="right") - 1)
         i = j - int(offsets[ti])
-        data = cubic_fit.tests[ti].posterior.data
+        post = cubic_fit.tests[ti].posterior
+        data, model = post.data, models.get(post.model, cubic.MODEL)
         held = np.arange(data.force.shape[0]) == i
         post = fit_collapsed(
-            MODEL, MODEL.hold_out(data, held), seed=seed + j, settings=settings, predictive=False
+            model, model.hold_out(data, held), seed=seed + j, settings=settings, predictive=False
         )
         return float(held_out_density(post.loglik_total(), [i])[0])
 
     return refit
 
 
+def not_comparable(rec) -> str | None:
+    """Why the models over all tests and the per-pressure cubics of ``rec`` cannot be compared by
+    PSIS-LOO (one line), or None. A force-only campaign is compared per force reading; a campaign
+    with a volume column but no piston is not: the cubics fit the volume (L = -V/S) of the tests
+    that have it, while the force surface leaves it out, so their densities are of different
+    readings."""
+    if rec.has_piston or not rec.has_volume:
+        return None
+    return (
+        "no PSIS-LOO comparison with the per-pressure cubics: they fit the volume_* column where it is "
+        "given and the surface leaves it out, so their densities are of different readings"
+    )
+
+
 def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
     """PSIS-LOO of a model over all tests (the surface model, or the thermodynamic one: its
     ``short_name`` keys the document) against the per-pressure cubics, per (force, piston) reading
     (module docstring); the ``comparison`` document of the JSON results."""
+    why = not_comparable(surface_fit.recordings)
+    if why is not None:
+        raise ValueError(why)
     name = surface_fit.short_name
+    force_only = not surface_fit.recordings.has_volume  # both fitted to the force alone
     cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.beta.shape[-1], 8 * len(cubic_fit.tests)
+    if force_only:
+        n_c = sum(t.posterior.beta.shape[-1] for t in cubic_fit.tests)
     loo_s = psis(surface_fit.loglik_loo)
     loo_c = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
     k_psis = float(np.max(loo_c.pareto_k))
@@ -100,7 +123,7 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
             "cubics": _part(plain_c, n_c, cub_plain),
             **verdict(plain_s, plain_c, names),
         },
-        "unit": "log density per (force, piston) reading, summed over readings",
+        "unit": f"log density per {'force' if force_only else '(force, piston)'} reading, summed over readings",
     }
 
 

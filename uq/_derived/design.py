@@ -501,6 +501,59 @@ class ThermoDesignModel:
         return self.fit.volume_pressure_draws(height_m, p_bar, beta=self.beta)
 
 
+def force_only_cubics(rec, *, seed: int = 0, stand=None, n_draws: int = DEFAULT_DRAWS):
+    """Isobaric force of a force-only campaign (no piston: no volume, so no sealed spring), as a
+    ``uq._derived.margin.CubicInterpolation`` (F_eff = P/p_u linear in p_u between tested pressures).
+
+    Per test, the force is a cubic in u = x - x0 (eq. 8) with the stand's error budget's shape, sd_k
+    proportional to sqrt(s0^2 + (r P_k)^2) (s0 = 10 N, r the load cell's relative error, P_k the
+    least-squares force), the common scale unknown (prior 1/sigma^2) and a flat prior on the
+    coefficients: the posterior is exactly Student-t and is drawn exactly (sigma^2 from its scaled
+    inverse chi-square, the coefficients from their Gaussian given it). No sampler: the design
+    sheet of a force-only campaign needs only these loads."""
+    from uq._data.stand_description import PAPER_STAND
+    from uq._derived.margin import CubicInterpolation
+    from uq._models.cubic import basis
+    from uq._physics.quantities import to_paper_basis
+
+    stand = PAPER_STAND if stand is None else stand
+    rng = np.random.default_rng(seed)
+    tests = sorted(rec.tests, key=lambda t: t.pressure_bar)
+    coefs = []
+    for t in tests:
+        u = t.height_m - rec.x0_m
+        X, y = np.asarray(basis(u)), np.asarray(t.force_N, float)
+        n, k = X.shape
+        if n <= k:
+            raise InputError(
+                f"{rec.path}: the test at {t.pressure_bar:g} bar has {n} points; a cubic needs at least 5"
+            )
+        P_ls = X @ np.linalg.lstsq(X, y, rcond=None)[0]  # the paper's least-squares cubic
+        w = 1.0 / (10.0**2 + (max(stand.load_cell_rel_sd, 1e-4) * np.abs(P_ls)) ** 2)
+        A = X.T @ (w[:, None] * X)
+        b_hat = np.linalg.solve(A, X.T @ (w * y))
+        r = y - X @ b_hat
+        s2 = float(np.sum(w * r**2) / (n - k))
+        sigma2 = s2 * (n - k) / rng.chisquare(n - k, n_draws)
+        L = np.linalg.cholesky(np.linalg.inv(A))
+        z = rng.standard_normal((n_draws, k))
+        draws = b_hat + np.sqrt(sigma2)[:, None] * (z @ L.T)
+        coefs.append(to_paper_basis(draws))
+    coef = np.stack(coefs, axis=1)
+    zi = rng.standard_normal((n_draws, max(len(tests) - 1, 1)))
+    p = np.array([t.pressure_bar for t in tests])
+    ans = CubicInterpolation.from_draws(
+        coef,
+        zi,
+        p,
+        rec.x0_m,
+        height_range_m=rec.height_range_m,
+        pressure_range_bar=(float(p.min()), float(p.max())),
+    )
+    ans.label = "per-test force cubics (force-only campaign; exact Student-t posterior)"
+    return ans
+
+
 # ----------------------------------------------------------------------------- the data sheet's tables
 
 

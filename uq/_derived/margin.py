@@ -280,59 +280,6 @@ class CubicInterpolation(_Ranges):
         return (p * BAR_PA * ((1 - w) * Fa + w * Fb + err)).reshape(-1, *shape)
 
 
-def force_only_cubics(rec, *, seed: int = 0, stand=None, n_draws: int = 1000):
-    """Isobaric force of a force-only campaign (no piston: no volume, so no sealed spring), as a
-    ``uq._derived.margin.CubicInterpolation`` (F_eff = P/p_u linear in p_u between tested pressures).
-
-    Per test, the force is a cubic in u = x - x0 (eq. 8) with the stand's error budget's shape, sd_k
-    proportional to sqrt(s0^2 + (r P_k)^2) (s0 = 10 N, r the load cell's relative error, P_k the
-    least-squares force), the common scale unknown (prior 1/sigma^2) and a flat prior on the
-    coefficients: the posterior is exactly Student-t and is drawn exactly (sigma^2 from its scaled
-    inverse chi-square, the coefficients from their Gaussian given it). No sampler: the design
-    sheet of a force-only campaign needs only these loads (``uq design``), and ``uq margin --model
-    cubics`` answers a campaign without piston readings with them."""
-    from uq._data.stand_description import PAPER_STAND
-    from uq._models.cubic import basis
-    from uq._physics.quantities import to_paper_basis
-
-    stand = PAPER_STAND if stand is None else stand
-    rng = np.random.default_rng(seed)
-    tests = sorted(rec.tests, key=lambda t: t.pressure_bar)
-    coefs = []
-    for t in tests:
-        u = t.height_m - rec.x0_m
-        X, y = np.asarray(basis(u)), np.asarray(t.force_N, float)
-        n, k = X.shape
-        if n <= k:
-            raise InputError(
-                f"{rec.path}: the test at {t.pressure_bar:g} bar has {n} points; a cubic needs at least 5"
-            )
-        P_ls = X @ np.linalg.lstsq(X, y, rcond=None)[0]  # the paper's least-squares cubic
-        w = 1.0 / (10.0**2 + (max(stand.load_cell_rel_sd, 1e-4) * np.abs(P_ls)) ** 2)
-        A = X.T @ (w[:, None] * X)
-        b_hat = np.linalg.solve(A, X.T @ (w * y))
-        r = y - X @ b_hat
-        s2 = float(np.sum(w * r**2) / (n - k))
-        sigma2 = s2 * (n - k) / rng.chisquare(n - k, n_draws)
-        L = np.linalg.cholesky(np.linalg.inv(A))
-        z = rng.standard_normal((n_draws, k))
-        draws = b_hat + np.sqrt(sigma2)[:, None] * (z @ L.T)
-        coefs.append(to_paper_basis(draws))
-    coef = np.stack(coefs, axis=1)
-    zi = rng.standard_normal((n_draws, max(len(tests) - 1, 1)))
-    p = np.array([t.pressure_bar for t in tests])
-    ans = CubicInterpolation.from_draws(
-        coef,
-        zi,
-        p,
-        rec.x0_m,
-        height_range_m=rec.height_range_m,
-        pressure_range_bar=(float(p.min()), float(p.max())),
-    )
-    ans.label = "per-test force cubics (force-only campaign; exact Student-t posterior)"
-    return ans
-
-
 def as_answer(model):
     return SurfaceAnswer(model) if isinstance(model, SurfaceFit) else model
 
@@ -821,8 +768,8 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
 
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
-    if not rec.has_piston and model in ("auto", "surface", "cubics"):
-        return _fit_force_only(rec, model, seed=seed, settings=settings, stand=stand)
+    if not rec.has_piston and (model == "surface" or (model == "auto" and rec.has_volume)):
+        return _surface_alone(rec, model, seed=seed, settings=settings, stand=stand)
     fit = cub = comparison = None
     if model == "auto":
         fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=stand)
@@ -844,40 +791,25 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
         ]
         converged &= cub.converged
     ans, info = choose_model(fit, cub, comparison, forced=model)
+    if not rec.has_piston:  # a force-only campaign: compared per force reading
+        from uq._models.surface import volume_omitted_reason
+
+        info["omitted"] = volume_omitted_reason(rec)
     return ans, info, {"warnings": warnings, "converged": bool(converged)}
 
 
-#: why ``uq margin`` answers a campaign without piston readings with the surface alone
-FORCE_ONLY_WHY = (
-    "no piston readings (force-only campaign or catalogue table): the force surface answers; no "
-    "PSIS-LOO comparison with the per-pressure cubics is made for such campaigns (--model cubics "
-    "gives the cubics' answer)"
-)
-
-
-def _fit_force_only(rec, model: str, *, seed: int, settings, stand):
-    """:func:`fit_and_choose` for a campaign without piston readings: the force surface ("auto",
-    "surface"), or exact Student-t force cubics interpolated in pressure ("cubics",
-    :func:`force_only_cubics`)."""
+def _surface_alone(rec, model: str, *, seed: int, settings, stand):
+    """:func:`fit_and_choose` for a campaign without piston readings that the models cannot be
+    compared on (a volume column: ``uq._derived.comparison.not_comparable``), or when the user
+    asks for the surface: the force surface answers, its omitted volume said in one line."""
+    from uq._derived.comparison import not_comparable
     from uq._models.surface import fit_surface, volume_omitted_reason
 
-    if model == "cubics":
-        ans = force_only_cubics(rec, seed=seed, stand=stand)
-        info = {
-            "name": ans.name,
-            "label": ans.label,
-            "comparison": None,
-            "why": "chosen by the user (--model cubics); no comparison made",
-            "interpolation": "F_eff = P/p_u linear in p_u between neighbouring tested pressures; "
-            "uncertainty: both tests' posteriors plus an interpolation error from the curvature in "
-            "pressure at the neighbouring tested pressures (zero at tested pressures)",
-        }
-        return ans, info, {"warnings": [], "converged": True}
     fit = fit_surface(rec, seed=seed, settings=settings, stand=stand)
     why = (
         "chosen by the user (--model surface); no comparison made"
         if model == "surface"
-        else FORCE_ONLY_WHY
+        else f"the force surface answers: {not_comparable(rec)}"
     )
     ans, info = surface_answer(fit, None, why=why)
     info["omitted"] = volume_omitted_reason(rec)

@@ -433,15 +433,12 @@ def volume_omitted_reason(rec: Recordings) -> str:
         return None
     with_volume = [t for t in rec.tests if t.volume_m3 is not None]
     if not with_volume:
-        return (
-            "volume results omitted: force-only campaign (no piston_* or volume_* column), the surface "
-            "is fitted to the force alone"
-        )
+        return "volume results omitted: force-only campaign (no piston_* or volume_* column)"
     at = ", ".join(f"{t.pressure_bar:g}" for t in with_volume)
     return (
-        f"volume results omitted: the volume_* column (at {at} bar only) is not fitted by the surface, "
-        "which is fitted to the force alone: volume at one pressure cannot fix how it changes with "
-        "pressure (uq diagnose reads it)"
+        f"volume results omitted: the volume_* column (at {at} bar only) cannot fix how the volume "
+        "changes with pressure, so the surface is fitted to the force alone (uq fit and uq diagnose "
+        "read the column)"
     )
 
 

@@ -24,10 +24,10 @@ the pooled share is reported as a summary.
 Catalogue tables (``--grids catalogue``): the stand's readings cut to a data sheet as
 ``uq simulate --catalogue`` cuts them (uq._stand.shapes.catalogue_recordings: 3..7 bar, one
 compression pass every 10 mm, forces to 10 N, a volume column at 5 bar), so the heights queried
-(70, 90, 112, 130, 150 mm) lie between the tabulated ones as well as the pressures. There the
-force surface answers (``uq margin`` compares nothing: the cubics fit the volume column, the
-surface does not), so "chosen" is the surface; the cubics (interpolated in pressure) are counted
-beside it. Write these under their own folder (``--out reports/margin-coverage/catalogue-n50``).
+(70, 90, 112, 130, 150 mm) lie between the tabulated ones as well as the pressures. The force
+surface and the per-pressure cubics are compared on the force readings as ``uq margin`` compares
+them (the volume column left out of both). Write these under their own folder
+(``--out reports/margin-coverage/catalogue-n50``).
 
 ``--tiny`` (tests): one replication of the smallest grid, three queries, 200 sampler steps.
 """
@@ -58,8 +58,6 @@ from uq._derived.margin import (  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.errors import InputError  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
-from uq._models.cubic import fit_campaign  # noqa: E402
-from uq._models.surface import fit_surface  # noqa: E402
 from uq._stand.shapes import catalogue_recordings  # noqa: E402
 from uq._stand.simulator import SPRINGS, Layout, simulate  # noqa: E402
 
@@ -89,21 +87,17 @@ def one_campaign(
     spring: str, grid, seed: int, settings: Settings, qs, workdir: Path, catalogue: bool = False
 ) -> dict:
     """Fit both models to one simulated campaign and answer every query with each."""
-    if catalogue:  # the force surface answers; the cubics fitted beside it, not compared
+    if catalogue:  # the force surface against force-only cubics, as uq margin compares them
         rec = catalogue_recordings(
             spring, seed=seed, layout=Layout(pressures_bar=grid, step_m=0.010)
         )
-        surface = fit_surface(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-        cubics = fit_campaign(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-        comparison = {"better": "not compared"}
-        chosen, info = SurfaceAnswer(surface), {"name": "surface"}
     else:
         path = workdir / f"campaign-{seed}.csv"
         layout = Layout(pressures_bar=grid)
         path.write_text(write_recordings_csv(simulate(spring, seed=seed, layout=layout)))
         rec = read_recordings(str(path))
-        surface, cubics, comparison = fit_both(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-        chosen, info = choose_model(surface, cubics, comparison)
+    surface, cubics, comparison = fit_both(rec, seed=seed, settings=settings, stand=PAPER_STAND)
+    chosen, info = choose_model(surface, cubics, comparison)
     answers = {
         "surface": SurfaceAnswer(surface),
         "cubics": CubicInterpolation(cubics, seed=seed),
@@ -206,8 +200,9 @@ def markdown(summary: dict, command: str, seconds: float) -> str:
             [
                 "Grid `catalogue`: catalogue tables made by the stand (one compression pass every 10 mm, "
                 "forces to 10 N, volume at 5 bar; uq._stand.shapes.catalogue_recordings); the heights "
-                "queried lie between the tabulated ones; the force surface answers (`chosen`), the "
-                "cubics are counted beside it.",
+                "queried lie between the tabulated ones; the force surface and the cubics are "
+                "compared on the force readings (the volume left out of both), as `uq margin` compares "
+                "them.",
                 "",
             ]
             if any(g in CATALOGUE_GRIDS for g in summary.get("grids", ()))

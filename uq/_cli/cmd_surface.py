@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 
 from uq._cli.common import add_stand, stand_from
-from uq._derived.comparison import FITTERS, not_comparable
+from uq._derived.comparison import FITTERS
 from uq._derived.comparison import words as comparison_words
 from uq._models import surface as _surface
 from uq._models import thermo as _thermo
@@ -77,16 +77,11 @@ def command_surface(args) -> int:
     else:
         fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
-    no_comparison = None if args.no_compare else not_comparable(rec)
-    if no_comparison:
-        print(f"{rec.path}: {no_comparison}")
-    elif not args.no_compare:
+    if not args.no_compare:
         _, _, comparison = fit_both(
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     res = fit.to_json(comparison)
-    if no_comparison:
-        res["comparison_omitted"] = no_comparison
     if args.model == "thermodynamic":
         _print_thermo(rec, fit, res, comparison)
     else:

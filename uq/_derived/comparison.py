@@ -74,17 +74,17 @@ def _cubic_refit(cubic_fit, settings: Settings, seed: int):
     return refit
 
 
-def not_comparable(rec) -> str | None:
-    """Why the models over all tests and the per-pressure cubics of ``rec`` cannot be compared by
-    PSIS-LOO (one line), or None. A force-only campaign is compared per force reading; a campaign
-    with a volume column but no piston is not: the cubics fit the volume (L = -V/S) of the tests
-    that have it, while the force surface leaves it out, so their densities are of different
-    readings."""
+def force_side(rec):
+    """The recordings the per-pressure cubics are fitted to for a comparison: ``rec`` itself, or,
+    for a campaign with a volume column but no piston (a catalogue table), ``rec`` without its
+    volume column: the force surface leaves the volume out, so both models are compared on the
+    force readings alone."""
+    import dataclasses
+
     if rec.has_piston or not rec.has_volume:
-        return None
-    return (
-        "no PSIS-LOO comparison with the per-pressure cubics: they fit the volume_* column where it is "
-        "given and the surface leaves it out, so their densities are of different readings"
+        return rec
+    return dataclasses.replace(
+        rec, tests=tuple(dataclasses.replace(t, volume_m3=None) for t in rec.tests)
     )
 
 
@@ -92,11 +92,12 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
     """PSIS-LOO of a model over all tests (the surface model, or the thermodynamic one: its
     ``short_name`` keys the document) against the per-pressure cubics, per (force, piston) reading
     (module docstring); the ``comparison`` document of the JSON results."""
-    why = not_comparable(surface_fit.recordings)
-    if why is not None:
-        raise ValueError(why)
     name = surface_fit.short_name
-    force_only = not surface_fit.recordings.has_volume  # both fitted to the force alone
+    force_only = not surface_fit.recordings.has_piston  # the force surface: per force reading
+    if force_only and any(t.has_piston for t in cubic_fit.tests):
+        raise ValueError(
+            "the force surface is compared with cubics fitted to the force alone (force_side)"
+        )
     cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.beta.shape[-1], 8 * len(cubic_fit.tests)
@@ -124,6 +125,13 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
             **verdict(plain_s, plain_c, names),
         },
         "unit": f"log density per {'force' if force_only else '(force, piston)'} reading, summed over readings",
+        **(
+            {
+                "note": "the volume_* column is left out of both models: compared on the force readings"
+            }
+            if force_only and surface_fit.recordings.has_volume
+            else {}
+        ),
     }
 
 
@@ -138,7 +146,7 @@ def fit_both(
     if surface_fit is None:
         surface_fit = FITTERS[model](rec, seed=seed, settings=settings, stand=stand)
     if cubic_fit is None:
-        cubic_fit = fit_campaign(rec, seed=seed, settings=settings, stand=stand)
+        cubic_fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 

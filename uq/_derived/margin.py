@@ -768,8 +768,6 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
 
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
-    if not rec.has_piston and (model == "surface" or (model == "auto" and rec.has_volume)):
-        return _surface_alone(rec, model, seed=seed, settings=settings, stand=stand)
     fit = cub = comparison = None
     if model == "auto":
         fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=stand)
@@ -796,25 +794,3 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
 
         info["omitted"] = volume_omitted_reason(rec)
     return ans, info, {"warnings": warnings, "converged": bool(converged)}
-
-
-def _surface_alone(rec, model: str, *, seed: int, settings, stand):
-    """:func:`fit_and_choose` for a campaign without piston readings that the models cannot be
-    compared on (a volume column: ``uq._derived.comparison.not_comparable``), or when the user
-    asks for the surface: the force surface answers, its omitted volume said in one line."""
-    from uq._derived.comparison import not_comparable
-    from uq._models.surface import fit_surface, volume_omitted_reason
-
-    fit = fit_surface(rec, seed=seed, settings=settings, stand=stand)
-    why = (
-        "chosen by the user (--model surface); no comparison made"
-        if model == "surface"
-        else f"the force surface answers: {not_comparable(rec)}"
-    )
-    ans, info = surface_answer(fit, None, why=why)
-    info["omitted"] = volume_omitted_reason(rec)
-    diagnostics = {
-        "warnings": fit.convergence.messages(CLI_ADVICE),
-        "converged": fit.convergence.converged,
-    }
-    return ans, info, diagnostics

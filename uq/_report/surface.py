@@ -333,17 +333,7 @@ def write_surface_report(
         result=result,
         comparison=comp,
         rows=comparison_rows(comp, "surface") if comp else [],
-        preference=(
-            preference(comp, "surface")
-            if comp or not result.get("comparison_omitted")
-            else {
-                "prefers": "not compared",
-                "headline": f"Not compared with the per-pressure cubics: {result['comparison_omitted']}.",
-                "meaning": "The surface below describes the force; read the tests' own curves from the "
-                "readings.",
-                "css": "note",
-            }
-        ),
+        preference=preference(comp, "surface"),
         order_selection=result.get("order_selection") or [],
         noise=noise_rows(result["noise"]),
         figures=figures,

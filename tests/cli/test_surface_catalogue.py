@@ -32,7 +32,9 @@ def test_surface(path, why, tmp_path, capsys):
     assert len(omitted) == 1 and why in omitted[0]
     assert ("PSIS-LOO: surface" in text) == (path == CATALOGUE)
     doc = json.loads(out.read_text())
-    assert doc["orders"]["Dk"] == -1 and doc["orders_label"].endswith("force only")
+    assert doc["orders"]["Dk"] == doc["orders"]["Dl"] == -1 and doc["orders_label"].endswith(
+        "force only"
+    )
     assert set(doc["omitted"]) == {
         "volume_excess_m2",
         "piston_reference_m",

@@ -53,7 +53,7 @@ def test_default_orders_leave_each_test_residuals():
     """Few heights a test (a catalogue table): the height degree stays below the heights and
     leaves a residual per test; the paper's two-branch tests keep the default."""
     assert default_orders(11, min_heights=19, min_points=37) == DEFAULT_ORDERS
-    assert default_orders(5, min_heights=10, min_points=10, volume=False) == Orders(3, 3, 3, -1, 0)
+    assert default_orders(5, min_heights=10, min_points=10, volume=False) == Orders(3, 3, 3, -1, -1)
     assert default_orders(5, min_heights=5, min_points=5, volume=False).K == 3
     o = default_orders(4, min_heights=4, min_points=4, volume=False)
     assert (o.K, o.Ke, o.Lp) == (2, 2, 2)
@@ -77,7 +77,7 @@ def test_too_small_a_table_is_refused_naming_what_is_short():
         for t in (full.tests[0], full.tests[-1])
     ]
     rec = dataclasses.replace(full, tests=tuple(six))
-    assert orders_for(rec) == Orders(3, 0, 3, -1, 0)
+    assert orders_for(rec) == Orders(3, 0, 3, -1, -1)
     with pytest.raises(
         InputError, match=r"12 readings cannot fix .* 8 coefficients .* at least 13"
     ):
@@ -86,7 +86,7 @@ def test_too_small_a_table_is_refused_naming_what_is_short():
 
 def test_catalogue_surface_json_and_volume_omitted(catalogue_fit):
     fit = catalogue_fit
-    assert fit.force_only and fit.orders == Orders(3, 3, 3, -1, 0)
+    assert fit.force_only and fit.orders == Orders(3, 3, 3, -1, -1)
     assert fit.convergence.converged
     doc = fit.to_json()
     assert "spread_credibly_nonzero_fraction" not in doc and "sL_m" not in doc["noise"]

@@ -75,7 +75,8 @@ LEVEL = 0.90
 class Orders:
     """Polynomial orders: pressure area F_p degree K in t and Lp in q, casing degree Ke, D degrees (Dk, Dl).
 
-    Dk = -1 means D = 0 (the traditional theory for the volume); Ke = -1 means no casing term.
+    Dk = -1 means D = 0 (the traditional theory for the volume); Ke = -1 means no casing term;
+    Dk = Dl = -1: no volume at all, the force surface of a campaign without piston readings.
     """
 
     K: int = 3
@@ -86,6 +87,8 @@ class Orders:
 
     @property
     def label(self) -> str:
+        if self.Dk < 0 and self.Dl < 0:
+            return force_label(self)
         d = "none" if self.Dk < 0 else f"{self.Dk}x{self.Dl}"
         return f"F_p {self.K}x{self.Lp}, casing {self.Ke}, D {d}"
 
@@ -111,7 +114,7 @@ def default_orders(
     (``min_heights``: a degree below it) and the fewest readings (``min_points``: a degree that
     leaves each test at least one residual), so a catalogue table of 5 heights a pressure keeps
     its cubic and one of 4 gets a quadratic; the paper's two-branch tests are never capped.
-    ``volume`` False: no volume block (Dk = -1), the force surface of a campaign without volume
+    ``volume`` False: no volume block (Dk = Dl = -1), the force surface of a campaign without volume
     readings (uq._models.surface_force)."""
     o = DEFAULT_ORDERS
     cap = min(
@@ -123,7 +126,7 @@ def default_orders(
     K, Ke = min(o.K, cap), min(o.Ke, cap)
     Lp = max(0, min(o.Lp, n_tests - 2))
     if not volume:
-        return Orders(K, Lp, Ke, -1, 0)
+        return Orders(K, Lp, Ke, -1, -1)
     return Orders(K, Lp, Ke, o.Dk, max(0, min(o.Dl, n_tests - 1)))
 
 
@@ -490,7 +493,7 @@ def fit_surface(
     the polynomial orders, by default :func:`orders_for` the campaign.
 
     A campaign without piston readings (force-only, or a catalogue table) is fitted by the force
-    surface alone (uq._models.surface_force; ``orders`` without a volume block, Dk = -1); its
+    surface alone (uq._models.surface_force; ``orders`` without a volume block, Dk = Dl = -1); its
     volume results are omitted with :func:`volume_omitted_reason`."""
     n_tests = len(rec.tests)
     orders = orders_for(rec) if orders is None else orders
@@ -500,10 +503,10 @@ def fit_surface(
             f"degree {orders.Lp} in pressure; the surface model needs at least {orders.Lp + 1}"
         )
     force_only = not rec.has_piston
-    if force_only and orders.Dk >= 0:
+    if force_only and (orders.Dk >= 0 or orders.Dl >= 0):
         raise InputError(
             f"orders: {rec.path} has no piston readings; the force surface takes no volume block "
-            f"(Dk = -1), got {orders.label}",
+            f"(Dk = Dl = -1), got {orders.label}",
             param="orders",
         )
     if force_only:
@@ -547,7 +550,11 @@ def select_orders(
         candidates = tuple(
             dict.fromkeys(
                 Orders(
-                    min(o.K, cap.K), max(0, min(o.Lp, len(rec.tests) - 2)), min(o.Ke, cap.Ke), -1, 0
+                    min(o.K, cap.K),
+                    max(0, min(o.Lp, len(rec.tests) - 2)),
+                    min(o.Ke, cap.Ke),
+                    -1,
+                    -1,
                 )
                 for o in candidates
             )

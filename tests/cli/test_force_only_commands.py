@@ -14,7 +14,7 @@ import json
 
 import pytest
 from browser import assert_real_page, screenshot
-from cli_helpers import one_line, run
+from cli_helpers import run
 from conftest import ROOT
 
 DATA = {
@@ -144,11 +144,15 @@ def test_check_of_a_force_only_result_checks_the_force_and_says_the_piston_is_no
         ]
 
 
-def test_report_surface_on_a_force_only_campaign_is_one_line_exit_2(tmp_path, capsys):
-    code = run(["report", DATA["force-only"], "--surface", "--out", tmp_path / "r", *FAST])
-    assert code == 2
-    assert "force-only campaign" in one_line(capsys.readouterr().err)
-    assert not (tmp_path / "r").exists()
+def test_report_surface_on_a_catalogue_links_the_force_surface_page(tmp_path):
+    """`uq report --surface` on a catalogue table: the force surface's page beside the report, its
+    volume results omitted with the reason, compared with cubics fitted to the force alone."""
+    out = tmp_path / "r"
+    code, stdout = _run(["report", DATA["catalogue"], "--surface", "--out", out, *FAST])
+    assert code == 0, stdout
+    assert "href='surface.html'" in (out / "report.html").read_text()
+    page = (out / "surface.html").read_text()
+    assert "volume results omitted" in page and "force alone" in page
 
 
 def test_batch_runs_force_only_and_catalogue_campaigns(tmp_path):

@@ -546,7 +546,9 @@ def test_commands_refuse_in_one_place_and_the_refusal_lifts(tmp_path, monkeypatc
 
     path = tmp_path / "rec.csv"
     path.write_text(_text(_drop(GOOD, "piston_mm")))
-    for command in ("surface",):  # diagnose runs force-only (tests/diagnose)
+    # every command takes force-only campaigns now (or soon): the table's mechanism is what is tested
+    monkeypatch.setitem(recordings.COMMAND_NEEDS, "surface", frozenset({"piston", "order"}))
+    for command in ("surface",):
         assert _run([command, str(path)]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and err.startswith(f"uq {command}: error: {path}: force-only")

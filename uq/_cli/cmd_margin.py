@@ -160,6 +160,21 @@ def _check_design_usage(args) -> None:
         )
 
 
+def _check_design_volume(args, rec) -> None:
+    """Design margins on a campaign without piston readings, refused before fitting: the sealed
+    spring needs dV/dx over the pressures its charge moves through."""
+    if not _design_asked(args) or rec.has_piston:
+        return
+    asked = next(o for o in DESIGN_OPTIONS if getattr(args, o, None) is not None)
+    option = "--" + asked.replace("_", "-")
+    raise InputError(
+        f"option {option}: {rec.path} has no piston readings (force-only campaign or catalogue "
+        "table), so the sealed rate, frequency and stroke cannot be given: they need dV/dx over the "
+        "pressures the sealed spring moves through (omit the design options: the pressure needed and "
+        "the force band are answered)"
+    )
+
+
 def _design_answer(args, ans, q: dict) -> dict:
     """One query's design margins (uq._derived.design.design_margin)."""
     from uq._derived.design import SealedDesign, design_margin
@@ -439,6 +454,7 @@ def command_margin(args) -> int:
                 len(THETA_NAMES) if args.model == "thermodynamic" else len(NOISE_NAMES)
             )
         rec = load(args)
+        _check_design_volume(args, rec)
         tested = [t.pressure_bar for t in rec.tests]
         for q in queries:
             _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
@@ -508,6 +524,8 @@ def _print_one(source, ans, info, q, res) -> None:
     e = res["pressure_bar_needed"]
     print(f"{source}: {q['load_N']:g} N at {q['height_mm']:g} mm, answered by the {ans.label}")
     print(f"  why: {info['why']}")
+    if info.get("omitted"):
+        print(f"  {info['omitted']}")
     c = info.get("comparison")
     if c:
         print(
@@ -547,6 +565,8 @@ def _print_table(source, ans, info, queries, results) -> None:
         f"{source}: {len(queries)} queries from {queries[0]['file']}, answered by the {ans.label}"
     )
     print(f"  why: {info['why']}")
+    if info.get("omitted"):
+        print(f"  {info['omitted']}")
     print(
         "   row  height_mm    load_N  prob  p_needed_bar (90 %)        p_for_prob  force at p_bar (90 %)      stroke_mm"
     )

@@ -150,26 +150,37 @@ def _print_thermo(rec, fit, res, comparison) -> None:
 def _print_surface(rec, fit, res, comparison) -> None:
     print(
         f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
-        f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)"
+        f"({fit.label}; {fit.beta.shape[-1]} coefficients)"
     )
     for row in fit.selection:
         print(
             f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}"
         )
     for pb, r in res["at_x0"].items():
-        f, s = r["force_N"], r["spread_N"]
+        f, s = r["force_N"], r.get("spread_N")
+        spread = (
+            f", traditional - measured {s['mean']:.0f} N [{s['q05']:.0f}, {s['q95']:.0f}]"
+            if s
+            else ""
+        )
         print(
             f"  x0, {pb} bar: F_p {r['pressure_area_m2']['mean'] * 1e4:.2f} cm^2, F_eff = P/p_u {r['feff_m2']['mean'] * 1e4:.2f} cm^2, "
-            f"force {f['mean']:.0f} N "
-            f"[{f['q05']:.0f}, {f['q95']:.0f}], traditional - measured {s['mean']:.0f} N [{s['q05']:.0f}, {s['q95']:.0f}]"
+            f"force {f['mean']:.0f} N [{f['q05']:.0f}, {f['q95']:.0f}]{spread}"
         )
     nz = res["noise"]
-    print(
-        f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
-        f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
-    )
-    print(
-        f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range"
-    )
+    if "omitted" in res:  # force only: no piston noise, no spread
+        print(
+            f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
+            f"pressure holding x{nz['k_p']['mean']:.2f}"
+        )
+        print(f"  {_surface.volume_omitted_reason(rec)}")
+    else:
+        print(
+            f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
+            f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
+        )
+        print(
+            f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range"
+        )
     if comparison:
         _print_comparison("surface", comparison)

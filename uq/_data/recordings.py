@@ -176,8 +176,8 @@ class Recordings:
 COMMAND_NEEDS: dict[str, frozenset[str]] = {
     "fit": frozenset(),  # force-only tests: the force block; one pass: no order check
     "report": frozenset(),
-    "surface": frozenset({"piston", "order"}),
-    "margin": frozenset({"piston", "order"}),
+    "surface": frozenset(),  # force-only and one-pass campaigns: the force surface (volume omitted)
+    "margin": frozenset(),  # the force surface answers; design margins refused without piston
     "diagnose": frozenset(),  # force-only and one-pass campaigns: what they can identify is offered
     "batch": frozenset(),
 }

@@ -53,7 +53,8 @@ def _part(loo: Loo, n_coefficients: int, loglik) -> dict:
 
 
 def _cubic_refit(cubic_fit, settings: Settings, seed: int):
-    """``refit(j)``: log p(reading j | its test's other readings), the test refitted without it."""
+    """``refit(j)``: log p(reading j | its test's other readings), the test refitted without it
+    (with the test's own variant of the cubics: the force-only one for a test without piston)."""
     from uq._models.cubic import collapsed_model
 
     offsets = np.cumsum([0] + [t.test.n_points for t in cubic_fit.tests])
@@ -72,15 +73,35 @@ def _cubic_refit(cubic_fit, settings: Settings, seed: int):
     return refit
 
 
+def force_side(rec):
+    """The recordings the per-pressure cubics are fitted to for a comparison: ``rec`` itself, or,
+    for a campaign with a volume column but no piston (a catalogue table), ``rec`` without its
+    volume column: the force surface leaves the volume out, so both models are compared on the
+    force readings alone."""
+    import dataclasses
+
+    if rec.has_piston or not rec.has_volume:
+        return rec
+    return dataclasses.replace(
+        rec, tests=tuple(dataclasses.replace(t, volume_m3=None) for t in rec.tests)
+    )
+
+
 def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
     """PSIS-LOO of a model over all tests (the surface model, or the thermodynamic one: its
     ``short_name`` keys the document) against the per-pressure cubics, per (force, piston) reading
     (module docstring); the ``comparison`` document of the JSON results."""
     name = surface_fit.short_name
+    force_only = not surface_fit.recordings.has_piston  # the force surface: per force reading
+    if force_only and any(t.has_piston for t in cubic_fit.tests):
+        raise ValueError(
+            "the force surface is compared with cubics fitted to the force alone (force_side)"
+        )
     cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
-    n_s = surface_fit.beta.shape[-1]
-    n_c = sum(8 if getattr(t, "has_piston", True) else 4 for t in cubic_fit.tests)
+    n_s, n_c = surface_fit.beta.shape[-1], 8 * len(cubic_fit.tests)
+    if force_only:
+        n_c = sum(t.posterior.beta.shape[-1] for t in cubic_fit.tests)
     loo_s = psis(surface_fit.loglik_loo)
     loo_c = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
     k_psis = float(np.max(loo_c.pareto_k))
@@ -102,7 +123,14 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
             "cubics": _part(plain_c, n_c, cub_plain),
             **verdict(plain_s, plain_c, names),
         },
-        "unit": "log density per (force, piston) reading, summed over readings",
+        "unit": f"log density per {'force' if force_only else '(force, piston)'} reading, summed over readings",
+        **(
+            {
+                "note": "the volume_* column is left out of both models: compared on the force readings"
+            }
+            if force_only and surface_fit.recordings.has_volume
+            else {}
+        ),
     }
 
 
@@ -117,7 +145,7 @@ def fit_both(
     if surface_fit is None:
         surface_fit = FITTERS[model](rec, seed=seed, settings=settings, stand=stand)
     if cubic_fit is None:
-        cubic_fit = fit_campaign(rec, seed=seed, settings=settings, stand=stand)
+        cubic_fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 

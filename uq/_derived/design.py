@@ -600,6 +600,11 @@ def _check_margin_args(
         raise InputError(
             f"prob: expected a probability between 0 and 1, got {prob:g}", param="prob"
         )
+    if getattr(model, "force_only", False):
+        raise InputError(
+            f"design margins need the volume-derived area dV/dx; the {model.label} was fitted to the "
+            "force alone (no piston readings): only the pressure needed and the force band can be given"
+        )
     if not hasattr(model, "volume_area_draws"):
         raise InputError(
             f"design margins need a model with the volume-derived area dV/dx; the {model.label} has none "

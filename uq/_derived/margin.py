@@ -101,21 +101,33 @@ class SurfaceAnswer(_Ranges):
 
     Built from a SurfaceFit, or from a saved answer (``load_answer``): all it needs is the
     orders, the geometry (x0, p_mid, p_half), the number of tests and the coefficient draws.
+    A force-only surface (a campaign without piston readings, ``force_only``) has no
+    ``volume_area_draws`` (``hasattr`` is False: design margins are refused for it).
     """
 
     name = "surface"
 
     def __init__(self, fit: SurfaceFit, max_draws: int = 4000):
         super().__init__(fit.recordings)
-        noise = {n: np.asarray(fit.idata.posterior[n]) for n in SURFACE_NOISE}
+        names = SURFACE_NOISE[:3] if fit.force_only else SURFACE_NOISE
+        noise = {n: np.asarray(fit.idata.posterior[n]) for n in names}
         self._setup(
-            fit.orders, fit.geometry, fit.recordings.pressures_bar, fit.beta, max_draws, noise
+            fit.orders,
+            fit.geometry,
+            fit.recordings.pressures_bar,
+            fit.beta,
+            max_draws,
+            noise,
+            force_only=fit.force_only,
         )
         self.fit = fit
 
-    def _setup(self, orders, geometry, test_pressures_bar, beta, max_draws, noise):
-        from uq._models.surface import SCALE_C, SCALE_D, SCALE_E, _sizes
+    def _setup(
+        self, orders, geometry, test_pressures_bar, beta, max_draws, noise, force_only=False
+    ):
+        from uq._models.surface import SCALE_C, SCALE_D, SCALE_E, _sizes, force_label
 
+        self.force_only = bool(force_only)
         self.orders, self.geometry, self.max_draws = orders, geometry, max_draws
         self.test_pressures_bar = np.asarray(test_pressures_bar, float)
         self.posterior_beta, self.noise = (
@@ -126,7 +138,7 @@ class SurfaceAnswer(_Ranges):
         nc, ne, nd, _ = _sizes(orders, self.test_pressures_bar.size)
         self._c, self._e = self.beta[:, :nc] * SCALE_C, self.beta[:, nc : nc + ne] * SCALE_E
         self._d = self.beta[:, nc + ne : nc + ne + nd] * SCALE_D
-        self.label = f"surface model ({orders.label})"
+        self.label = f"surface model ({force_label(orders) if force_only else orders.label})"
 
     def force_draws(self, height_m, p_bar):
         """P = p_u F_p + E, the same arithmetic as ``SurfaceFit.force_draws`` (tested equal to it), (S, *shape)."""
@@ -152,14 +164,24 @@ class SurfaceAnswer(_Ranges):
             self.posterior_beta,
             max_draws,
             self.noise,
+            force_only=self.force_only,
         )
         new.fit = getattr(self, "fit", None)
         return new
 
-    def volume_area_draws(self, height_m, p_bar):
+    @property
+    def volume_area_draws(self):
         """The volume-derived area dV/dx = F_p + D, the same arithmetic as
         ``SurfaceFit.volume_area_draws`` (tested equal to it), (S, *shape): with it a saved surface
-        answer is a design model (uq._derived.design) and answers design margins without a refit."""
+        answer is a design model (uq._derived.design) and answers design margins without a refit.
+        A force-only surface has none (AttributeError, so ``hasattr`` says so)."""
+        if self.force_only:
+            raise AttributeError(
+                "volume_area_draws: the surface was fitted to the force alone (no piston readings)"
+            )
+        return self._volume_area_draws
+
+    def _volume_area_draws(self, height_m, p_bar):
         from uq._models.surface import _tq
 
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
@@ -176,6 +198,8 @@ class SurfaceAnswer(_Ranges):
         names += [f"e_{m}" for m in range(o.Ke + 1)]
         if o.Dk >= 0:
             names += [f"d_{k}{lq}" for k in range(o.Dk + 1) for lq in range(o.Dl + 1)]
+        if self.force_only:
+            return names
         return names + [f"r_{p:g}bar" for p in self.test_pressures_bar]
 
 
@@ -427,7 +451,7 @@ def surface_answer(
 ):
     """(SurfaceAnswer, model description) for a surface fit; ``why`` overrides the stated reason."""
     ans = SurfaceAnswer(fit)
-    info = {"comparison": comparison, "orders": fit.orders.label}
+    info = {"comparison": comparison, "orders": fit.label}
     if why is not None:
         info["why"] = why
     elif forced == "surface":
@@ -481,7 +505,7 @@ def answer_idata(
         o, g = ans.orders, ans.geometry
         C, D, k = ans.posterior_beta.shape
         names = ans.coefficient_names()
-        nc, ne, nd, nr = _sizes(o, ans.test_pressures_bar.size)
+        nc, ne, nd, nr = _sizes(o, 0 if ans.force_only else ans.test_pressures_bar.size)
         scale = np.concatenate(
             [np.full(nc, SCALE_C), np.full(ne, SCALE_E), np.full(nd, SCALE_D), np.full(nr, SCALE_R)]
         )
@@ -615,24 +639,28 @@ def load_answer(path):
             "pressure_range_bar": const["tested_pressure_range_bar"].values,
         }
         if attrs["answer"] == "surface":
-            from uq._models.surface import Geometry, Orders
+            from uq._models.surface import Geometry, Orders, _sizes
 
             ans = SurfaceAnswer.__new__(SurfaceAnswer)
             _Ranges.__init__(ans, **ranges)
             noise = {n: post[n].values for n in SURFACE_NOISE if n in post}
+            orders = Orders(*(int(v) for v in const["orders"].values))
             g = Geometry(
                 float(const["x0_m"]),
                 float(const["piston_area_m2"]),
                 float(const["p_mid_bar"]),
                 float(const["p_half_bar"]),
             )
-            ans._setup(
-                Orders(*(int(v) for v in const["orders"].values)),
+            beta = post["surface_coefficient"].values
+            nc, ne, nd, _ = _sizes(orders, 0)
+            ans._setup(  # a force-only surface has no piston references
+                orders,
                 g,
                 const["test_pressure_bar"].values,
-                post["surface_coefficient"].values,
+                beta,
                 int(attrs["max_draws"]),
                 noise,
+                force_only=beta.shape[-1] == nc + ne + nd,
             )
             ans.fit = None
         elif attrs["answer"] == "cubics":
@@ -761,4 +789,8 @@ def fit_and_choose(rec, *, model: str = "auto", seed: int = 0, settings=None, st
         ]
         converged &= cub.converged
     ans, info = choose_model(fit, cub, comparison, forced=model)
+    if not rec.has_piston:  # a force-only campaign: compared per force reading
+        from uq._models.surface import volume_omitted_reason
+
+        info["omitted"] = volume_omitted_reason(rec)
     return ans, info, {"warnings": warnings, "converged": bool(converged)}

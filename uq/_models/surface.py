@@ -51,7 +51,7 @@ from uq._inference.convergence import CLI_ADVICE
 from uq._inference.sampler import Settings
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
-from uq._models import pair
+from uq._models import pair, surface_force
 from uq._models.pair import (
     NATURAL_NAMES,
     NOISE_NAMES,
@@ -75,7 +75,8 @@ LEVEL = 0.90
 class Orders:
     """Polynomial orders: pressure area F_p degree K in t and Lp in q, casing degree Ke, D degrees (Dk, Dl).
 
-    Dk = -1 means D = 0 (the traditional theory for the volume); Ke = -1 means no casing term.
+    Dk = -1 means D = 0 (the traditional theory for the volume); Ke = -1 means no casing term;
+    Dk = Dl = -1: no volume at all, the force surface of a campaign without piston readings.
     """
 
     K: int = 3
@@ -86,6 +87,8 @@ class Orders:
 
     @property
     def label(self) -> str:
+        if self.Dk < 0 and self.Dl < 0:
+            return force_label(self)
         d = "none" if self.Dk < 0 else f"{self.Dk}x{self.Dl}"
         return f"F_p {self.K}x{self.Lp}, casing {self.Ke}, D {d}"
 
@@ -95,13 +98,47 @@ class Orders:
 DEFAULT_ORDERS = Orders(3, 5, 3, 2, 3)
 
 
-def default_orders(n_tests: int) -> Orders:
+def default_orders(
+    n_tests: int,
+    *,
+    min_heights: int | None = None,
+    min_points: int | None = None,
+    volume: bool = True,
+) -> Orders:
     """``DEFAULT_ORDERS`` with its pressure degrees capped by what ``n_tests`` tests can fix: the
     force p_u F_p(x, p_u) + E(x) has Lp + 2 coefficients in pressure at a height (Lp <= n - 2),
     the volume's D has Dl + 1 (Dl <= n - 1). Campaigns of 7 tests or more get ``DEFAULT_ORDERS``
-    itself; a coarse grid (3 to 5 pressures) a surface of lower degree in pressure."""
+    itself; a coarse grid (3 to 5 pressures) a surface of lower degree in pressure.
+
+    The height degrees K and Ke are capped by the test with the fewest distinct heights
+    (``min_heights``: a degree below it) and the fewest readings (``min_points``: a degree that
+    leaves each test at least one residual), so a catalogue table of 5 heights a pressure keeps
+    its cubic and one of 4 gets a quadratic; the paper's two-branch tests are never capped.
+    ``volume`` False: no volume block (Dk = Dl = -1), the force surface of a campaign without volume
+    readings (uq._models.surface_force)."""
     o = DEFAULT_ORDERS
-    return Orders(o.K, max(0, min(o.Lp, n_tests - 2)), o.Ke, o.Dk, max(0, min(o.Dl, n_tests - 1)))
+    cap = min(
+        o.K,
+        o.Ke,
+        *(() if min_heights is None else (min_heights - 1,)),
+        *(() if min_points is None else (min_points - 2,)),
+    )
+    K, Ke = min(o.K, cap), min(o.Ke, cap)
+    Lp = max(0, min(o.Lp, n_tests - 2))
+    if not volume:
+        return Orders(K, Lp, Ke, -1, -1)
+    return Orders(K, Lp, Ke, o.Dk, max(0, min(o.Dl, n_tests - 1)))
+
+
+def orders_for(rec: Recordings) -> Orders:
+    """:func:`default_orders` for a campaign: its number of tests, its fewest heights and readings
+    in a test, and whether it has piston readings."""
+    return default_orders(
+        len(rec.tests),
+        min_heights=min(np.unique(np.round(t.height_m, 9)).size for t in rec.tests),
+        min_points=min(t.n_points for t in rec.tests),
+        volume=rec.has_piston,
+    )
 
 
 #: the small candidate set ranked by PSIS-LOO (``select_orders``, ``uq surface --select``)
@@ -156,17 +193,26 @@ def _sizes(o: Orders, n_tests: int):
     return nc, ne, nd, n_tests
 
 
-def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
-    """Force and piston design matrices in standardised coefficients, (n, k) each."""
+def force_design(o: Orders, g: Geometry, x_m, p_bar, n_columns: int | None = None):
+    """The force design p_u F_p + E in standardised coefficients, (n, n_columns): the pressure-area
+    and casing columns first, zeros after them (default: those columns alone)."""
     t, q = g.t(x_m), g.q(p_bar)
     p_pa = np.asarray(p_bar, float) * BAR_PA
-    n = t.size
-    nc, ne, nd, nr = _sizes(o, n_tests)
-    Xf = np.zeros((n, nc + ne + nd + nr))
-    Xl = np.zeros_like(Xf)
+    nc, ne = (o.K + 1) * (o.Lp + 1), o.Ke + 1
+    Xf = np.zeros((t.size, nc + ne if n_columns is None else n_columns))
     Xf[:, :nc] = p_pa[:, None] * _tq(t, q, o.K, o.Lp) * SCALE_C
     if ne:
         Xf[:, nc : nc + ne] = _poly(t, o.Ke) * SCALE_E
+    return Xf
+
+
+def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
+    """Force and piston design matrices in standardised coefficients, (n, k) each."""
+    t, q = g.t(x_m), g.q(p_bar)
+    n = t.size
+    nc, ne, nd, nr = _sizes(o, n_tests)
+    Xf = force_design(o, g, x_m, p_bar, nc + ne + nd + nr)
+    Xl = np.zeros_like(Xf)
     lever = -BASIS_SCALE_M / g.area_m2
     Xl[:, :nc] = lever * _tq(t, q, o.K, o.Lp, integrate=True) * SCALE_C
     if nd:
@@ -239,10 +285,25 @@ class SurfaceFit(PairFit):
     model_name = "the surface model"
     short_name = "surface"
 
+    @property
+    def force_only(self) -> bool:
+        """Fitted to the force alone (no piston readings: uq._models.surface_force); the volume
+        methods then refuse with :func:`volume_omitted_reason`."""
+        return not self.recordings.has_piston
+
+    @property
+    def label(self) -> str:
+        """The orders in words (``Orders.label``; "force only" in place of the volume block)."""
+        return force_label(self.orders) if self.force_only else self.orders.label
+
+    def _no_volume(self) -> None:
+        if self.force_only:
+            raise InputError(volume_omitted_reason(self.recordings))
+
     def __repr__(self) -> str:
         state = "converged" if self.convergence.converged else "NOT converged"
         return (
-            f"SurfaceFit({self.orders.label}; {len(self.recordings.tests)} tests, "
+            f"SurfaceFit({self.label}; {len(self.recordings.tests)} tests, "
             f"{self.recordings.n_points} readings, {self.beta.shape[-1]} coefficients, "
             f"{self.beta.shape[0] * self.beta.shape[1]} draws, {state})"
         )
@@ -250,7 +311,7 @@ class SurfaceFit(PairFit):
     # ---- coefficient blocks (physical units, flattened draws)
     def blocks(self, beta=None):
         beta = self.flat_beta() if beta is None else beta
-        nc, ne, nd, nr = _sizes(self.orders, len(self.recordings.tests))
+        nc, ne, nd, nr = _sizes(self.orders, 0 if self.force_only else len(self.recordings.tests))
         c = beta[:, :nc] * SCALE_C
         e = beta[:, nc : nc + ne] * SCALE_E
         d = beta[:, nc + ne : nc + ne + nd] * SCALE_D
@@ -299,6 +360,7 @@ class SurfaceFit(PairFit):
 
     def volume_excess_draws(self, height_m, p_bar, *, check=True, beta=None):
         """D(x, p_u) = -dV/dx - F_p draws, m^2 (0 in the traditional theory)."""
+        self._no_volume()
         shape, t, q, _ = self._grid(height_m, p_bar, check)
         d = self.blocks(beta)[2]
         o = self.orders
@@ -308,12 +370,14 @@ class SurfaceFit(PairFit):
 
     def volume_area_draws(self, height_m, p_bar, *, check=True, beta=None):
         """The volume-derived area -dV/dx = F_p + D draws, m^2 (the second formula of eq. 1)."""
+        self._no_volume()
         return self.pressure_area_draws(
             height_m, p_bar, check=check, beta=beta
         ) + self.volume_excess_draws(height_m, p_bar, check=False, beta=beta)
 
     def spread_draws(self, height_m, p_bar, *, check=True, beta=None):
         """Traditional characteristic p_u (-dV/dx) minus the experimental force: p_u D - E, N."""
+        self._no_volume()
         p = np.broadcast_to(
             np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
         )
@@ -323,13 +387,14 @@ class SurfaceFit(PairFit):
         return p * BAR_PA * D - E
 
     def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
-        """Pointwise 90 % bands of F_p, the paper's F_eff, force and spread (refuses extrapolation)."""
+        """Pointwise 90 % bands of F_p, the paper's F_eff, force and spread (refuses extrapolation;
+        no spread for a force-only fit)."""
         out = {}
         for name, fn in (
             ("pressure_area_m2", self.pressure_area_draws),
             ("feff_m2", self.feff_draws),
             ("force_N", self.force_draws),
-            ("spread_N", self.spread_draws),
+            *(() if self.force_only else (("spread_N", self.spread_draws),)),
         ):
             m, lo, hi = band(fn(height_m, p_bar), axis=0, level=level)
             out[name] = {"mean": m, "lower": lo, "upper": hi}
@@ -360,6 +425,49 @@ def _reference(o, g, x, p, F, L, idx, n_tests):
     return beta, phat, np.abs(feff), Xf, Xl
 
 
+def force_label(o: Orders) -> str:
+    """The orders of a force-only surface in words (no volume block)."""
+    return f"F_p {o.K}x{o.Lp}, casing {o.Ke}, force only"
+
+
+def volume_omitted_reason(rec: Recordings) -> str:
+    """One line: why a surface fitted to ``rec`` has no volume results (None when it has them)."""
+    if rec.has_piston:
+        return None
+    with_volume = [t for t in rec.tests if t.volume_m3 is not None]
+    if not with_volume:
+        return "volume results omitted: force-only campaign (no piston_* or volume_* column)"
+    at = ", ".join(f"{t.pressure_bar:g}" for t in with_volume)
+    return (
+        f"volume results omitted: the volume_* column (at {at} bar only) cannot fix how the volume "
+        "changes with pressure, so the surface is fitted to the force alone (uq fit and uq diagnose "
+        "read the column)"
+    )
+
+
+def force_arrays(rec: Recordings):
+    """Every force reading of a campaign: height (m), set pressure (bar), force (N)."""
+    x = np.concatenate([t.height_m for t in rec.tests])
+    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in rec.tests])
+    F = np.concatenate([t.force_N for t in rec.tests])
+    return x, p, F
+
+
+def surface_force_data(rec: Recordings, orders: Orders, stand: StandDescription):
+    """The force surface's arrays (uq._models.surface_force.ForceData): the design, the readings and
+    the noise references of a weighted least-squares fit of the force."""
+    g = geometry_of(rec)
+    x, p, F = force_arrays(rec)
+    X = force_design(orders, g, x, p)
+    w = 1.0 / (0.005 * np.abs(F) + 20.0)
+    beta, *_ = np.linalg.lstsq(X * w[:, None], F * w, rcond=None)
+    nc = (orders.K + 1) * (orders.Lp + 1)
+    feff = np.abs(_tq(g.t(x), g.q(p), orders.K, orders.Lp) @ (beta[:nc] * SCALE_C))
+    return surface_force.force_data(
+        X, F, np.abs(X @ beta), feff, p, stand, pair.measured_deviation(rec)
+    )
+
+
 def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> PairData:
     """The model's arrays for a campaign: designs, readings, the noise references, the Gram plan."""
     g = geometry_of(rec)
@@ -382,17 +490,39 @@ def fit_surface(
 
     ``stand`` is the stand the recordings were taken on: its pressure holding and p_atm enter
     the reading covariance, its load cell and gas volume centre the noise priors. ``orders``:
-    the polynomial orders, by default :func:`default_orders` of the campaign's number of tests."""
+    the polynomial orders, by default :func:`orders_for` the campaign.
+
+    A campaign without piston readings (force-only, or a catalogue table) is fitted by the force
+    surface alone (uq._models.surface_force; ``orders`` without a volume block, Dk = Dl = -1); its
+    volume results are omitted with :func:`volume_omitted_reason`."""
     n_tests = len(rec.tests)
-    orders = default_orders(n_tests) if orders is None else orders
+    orders = orders_for(rec) if orders is None else orders
     if n_tests < orders.Lp + 1:
         raise InputError(
             f"{rec.path}: {n_tests} tests at different pressures cannot fix an effective area of "
             f"degree {orders.Lp} in pressure; the surface model needs at least {orders.Lp + 1}"
         )
-    data = surface_data(rec, orders, stand)
+    force_only = not rec.has_piston
+    if force_only and (orders.Dk >= 0 or orders.Dl >= 0):
+        raise InputError(
+            f"orders: {rec.path} has no piston readings; the force surface takes no volume block "
+            f"(Dk = Dl = -1), got {orders.label}",
+            param="orders",
+        )
+    if force_only:
+        data, model = surface_force_data(rec, orders, stand), surface_force.MODEL
+        k = data.X.shape[1]
+        if rec.n_points - k < len(surface_force.THETA_NAMES) + 2:
+            short = k + len(surface_force.THETA_NAMES) + 2
+            raise InputError(
+                f"{rec.path}: {rec.n_points} readings cannot fix the force surface's {k} coefficients "
+                f"({force_label(orders)}) and leave residuals for its noise: it needs at least {short} "
+                f"(more heights per test, or more tests)"
+            )
+    else:
+        data, model = surface_data(rec, orders, stand), MODEL
     post = fit_collapsed(
-        MODEL,
+        model,
         data,
         seed=seed,
         settings=settings,
@@ -412,7 +542,23 @@ def select_orders(
     settings: Settings | None = None,
     stand: StandDescription = PAPER_STAND,
 ):
-    """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows)."""
+    """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows). For a campaign
+    without piston readings the candidates lose their volume block and their degrees are capped
+    as :func:`orders_for` caps them (duplicates fitted once)."""
+    if not rec.has_piston:
+        cap = orders_for(rec)
+        candidates = tuple(
+            dict.fromkeys(
+                Orders(
+                    min(o.K, cap.K),
+                    max(0, min(o.Lp, len(rec.tests) - 2)),
+                    min(o.Ke, cap.Ke),
+                    -1,
+                    -1,
+                )
+                for o in candidates
+            )
+        )
     return pair.select_orders(
         fit_surface, rec, candidates, seed=seed, settings=settings or Settings(), stand=stand
     )
@@ -441,6 +587,9 @@ def coefficient_summary(fit: SurfaceFit) -> dict:
     if o.Dk >= 0:
         for i, (k, lq) in enumerate((k, lq) for k in range(o.Dk + 1) for lq in range(o.Dl + 1)):
             out["volume_excess_m2"][f"d_{k}{lq}"] = estimate(d[:, i])
+    if fit.force_only:
+        del out["volume_excess_m2"], out["piston_reference_m"]
+        return out
     for i, t in enumerate(fit.recordings.tests):
         out["piston_reference_m"][f"{t.pressure_bar:g} bar"] = estimate(r[:, i])
     return out
@@ -449,7 +598,7 @@ def coefficient_summary(fit: SurfaceFit) -> dict:
 def noise_summary(fit: SurfaceFit) -> dict:
     diag = fit.convergence.variables
     out = {}
-    for n in NATURAL_NAMES:
+    for n in surface_force.NATURAL if fit.force_only else NATURAL_NAMES:
         est = estimate(np.asarray(fit.idata.posterior[n]))
         est["r_hat"] = diag[n]["r_hat"]
         est["ess_bulk"] = diag[n]["ess_bulk"]
@@ -478,39 +627,64 @@ def spread_region(fit: SurfaceFit, n_x: int = 46, n_p: int = 41, level: float = 
 
 
 def summary(fit: SurfaceFit, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
-    """The JSON document of ``uq surface`` (:meth:`SurfaceFit.to_json`)."""
+    """The JSON document of ``uq surface`` (:meth:`SurfaceFit.to_json`). A force-only fit has no
+    volume keys (volume excess, piston references, piston noise, spread) and an ``omitted`` object
+    naming each with the one-line reason."""
     g = fit.geometry
     conv = fit.convergence
     r_hat_max, ess_bulk_min = conv.worst()
-    reg = spread_region(fit, 19, 21)
     plo, phi = fit.pressure_range_bar
     ref = {}
     beta = fit.flat_beta(2000)
+    x0 = np.array(g.x0_m)
     for pb in sorted({plo, (plo + phi) / 2, phi}):
         ref[f"{pb:g}"] = {
-            "pressure_area_m2": estimate(fit.pressure_area_draws(np.array(g.x0_m), pb, beta=beta)),
-            "feff_m2": estimate(fit.feff_draws(np.array(g.x0_m), pb, beta=beta)),
-            "force_N": estimate(fit.force_draws(np.array(g.x0_m), pb, beta=beta)),
-            "spread_N": estimate(fit.spread_draws(np.array(g.x0_m), pb, beta=beta)),
+            "pressure_area_m2": estimate(fit.pressure_area_draws(x0, pb, beta=beta)),
+            "feff_m2": estimate(fit.feff_draws(x0, pb, beta=beta)),
+            "force_N": estimate(fit.force_draws(x0, pb, beta=beta)),
         }
-    return {
+        if not fit.force_only:
+            ref[f"{pb:g}"]["spread_N"] = estimate(fit.spread_draws(x0, pb, beta=beta))
+    basis = "t = (x - x0) / 0.05 m; F_p = sum c_kl t^k q^l; E = sum e_m t^m"
+    out = {
         "x0_m": g.x0_m,
         "piston_area_m2": g.area_m2,
         "orders": asdict(fit.orders),
-        "orders_label": fit.orders.label,
+        "orders_label": fit.label,
         "pressure_scaling": {
             "q": "(p_bar - p_mid) / p_half",
             "p_mid_bar": g.p_mid,
             "p_half_bar": g.p_half,
         },
-        "basis": "t = (x - x0) / 0.05 m; F_p = sum c_kl t^k q^l; E = sum e_m t^m; D = sum d_kl t^k q^l",
-        "definitions": DEFINITIONS,
+        "basis": basis if fit.force_only else basis + "; D = sum d_kl t^k q^l",
+        "definitions": {
+            k: v
+            for k, v in DEFINITIONS.items()
+            if not (fit.force_only and k in ("volume_excess_m2", "spread_N"))
+        },
         "stand": asdict(fit.stand),
         "valid_range": {"height_m": list(fit.height_range_m), "pressure_bar": [plo, phi]},
         "coefficients": coefficient_summary(fit),
         "noise": noise_summary(fit),
         "at_x0": ref,
-        "spread_credibly_nonzero_fraction": float(reg["credibly_nonzero"].mean()),
+    }
+    if fit.force_only:
+        why = volume_omitted_reason(fit.recordings)
+        out["omitted"] = {
+            k: why
+            for k in (
+                "volume_excess_m2",
+                "piston_reference_m",
+                "sL_m",
+                "V0_m3",
+                "spread_N",
+                "spread_credibly_nonzero_fraction",
+            )
+        }
+    else:
+        reg = spread_region(fit, 19, 21)
+        out["spread_credibly_nonzero_fraction"] = float(reg["credibly_nonzero"].mean())
+    return out | {
         "order_selection": list(fit.selection),
         "comparison": comparison,
         "converged": conv.converged,

@@ -19,7 +19,7 @@ import numpy as np
 
 from uq._inference.summary import band
 from uq._io.files import write_bytes_atomic, write_text_atomic
-from uq._models.surface import SurfaceFit, spread_region
+from uq._models.surface import SurfaceFit, spread_region, volume_omitted_reason
 from uq._report.html import Figure, _plt, check_format, encode, render
 
 
@@ -126,22 +126,25 @@ def figure_residual_overlay(fit, model: str = "surface"):
         )
         ax.axhline(0, color="k", lw=0.6)
         comp = t.compression
-        ax.plot(
-            t.height_m[comp] * 1e3,
-            (t.force_N - at_pts)[comp],
-            ".",
-            ms=3,
-            color="tab:red",
-            label="compression",
-        )
-        ax.plot(
-            t.height_m[~comp] * 1e3,
-            (t.force_N - at_pts)[~comp],
-            "x",
-            ms=3,
-            color="tab:green",
-            label="rebound",
-        )
+        if comp is None:  # one pass in unknown order (a catalogue table)
+            ax.plot(t.height_m * 1e3, t.force_N - at_pts, ".", ms=3, color="k", label="readings")
+        else:
+            ax.plot(
+                t.height_m[comp] * 1e3,
+                (t.force_N - at_pts)[comp],
+                ".",
+                ms=3,
+                color="tab:red",
+                label="compression",
+            )
+            ax.plot(
+                t.height_m[~comp] * 1e3,
+                (t.force_N - at_pts)[~comp],
+                "x",
+                ms=3,
+                color="tab:green",
+                label="rebound",
+            )
         ax.set_title(f"{t.pressure_bar:g} bar", fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[n:]:
@@ -313,21 +316,16 @@ def write_surface_report(
     check_format(figure_format)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figures = write_figures(
-        {
-            "surface_pressure_area": (
-                figure_pressure_area(fit),
-                "pressure area F_p(x, p_u) heat map",
-            ),
-            "surface_spread": (figure_spread(fit), "spread traditional minus measured"),
-            "surface_residuals": (
-                figure_residual_overlay(fit),
-                "readings against the surface band",
-            ),
-        },
-        out,
-        figure_format,
-    )
+    figs = {
+        "surface_pressure_area": (
+            figure_pressure_area(fit),
+            "pressure area F_p(x, p_u) heat map",
+        ),
+        "surface_residuals": (figure_residual_overlay(fit), "readings against the surface band"),
+    }
+    if not fit.force_only:  # the spread needs the volume
+        figs["surface_spread"] = (figure_spread(fit), "spread traditional minus measured")
+    figures = write_figures(figs, out, figure_format)
     comp = result.get("comparison")
     page = render(
         "surface.html",
@@ -339,5 +337,6 @@ def write_surface_report(
         order_selection=result.get("order_selection") or [],
         noise=noise_rows(result["noise"]),
         figures=figures,
+        volume_omitted=volume_omitted_reason(fit.recordings),
     )
     return write_text_atomic(out / "surface.html", page)

@@ -111,3 +111,48 @@ def catalogue(
 def catalogue_rounding(units: dict) -> dict:
     """The writer's ``rounding`` for a catalogue in ``units`` (quantity -> suffix)."""
     return {q: steps[units[q]] for q, steps in CATALOGUE_ROUNDING.items() if q in units}
+
+
+def catalogue_recordings(
+    spring: str = "n50",
+    *,
+    seed: int = 0,
+    layout=None,
+    volume_at_bar: float | None = None,
+    stand=None,
+    piston_area_m2: float | None = None,
+    name: str | None = None,
+):
+    """A catalogue table made by the stand, as :class:`uq.Recordings` in memory: what
+    ``uq simulate --catalogue [--volume-at-bar P]`` writes (the same tests, cut and rounded the
+    same way) and a reader reads. ``volume_at_bar``: default the middle pressure, as the command;
+    ``layout`` default: the paper's pressures, 10 mm steps."""
+    from uq._data.recordings import recordings_from_text
+    from uq._data.stand_description import PAPER_STAND
+    from uq._data.writing import write_recordings_csv
+    from uq._stand.simulator import PAPER_PISTON_AREA_M2, Layout, simulate
+
+    stand = PAPER_STAND if stand is None else stand
+    area = PAPER_PISTON_AREA_M2 if piston_area_m2 is None else piston_area_m2
+    layout = Layout(step_m=0.010) if layout is None else layout
+    p = tuple(layout.pressures_bar)
+    volume_at_bar = p[len(p) // 2] if volume_at_bar is None else volume_at_bar
+    tests = simulate(spring, seed=seed, layout=layout, piston_area_m2=area, stand=stand)
+    tests = catalogue(
+        tests,
+        spring,
+        {},
+        volume_at_bar=volume_at_bar,
+        x_max_m=layout.x_max_m,
+        element_volume_at_xmax_m3=stand.element_volume_at_xmax_m3,
+        piston_area_m2=area,
+    )
+    text = write_recordings_csv(
+        tests,
+        "RECONSTRUCTED catalogue table from the virtual test stand",
+        order=False,
+        piston=False,
+        volume=True,
+        rounding=catalogue_rounding({"height": "mm", "force": "N", "volume": "l"}),
+    )
+    return recordings_from_text(text, name or f"catalogue seed {seed}", piston_area_cm2=area * 1e4)

@@ -86,6 +86,18 @@ class PairData(NamedTuple):
     dp_meas: jnp.ndarray
 
 
+def holding_sd_Pa(p_bar, stand: StandDescription, *, measured: bool, shape) -> np.ndarray:
+    """The sd (Pa) of each reading's pressure-holding error the likelihood carries: the stand's
+    holding error at the set pressures ``p_bar``, or, where the readings are corrected by their
+    measured pressures, the sensor's rounding (uq._stand.shapes: 1 Pa, uniform, sd 1/sqrt(12) Pa)."""
+    from uq._physics.quantities import BAR_PA
+    from uq._stand.shapes import SENSOR_RESOLUTION_PA
+
+    if measured:
+        return np.full(shape, SENSOR_RESOLUTION_PA / np.sqrt(12.0))
+    return np.broadcast_to(stand.pressure_sd_bar(np.asarray(p_bar, float)) * BAR_PA, shape)
+
+
 def pair_data(
     Xf, Xl, F, L, phat, lever, p_bar, area, stand: StandDescription, dp_meas=None
 ) -> PairData:
@@ -96,16 +108,9 @@ def pair_data(
     covariance shrinks to the sensor's resolution (uq._stand.shapes: 1 Pa, a uniform rounding
     error of sd 1/sqrt(12) Pa)."""
     from uq._physics.quantities import BAR_PA
-    from uq._stand.shapes import SENSOR_RESOLUTION_PA
 
-    p_bar = np.asarray(p_bar, float)
-    measured = dp_meas is not None
+    hold_pa = holding_sd_Pa(p_bar, stand, measured=dp_meas is not None, shape=np.shape(F))
     dp_meas = np.zeros(np.shape(F)) if dp_meas is None else np.asarray(dp_meas, float)
-    hold_pa = (
-        np.full(np.shape(F), SENSOR_RESOLUTION_PA / np.sqrt(12.0))
-        if measured
-        else stand.pressure_sd_bar(p_bar) * BAR_PA
-    )
     return PairData(
         jnp.asarray(Xf),
         jnp.asarray(Xl),

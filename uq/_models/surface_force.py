@@ -38,8 +38,14 @@ from uq._data.stand_description import StandDescription
 from uq._inference.collapsed import CollapsedModel
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
-from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD, noise_prior_mean
-from uq._physics.quantities import BAR_PA, force_noise_var
+from uq._models.pair import (
+    NATURAL_NAMES,
+    NOISE_NAMES,
+    NOISE_PRIOR_SD,
+    holding_sd_Pa,
+    noise_prior_mean,
+)
+from uq._physics.quantities import force_noise_var
 
 #: the sampled noise parameters: the surface's floor, load cell and pressure holding
 THETA_NAMES = NOISE_NAMES[:3]
@@ -62,15 +68,7 @@ class ForceData(NamedTuple):
 
 def force_data(X, F, phat, lever, p_bar, stand: StandDescription, dp_meas=None) -> ForceData:
     """The arrays of :class:`ForceData` (as ``uq._models.pair.pair_data`` for the force alone)."""
-    from uq._stand.shapes import SENSOR_RESOLUTION_PA
-
-    p_bar = np.asarray(p_bar, float)
-    measured = dp_meas is not None
-    hold_pa = (
-        np.full(np.shape(F), SENSOR_RESOLUTION_PA / np.sqrt(12.0))
-        if measured
-        else stand.pressure_sd_bar(p_bar) * BAR_PA
-    )
+    hold_pa = holding_sd_Pa(p_bar, stand, measured=dp_meas is not None, shape=np.shape(F))
     return ForceData(
         jnp.asarray(X),
         jnp.asarray(F),

@@ -569,19 +569,15 @@ def test_commands_refuse_in_one_place_and_the_refusal_lifts(tmp_path, monkeypatc
     ],
     ids=["no-piston-column", "catalogue-one-pass", "catalogue-with-volume"],
 )
-def test_force_only_and_one_pass_tables_pass_fit_report_batch(tmp_path, capsys, lines, has_volume):
-    """What fit, report and batch take (fitted in tests/cli/test_force_only_commands.py); the
-    surface model is still refused in one line until it learns them."""
+def test_force_only_and_one_pass_tables_pass_fit_report_batch(lines, has_volume):
+    """Every command takes them (fitted in tests/cli/test_force_only_commands.py and
+    tests/cli/test_surface_catalogue.py): none of them refuses these shapes any more."""
     from uq._data.recordings import require_for
 
     rec = _from_lines(lines)
     assert rec.has_volume == has_volume
-    for command in ("fit", "report", "batch", "diagnose"):
+    for command in ("fit", "report", "batch", "diagnose", "surface", "margin"):
         assert require_for(rec, command) is rec
-    path = _write_input(tmp_path, lines)
-    assert _run(["surface", str(path)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and err.startswith(f"uq surface: error: {path}:")
 
 
 def test_catalogue_table_reads():
@@ -966,7 +962,7 @@ def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
 # ----------------------------------------------------------------------------- options elsewhere
 
 
-def test_fit_definition_and_batch_take_the_reading_options(tmp_path):
+def test_fit_definition_and_batch_take_the_reading_options(tmp_path, monkeypatch):
     from uq._cli.cmd_basic import read_fit_config
     from uq._drivers import batch
 
@@ -989,10 +985,14 @@ def test_fit_definition_and_batch_take_the_reading_options(tmp_path):
     job = {"file": str(c.file), "options": c.options, "task": "fit"}
     assert _same(batch._recordings(job), _reference())
     (tmp_path / "fo.csv").write_text(_text(_drop(GOOD, "piston_mm")))
+    for task in ("fit", "surface"):  # each task reads what its command takes: force-only too
+        fo = {"file": str(tmp_path / "fo.csv"), "options": {}, "task": task}
+        assert not batch._recordings(fo).has_volume
+    # ... and a command's needs, were it to have any, refuse the task in one line
+    from uq._data import recordings
+
+    monkeypatch.setitem(recordings.COMMAND_NEEDS, "surface", frozenset({"piston"}))
     with pytest.raises(InputError, match="force-only campaign"):
         batch._recordings({"file": str(tmp_path / "fo.csv"), "options": {}, "task": "surface"})
-    assert not batch._recordings(
-        {"file": str(tmp_path / "fo.csv"), "options": {}, "task": "fit"}
-    ).has_volume
     with pytest.raises(InputError, match="column 'absolute_pressure': expected true or false"):
         batch._campaign(entry | {"absolute_pressure": "maybe"}, tmp_path, "cat.csv, row 2")

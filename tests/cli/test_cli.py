@@ -400,7 +400,15 @@ def test_every_command_has_a_json_row():
     assert set(_json_rows(Path("."), Path("."), Path("."))) == {c[0] for c in COMMANDS}
 
 
-@pytest.mark.parametrize("name", [c[0] for c in COMMANDS])
+#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration): their
+#: --json - runs with the slow suite
+HEAVY = ("batch", "diagnose", "calibrate")
+
+
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(c[0], marks=pytest.mark.slow) if c[0] in HEAVY else c[0] for c in COMMANDS],
+)
 def test_json_dash_is_valid_json_on_stdout(name, small, capsys):
     argv = _json_rows(*small)[name]
     status = run([*argv, "--json", "-", "--quiet"])

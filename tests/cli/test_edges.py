@@ -66,6 +66,7 @@ def _no_traceback(proc) -> list[str]:
     return [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("WARNING")]
 
 
+@pytest.mark.slow  # fast: the full-disk report test (the same staged writing)
 def test_full_disk_uq_fit_out_is_one_line_and_exit_2(campaign, tmp_path):
     out = tmp_path / "fit"
     proc = _limited(_uq("fit", campaign, "--out", out, *QUICK), 100_000, tmp_path)

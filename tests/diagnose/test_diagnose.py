@@ -41,6 +41,7 @@ def _run(rec, **kw):
     ).to_json()
 
 
+@pytest.mark.slow  # fast: test_other_stand_noise_names_no_mechanism (a clean campaign)
 def test_clean_control_stays_quiet():
     res = _run(_rec({}, layout=SMALL))
     assert res["mismatch_detected"] is False

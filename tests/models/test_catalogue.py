@@ -178,6 +178,7 @@ def test_cylinder_diagnose(cylinder):
     _diagnose(cylinder[1])
 
 
+@pytest.mark.slow  # fast: the thermodynamic model's own tests (tests/models/test_thermo_model.py)
 def test_cylinder_thermodynamic(cylinder):
     _thermo(*cylinder)
 

@@ -346,6 +346,7 @@ def ar_fits():
     return t, plain, ar
 
 
+@pytest.mark.slow  # fast: the exact AR(1) density and draws, and the rough stand's fast coverage
 def test_ar1_recovers_rho_and_widens_the_piston_intervals(ar_fits):
     _, plain, ar = ar_fits
     assert ar.variant == "ar1" and ar.convergence.converged
@@ -364,6 +365,7 @@ def test_ar1_recovers_rho_and_widens_the_piston_intervals(ar_fits):
     assert set(js["pressure_holding"]) >= {"rho", "k_p", "V_gas_m3"}
 
 
+@pytest.mark.slow  # shares ar_fits (two AR(1) campaign fits) with the test above
 def test_auto_refits_only_the_flagged_tests(ar_fits):
     """pressure_ar1="auto": the plain fit where the recording-order check passes, AR(1) where it
     flags (the check on the plain fit of the AR stand's test flags its piston)."""

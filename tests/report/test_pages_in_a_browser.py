@@ -102,6 +102,7 @@ def _comparison_checks(text: str, comparison: dict, name: str) -> None:
     assert f"{comparison['elpd_diff']:+.1f}" in text
 
 
+@pytest.mark.slow  # fast: the report and diagnose pages here, the design sheet in test_design_command
 def test_thermodynamic_page(small_campaign, small_cubics, tmp_path):
     from uq._models.thermo import ThermoOrders
     from uq._report import surface, thermo

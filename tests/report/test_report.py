@@ -119,6 +119,7 @@ def test_report_cli_bad_input(tmp_path, capsys):
     assert not (tmp_path / "o" / "report.html").exists()
 
 
+@pytest.mark.slow  # fast: report --surface on a catalogue (tests/cli/test_force_only_commands.py)
 def test_report_links_the_surface_page(tmp_path):
     """`uq report --surface` writes surface.html beside the report and links it."""
     from uq._cli.main import main

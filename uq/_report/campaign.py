@@ -413,21 +413,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     piston_m = t.piston_m if piston_m is None else piston_m
 
     def points(ax, y):
-        if comp is None:  # one pass in unknown order: no branches to tell apart
-            ax.plot(h, y, "o", ms=3.5, color="k", mfc="none", label="readings (order unknown)")
-            return
-        for is_comp, name in ((True, "compression"), (False, "rebound")):
-            m = comp == is_comp
-            if m.any():
-                ax.plot(
-                    h[m],
-                    y[m],
-                    "o",
-                    ms=3.5,
-                    mfc="none" if not is_comp else BRANCH_COLORS[is_comp],
-                    color=BRANCH_COLORS[is_comp],
-                    label=name,
-                )
+        _readings(ax, h, y, comp)
 
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)
@@ -439,22 +425,10 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
 
     ax = axs[0, 1]
     fit_pts = cubic(force_mean, t.height_m - x0_m)
-    ax.fill_between(
-        x,
-        tb.force_pred.lo - tb.force.mean,
-        tb.force_pred.hi - tb.force.mean,
-        color="0.5",
-        alpha=0.2,
-        lw=0,
-    )
-    ax.fill_between(
-        x,
-        tb.force.lo - tb.force.mean,
-        tb.force.hi - tb.force.mean,
-        color="tab:green",
-        alpha=0.5,
-        lw=0,
-    )
+    for band, color, alpha in ((tb.force_pred, "0.5", 0.2), (tb.force, "tab:green", 0.5)):
+        ax.fill_between(
+            x, band.lo - tb.force.mean, band.hi - tb.force.mean, color=color, alpha=alpha, lw=0
+        )
     points(ax, t.force_N - fit_pts)
     ax.axhline(0, color="k", lw=0.6)
     ax.set(
@@ -525,6 +499,26 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     fig.suptitle(f"test at p_u = {tb.pressure_bar:g} bar", fontsize=11)
     fig.subplots_adjust(left=0.06, right=0.99, bottom=0.07, top=0.92, wspace=0.25, hspace=0.3)
     return fig
+
+
+def _readings(ax, h, y, comp) -> None:
+    """The readings (heights ``h`` mm, values ``y``) marked by branch, or plain for a test in
+    unknown order (``comp`` None: one pass, no branches to tell apart)."""
+    if comp is None:
+        ax.plot(h, y, "o", ms=3.5, color="k", mfc="none", label="readings (order unknown)")
+        return
+    for is_comp, name in ((True, "compression"), (False, "rebound")):
+        m = comp == is_comp
+        if m.any():
+            ax.plot(
+                h[m],
+                y[m],
+                "o",
+                ms=3.5,
+                mfc="none" if not is_comp else BRANCH_COLORS[is_comp],
+                color=BRANCH_COLORS[is_comp],
+                label=name,
+            )
 
 
 def _absent(ax, words: str, x, y: float = 0.5) -> None:

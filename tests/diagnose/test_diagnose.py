@@ -65,6 +65,7 @@ def test_visible_mechanism_is_named_with_its_magnitude(name, value):
     )
 
 
+@pytest.mark.slow  # fast: the other diagnose tests name the mechanism a campaign carries
 def test_offset_preferred_over_casing_force_on_other_stand():
     """Robustness: another layout, x0 and piston area; the simpler mechanism wins."""
     res = _run(_rec({"force_offset": 56.3}, layout=ALT, x0=0.100, area=40e-4), max_mechanisms=2)
@@ -162,6 +163,7 @@ def test_cli_json_and_report(tmp_path, capsys):
     assert (tmp_path / "rep" / "diagnose_residuals.png").exists()
 
 
+@pytest.mark.slow  # fast: uq fit's byte-identical JSON for a seed (test_cubic)
 def test_same_seed_gives_byte_identical_json(tmp_path):
     from uq._cli.main import main
     from uq._data.recordings import write_recordings_csv

@@ -379,6 +379,7 @@ def test_auto_refits_only_the_flagged_tests(ar_fits):
     assert np.array_equal(fits[0].flat("force"), off[0].flat("force"))  # untouched
 
 
+@pytest.mark.slow  # fast: test_fit_cli_uses_the_recorded_pressure; coverage: reports/calibration-measured-pressure
 def test_measured_pressure_shrinks_the_intervals_and_covers():
     """A stand that records its pressure: the covariate takes the holding error out of force and
     piston; the piston's intervals shrink most (its scatter was almost all holding error)."""

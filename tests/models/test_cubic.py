@@ -14,25 +14,14 @@ from uq._data.reference import table1
 from uq._inference.linear import linear_posterior, posterior_cov
 from uq._inference.sampler import Settings
 from uq._models.cubic import FORCE_PRIOR_SD_N, basis, fit_test, least_squares, to_paper_basis
-from uq._stand.simulator import Layout, simulate
+from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
 FAST = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)
 
 
 def _test(pressure=5.0, seed=1, spring="n50", layout=None):
     layout = layout or Layout(pressures_bar=(pressure,))
-    t = simulate(spring, seed=seed, layout=layout)[0]
-    from uq._data.recordings import PressureTest
-
-    return PressureTest(
-        pressure,
-        t["height_m"],
-        t["force_N"],
-        t["piston_m"],
-        t["compression"],
-        t["step"],
-        np.arange(t["step"].size) + 2,
-    )
+    return recordings_from_tests(simulate(spring, seed=seed, layout=layout)).tests[0]
 
 
 def test_levenberg_marquardt_equals_polyfit():

@@ -30,7 +30,7 @@ from uq._models.cubic import (
     force_data,
     piston_coordinate,
 )
-from uq._stand.simulator import Layout, simulate
+from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
 X0 = 0.112
 S = 54.82e-4
@@ -38,16 +38,8 @@ FAST = Settings(n_walkers=16, min_steps=200, chunk=100, max_steps=2000)
 
 
 def _test(pressure=5.0, seed=3) -> PressureTest:
-    t = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure,)))[0]
-    return PressureTest(
-        pressure,
-        t["height_m"],
-        t["force_N"],
-        t["piston_m"],
-        t["compression"],
-        t["step"],
-        np.arange(t["step"].size) + 2,
-    )
+    tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure,)))
+    return recordings_from_tests(tests).tests[0]
 
 
 def test_force_only_density_is_the_force_block_of_the_full_model():

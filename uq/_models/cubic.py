@@ -128,7 +128,8 @@ class CubicData(NamedTuple):
 
 
 def natural_noise(theta, ref_mean):
-    """Sampler coordinates -> (log sigma0, log r, log sigma_L).
+    """Sampler coordinates -> (log sigma0, log r, log sigma_L); theta (..., 2) of a force-only
+    test gives (log sigma0, log r).
 
     emcee moves in (psi, eta, log sigma_L): psi = log of the force noise at the mean force
     level s, eta = logit of the share phi = sigma0^2 / s^2 of the floor in it. The floor and
@@ -140,9 +141,8 @@ def natural_noise(theta, ref_mean):
     psi, eta = theta[..., 0], theta[..., 1]
     log_phi = -jnp.logaddexp(0.0, -eta)
     log_1mphi = -jnp.logaddexp(0.0, eta)
-    return jnp.stack(
-        [psi + 0.5 * log_phi, psi + 0.5 * log_1mphi - jnp.log(ref_mean), theta[..., 2]], axis=-1
-    )
+    force = jnp.stack([psi + 0.5 * log_phi, psi + 0.5 * log_1mphi - jnp.log(ref_mean)], axis=-1)
+    return jnp.concatenate([force, theta[..., 2:]], axis=-1)
 
 
 def _noise(theta, d: CubicData):
@@ -287,11 +287,8 @@ class ForceData(NamedTuple):
 
 
 def _force_noise(theta, d: ForceData):
-    psi, eta = theta[0], theta[1]
-    log_s0 = psi - 0.5 * jnp.logaddexp(0.0, -eta)
-    log_r = psi - 0.5 * jnp.logaddexp(0.0, eta) - jnp.log(jnp.mean(d.ref_force))
-    nat = jnp.stack([log_s0, log_r])
-    return jnp.sqrt(force_noise_var(jnp.exp(log_s0), jnp.exp(log_r), d.ref_force)), nat
+    nat = natural_noise(theta, jnp.mean(d.ref_force))
+    return jnp.sqrt(force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)), nat
 
 
 def _force_post(theta, d: ForceData):
@@ -333,14 +330,10 @@ def force_start(d: ForceData) -> np.ndarray:
 
 
 def force_report(theta, beta, d: ForceData) -> dict:
-    theta = np.asarray(theta)
-    psi, eta = theta[:, 0], theta[:, 1]
-    ref = float(np.mean(np.asarray(d.ref_force)))
-    sigma0 = np.exp(psi - 0.5 * np.logaddexp(0.0, -eta))
-    rel = np.exp(psi - 0.5 * np.logaddexp(0.0, eta) - np.log(ref))
+    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
     force = to_paper_basis(beta[:, :4])
     out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
-    out |= {"sigma0_N": sigma0, "rel_force": rel}
+    out |= {n: noise[:, i] for i, n in enumerate(FORCE_NOISE_NAMES)}
     if beta.shape[1] > 4:
         out["pressure_offset_Pa"] = float(d.offset_mean) + beta[:, 4]
     return out

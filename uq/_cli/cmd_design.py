@@ -182,21 +182,28 @@ class _Ranges:
             self.volume_pressure_draws = None
 
 
-def _design_from(args, volume_l):
+def sealed_design(args, height_m: float, charge_bar: float, forcing_Hz: float | None = None):
+    """The sealed spring the options describe (``--volume-l``, ``--volume-sd-l``, ``--polytropic``,
+    ``--reservoir-l``, ``--dvdp-l-per-bar``), closed at ``height_m`` with ``charge_bar`` (uq design,
+    and uq margin's design margins)."""
     from uq._derived.design import SealedDesign
 
     return SealedDesign(
-        args.height_mm * 1e-3,
-        args.charge_bar,
-        volume_l,
+        height_m,
+        charge_bar,
+        args.volume_l,
         volume_sd_l=args.volume_sd_l,
         polytropic=args.polytropic,
         reservoir_l=args.reservoir_l,
         dvdp_l_per_bar=args.dvdp_l_per_bar,
-        forcing_Hz=args.forcing_hz,
+        forcing_Hz=forcing_Hz,
         p_atm_bar=getattr(args, "p_atm_bar", 1.01325),
         seed=args.seed,
     )
+
+
+def _design_from(args):
+    return sealed_design(args, args.height_mm * 1e-3, args.charge_bar, args.forcing_hz)
 
 
 def _check_before_fit(args, rec) -> None:
@@ -245,7 +252,7 @@ def _check_before_fit(args, rec) -> None:
             "option --dvdp-l-per-bar: 'model' needs --model thermodynamic (the surface model has no dV/dp_u "
             "of its own); give a number of litres per bar"
         )
-    check_design(ranges, _design_from(args, args.volume_l))
+    check_design(ranges, _design_from(args))
 
 
 def _default_heights(rec, x_c: float):
@@ -292,7 +299,7 @@ def command_design(args) -> int:
     model = (D.ThermoDesignModel if args.model == "thermodynamic" else D.SurfaceDesignModel)(
         fit, args.draws
     )
-    design = _design_from(args, args.volume_l)
+    design = _design_from(args)
     grid = D.DesignGrid(model, x_c)
     doc = D.design_document(model, design, charges, grid)
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)

@@ -177,19 +177,11 @@ def _check_design_volume(args, rec) -> None:
 
 def _design_answer(args, ans, q: dict) -> dict:
     """One query's design margins (uq._derived.design.design_margin)."""
-    from uq._derived.design import SealedDesign, design_margin
+    from uq._cli.cmd_design import sealed_design
+    from uq._derived.design import design_margin
 
-    design = SealedDesign(
-        q["height_mm"] * 1e-3,
-        1.0,  # replaced: each draw is charged to the pressure at which it carries the load
-        args.volume_l,
-        volume_sd_l=args.volume_sd_l,
-        polytropic=args.polytropic,
-        reservoir_l=args.reservoir_l,
-        dvdp_l_per_bar=args.dvdp_l_per_bar,
-        p_atm_bar=getattr(args, "p_atm_bar", 1.01325),
-        seed=args.seed,
-    )
+    # the charge 1.0 bar is replaced: each draw is charged to the pressure that carries the load
+    design = sealed_design(args, q["height_mm"] * 1e-3, 1.0)
     return design_margin(
         ans,
         q["height_mm"] * 1e-3,

@@ -94,16 +94,10 @@ def command_report(args) -> int:
     )
     surface = comparison = None
     if args.surface:
-        from uq._derived.comparison import fit_both, force_side
+        from uq._derived.comparison import fit_both
 
-        # a catalogue's volume column is left out of the force surface: the cubics it is compared
-        # with are then fitted to the force alone (fit_both does), not the report's own
         surface, _, comparison = fit_both(
-            rec,
-            seed=args.seed,
-            settings=settings,
-            stand=stand,
-            cubic_fit=cf if force_side(rec) is rec else None,
+            rec, seed=args.seed, settings=settings, stand=stand, cubic_fit=cf
         )
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)

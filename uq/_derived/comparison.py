@@ -139,12 +139,14 @@ def fit_both(
 ):
     """A model over all tests (``model``: "surface" or "thermodynamic") and the per-pressure
     cubics of ``rec`` with the same settings (either fit may be given already) and their
-    :func:`compare` document: (model fit, cubics, comparison)."""
+    :func:`compare` document: (model fit, cubics, comparison). The cubics compared are fitted to
+    :func:`force_side` of ``rec``: a catalogue's own cubic fit (its volume column fitted as L) is
+    not the comparison's, and a given one is then replaced."""
     from uq._models.cubic import fit_campaign
 
     if surface_fit is None:
         surface_fit = FITTERS[model](rec, seed=seed, settings=settings, stand=stand)
-    if cubic_fit is None:
+    if cubic_fit is None or force_side(rec) is not rec:
         cubic_fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 

@@ -31,6 +31,6 @@ def n50_fit(n50_recordings):
 @pytest.fixture(scope="session")
 def n50_surface(n50_recordings):
     """The surface model fitted once to the bundled campaign (the default orders and settings)."""
-    from uq._models.surface import fit_surface
+    from uq._models.surface_likelihood import fit_surface
 
     return fit_surface(n50_recordings, seed=20201)

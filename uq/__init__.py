@@ -46,7 +46,7 @@ Surface model and a margin query (``orders`` kept small for three tests):
 >>> answer = uq.margin(surface, height_m=0.112, load_N=15e3, prob=0.95)
 >>> 4.0 < answer["pressure_bar_for_prob"] < 8.0, answer["model"]["name"]
 (True, 'surface')
->>> draws = uq.SurfaceAnswer(surface).force_draws(0.112, 5.0)   # posterior draws of the force, N
+>>> draws = surface.force_draws(0.112, 5.0)   # posterior draws of the force, N (FittedModel)
 >>> draws.ndim, bool(10e3 < draws.mean() < 16e3)
 (1, True)
 
@@ -94,26 +94,29 @@ _API = {
     "write_report": "_report.campaign",
     "campaign_bands": "_derived.bands",
     "CampaignBands": "_derived.bands",
-    "fit_surface": "_models.surface",
-    "fit_thermo": "_models.thermo",
+    "fit_surface": "_models.surface_likelihood",
+    "fit_thermo": "_models.thermo_likelihood",
     "ThermoFit": "_models.thermo",
     "ThermoOrders": "_models.thermo",
     "SurfaceFit": "_models.surface",
     "Orders": "_models.surface",
+    "FittedModel": "_models.fitted",
+    "Block": "_models.fitted",
+    "LinearFit": "_models.linear_fit",
+    "CubicInterpolation": "_models.cubic_interpolation",
+    "ModelEntry": "_models.registry",
+    "register_model": ("_models.registry", "register"),
+    "model_names": ("_models.registry", "names"),
+    "load_model": ("_models.saved", "load"),
     "margin": "_derived.margin",
-    "SurfaceAnswer": "_derived.margin",
-    "save_answer": "_derived.margin",
-    "load_answer": "_derived.margin",
     "diagnose": "_diagnose.engine",
     "check": ("_derived.check", "check_documents"),
     "StandDescription": "_data.stand_description",
     "PAPER_STAND": "_data.stand_description",
     "read_stand": "_data.stand_description",
     "SealedDesign": "_derived.design",
-    "SurfaceDesignModel": "_derived.design",
     "design_document": "_derived.design",
     "design_margin": "_derived.design",
-    "ThermoDesignModel": "_derived.design",
     "simulate_sealed": "_stand.sealed_test",
 }
 

@@ -17,7 +17,8 @@ from uq._inference.loo import Loo
 from uq._inference.loo import verdict as loo_verdict
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
-from uq._models.surface import DEFAULT_ORDERS, Orders, fit_surface, summary
+from uq._models.surface import DEFAULT_ORDERS, Orders, summary
+from uq._models.surface_likelihood import fit_surface
 from uq._report.surface import figure_pressure_area, figure_spread
 from uq._stand.simulator import Layout, SmoothSurfaceSpring, simulate
 
@@ -157,7 +158,6 @@ def test_figures(n50_surface):
 
 
 def test_surface_report_section(n50_surface, tmp_path):
-    from uq._models.surface import summary
     from uq._report.surface import write_surface_report
 
     path = write_surface_report(n50_surface, summary(n50_surface), tmp_path)
@@ -335,7 +335,7 @@ NOISY_STAND = PAPER_STAND.replace(load_cell_rel_sd=0.008, pressure_holding_bar=0
 
 def test_stand_description_reaches_the_likelihood_and_priors():
     """fit_surface(stand=...) takes dp, p_atm and the prior centres from the stand, not constants."""
-    from uq._models.surface import noise_prior_mean, surface_data
+    from uq._models.surface_likelihood import noise_prior_mean, surface_data
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     stand = NOISY_STAND.replace(p_atm_bar=0.9)
@@ -400,7 +400,7 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
 
     from uq._inference.linear import linear_posterior
     from uq._models import pair
-    from uq._models import surface as S
+    from uq._models import surface_likelihood as S
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)

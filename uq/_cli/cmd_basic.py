@@ -185,7 +185,7 @@ def command_simulate(args) -> int:
         stand=stand,
     )
     if args.record_pressure:
-        tests = shapes.record_pressure(tests, args.seed)
+        tests = shapes.record_pressure(tests, args.seed, stand)
     if args.catalogue:
         tests = shapes.catalogue(
             tests,
@@ -312,9 +312,9 @@ def _shape_comment(args, volume_at, stand) -> str:
         lines.append("Shape: force only (no piston column).")
     if args.record_pressure:
         lines.append(
-            f"Pressure: measured by a sensor of {shapes.SENSOR_RESOLUTION_PA:g} Pa resolution with a gain error "
-            f"drawn once per campaign (sd {shapes.SENSOR_GAIN_SD:.1%}; this campaign's "
-            f"{shapes.sensor_gain(args.seed):+.4%}) on the held pressure p + dp."
+            f"Pressure: measured by a sensor of {stand.pressure_sensor_resolution_pa:g} Pa resolution with a "
+            f"gain error drawn once per campaign (sd {stand.pressure_sensor_gain_sd:.1%}; this campaign's "
+            f"{shapes.sensor_gain(args.seed, stand):+.4%}) on the held pressure p + dp."
         )
     if args.compression_negative:
         lines.append("Force: compression written negative (read with --compression negative).")
@@ -487,7 +487,7 @@ def command_fit(args) -> int:
         print(f"WARNING (model): {w}", file=sys.stderr)
     if args.out:  # the posteriors and fit.json whole or not at all (a full disk leaves none)
         with staged_folder(args.out, last=("fit.json",)) as stage:
-            paths = cf.save(stage)
+            paths = cf.save_posteriors(stage)
             emit_json(result, str(stage / "fit.json"))
         print(f"posteriors: {len(paths)} NetCDF files and fit.json in {args.out}")
     emit_json(result, args.json)

@@ -383,7 +383,7 @@ def _task_fit(job: dict, out: Path) -> dict:
 
     rec = _recordings(job)
     cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
-    cf.save(out)
+    cf.save_posteriors(out)
     emit_json(cf.to_json(), str(out / "fit.json"))
     return {
         "converged": cf.converged,
@@ -412,17 +412,23 @@ def _task_report(job: dict, out: Path) -> dict:
 
 def _task_surface(job: dict, out: Path) -> dict:
     from uq._io.files import emit_json
-    from uq._models.surface import fit_surface, summary
-    from uq._report.surface import write_surface_report
+    from uq._models import registry
+    from uq._report.pages import write_model_page
 
-    fit = fit_surface(_recordings(job), seed=_seed(job), settings=_settings(job), stand=_stand(job))
-    res = summary(fit)
-    page = write_surface_report(fit, res, out)
+    fit = registry.fit(
+        registry.default("surface"),
+        _recordings(job),
+        seed=_seed(job),
+        settings=_settings(job),
+        stand=_stand(job),
+    )
+    res = fit.to_json()
+    page = write_model_page(fit, res, out)
     emit_json(res, str(out / "surface.json"))
     return {
         "converged": bool(res["converged"]),
         "output": page.name,
-        "result": f"{fit.orders.label}, {fit.beta.shape[-1]} coefficients",
+        "result": f"{fit.orders_label}, {fit.n_coefficients} coefficients",
     }
 
 

@@ -89,7 +89,7 @@ def _test_from_stand(
     if recorded:
         from uq._stand.shapes import record_pressure
 
-        tests = record_pressure(tests, seed)
+        tests = record_pressure(tests, seed, stand)
     t = tests[0]
     t1 = table1()
     i = t1.index(pressure_bar)

@@ -23,9 +23,11 @@ paper's basis (a + b u + c u^2 + d u^3, SI units).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -54,8 +56,14 @@ from uq._inference.linear import (
 )
 from uq._inference.sampler import Settings
 from uq._inference.summary import estimate
+from uq._io.errors import InputError
+from uq._io.netcdf import write_netcdf_atomic
+from uq._models.cubic_interpolation import LABEL as CUBICS_LABEL
+from uq._models.cubic_interpolation import NAME as CUBICS_NAME
+from uq._models.cubic_interpolation import CubicInterpolation, TestsVerdict
 from uq._models.residual_order import ALPHA as ORDER_ALPHA
 from uq._models.residual_order import ORDER_UNKNOWN, lag_one_check, order_warnings
+from uq._models.saved import provenance_of
 from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var, to_paper_basis
 
@@ -836,28 +844,111 @@ def fit_test(
     )[0]
 
 
+def no_test_at(pressure_bar, pressures) -> InputError:
+    """The one line for a pressure no test was recorded at, naming those that were."""
+    return InputError(
+        f"pressure_bar: no test at {pressure_bar:g} bar; the tests are at "
+        f"{', '.join(f'{p:g}' for p in pressures)} bar",
+        param="pressure_bar",
+    )
+
+
 @dataclass(eq=False, frozen=True, repr=False)
 class CampaignFit:
-    """The per-pressure cubics of every test of a campaign (:func:`fit_campaign`)."""
+    """The per-pressure cubics of every test of a campaign (:func:`fit_campaign`), and the
+    campaign's :class:`uq._models.fitted.FittedModel`: between the tested pressures the cubics are
+    interpolated on fixed paired draws (:class:`uq._models.cubic_interpolation.CubicInterpolation`,
+    ``interpolation``), which answer ``force_draws``, ``volume_area_draws`` and the rest."""
 
     recordings: Recordings
     tests: list[PressureFit]
     seed: int
     stand: StandDescription = PAPER_STAND
+    provenance: dict = field(default_factory=dict)
+
+    name = CUBICS_NAME
+    label = CUBICS_LABEL
+    words = "the per-pressure cubics"
+    has_dvdp = False
+    idata = None  # one posterior per test: ``tests[i].idata``
 
     @property
     def converged(self) -> bool:
         return all(t.convergence.converged for t in self.tests)
 
+    @property
+    def convergence(self) -> TestsVerdict:
+        return TestsVerdict(tuple(self.tests))
+
+    @property
+    def seconds(self) -> float:
+        """The fit's wall time (every test in one emcee run)."""
+        return max(t.posterior.seconds for t in self.tests)
+
     def at(self, pressure_bar: float) -> PressureFit:
+        """The test at ``pressure_bar``; a pressure without a test is one line naming the tested ones."""
         for t in self.tests:
             if abs(t.pressure_bar - pressure_bar) < 1e-9:
                 return t
-        raise KeyError(pressure_bar)
+        raise no_test_at(pressure_bar, [t.pressure_bar for t in self.tests])
+
+    # ---- the FittedModel protocol, by the interpolation on fixed paired draws
+    @functools.cached_property
+    def interpolation(self) -> CubicInterpolation:
+        return CubicInterpolation.of(self)
+
+    @property
+    def height_range_m(self) -> tuple[float, float]:
+        return self.interpolation.height_range_m
+
+    @property
+    def pressure_range_bar(self) -> tuple[float, float]:
+        return self.interpolation.pressure_range_bar
+
+    @property
+    def tested_pressures_bar(self) -> np.ndarray:
+        return self.interpolation.tested_pressures_bar
+
+    @property
+    def has_volume(self) -> bool:
+        return all(t.has_piston for t in self.tests)
+
+    @property
+    def omitted_reason(self) -> str | None:
+        return self.interpolation.omitted_reason
+
+    @property
+    def n_draws(self) -> int:
+        return self.interpolation.n_draws
+
+    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
+        self.interpolation.check_range(height_m, p_bar, param)
+
+    def force_draws(self, height_m, p_bar, *, check: bool = True):
+        return self.interpolation.force_draws(height_m, p_bar, check=check)
+
+    def feff_draws(self, height_m, p_bar, *, check: bool = True):
+        return self.interpolation.feff_draws(height_m, p_bar, check=check)
+
+    def volume_area_draws(self, height_m, p_bar, *, check: bool = True):
+        return self.interpolation.volume_area_draws(height_m, p_bar, check=check)
+
+    def volume_pressure_draws(self, height_m, p_bar, *, check: bool = True):
+        return self.interpolation.volume_pressure_draws(height_m, p_bar, check=check)
+
+    def on_draws(self, n: int) -> CubicInterpolation:
+        return self.interpolation.on_draws(n)
+
+    def blocks(self):
+        return self.interpolation.blocks()
+
+    def save(self, path, **provenance):
+        """Write the campaign's interpolation (paired draws) in the one saved format."""
+        return self.interpolation.save(path, **provenance)
 
     def summary(self):
         """One row per test and coefficient: ArviZ's summary statistics (pandas DataFrame)."""
-        import pandas as pd
+        import pandas as pd  # reason: pandas only for this table
 
         return pd.concat(
             {f"{t.pressure_bar:g} bar": t.summary() for t in self.tests}, names=["test", "quantity"]
@@ -875,7 +966,7 @@ class CampaignFit:
         """The recording-order warnings of every test, each prefixed with its pressure."""
         return [f"{t.pressure_bar:g} bar: {w}" for t in self.tests for w in t.model_warnings()]
 
-    def to_json(self, advice: str = CLI_ADVICE) -> dict:
+    def to_json(self, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
         """What ``uq fit --json`` writes (docs/formats.md): per test the coefficients' and noise's
         posterior summaries, the coefficient blocks' covariance, least squares and diagnostics."""
         rec = self.recordings
@@ -890,15 +981,11 @@ class CampaignFit:
             "tests": [t.to_json(advice) for t in self.tests],
         }
 
-    def save(self, out_dir) -> list:
+    def save_posteriors(self, out_dir) -> list:
         """One NetCDF file per test (ArviZ InferenceData with posterior, log_likelihood,
         posterior_predictive and observed_data groups), made in memory and written atomically (a
-        full disk is a one-line error, not a crash inside HDF5: ``uq._io.files.netcdf_bytes``);
-        returns the paths."""
-        from pathlib import Path
-
-        from uq._io.files import write_netcdf_atomic
-
+        full disk is a one-line error, not a crash inside HDF5: ``uq._io.netcdf.netcdf_bytes``);
+        returns the paths (``uq fit --out``)."""
         out = Path(out_dir)
         return [
             write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
@@ -950,7 +1037,8 @@ def fit_campaign(
         ar1=pressure_ar1,
         piston_area_m2=getattr(recordings, "piston_area_m2", PAPER_PISTON_AREA_M2),
     )
-    return CampaignFit(recordings, fits, seed, stand)
+    prov = provenance_of(recordings, seed=seed, settings=settings, stand=stand)
+    return CampaignFit(recordings, fits, seed, stand, prov)
 
 
 # ----------------------------------------------------------------------------- the pressure-holding error

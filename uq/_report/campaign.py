@@ -24,6 +24,7 @@ from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import FIGURE_FORMATS, Figure, _plt, check_format, encode, render
+from uq._report.pages import write_model_page
 
 #: Names of the files write_report and the surface page write (uq._io.files.remove_stale prunes the rest).
 REPORT_FIGURES = tuple(
@@ -980,12 +981,9 @@ def write_report(
     # All pages and figures go to a hidden folder first and are moved in at the end, so a full
     # disk or a Ctrl-C leaves the previous report (or nothing), never part of a new one.
     with staged_folder(out, last=("surface.html", "report.html")) as stage:
-        if surface is not None:
-            from uq._models.surface import summary
-            from uq._report.surface import write_surface_report
-
-            surface_page = write_surface_report(
-                surface, summary(surface, comparison), stage, figure_format=figure_format
+        if surface is not None:  # the model's page (uq._report.pages: by the fit's class)
+            surface_page = write_model_page(
+                surface, surface.to_json(comparison), stage, figure_format=figure_format
             ).name
         n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
         with _TestFigures(cf, cb, n_jobs, figure_format) as test_figures:

@@ -93,7 +93,7 @@ QUANTITIES = (*FORCE_NAMES, "sigma0_N", "rel_force")
 def run_project(
     test: PressureTest, x0_m: float, *, seed: int, seconds: float, settings: Settings
 ) -> dict:
-    from uq._models.cubic import fit_test
+    from uq._models.cubic_fit import fit_test
 
     # JIT warm-up, not timed: a whole fit, so the draw programs of the timed runs' bucket are compiled too
     fit_test(test, x0_m, seed=seed, settings=settings)
@@ -326,7 +326,7 @@ def scaling(
     given beside the wall time; memory is the peak RSS the fit added over the RSS before it."""
     import tempfile
 
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="uq-bench-scaling-") as tmp:

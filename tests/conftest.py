@@ -23,7 +23,7 @@ def n50_recordings():
 def n50_fit(n50_recordings):
     """The bundled campaign fitted once with the default settings and seed (about 35 s)."""
     from uq._cli.common import DEFAULT_SEED
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     return fit_campaign(n50_recordings, seed=DEFAULT_SEED)
 

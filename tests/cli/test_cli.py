@@ -36,10 +36,10 @@ def no_fitting(monkeypatch):
 
     import uq._diagnose.engine
     import uq._drivers.calibrate
-    import uq._models.cubic
+    import uq._models.cubic_fit
     import uq._models.surface
 
-    monkeypatch.setattr(uq._models.cubic, "fit_campaign", forbidden)
+    monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
     monkeypatch.setattr(uq._models.surface, "fit_surface", forbidden)
     monkeypatch.setattr(uq._drivers.calibrate, "calibrate", forbidden)
     monkeypatch.setattr(uq._diagnose.engine, "diagnose", forbidden)
@@ -311,9 +311,9 @@ def test_light_constants_equal_the_library():
 
 def test_lazy_package_keeps_the_public_api():
     import uq
-    import uq._models.cubic
+    import uq._models.cubic_fit
 
-    assert uq.fit_campaign is uq._models.cubic.fit_campaign
+    assert uq.fit_campaign is uq._models.cubic_fit.fit_campaign
     assert {"fit_campaign", "read_recordings", "simulate", "InputError"} <= set(dir(uq))
     with pytest.raises(AttributeError):
         uq.no_such_thing  # noqa: B018
@@ -439,10 +439,10 @@ def test_progress_only_on_a_terminal_and_not_quiet(monkeypatch, restore_progress
     assert list(_progress.progress(range(3), desc="fits")) == [0, 1, 2]
     assert "fits" in tty.getvalue()
     _progress.set_enabled(False)  # --quiet
-    assert isinstance(_progress.progress(range(3)), _progress._Silent)
+    assert isinstance(_progress.progress(range(3)), _progress.Silent)
     _progress.set_enabled(True)
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # a pipe or a log file
-    assert isinstance(_progress.progress(range(3)), _progress._Silent)
+    assert isinstance(_progress.progress(range(3)), _progress.Silent)
 
 
 @pytest.mark.parametrize("quiet, shown", [([], True), (["--quiet"], False)])
@@ -458,7 +458,7 @@ def test_cli_quiet_switches_progress_off(monkeypatch, restore_progress, quiet, s
 
 def test_campaign_fit_shows_a_step_bar(monkeypatch, restore_progress):
     """fit_campaign samples all tests in one emcee run: one bar over its steps."""
-    import uq._models.cubic as cubic
+    import uq._models.cubic_fit as cubic
 
     seen = {}
 

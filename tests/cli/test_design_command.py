@@ -70,7 +70,7 @@ def given_fit(thermo_campaign, monkeypatch):
 @pytest.fixture
 def no_fitting(monkeypatch):
     """Every fit fails the test: bad input must be refused before any fitting."""
-    import uq._models.cubic
+    import uq._models.cubic_fit
     import uq._models.surface_likelihood
     import uq._models.thermo_likelihood
 
@@ -79,7 +79,7 @@ def no_fitting(monkeypatch):
 
     monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
     monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
-    monkeypatch.setattr(uq._models.cubic, "fit_campaign", forbidden)
+    monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
 
 
 def _truth(x_m, **kw):

@@ -160,7 +160,7 @@ def test_cubic_interpolation_coverage(tmp_path):
     from scipy import stats
 
     from uq._data.recordings import read_recordings, write_recordings_csv
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
     from uq._stand.simulator import N50Spring, simulate
 
     n = int(os.environ.get("UQ_COVERAGE_REPS", "20"))

@@ -368,14 +368,14 @@ def test_saved_fit_refuses_what_a_fit_refuses(extra, words, surface_saved, capsy
 @pytest.fixture
 def no_fitting(monkeypatch):
     import uq._cli.common
-    import uq._models.cubic
+    import uq._models.cubic_fit
     import uq._models.surface_likelihood
 
     def forbidden(*a, **k):
         raise AssertionError("read or fitted before the options were checked")
 
     for mod, name in (
-        (uq._models.cubic, "fit_campaign"),
+        (uq._models.cubic_fit, "fit_campaign"),
         (uq._models.surface_likelihood, "fit_surface"),
         (uq._cli.common, "load"),
     ):

@@ -30,6 +30,7 @@ FAST_LAYOUT = Layout(pressures_bar=(1.0, 2.5, 4.0, 5.5, 7.0, 8.5, 10.0), step_m=
 PAPER_LAYOUT = Layout()
 X_CHECK, P_CHECK = 0.100, 4.5  # between the tested pressures of both layouts
 TRUTH_ORDERS = Orders(3, 2, 2, 1, 1)  # the n50-smooth spring's own class, nested in DEFAULT_ORDERS
+NAMES = ("surface", "per-pressure cubics")
 ALPHA = 1.0e-3  # false-failure rate of each coverage test (Bonferroni over its assertions' tails)
 
 
@@ -207,14 +208,14 @@ def test_loo_verdict_uses_the_se_and_pareto_k():
     base = rng.normal(-1.0, 0.5, 400)
     noisy = rng.normal(0.0, 1.0, 400)  # a difference of about 0 +- 20: no verdict
     small = base + 0.03 + noisy  # total +12, SE about 20: within 2 SE
-    v = loo_verdict(_Loo(small), _Loo(base))
+    v = loo_verdict(_Loo(small), _Loo(base), NAMES)
     assert abs(v["elpd_diff"]) < 2 * v["elpd_diff_se"] and v["better"] == "indistinguishable", v
     clear = base + 0.5 + 0.1 * noisy  # +200 +- 2
-    assert loo_verdict(_Loo(clear), _Loo(base))["better"] == "surface"
-    assert loo_verdict(_Loo(base), _Loo(clear))["better"] == "per-pressure cubics"
+    assert loo_verdict(_Loo(clear), _Loo(base), NAMES)["better"] == "surface"
+    assert loo_verdict(_Loo(base), _Loo(clear), NAMES)["better"] == "per-pressure cubics"
     k = np.zeros(400)
     k[7] = 0.9
-    v = loo_verdict(_Loo(clear), _Loo(base, k))
+    v = loo_verdict(_Loo(clear), _Loo(base, k), NAMES)
     assert (
         v["better"] == "refused"
         and "Pareto k > 0.7" in v["reason"]

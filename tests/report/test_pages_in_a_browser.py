@@ -74,13 +74,13 @@ def test_report_page(small_cubics, tmp_path, figure_format):
 
 def _readable(*figures) -> None:
     """No title or label of these figures on another (tests/figure_text.py)."""
-    from uq._report.html import _plt
+    from uq._report.html import pyplot
 
     for fig in figures:
         try:
             assert overlaps(fig) == [], fig.axes[0].get_title()
         finally:
-            _plt().close(fig)
+            pyplot().close(fig)
 
 
 def _comparison_checks(text: str, comparison: dict, name: str) -> None:

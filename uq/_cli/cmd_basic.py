@@ -433,7 +433,7 @@ def command_fit(args) -> int:
             "give the recordings CSV (uq fit FILE.csv) or a fit definition (uq fit --config FILE.toml)"
         )
     from uq._io.files import emit_json, staged_folder
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     stand = stand_from(args)
     rec = load(args)

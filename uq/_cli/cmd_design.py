@@ -15,7 +15,7 @@ import sys
 import time
 from types import SimpleNamespace
 
-from uq._cli.common import _option_type
+from uq._cli.common import option_type
 from uq._models import registry
 
 POLYTROPIC_HELP = (
@@ -68,9 +68,9 @@ def _number_list(text: str) -> tuple[float, ...]:
     return vals
 
 
-polytropic = _option_type(_polytropic)
-dvdp = _option_type(_dvdp)
-number_list = _option_type(_number_list)
+polytropic = option_type(_polytropic)
+dvdp = option_type(_dvdp)
+number_list = option_type(_number_list)
 polytropic.__name__, dvdp.__name__, number_list.__name__ = "value or range", "L/bar", "list"
 
 

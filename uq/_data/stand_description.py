@@ -109,6 +109,10 @@ class StandDescription:
             self.pressure_holding_bar * np.minimum(1.0, p), self.pressure_holding_floor_bar
         )
 
+    def __repr__(self) -> str:
+        changed = ", ".join(f"{k}={v:g}" for k, v in self.changes().items())
+        return f"StandDescription(the paper's stand{' except ' + changed if changed else ''})"
+
     def replace(self, **changes) -> StandDescription:
         return dataclasses.replace(self, **changes)
 

@@ -46,7 +46,7 @@ from uq._inference.loo import (
 )
 from uq._inference.sampler import Settings
 from uq._models import registry
-from uq._models.cubic import collapsed_model, fit_campaign
+from uq._models.cubic_fit import collapsed_model, fit_campaign
 
 
 def _concat(parts) -> np.ndarray:

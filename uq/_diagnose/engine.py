@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._diagnose.maxwell import campaign_table
@@ -222,7 +223,7 @@ def _compare(new: Fit, old: Fit, scoring: Scoring) -> dict:
 # ----------------------------------------------------------------------------- where
 
 
-def _residuals(fit: Fit, meta: dict, d) -> dict:
+def residuals_of(fit: Fit, meta: dict, d) -> dict:
     """Posterior-mean residuals and standardised residuals of force (N) and volume (m^3)."""
     S = meta["area"]
     n = meta["force_N"].size
@@ -246,7 +247,6 @@ def _group_stats(r, z, sel, unit_scale):
     if k == 0:
         return {"n": 0}  # dropped by ``where``
     zs = z[sel]
-    from scipy.stats import chi2
 
     mean_z = float(zs.mean()) if k else 0.0
     log_p = float(chi2.logsf(np.sum(zs**2), k)) if k else 0.0
@@ -263,7 +263,7 @@ def _group_stats(r, z, sel, unit_scale):
 
 def where(fit: Fit, meta: dict, d) -> dict:
     """Where the residuals of ``fit`` sit: by pressure, height, branch and recording order."""
-    res = _residuals(fit, meta, d)
+    res = residuals_of(fit, meta, d)
     p, x, comp, step = meta["pressure_bar"], meta["height_m"], meta["compression"], meta["step"]
     edges = np.linspace(x.min(), x.max() + 1e-12, 7)
     n_steps = np.array([step[meta["test"] == i].max() + 1 for i in meta["test"]])
@@ -588,7 +588,7 @@ class Diagnosis:
     def summary(self):
         """One row per mechanism found: magnitude (mean, sd, q05, q95), unit, ELPD gain and SE,
         status (a pandas DataFrame; empty when nothing was found)."""
-        import pandas as pd
+        import pandas as pd  # reason: optional and heavy, loaded only where used
 
         rows = {
             m["name"]: {

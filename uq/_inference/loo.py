@@ -199,8 +199,9 @@ def difference(a: Loo, b: Loo) -> tuple[float, float]:
     return float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
 
 
-def verdict(a: Loo, b: Loo, names=("surface", "per-pressure cubics")) -> dict:
-    """Which model the data prefer (module docstring): a name, "indistinguishable" or "refused"."""
+def verdict(a: Loo, b: Loo, names: tuple[str, str] = ("first", "second")) -> dict:
+    """Which model the data prefer (module docstring): one of ``names``, "indistinguishable" or
+    "refused"."""
     d, se = difference(a, b)
     bad = {nm: lo.n_bad for nm, lo in zip(names, (a, b), strict=True)}
     if any(bad.values()):

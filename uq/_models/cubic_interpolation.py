@@ -115,7 +115,7 @@ class CubicInterpolation:
 
     @classmethod
     def of(cls, campaign, n_draws: int = N_DRAWS, seed: int = 0) -> CubicInterpolation:
-        """The interpolation of a :class:`uq._models.cubic.CampaignFit` on ``n_draws`` paired
+        """The interpolation of a :class:`uq._models.cubic_results.CampaignFit` on ``n_draws`` paired
         draws (``seed``: the pairing and the interpolation errors)."""
         rec = campaign.recordings
         tests = sorted(campaign.tests, key=lambda t: t.pressure_bar)

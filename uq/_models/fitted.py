@@ -108,8 +108,8 @@ class FittedModel(Protocol):
 
     def save(self, path, **provenance) -> Any:
         """Write the model atomically to ``path`` in the one saved format (NetCDF: named blocks,
-        constant data, ``uq_file_kind``, ``uq_format_version``, provenance); ``uq._models.registry.
-        load(path)`` reads it back without a refit."""
+        constant data, ``uq_file_kind``, ``uq_format_version``, provenance); ``uq._models.saved.
+        load(path)`` (``uq.load_model``) reads it back without a refit."""
 
 
 # ----------------------------------------------------------------------------- shared by the fits

@@ -169,7 +169,7 @@ def help_words(over_all_tests: bool | None = None) -> str:
 register(
     ModelEntry(
         CUBICS,
-        fit="uq._models.cubic:fit_campaign",
+        fit="uq._models.cubic_fit:fit_campaign",
         model="uq._models.cubic_interpolation:CubicInterpolation",
         words="an independent Bayesian cubic per tested pressure (eqs. 8, 9), F_eff = P/p_u "
         "interpolated linearly in pressure between the tests",

@@ -20,14 +20,14 @@ import numpy as np
 from uq._inference.summary import band
 from uq._io.files import write_bytes_atomic, write_text_atomic
 from uq._models.registry import CUBICS
-from uq._report.html import Figure, _plt, check_format, encode, render
+from uq._report.html import Figure, check_format, encode, pyplot, render
 
 
 def figure_residual_overlay(fit, model: str | None = None):
     """Readings minus the model's mean force, with its 90 % band, one panel per test (``fit``: any
     fitted model of the recordings; ``model`` names it in the legend, default its name)."""
     model = fit.name if model is None else model
-    plt = _plt()
+    plt = pyplot()
     tests = fit.recordings.tests
     n = len(tests)
     cols = min(4, n)
@@ -128,7 +128,8 @@ def preference(comparison: dict | None, name: str, what: str, notes: dict | None
     :func:`uq._derived.comparison.compare` document; ``what``: it in words, "the surface model")
     or the per-pressure cubics, and what that means for the reader: {"prefers": "model" |
     "cubics" | "neither" | "no verdict" | "not compared", "headline", "meaning", "css"}.
-    ``notes``: a model's own sentence for when the cubics ("cubics") or it ("model") is preferred."""
+    ``notes``: a model's own sentence for when the cubics (key ``CUBICS``) or it ("model") is
+    preferred."""
     notes = notes or {}
     if not comparison:
         return {
@@ -143,7 +144,7 @@ def preference(comparison: dict | None, name: str, what: str, notes: dict | None
     diff = f"ELPD difference {d:+.1f} ± {se:.1f}, {what} minus the cubics"
     if better == "per-pressure cubics":
         return {
-            "prefers": "cubics",
+            "prefers": CUBICS,
             "headline": f"The recordings prefer the per-pressure cubics to {what}: the cubics "
             f"predict left-out readings better ({diff}).",
             "meaning": f"At the tested pressures, read force and volume from the cubics (the main "
@@ -151,7 +152,7 @@ def preference(comparison: dict | None, name: str, what: str, notes: dict | None
             "recordings allow: the figures below show its trend over height and pressure, but its "
             "bands are too narrow where it misses the readings (see each test against the model), "
             "and its values between the tested pressures rest on a description the data rank "
-            "lower." + notes.get("cubics", ""),
+            "lower." + notes.get(CUBICS, ""),
             "css": "warn",
         }
     if better == name:

@@ -20,7 +20,7 @@ import numpy as np
 from uq._inference.summary import band
 from uq._io.files import write_text_atomic
 from uq._models.surface import SurfaceFit, spread_region
-from uq._report.html import _plt, check_format, render
+from uq._report.html import check_format, pyplot, render
 from uq._report.model_page import (
     comparison_rows,
     figure_residual_overlay,
@@ -32,7 +32,7 @@ from uq._report.model_page import (
 
 def figure_pressure_area(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     """Heat map of the posterior-mean pressure area F_p(x, p_u) with the 90 % band's relative width."""
-    plt = _plt()
+    plt = pyplot()
     lo, hi = fit.height_range_m
     plo, phi = fit.pressure_range_bar
     xs, ps = np.linspace(lo, hi, n_x), np.linspace(plo, phi, n_p)
@@ -58,7 +58,7 @@ def figure_pressure_area(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
 
 def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     """Heat map of the spread traditional - experimental, the credibly non-zero region outlined."""
-    plt = _plt()
+    plt = pyplot()
     reg = spread_region(fit, n_x, n_p)
     xs, ps = reg["height_m"] * 1e3, reg["pressure_bar"]
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
@@ -87,7 +87,7 @@ def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
 
 def figure_overlay(fit: SurfaceFit, pressure_bar: float, ax=None):
     """One test's force readings with the surface model's 90 % band at that pressure."""
-    plt = _plt()
+    plt = pyplot()
     t = fit.recordings.test_at(pressure_bar)
     lo, hi = fit.height_range_m
     xs = np.linspace(lo, hi, 120)

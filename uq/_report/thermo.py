@@ -21,9 +21,10 @@ import numpy as np
 
 from uq._inference.summary import band
 from uq._io.files import write_text_atomic
+from uq._models.registry import CUBICS
 from uq._models.thermo import ThermoFit
 from uq._physics.quantities import BAR_PA
-from uq._report.html import _plt, check_format, render
+from uq._report.html import check_format, pyplot, render
 from uq._report.model_page import (
     comparison_rows,
     figure_residual_overlay,
@@ -35,7 +36,7 @@ from uq._report.model_page import (
 PAGE = "thermodynamic.html"
 #: what the preference means for a model that ties force and volume through one potential
 PHYSICS_NOTES = {
-    "cubics": " The thermodynamic model ties force and volume through one potential (the Maxwell "
+    CUBICS: " The thermodynamic model ties force and volume through one potential (the Maxwell "
     "relation dP/dp_u = dV/dx); recordings that break it (relaxation, hysteresis: the Maxwell "
     "table of uq diagnose) or need higher orders (--select) are fitted better by the cubics, "
     "which tie nothing.",
@@ -55,7 +56,7 @@ def _grid(fit: ThermoFit, n: int):
 def figure_areas(fit: ThermoFit):
     """Per test: the effective area from the force, F_eff = P/p_u (eq. 1), and from the volume,
     dV/dx (eq. 1, second formula), with their 90 % bands, and the readings' P/p_u."""
-    plt = _plt()
+    plt = pyplot()
     tests = fit.recordings.tests
     n = len(tests)
     cols = min(4, n)
@@ -115,7 +116,7 @@ def figure_maxwell(fit: ThermoFit, region: dict | None = None):
     """Heat map of the Maxwell ratio over height and pressure, centred on 1, the region where its
     90 % band excludes 1 outlined; the colour scale is clipped at the 98th percentile of |r - 1|
     (P/p_u near zero, at low pressure and full height, makes the ratio run away there)."""
-    plt = _plt()
+    plt = pyplot()
     reg = region or maxwell_region(fit)
     xs, ps, m = reg["height_m"] * 1e3, reg["pressure_bar"], reg["mean"]
     fig, ax = plt.subplots(figsize=(7.2, 4.8), layout="constrained")
@@ -143,7 +144,7 @@ def figure_maxwell(fit: ThermoFit, region: dict | None = None):
 
 def figure_piston_area(fit: ThermoFit):
     """The posterior of the piston area the recordings imply, S / (1 + m), against the given S."""
-    plt = _plt()
+    plt = pyplot()
     draws = fit.piston_area_draws() * 1e4
     given = fit.geometry.area_m2 * 1e4
     q05, q95 = np.quantile(draws, [0.05, 0.95])

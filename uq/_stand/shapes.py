@@ -18,8 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from uq._data.recordings import recordings_from_text
 from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._data.writing import write_recordings_csv
 from uq._physics.quantities import BAR_PA
+from uq._stand.simulator import PAPER_PISTON_AREA_M2, SPRINGS, Layout, simulate, true_curves
 
 #: The pressure sensor of ``--record-pressure`` is the stand's (``StandDescription.
 #: pressure_sensor_*``; the paper's resolves 1 Pa and is accurate to 0.1 %, section 3.2): a reading
@@ -80,7 +83,6 @@ def catalogue(
     stand, not a property of the element), noise-free: a catalogue prints a smoothed value, rounded.
     V(x_max) is the stand's element volume (4.2 L for the paper's stand, assumed).
     """
-    from uq._stand.simulator import SPRINGS, true_curves
 
     spring = (
         SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
@@ -131,10 +133,6 @@ def catalogue_recordings(
     ``uq simulate --catalogue [--volume-at-bar P]`` writes (the same tests, cut and rounded the
     same way) and a reader reads. ``volume_at_bar``: default the middle pressure, as the command;
     ``layout`` default: the paper's pressures, 10 mm steps."""
-    from uq._data.recordings import recordings_from_text
-    from uq._data.stand_description import PAPER_STAND
-    from uq._data.writing import write_recordings_csv
-    from uq._stand.simulator import PAPER_PISTON_AREA_M2, Layout, simulate
 
     stand = PAPER_STAND if stand is None else stand
     area = PAPER_PISTON_AREA_M2 if piston_area_m2 is None else piston_area_m2

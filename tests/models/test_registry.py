@@ -236,3 +236,27 @@ def test_unknown_model_names_the_known_ones():
 
     with pytest.raises(InputError, match="unknown model 'nope'; the registered models are cubics"):
         registry.entry("nope")
+
+
+def test_a_saved_model_is_loaded_and_queried_without_jax(n50_surface, n50_fit, tmp_path):
+    """The fitted objects are numpy: a saved surface and the saved cubics are loaded and answer a
+    margin and the sealed spring in a fresh interpreter that imports no JAX, ArviZ or optimistix."""
+    import subprocess
+    import sys
+
+    n50_surface.save(tmp_path / "surface.nc")
+    n50_fit.save(tmp_path / "cubics.nc")
+    code = (
+        "import sys\n"
+        "from uq._derived.design import SealedDesign, design_point\n"
+        "from uq._derived.margin import margin\n"
+        "from uq._models.saved import load\n"
+        f"for name in ('surface', 'cubics'):\n"
+        f"    m = load({str(tmp_path)!r} + '/' + name + '.nc')\n"
+        "    assert margin(m, 0.112, 13020.0)['pressure_bar_needed']['mean'] > 4.0\n"
+        "    design_point(m.on_draws(200), SealedDesign(0.112, 5.0, 3.4))\n"
+        "print(sorted(k for k in ('jax', 'arviz', 'optimistix', 'emcee') if k in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "[]"

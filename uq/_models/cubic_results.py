@@ -31,6 +31,14 @@ NOISE_NAMES = ("sigma0_N", "rel_force", "sigma_L_m")
 FORCE_NOISE_NAMES = NOISE_NAMES[:2]
 AR_EXTRA_NAMES = ("k_p", "V_gas_m3", "rho")
 MEASURED_EXTRA_NAMES = ("V_gas_m3", "pressure_offset_Pa")
+#: what a campaign fit answers by its interpolation on fixed paired draws (CampaignFit.__getattr__)
+PROTOCOL = frozenset(
+    (
+        "height_range_m pressure_range_bar tested_pressures_bar has_volume omitted_reason n_draws "
+        "check_range force_draws feff_draws volume_area_draws volume_pressure_draws on_draws "
+        "blocks save"
+    ).split()
+)
 #: Why a force-only test has no piston block (``uq fit --json``'s "omitted", the report's line).
 NO_VOLUME = (
     "force-only test: no piston_* or volume_* column, so no piston coordinate, volume increment "
@@ -306,54 +314,12 @@ class CampaignFit:
     def interpolation(self) -> CubicInterpolation:
         return CubicInterpolation.of(self)
 
-    @property
-    def height_range_m(self) -> tuple[float, float]:
-        return self.interpolation.height_range_m
-
-    @property
-    def pressure_range_bar(self) -> tuple[float, float]:
-        return self.interpolation.pressure_range_bar
-
-    @property
-    def tested_pressures_bar(self) -> np.ndarray:
-        return self.interpolation.tested_pressures_bar
-
-    @property
-    def has_volume(self) -> bool:
-        return all(t.has_piston for t in self.tests)
-
-    @property
-    def omitted_reason(self) -> str | None:
-        return self.interpolation.omitted_reason
-
-    @property
-    def n_draws(self) -> int:
-        return self.interpolation.n_draws
-
-    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
-        self.interpolation.check_range(height_m, p_bar, param)
-
-    def force_draws(self, height_m, p_bar, *, check: bool = True):
-        return self.interpolation.force_draws(height_m, p_bar, check=check)
-
-    def feff_draws(self, height_m, p_bar, *, check: bool = True):
-        return self.interpolation.feff_draws(height_m, p_bar, check=check)
-
-    def volume_area_draws(self, height_m, p_bar, *, check: bool = True):
-        return self.interpolation.volume_area_draws(height_m, p_bar, check=check)
-
-    def volume_pressure_draws(self, height_m, p_bar, *, check: bool = True):
-        return self.interpolation.volume_pressure_draws(height_m, p_bar, check=check)
-
-    def on_draws(self, n: int) -> CubicInterpolation:
-        return self.interpolation.on_draws(n)
-
-    def blocks(self):
-        return self.interpolation.blocks()
-
-    def save(self, path, **provenance):
-        """Write the campaign's interpolation (paired draws) in the one saved format."""
-        return self.interpolation.save(path, **provenance)
+    def __getattr__(self, name: str):
+        """The rest of the protocol (``PROTOCOL``: the draws, ranges, ``on_draws``, ``blocks``,
+        ``save``) is the interpolation's."""
+        if name not in PROTOCOL:
+            raise AttributeError(f"'CampaignFit' object has no attribute '{name}'")
+        return getattr(self.interpolation, name)
 
     def summary(self):
         """One row per test and coefficient: ArviZ's summary statistics (pandas DataFrame)."""

@@ -54,7 +54,6 @@ TRAVEL_PRIOR_SD = 0.3  # log(1 + m): the piston area is known to about 30 % a pr
 #: what the likelihood reports besides the potential: the noise (uq._models.pair.NATURAL_NAMES),
 #: the travel factor and the piston area it implies
 NATURAL_NAMES = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3")
-LEVEL = 0.90
 
 
 @dataclass(frozen=True)
@@ -240,17 +239,6 @@ class ThermoFit(LinearFit):
         """The piston area the recordings imply, S / (1 + m), m^2, on the fixed draws."""
         a = np.asarray(self.reported["piston_area_m2"], float)
         return thin_rows(a.reshape(-1), self.max_draws)
-
-    def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
-        """Pointwise 90 % bands of force, F_eff = P/p_u and dV/dx (refuses extrapolation)."""
-        return {
-            name: self.band(fn, height_m, p_bar, level)
-            for name, fn in (
-                ("force_N", self.force_draws),
-                ("feff_m2", self.feff_draws),
-                ("volume_area_m2", self.volume_area_draws),
-            )
-        }
 
     def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
         """What ``uq surface --model thermodynamic --json`` writes (docs/formats.md)."""

@@ -182,6 +182,21 @@ def test_compare_with_cubics(n50_surface, n50_fit):
         assert abs(c["elpd_diff"]) > 2 * c["elpd_diff_se"]
 
 
+@pytest.mark.slow  # minutes: 10 Laplace refits of the surface, 110 of the cubics; the policy itself
+# is carried by tests/inference/test_loo.py and the engine's K-fold by tests/diagnose/test_diagnose.py
+def test_comparison_beyond_the_refit_limit_is_kfold_of_both(n50_surface, n50_fit, monkeypatch):
+    """Every PSIS term made unreliable (Pareto k threshold 0): more than MAX_REFITS of them, so
+    both models are scored by 10-fold cross-validation on the same folds, and the verdict agrees
+    with PSIS-LOO's on n50 (the cubics, by far)."""
+    from uq._inference import loo
+
+    psis_verdict = compare_with_cubics(n50_surface, n50_fit)["better"]
+    monkeypatch.setattr(loo, "PARETO_K_MAX", 0.0)
+    c = compare_with_cubics(n50_surface, n50_fit, seed=1)
+    assert "here: 10-fold cross-validation" in c["method"]
+    assert c["cubics"]["n_pareto_k_above_0.7"] == 0 and c["better"] == psis_verdict
+
+
 def test_exact_refit_agrees_with_integrated_psis_where_k_is_low(n50_fit):
     """The exact refit used for high-k cubic readings (the test refitted with the reading held
     out) gives the same ELPD as the integrated PSIS-LOO for a reading whose k is low

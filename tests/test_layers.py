@@ -322,3 +322,14 @@ def test_imports_are_at_the_top_outside_the_command_line():
                     found.append(f"uq/{rel}:{node.lineno} {', '.join(m or '' for m in mods)}")
     found = sorted(set(found))
     assert not found, "function-level imports:\n" + "\n".join(found)
+
+
+def test_the_models_and_the_inference_do_not_import_the_virtual_stand():
+    """The likelihoods take a stand's description (uq._data.stand_description: its error budget,
+    its pressure sensor), never the virtual stand that makes recordings."""
+    bad = [
+        f"{a} -> {b}: {', '.join(w)}"
+        for (a, b), w in import_graph().items()
+        if a.split(".")[0] in ("_inference", "_models") and b.startswith("_stand")
+    ]
+    assert not bad, "\n".join(bad)

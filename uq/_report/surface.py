@@ -85,26 +85,6 @@ def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     return fig
 
 
-def figure_overlay(fit: SurfaceFit, pressure_bar: float, ax=None):
-    """One test's force readings with the surface model's 90 % band at that pressure."""
-    plt = pyplot()
-    t = fit.recordings.test_at(pressure_bar)
-    lo, hi = fit.height_range_m
-    xs = np.linspace(lo, hi, 120)
-    m, lo_b, hi_b = band(fit.on_draws(2000).force_draws(xs, pressure_bar), axis=0)
-    fig = None
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(6.0, 4.0))
-    ax.fill_between(xs * 1e3, lo_b, hi_b, alpha=0.35, label="surface model 90 % band")
-    ax.plot(xs * 1e3, m, lw=1)
-    ax.plot(t.height_m * 1e3, t.force_N, "k.", ms=3, label="readings")
-    ax.set_xlabel("height x, mm")
-    ax.set_ylabel("force P, N")
-    ax.set_title(f"{pressure_bar:g} bar")
-    ax.legend(fontsize=7)
-    return fig if fig is not None else ax.figure
-
-
 # ----------------------------------------------------------------------------- the page
 
 

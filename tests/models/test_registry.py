@@ -260,3 +260,16 @@ def test_a_saved_model_is_loaded_and_queried_without_jax(n50_surface, n50_fit, t
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == "[]"
+
+
+def test_a_file_of_a_model_no_longer_registered_is_refused_in_one_line(
+    plugged, n50_recordings, tmp_path
+):
+    from uq._io.errors import InputError
+    from uq._models.saved import load
+
+    path = fit_traditional(n50_recordings, seed=2).save(tmp_path / "t.nc")
+    assert load(path).name == NAME
+    registry.unregister(NAME)
+    with pytest.raises(InputError, match=f"holds the model '{NAME}', which no registered model is"):
+        load(path)

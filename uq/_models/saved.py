@@ -144,7 +144,14 @@ def load(path):
     """The fitted model a file of ``save`` holds, by the class its registry entry names (no refit,
     no JAX); a file that is not a saved model, or is damaged, is one line naming it."""
     attrs, groups = read(path)
-    kind = registry.entry(str(attrs.get("model", ""))).model_class()
+    name = str(attrs.get("model", ""))
+    if name not in registry.names():
+        raise InputError(
+            f"{path}: holds the model '{name}', which no registered model is (a model plugged in "
+            f"from outside: install or register it); the registered ones are "
+            f"{', '.join(registry.names())}"
+        )
+    kind = registry.entry(name).model_class()
     try:
         return kind.from_saved(attrs, groups)
     except Exception as exc:  # a damaged or hand-edited file: say so in one line

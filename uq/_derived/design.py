@@ -459,8 +459,12 @@ def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -
     xs = np.asarray(heights_m, float)
     lo, hi = model.height_range_m
     has_volume = model.has_volume
-    if has_volume:  # a fine grid through the table's heights and the reference, for the integral
-        fine = np.unique(np.concatenate([np.linspace(lo, hi, 91), xs, [reference_height_m]]))
+    if has_volume:  # a fine grid through the table's heights and the reference, for the integral;
+        # heights equal to 1 nm are one knot (0.07 and 0.07000000000000001 as two knots 1e-17 m
+        # apart made the spline's integral lose five digits)
+        fine = np.unique(
+            np.round(np.concatenate([np.linspace(lo, hi, 91), xs, [reference_height_m]]), 9)
+        )
     rows = []
     for p in np.asarray(pressures_bar, float):
         P = np.asarray(model.force_draws(xs, np.full(xs.shape, p)), float)
@@ -468,7 +472,7 @@ def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -
             A = np.asarray(model.volume_area_draws(fine, np.full(fine.shape, p)), float)
             anti = CubicSpline(fine, A, axis=1).antiderivative()
             dV = anti(xs) - anti(np.array([reference_height_m]))
-            A_at = A[:, np.searchsorted(fine, xs)]
+            A_at = A[:, np.searchsorted(fine, np.round(xs, 9))]
         for j, x in enumerate(xs):
             row = {
                 "pressure_bar": float(p),

@@ -37,10 +37,12 @@ def no_fitting(monkeypatch):
     import uq._diagnose.engine
     import uq._drivers.calibrate
     import uq._models.cubic_fit
-    import uq._models.surface
+    import uq._models.surface_likelihood
+    import uq._models.thermo_likelihood
 
     monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
-    monkeypatch.setattr(uq._models.surface, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
     monkeypatch.setattr(uq._drivers.calibrate, "calibrate", forbidden)
     monkeypatch.setattr(uq._diagnose.engine, "diagnose", forbidden)
 
@@ -128,10 +130,12 @@ def test_bad_usage_exits_2_with_one_line_before_any_work(row, tmp_path, capsys, 
 def test_margin_prob_refused_before_reading_or_fitting(monkeypatch, capsys):
     """The issue's example: --prob 1.5 used to fail only after 30 s of fitting."""
     import uq._cli.common
-    import uq._models.surface
+    import uq._models.surface_likelihood
 
     calls = []
-    monkeypatch.setattr(uq._models.surface, "fit_surface", lambda *a, **k: calls.append("fit"))
+    monkeypatch.setattr(
+        uq._models.surface_likelihood, "fit_surface", lambda *a, **k: calls.append("fit")
+    )
     monkeypatch.setattr(uq._cli.common, "load", lambda *a, **k: calls.append("load"))
     assert run(["margin", N50, "--height-mm", 112, "--load-N", 13020, "--prob", 1.5]) == 2
     assert calls == []
@@ -467,11 +471,10 @@ def test_campaign_fit_shows_a_step_bar(monkeypatch, restore_progress):
         return list(tests)
 
     class Rec:
-        tests = ["t1", "t2", "t3"]
-        x0_m = 0.112
+        path, tests, x0_m, piston_area_m2 = "r.csv", ["t1", "t2", "t3"], 0.112, 54.82e-4
 
     monkeypatch.setattr(cubic, "fit_tests", fake_fit_tests)
-    monkeypatch.setattr(cubic, "CampaignFit", lambda rec, fits, seed, stand: fits)
+    monkeypatch.setattr(cubic, "CampaignFit", lambda rec, fits, seed, stand, prov: fits)
     assert cubic.fit_campaign(Rec(), seed=1) == ["t1", "t2", "t3"]
     assert seen["desc"] == "sampling all tests"
 

@@ -445,7 +445,7 @@ def test_surface_model_uses_the_measured_pressure(tmp_path):
     from uq._cli.main import main
     from uq._data.recordings import read_recordings
     from uq._models import pair
-    from uq._models.surface import fit_surface
+    from uq._models.surface_likelihood import fit_surface
 
     common = ["simulate", "--seed", "4", "--pressures", "1,2,4,6,8,10", "--step-mm", "10"]
     main([*common, "--out", str(tmp_path / "set.csv")])
@@ -458,10 +458,10 @@ def test_surface_model_uses_the_measured_pressure(tmp_path):
     settings = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)
     plain = fit_surface(rec_set, seed=1, settings=settings)
     meas = fit_surface(rec_meas, seed=1, settings=settings)
-    sd_plain = plain.flat_beta().std(0)
-    sd_meas = meas.flat_beta().std(0)
+    sd_plain = plain.coef.std(0)
+    sd_meas = meas.coef.std(0)
     assert np.median(sd_meas / sd_plain) < 0.7
-    V0 = np.exp(meas.theta.reshape(-1, meas.theta.shape[-1])[:, 4])
+    V0 = np.exp(meas.posterior.theta.reshape(-1, meas.posterior.theta.shape[-1])[:, 4])
     assert abs(np.median(V0) / PAPER_STAND.gas_volume_at_xmax_m3 - 1) < 0.1
 
 

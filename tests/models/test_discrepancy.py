@@ -216,3 +216,21 @@ def test_grid_nodes_leave_out_tested_pressures():
     assert np.min(np.abs(g - 2.5)) > 0.02
     nodes = np.sort(np.r_[g, 1.0, 2.5, 10.0])
     assert np.all(np.diff(g) > 0) and np.diff(nodes).max() <= gp.GRID_STEP_BAR + 1e-12
+
+
+@pytest.mark.parametrize("which", ["pair", "force"])
+def test_exact_draws_have_the_posterior_law(which, tiny, tiny_force):
+    """The draws (Matheron's rule in the Z-space) are affine in their normals: at zero they give the
+    posterior mean, and their Jacobian J has J J^T = the posterior covariance, both of the (K x K)
+    Gram route."""
+    import jax
+
+    _, d = tiny if which == "pair" else tiny_force
+    theta = theta_of(d)
+    post = dm.posterior(theta, d)
+    K = dm.n_coefficients(d)
+    e0 = jnp.zeros(K + d.A.shape[0] * d.A.shape[1])
+    np.testing.assert_allclose(dm.draw_from_normals(theta, e0, d), post.mean, rtol=1e-7, atol=1e-9)
+    J = np.asarray(jax.jacfwd(lambda e: dm.draw_from_normals(theta, e, d))(e0))
+    Linv = np.linalg.inv(np.asarray(post.chol))
+    np.testing.assert_allclose(J @ J.T, Linv.T @ Linv, rtol=1e-6, atol=1e-10)

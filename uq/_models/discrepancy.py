@@ -28,8 +28,11 @@ coefficients map to each test's Z-coefficients by gamma_i = A_i beta + D_i v_i(t
 fixed (least squares from the surface's design rows at the test's heights, the residual checked
 to be zero when the data are built), D_i the deviations' columns. The Gram matrix is then
 sum_i C_i^T H_i C_i + I over the surface's and the deviations' coefficients (139 for data/n50):
-the same matrix as the dense design's X^T W X (tests/models/test_discrepancy.py), at a cost
-independent of the number of readings.
+the same matrix as the dense design's X^T W X, at a cost independent of the number of readings;
+and by Woodbury's identity it is never factored: the one Cholesky factor per theta is of the
+(T m x T m) matrix I + R P R^T (P = C C^T, H_i = R_i^T R_i), for the density, the exact draws
+(Matheron's rule) and the leave-one-out densities alike (``span_posterior``; tested against the
+dense design and against brute-force Gaussian integration in tests/models/test_discrepancy.py).
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import LOG_2PI, draw_exact, gaussian_loglik, posterior_from_moments
+from uq._inference.linear import LOG_2PI, gaussian_loglik, posterior_from_moments
 from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
@@ -364,18 +367,28 @@ def prior_span_cov(theta, d):
     return d.AAt + jnp.einsum("ij,iac,c,jbc->ijab", R, d.D, g2, d.D)
 
 
-def log_marginal(theta, d):
-    """log p(readings | theta), every coefficient integrated out, in the tests' Z-space.
+class SpanPosterior(NamedTuple):
+    """The posterior given theta, in the tests' Z-space (``span_posterior``)."""
+
+    Rt: jnp.ndarray  # (T, m, m) lower Cholesky factors of H_i (R_i = Rt_i^T)
+    u: jnp.ndarray  # (T, m) R^-T b
+    P: jnp.ndarray  # (T, T, m, m) prior covariance of the Z-coefficients
+    Lm: jnp.ndarray  # (T m, T m) lower Cholesky factor of M = I + R P R^T
+    log_marginal: jnp.ndarray  # () log p(readings | theta)
+
+
+def span_posterior(theta, d) -> SpanPosterior:
+    """The coefficients' posterior given theta, in the tests' Z-space.
 
     With H_i = R_i^T R_i (Cholesky) and B = R C: det(I + C^T H C) = det(I + B B^T) and
-    b^T C (I + C^T H C)^-1 C^T b = |u|^2 - u^T (I + B B^T)^-1 u, u = R^-T b, so the Cholesky is of
-    the (T m x T m) matrix I + R P R^T (99 for data/n50) instead of the (K x K) Gram (139).
-    Equal to ``posterior(theta, d).log_marginal`` (tests/models/test_discrepancy.py); needs every
-    H_i positive definite, which the data's check of the heights per test ensures."""
+    b^T C (I + C^T H C)^-1 C^T b = |u|^2 - u^T (I + B B^T)^-1 u, u = R^-T b, so the one Cholesky
+    factor is of the (T m x T m) matrix M = I + R P R^T (99 for data/n50), P = C C^T, not of the
+    (K x K) Gram (139). Needs every H_i positive definite, which the fit's check of the heights per
+    test ensures."""
     noise, _, _ = _split(theta, d)
     H, bvec, yy, n, log_det = moments(noise, d)
-    Rt = jnp.linalg.cholesky(H)  # (T, m, m) lower: H_i = Rt_i Rt_i^T, R_i = Rt_i^T
-    u = jax.scipy.linalg.solve_triangular(Rt, bvec[..., None], lower=True)[..., 0]  # R^-T b
+    Rt = jnp.linalg.cholesky(H)
+    u = jax.scipy.linalg.solve_triangular(Rt, bvec[..., None], lower=True)[..., 0]
     P = prior_span_cov(theta, d)
     T, m = bvec.shape
     RPR = jnp.einsum("iba,ijbc,jcd->iajd", Rt, P, Rt).reshape(T * m, T * m)
@@ -383,18 +396,61 @@ def log_marginal(theta, d):
     v = jax.scipy.linalg.solve_triangular(Lm, u.reshape(-1), lower=True)
     quad = yy - (jnp.sum(u**2) - jnp.sum(v**2))
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(Lm)))
-    return -0.5 * (quad + log_det + logdet + n * LOG_2PI)
+    return SpanPosterior(Rt, u, P, Lm, -0.5 * (quad + log_det + logdet + n * LOG_2PI))
+
+
+def log_marginal(theta, d):
+    """log p(readings | theta), every coefficient integrated out (``span_posterior``)."""
+    return span_posterior(theta, d).log_marginal
 
 
 def posterior(theta, d):
-    """The coefficients' Gaussian posterior given theta (uq._inference.linear.LinearPosterior)."""
+    """The (K x K) Gaussian posterior of the coefficients given theta from the Gram matrix
+    sum_i C_i^T H_i C_i + I (uq._inference.linear.LinearPosterior): the direct route, which the
+    tests hold ``span_posterior`` to; the fit never forms it."""
     noise, _, _ = _split(theta, d)
     H, bvec, yy, n, log_det = moments(noise, d)
     C = coefficient_map(theta, d)
-    HC = jnp.einsum("iab,ibl->ial", H, C)
-    gram = jnp.einsum("iak,ial->kl", C, HC)
+    gram = jnp.einsum("iak,ial->kl", C, jnp.einsum("iab,ibl->ial", H, C))
     rhs = jnp.einsum("iak,ia->k", C, bvec)
     return posterior_from_moments(gram, rhs, yy, n, log_det, jnp.ones(C.shape[2]))
+
+
+def _apply_Rt(Rt, x):
+    """R^T x per test, (T, m): Rt_i x_i."""
+    return jnp.einsum("iab,ib->ia", Rt, x)
+
+
+def draw_from_normals(theta, e, d):
+    """An exact posterior draw of the coefficients from standard normals ``e`` (K + T m,) by
+    conditioning a prior draw (Matheron's rule): beta = beta0 + B^T M^-1 (u - B beta0 - xi) with
+    beta0 = e[:K], xi = e[K:], B = R C; its mean is B^T M^-1 u = (I + C^T H C)^-1 C^T b and its
+    covariance I - B^T M^-1 B = (I + C^T H C)^-1. e = 0 gives the posterior mean."""
+    post = span_posterior(theta, d)
+    C = coefficient_map(theta, d)
+    T, m, K = C.shape
+    beta0, xi = e[:K], e[K:].reshape(T, m)
+    Bb = jnp.einsum("iba,ib->ia", post.Rt, jnp.einsum("iak,k->ia", C, beta0))  # R C beta0
+    w = jax.scipy.linalg.cho_solve((post.Lm, True), (post.u - Bb - xi).reshape(-1))
+    return beta0 + jnp.einsum("iak,ia->k", C, _apply_Rt(post.Rt, w.reshape(T, m)))
+
+
+def draw_linear(theta, key, d):
+    T, m = d.A.shape[:2]
+    return draw_from_normals(theta, jax.random.normal(key, (n_coefficients(d) + T * m,)), d)
+
+
+def span_moments(theta, d):
+    """The posterior mean of every test's Z-coefficients (T, m) and the diagonal blocks G_i (T, m, m)
+    of their posterior covariance: C m = P R^T M^-1 u and P - P R^T M^-1 R P (Woodbury)."""
+    post = span_posterior(theta, d)
+    T, m = post.u.shape
+    w = jax.scipy.linalg.cho_solve((post.Lm, True), post.u.reshape(-1)).reshape(T, m)
+    mean = jnp.einsum("ijab,jb->ia", post.P, _apply_Rt(post.Rt, w))
+    RP = jnp.einsum("iba,ijbc->iajc", post.Rt, post.P).reshape(T * m, T * m)
+    Q = jax.scipy.linalg.solve_triangular(post.Lm, RP, lower=True).reshape(T * m, T, m)
+    G = jnp.einsum("iiab->iab", post.P) - jnp.einsum("kia,kib->iab", Q, Q)
+    return mean, G
 
 
 # ----------------------------------------------------------------------------- the model's functions
@@ -412,10 +468,6 @@ def log_prior(theta, d):
 def log_prob(theta, d):
     """log p(theta | readings), every coefficient integrated out; theta (8,) or (5,)."""
     return log_prior(theta, d) + log_marginal(theta, d)
-
-
-def draw_linear(theta, key, d):
-    return draw_exact(posterior(theta, d), key)
 
 
 def z_means(theta, beta, d):
@@ -458,15 +510,11 @@ def pointwise(theta, beta, d):
 
 def pointwise_loo(theta, d):
     """log p(reading_i | theta, the other readings), every coefficient integrated out exactly (n,):
-    the leverages come from G_i = C_i A^-1 C_i^T (m x m per test), not from the (2n x K) design."""
+    the leverages come from the posterior covariance's per-test blocks G_i (``span_moments``), not
+    from the (2n x K) design."""
     noise, _, _ = _split(theta, d)
-    post = posterior(theta, d)
-    C = coefficient_map(theta, d)
-    T, m, K = C.shape
-    W = jax.scipy.linalg.solve_triangular(post.chol, C.transpose(2, 0, 1).reshape(K, T * m), lower=True)
-    W = W.reshape(K, T, m)
-    G = jnp.einsum("kia,kib->iab", W, W)[d.test]  # (n, m, m)
-    gam = jnp.einsum("iak,k->ia", C, post.mean)[d.test]
+    gam, G = span_moments(theta, d)
+    gam, G = gam[d.test], G[d.test]
     zf, zl = _rows(d)
     if not has_piston(d):
         sigma, y = _force_sigma_y(noise, d)

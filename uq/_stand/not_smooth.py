@@ -99,9 +99,12 @@ class NotSmoothSpring(ThermoSpring):
         ) * self.extra_dh(p_bar)
 
     def potential_J(self, height_m, p_bar):
-        return super().potential_J(height_m, p_bar) - self.extra_volume_m3(
-            height_m
-        ) * self.extra_h_pa(p_bar)
+        """G = G_thermo - W(x) h(p_u), J (the thermodynamic part takes V0 = V(x, 0), which here
+        holds W(x) h'(0): taken back out)."""
+        w_vol = self.extra_volume_m3(height_m)
+        pa = np.asarray(p_bar, float) * BAR_PA
+        thermo = super().potential_J(height_m, p_bar) + pa * w_vol * self.extra_dh(0.0)
+        return thermo - w_vol * self.extra_h_pa(p_bar)
 
 
 class KinkSpring(NotSmoothSpring):

@@ -33,7 +33,9 @@ def tiny():
 
 @pytest.fixture(scope="module")
 def tiny_force():
-    rec = catalogue_recordings("n50", seed=4, layout=Layout(pressures_bar=(3.0, 5.0, 7.0), step_m=0.015))
+    rec = catalogue_recordings(
+        "n50", seed=4, layout=Layout(pressures_bar=(3.0, 5.0, 7.0), step_m=0.015)
+    )
     return rec, dm.force_dev_data(rec, FORCE_ORDERS)
 
 
@@ -120,8 +122,12 @@ def test_collapsed_density_equals_dense_and_brute_force(which, tiny, tiny_force)
     assert float(post.log_marginal) == pytest.approx(brute, abs=1e-6)
     Lc = np.linalg.cholesky(cov)
     Xw, yw = np.linalg.solve(Lc, X), np.linalg.solve(Lc, y)
-    dense = linear_posterior(jnp.asarray(Xw), jnp.asarray(yw), jnp.ones(y.size), jnp.ones(X.shape[1]))
-    np.testing.assert_allclose(post.mean, dense.mean, rtol=1e-7, atol=1e-9 * np.abs(dense.mean).max())
+    dense = linear_posterior(
+        jnp.asarray(Xw), jnp.asarray(yw), jnp.ones(y.size), jnp.ones(X.shape[1])
+    )
+    np.testing.assert_allclose(
+        post.mean, dense.mean, rtol=1e-7, atol=1e-9 * np.abs(dense.mean).max()
+    )
 
 
 @pytest.mark.parametrize("which", ["pair", "force"])
@@ -234,3 +240,89 @@ def test_exact_draws_have_the_posterior_law(which, tiny, tiny_force):
     J = np.asarray(jax.jacfwd(lambda e: dm.draw_from_normals(theta, e, d))(e0))
     Linv = np.linalg.inv(np.asarray(post.chol))
     np.testing.assert_allclose(J @ J.T, Linv.T @ Linv, rtol=1e-6, atol=1e-10)
+
+
+# ----------------------------------------------------------------------------- the fitted model
+
+
+@pytest.fixture(scope="module")
+def small_fit():
+    """A 4-test campaign of the kinked spring, fitted with a short run (the draws' plumbing, not
+    the posterior's quality, is under test here)."""
+    from uq._inference.sampler import Settings
+    from uq._stand.simulator import simulate_recordings
+
+    rec = simulate_recordings(
+        "n50-kink", seed=11, layout=Layout(pressures_bar=(2.0, 4.0, 6.0, 8.0), step_m=0.015)
+    )
+    return dm.fit_discrepancy(
+        rec, seed=3, settings=Settings(n_walkers=16, n_ensembles=2, max_steps=200), max_draws=400
+    )
+
+
+def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
+    """The same draws on every call and on thinned views; each draw's force is a continuous curve
+    in pressure (at every node, tested or virtual, its value from the left and from the right
+    agree); at a tested pressure the force is the surface's plus p_u times the draw's deviation
+    there."""
+    fit = small_fit
+    ps = np.linspace(2.0, 8.0, 801)
+    h = np.full(801, 0.15)
+    F1 = fit.force_draws(h, ps)
+    np.testing.assert_array_equal(F1, fit.force_draws(h, ps))
+    half = fit.on_draws(fit.n_draws // 2)
+    rows = np.searchsorted(fit.rows, half.rows)
+    assert np.all(fit.rows[rows] == half.rows)
+    np.testing.assert_allclose(half.force_draws(h, ps), F1[rows], rtol=1e-12)
+    nodes = fit.nodes[0][1:-1]
+    eps = 1e-9
+    below = fit.deviation_draws(np.full(nodes.size, 0.15), nodes - eps)
+    above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps)
+    scale = np.abs(fit.tested_deviations).max()
+    assert np.abs(above - below).max() < 1e-6 * scale
+    base = fit.surface_view.force_draws(0.15, 4.0, beta=fit.surface_beta)
+    t = fit.geometry.t(0.15)
+    dev = fit.tested_deviations[:, 1, : fit.n_k] @ t ** np.arange(fit.n_k)
+    np.testing.assert_allclose(fit.force_draws(0.15, 4.0), base + 4e5 * dev, rtol=1e-9)
+
+
+def test_protocol_quantities(small_fit):
+    from uq._io.errors import InputError
+    from uq._models.fitted import FittedModel
+
+    fit = small_fit
+    assert isinstance(fit, FittedModel)
+    assert fit.name == "discrepancy" and "discrepancy in pressure" in fit.label
+    va = fit.volume_area_draws(np.array([0.1, 0.12]), 5.0)
+    assert va.shape == (fit.n_draws, 2) and np.all(va > 0.01)
+    with pytest.raises(InputError, match="outside the tested"):
+        fit.force_draws(0.1, 9.0)
+    with pytest.raises(InputError, match="no dV/dp_u"):
+        fit.volume_pressure_draws(0.1, 5.0)
+    blocks = fit.blocks()
+    assert blocks["pressure_area_deviation_m2"].draws.shape == (fit.n_draws, 4 * fit.n_k)
+    assert blocks["volume_area_deviation_m2"].names[0] == "eps_0_2bar"
+    doc = fit.to_json()
+    assert set(doc["discrepancy"]) >= {"a_F_m2", "a_V_m2", "length_bar", "kernel", "priors"}
+    assert doc["at_x0"]["3"]["tested"] is False and doc["at_x0"]["4"]["tested"] is True
+
+
+def test_refuses_campaigns_it_cannot_fit():
+    from uq._io.errors import InputError
+
+    rec = recordings_from_tests(
+        simulate("n50", seed=1, layout=Layout(pressures_bar=(3.0,), step_m=0.015)),
+        x0_m=0.112,
+        piston_area_m2=54.82e-4,
+    )
+    with pytest.raises(InputError, match="needs at least 2"):
+        dm.fit_discrepancy(rec, orders=surface.Orders(3, 0, 2, 1, 0))
+    rec = recordings_from_tests(
+        simulate(
+            "n50", seed=1, layout=Layout(pressures_bar=(3.0, 5.0), x_min_m=0.13, step_m=0.0125)
+        ),
+        x0_m=0.112,
+        piston_area_m2=54.82e-4,
+    )
+    with pytest.raises(InputError, match="distinct heights"):
+        dm.fit_discrepancy(rec, orders=surface.Orders(3, 0, 2, 1, 0))

@@ -185,9 +185,7 @@ class DiscrepancyFit:
     @functools.cached_property
     def surface_view(self) -> surface.SurfaceFit:
         """The smooth surface of the same draws (its coefficients alone)."""
-        post = dataclasses.replace(
-            self.posterior, beta=self.posterior.beta[..., : self.n_surface]
-        )
+        post = dataclasses.replace(self.posterior, beta=self.posterior.beta[..., : self.n_surface])
         return surface.SurfaceFit(self.recordings, post, self.stand, self.orders, self.geometry)
 
     @property

@@ -2,7 +2,7 @@
 surface and the per-pressure cubics, on springs smooth and not smooth in pressure. Writes
 coverage.json and summary.md into ``--out`` (default reports/between-coverage).
 
-    .venv/bin/python scripts/between_coverage.py --reps 10 [--springs ...] [--grids ...] [--tiny]
+    .venv/bin/python scripts/between_coverage.py --reps 10 [--springs ...] [--grids ...] [--resume] [--tiny]
 
 Each replication: the virtual stand records a spring at a grid of set pressures; the three models
 are fitted as ``uq margin`` fits them (default orders and sampler settings; the cubics to the
@@ -33,6 +33,7 @@ between the tabulated ones).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -293,6 +294,12 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--tiny", action="store_true", help="one replication, one spring, the 1-3-5 grid"
     )
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the (spring, grid) runs of --out's partial.json and add what is missing: a study "
+        "made of several commands (the summary covers every run in the folder)",
+    )
     args = ap.parse_args(argv)
     settings, heights, springs, grids, reps = (
         Settings(),
@@ -304,33 +311,51 @@ def main(argv=None) -> int:
     if args.tiny:
         settings, heights, grids, reps = TINY, (90.0, 150.0), ["1-3-5"], 1
         springs = springs[:1]
-    t0, results = time.time(), {}
-    for spring in springs:
-        for gname in grids:
-            grid, qs = GRIDS[gname], queries(GRIDS[gname], heights)
-            runs = []
-            for seed in range(FIRST_SEED, FIRST_SEED + reps):
-                runs.append(
-                    one_campaign(spring, grid, seed, settings, qs, gname in CATALOGUE_GRIDS)
-                )
-                print(
-                    f"{spring} {gname} seed {seed}: {time.time() - t0:.0f} s",
-                    file=sys.stderr,
-                    flush=True,
-                )
-            results[f"{spring}/{gname}"] = runs
-    seconds = time.time() - t0
-    summary = {**summarise(results), "replications": reps, "springs": springs, "grids": grids}
+    out = Path(args.out or ROOT / "reports" / "between-coverage")
+    out.mkdir(parents=True, exist_ok=True)
+    partial = out / "partial.json"
     command = "python scripts/between_coverage.py " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
-    out = Path(args.out or ROOT / "reports" / "between-coverage")
-    out.mkdir(parents=True, exist_ok=True)
+    done = json.loads(partial.read_text()) if args.resume and partial.exists() else {}
+    results, commands = done.get("runs", {}), done.get("commands", [])
+    seconds = done.get("seconds", 0.0)
+    commands.append(command.strip())
+    t0 = time.time()
+    for spring in springs:
+        for gname in grids:
+            key = f"{spring}/{gname}"
+            if len(results.get(key, [])) >= reps:
+                continue
+            grid, qs = GRIDS[gname], queries(GRIDS[gname], heights)
+            runs = results.get(key, [])
+            for seed in range(FIRST_SEED + len(runs), FIRST_SEED + reps):
+                runs.append(
+                    one_campaign(spring, grid, seed, settings, qs, gname in CATALOGUE_GRIDS)
+                )
+                print(f"{key} seed {seed}: {time.time() - t0:.0f} s", file=sys.stderr, flush=True)
+                results[key] = runs
+                state = {
+                    "runs": results,
+                    "commands": commands,
+                    "seconds": seconds + time.time() - t0,
+                }
+                write_text_atomic(partial, dumps_json(state))
+    seconds += time.time() - t0
+    reps_done = min(len(r) for r in results.values())
+    results = {k: r[:reps_done] for k, r in results.items()}
+    summary = {
+        **summarise(results),
+        "replications": reps_done,
+        "springs": sorted({k.split("/")[0] for k in results}),
+        "grids": sorted({k.split("/")[1] for k in results}),
+    }
+    command = " ; ".join(dict.fromkeys(commands))
     write_text_atomic(
         out / "coverage.json",
-        dumps_json({**summary, "command": command.strip(), "seconds": seconds, "runs": results}),
+        dumps_json({**summary, "command": command, "seconds": seconds, "runs": results}),
     )
-    write_text_atomic(out / "summary.md", markdown(summary, command.strip(), seconds))
+    write_text_atomic(out / "summary.md", markdown(summary, command, seconds))
     print(f"pooled {summary['pooled_coverage']}")
     return 0
 

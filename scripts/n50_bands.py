@@ -36,6 +36,7 @@ from uq._data.recordings import read_recordings  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._inference.summary import band  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
+from uq._models import discrepancy_gp as gp  # noqa: E402
 from uq._stand.simulator import SPRINGS, Layout, simulate_recordings  # noqa: E402
 
 HEIGHTS_MM = (70.0, 110.0, 150.0)
@@ -72,6 +73,21 @@ def count(answers, truth, h_m, p_bar) -> dict:
             ],
         }
     return out
+
+
+def between_nodes(fit) -> dict:
+    """What the two-point mean between the virtual pressures neglects on this fit's draws: the share
+    of draws with a short length scale, and the neglected conditional variance half-way between
+    nodes relative to the deviation's prior variance, averaged over the draws."""
+    length = fit.hyper["length"]
+    step = float(np.diff(fit.nodes[0]).max())
+    neglected = np.array([gp.interpolation_sd(step / v) ** 2 for v in length])
+    return {
+        "node_step_bar": step,
+        "share_length_below_0.5_bar": float(np.mean(length < 0.5)),
+        "share_length_below_0.25_bar": float(np.mean(length < 0.25)),
+        "mean_neglected_variance": float(neglected.mean()),
+    }
 
 
 def main(argv=None) -> int:
@@ -122,6 +138,7 @@ def main(argv=None) -> int:
             k: answers["discrepancy"].to_json()["discrepancy"][k]
             for k in ("a_F_m2", "a_V_m2", "length_bar")
         },
+        "between_nodes": between_nodes(answers["discrepancy"]),
         "converged": bool(answers["discrepancy"].convergence.converged),
         "warnings": answers["discrepancy"].convergence.messages(),
         "command": "python scripts/n50_bands.py "

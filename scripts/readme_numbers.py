@@ -569,6 +569,16 @@ def n50_bands_summary(rel: str) -> Callable[[], str]:
             f"[{hp['length_bar']['q05']:.2f}, {hp['length_bar']['q95']:.2f}]; "
             f"{'converged' if d['converged'] else 'NOT converged'}.",
         ]
+        b = d.get("between_nodes")
+        if b:
+            lines += [
+                "",
+                f"Between the virtual pressures ({b['node_step_bar']:.2f} bar apart): "
+                f"{100 * b['share_length_below_0.5_bar']:.0f} % of the draws have a length scale below "
+                f"0.5 bar, {100 * b['share_length_below_0.25_bar']:.0f} % below 0.25 bar; the conditional "
+                "variance the two-point mean neglects half-way between nodes is, averaged over the draws, "
+                f"{100 * b['mean_neglected_variance']:.2f} % of the deviation's prior variance.",
+            ]
         return "\n".join(lines) + "\n"
 
     return make

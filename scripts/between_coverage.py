@@ -52,14 +52,15 @@ from scipy import stats  # noqa: E402
 
 from uq._data.stand_description import PAPER_STAND  # noqa: E402
 from uq._derived.comparison import force_side  # noqa: E402
-from uq._derived.margin import CubicInterpolation, SurfaceAnswer, pressure_needed  # noqa: E402
+from uq._derived.margin import pressure_needed  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._inference.summary import band  # noqa: E402
 from uq._io.errors import InputError  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
 from uq._models.cubic import fit_campaign  # noqa: E402
+from uq._models.cubic_interpolation import CubicInterpolation  # noqa: E402
 from uq._models.discrepancy import fit_discrepancy  # noqa: E402
-from uq._models.surface import fit_surface  # noqa: E402
+from uq._models.surface_likelihood import fit_surface  # noqa: E402
 from uq._stand.shapes import catalogue_recordings  # noqa: E402
 from uq._stand.simulator import SPRINGS, Layout, simulate_recordings  # noqa: E402
 
@@ -101,12 +102,10 @@ def fit_models(rec, seed: int, settings: Settings) -> tuple[dict, dict]:
         if name == "discrepancy":
             answers[name] = fit_discrepancy(rec, seed=seed, settings=settings, stand=PAPER_STAND)
         elif name == "surface":
-            answers[name] = SurfaceAnswer(
-                fit_surface(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-            )
+            answers[name] = fit_surface(rec, seed=seed, settings=settings, stand=PAPER_STAND)
         else:
             cubics = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=PAPER_STAND)
-            answers[name] = CubicInterpolation(cubics, seed=seed)
+            answers[name] = CubicInterpolation.of(cubics, seed=seed)
         seconds[name] = time.process_time() - t0
     return answers, seconds
 
@@ -117,7 +116,7 @@ def one_campaign(spring: str, grid, seed: int, settings: Settings, qs, catalogue
     truth = SPRINGS[spring]()
     converged = {
         "discrepancy": bool(answers["discrepancy"].convergence.converged),
-        "surface": bool(answers["surface"].fit.convergence.converged),
+        "surface": bool(answers["surface"].convergence.converged),
     }
     out = {"seed": seed, "cpu_seconds": seconds, "converged": converged, "queries": []}
     for h_mm, p in qs:

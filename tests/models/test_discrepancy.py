@@ -12,7 +12,7 @@ from uq._inference.float64 import jnp
 from uq._inference.linear import linear_posterior
 from uq._models import discrepancy as dm
 from uq._models import discrepancy_gp as gp
-from uq._models import pair, surface
+from uq._models import pair, surface, surface_likelihood
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 from uq._stand.shapes import catalogue_recordings
 from uq._stand.simulator import Layout, recordings_from_tests, simulate
@@ -50,10 +50,10 @@ def dense_designs(rec, d, theta):
     piston = dm.has_piston(d)
     g = surface.geometry_of(rec)
     if piston:
-        base = surface.surface_data(rec, ORDERS, dm.PAPER_STAND)
+        base = surface_likelihood.surface_data(rec, ORDERS, dm.PAPER_STAND)
         Xf, Xl = np.asarray(base.Xf), np.asarray(base.Xl)
     else:
-        Xf, Xl = np.asarray(surface.surface_force_data(rec, FORCE_ORDERS, dm.PAPER_STAND).X), None
+        Xf, Xl = np.asarray(surface_likelihood.surface_force_data(rec, FORCE_ORDERS, dm.PAPER_STAND).X), None
     t, idx, p = np.asarray(d.t), np.asarray(d.test), np.asarray(d.p_bar)
     T, nk = p.size, int(d.s.shape[0])
     _, amps, length = (np.asarray(v) for v in dm._split(np.asarray(theta), d))
@@ -163,7 +163,7 @@ def test_pointwise_at_the_posterior_mean_is_the_readings_loglik(tiny):
     beta = np.asarray(dm.posterior(theta, d).mean)
     XF, XL = dense_designs(rec, d, theta)
     ll = np.asarray(dm.pointwise(theta, beta, d)["reading"])
-    base = surface.surface_data(rec, ORDERS, dm.PAPER_STAND)
+    base = surface_likelihood.surface_data(rec, ORDERS, dm.PAPER_STAND)
     dense = base._replace(Xf=jnp.asarray(XF), Xl=jnp.asarray(XL))
     np.testing.assert_allclose(ll, pair.pointwise(theta[:5], beta, dense), rtol=1e-9, atol=1e-9)
 
@@ -261,6 +261,8 @@ def small_fit():
 
 
 def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
+    from uq._models.surface import SurfaceFit
+
     """The same draws on every call and on thinned views; each draw's force is a continuous curve
     in pressure (at every node, tested or virtual, its value from the left and from the right
     agree); at a tested pressure the force is the surface's plus p_u times the draw's deviation
@@ -280,7 +282,7 @@ def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
     above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps)
     scale = np.abs(fit.tested_deviations).max()
     assert np.abs(above - below).max() < 1e-6 * scale
-    base = fit.surface_view.force_draws(0.15, 4.0, beta=fit.surface_beta)
+    base = SurfaceFit.force_draws(fit, 0.15, 4.0)
     t = fit.geometry.t(0.15)
     dev = fit.tested_deviations[:, 1, : fit.n_k] @ t ** np.arange(fit.n_k)
     np.testing.assert_allclose(fit.force_draws(0.15, 4.0), base + 4e5 * dev, rtol=1e-9)
@@ -304,7 +306,8 @@ def test_protocol_quantities(small_fit):
     assert blocks["volume_area_deviation_m2"].names[0] == "eps_0_2bar"
     doc = fit.to_json()
     assert set(doc["discrepancy"]) >= {"a_F_m2", "a_V_m2", "length_bar", "kernel", "priors"}
-    assert doc["at_x0"]["3"]["tested"] is False and doc["at_x0"]["4"]["tested"] is True
+    at = doc["discrepancy"]["at_x0"]
+    assert at["3"]["tested"] is False and at["4"]["tested"] is True
 
 
 def test_refuses_campaigns_it_cannot_fit():
@@ -326,3 +329,18 @@ def test_refuses_campaigns_it_cannot_fit():
     )
     with pytest.raises(InputError, match="distinct heights"):
         dm.fit_discrepancy(rec, orders=surface.Orders(3, 0, 2, 1, 0))
+
+
+def test_saved_and_loaded_it_answers_the_same(small_fit, tmp_path):
+    """The one saved format: the deviation blocks and the sampled amplitudes and length scale are
+    saved, the curves between tested pressures are made again from the seed, so a loaded model's
+    force between tested pressures is the fitted one's, draw by draw."""
+    from uq._models.saved import load
+
+    path = small_fit.save(tmp_path / "d.nc", seed=3)
+    loaded = load(path)
+    assert type(loaded) is type(small_fit) and loaded.recordings is None
+    ps = np.array([2.0, 3.0, 4.7, 8.0])
+    np.testing.assert_allclose(
+        loaded.force_draws(np.full(4, 0.1), ps), small_fit.force_draws(np.full(4, 0.1), ps)
+    )

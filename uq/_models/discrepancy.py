@@ -51,8 +51,9 @@ from uq._inference.linear import LOG_2PI, gaussian_loglik, posterior_from_moment
 from uq._inference.sampler import Settings, min_walkers_for_independence
 from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
-from uq._models import pair, surface, surface_force
+from uq._models import pair, surface, surface_force, surface_likelihood
 from uq._models.discrepancy_fit import DiscrepancyFit
+from uq._models.saved import provenance_of
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
 
@@ -178,7 +179,7 @@ def dev_data(
     rec: Recordings, orders: surface.Orders, stand: StandDescription = PAPER_STAND
 ) -> DevData:
     """The model's arrays for a campaign with piston readings."""
-    base = surface.surface_data(rec, orders, stand)
+    base = surface_likelihood.surface_data(rec, orders, stand)
     g = surface.geometry_of(rec)
     x, _, _, _, _ = pair.arrays(rec)
     idx, p_bar = _tests(rec)
@@ -212,7 +213,7 @@ def dev_data(
         jnp.asarray(p_bar),
         jnp.asarray(np.stack(A)),
         jnp.asarray(np.stack(D)),
-        jnp.ones(n_k),
+        jnp.full(n_k, gp.COEFFICIENT_SCALE),
         jnp.asarray([rate, rate]),
         jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
     )
@@ -222,9 +223,9 @@ def force_dev_data(
     rec: Recordings, orders: surface.Orders, stand: StandDescription = PAPER_STAND
 ) -> ForceDevData:
     """The model's arrays for a campaign without piston readings (force-only, catalogue tables)."""
-    base = surface.surface_force_data(rec, orders, stand)
+    base = surface_likelihood.surface_force_data(rec, orders, stand)
     g = surface.geometry_of(rec)
-    x, _, _ = surface.force_arrays(rec)
+    x, _, _ = surface_likelihood.force_arrays(rec)
     idx, p_bar = _tests(rec)
     t = g.t(x)
     m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
@@ -250,7 +251,7 @@ def force_dev_data(
         jnp.asarray(p_bar),
         jnp.asarray(np.stack(A)),
         jnp.asarray(np.stack(D)),
-        jnp.ones(n_k),
+        jnp.full(n_k, gp.COEFFICIENT_SCALE),
         jnp.asarray([gp.amplitude_rate(reference_area(base.feff_hat))]),
         jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
     )
@@ -694,6 +695,7 @@ def fit_discrepancy(
         predictive=False,
         desc="discrepancy sampling",
     )
-    return DiscrepancyFit(
-        rec, post, stand, orders, surface.geometry_of(rec), data, seed=seed, max_draws=max_draws
+    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
+    return DiscrepancyFit.from_posterior(
+        post, rec, orders, surface.geometry_of(rec), stand, provenance=prov
     )

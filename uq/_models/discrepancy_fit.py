@@ -4,18 +4,21 @@ The model (uq._models.discrepancy) knows the deviations of each tested pressure'
 smooth surface; between tested pressures each posterior draw carries its Gaussian process in p_u
 (uq._models.discrepancy_gp) with its own amplitudes and length scale:
 
-* at the tested pressures the deviations are the draw's (from its exact coefficient draw);
+* at the tested pressures the deviations are the draw's (a coefficient block of the fit, in m^2);
 * on a fixed grid of virtual pressures (``GRID_STEP_BAR`` apart over the tested range) each draw's
   process is drawn once, jointly, given its values at the tested pressures: exact, because the
   virtual pressures carry no readings; the standard normals come from the fit's seed and the
-  draw's index, so every call (and every thinned view, ``on_draws``) sees the same curves;
+  draw's index, so every call (and every thinned view, ``on_draws``, and a saved and loaded model)
+  sees the same curves;
 * between neighbouring nodes (tested or virtual) the draw's conditional mean given those two
   nodes. What it neglects is the process's conditional sd between the nodes: at most
-  ``interpolation_sd(step / l)`` of the amplitude, 5 % for l = 0.5 bar at 0.1-bar nodes (the
-  length scale's prior puts 14 % of its mass below 0.5 bar; data/n50's posterior 1 %).
+  ``interpolation_sd(step / l)`` of the amplitude, 5 % for l = 0.5 bar at 0.1-bar nodes.
 
 So a draw's force at 801 pressures is one smooth curve in p_u, as ``uq margin`` needs (it looks for
-where each draw's force crosses the load).
+where each draw's force crosses the load). Everything else (the surface's blocks and columns, the
+saved format, the JSON's common parts) is the smooth surface's (uq._models.surface.SurfaceFit),
+with the deviations as two more blocks and the amplitudes and length scale among the sampled
+parameters; a fitted or loaded model evaluates in numpy.
 """
 
 from __future__ import annotations
@@ -27,192 +30,157 @@ from dataclasses import dataclass
 import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.summary import band, estimate
+from uq._inference.summary import estimate
 from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
-from uq._models import surface
-from uq._models.fitted import Block
-from uq._models.pair import refuse_extrapolation
+from uq._models.fitted import thin_rows
+from uq._models.linear_fit import BlockSpec
+from uq._models.surface import SurfaceFit, force_label
+from uq._models.surface import summary as surface_summary
 from uq._physics.quantities import BAR_PA
 
-MAX_DRAWS = 4000
-LEVEL = 0.90
 #: rows of draws whose grid values are computed at once (memory: chunk x nodes^2 floats)
 GRID_CHUNK = 256
 #: the seed stream of the virtual pressures' normals (with the fit's seed)
 GRID_STREAM = 29
+#: the sampled parameters of the discrepancy as reported (the noise's are the surface's)
+HYPER = ("a_F_m2", "a_V_m2", "length_bar")
+BLOCKS = (
+    ("pressure_area_deviation_m2", "delta", "F_p gains sum_k delta_k t^k at each tested pressure"),
+    ("volume_area_deviation_m2", "eps", "-dV/dx gains sum_k (delta_k + eps_k) t^k"),
+)
 
 
 @dataclass(eq=False, frozen=True, repr=False)
-class DiscrepancyFit:
-    """The posterior of the surface with a discrepancy in pressure, on a fixed set of draws.
-
-    ``posterior``: the driver's :class:`uq._inference.collapsed.Posterior` (theta: noise logs,
-    log a_F, [log a_V,] log l; beta: the surface's standardised coefficients, then z);
-    ``data``: the model's arrays (uq._models.discrepancy.DevData or ForceDevData);
-    ``max_draws``: the fixed draws are the chains flattened and thinned evenly to at most this."""
-
-    recordings: object
-    posterior: object
-    stand: object
-    orders: surface.Orders
-    geometry: surface.Geometry
-    data: object
-    seed: int = 0
-    max_draws: int | None = MAX_DRAWS
-    selection: tuple = ()
+class DiscrepancyFit(SurfaceFit):
+    """The surface with a discrepancy in pressure, fitted to a campaign (or loaded from a saved
+    file), on a fixed set of draws: the surface's coefficients and the deviations at the tested
+    pressures as blocks (physical units), the amplitudes and length scale among ``reported``.
+    Fitted by ``uq._models.discrepancy.fit_discrepancy``."""
 
     name = "discrepancy"
     words = "the surface with a discrepancy in pressure"
-    model_name = words
-    has_dvdp = False
-
-    # ---- what the protocol names
-    @property
-    def label(self) -> str:
-        return f"surface with a discrepancy in pressure ({self.surface_label}; Matern 3/2 in p_u)"
+    likelihood = "uq._models.discrepancy"
+    coverage_note = (
+        "the default: between tested pressures its band widens by what the data say the smooth "
+        "surface misses (docs/discrepancy.md; coverage in reports/between-coverage)"
+    )
 
     @property
-    def surface_label(self) -> str:
-        return surface.force_label(self.orders) if self.force_only else self.orders.label
+    def orders_label(self) -> str:
+        base = force_label(self.orders) if self.force_only else self.orders.label
+        return f"{base}; Matern 3/2 in p_u"
 
-    @property
-    def force_only(self) -> bool:
-        return not self.recordings.has_piston
-
-    @property
-    def has_volume(self) -> bool:
-        return not self.force_only
-
-    @property
-    def omitted_reason(self) -> str | None:
-        return surface.volume_omitted_reason(self.recordings)
-
-    @property
-    def provenance(self) -> dict:
-        return {"recordings_path": str(self.recordings.path), "seed": self.seed}
-
-    @property
-    def tested_pressures_bar(self) -> np.ndarray:
-        return np.asarray(self.data.p_bar, float)
-
-    @property
-    def pressure_range_bar(self) -> tuple[float, float]:
-        p = self.tested_pressures_bar
-        return float(p.min()), float(p.max())
-
-    @property
-    def height_range_m(self) -> tuple[float, float]:
-        return self.recordings.height_range_m
-
-    @property
-    def convergence(self):
-        return self.posterior.convergence
-
-    @property
-    def idata(self):
-        return self.posterior.idata
-
-    @property
-    def loglik_loo(self):
-        return self.posterior.loglik_loo
-
-    @property
-    def n_draws(self) -> int:
-        return int(self.rows.size)
-
-    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
-        refuse_extrapolation(
-            height_m, p_bar, self.height_range_m, self.pressure_range_bar, param, self.words
-        )
-
-    def on_draws(self, n: int) -> DiscrepancyFit:
-        """The same model on at most ``n`` of its draws, thinned evenly from all of them (each
-        draw keeps its curves between tested pressures)."""
-        return dataclasses.replace(self, max_draws=min(int(n), self.max_draws or int(n)))
-
-    def __repr__(self) -> str:
-        state = "converged" if self.convergence.converged else "NOT converged"
-        return (
-            f"DiscrepancyFit({self.label}; {len(self.recordings.tests)} tests, "
-            f"{self.recordings.n_points} readings, {self.posterior.beta.shape[-1]} coefficients, "
-            f"{self.n_draws} draws, {state})"
-        )
-
-    # ---- the fixed draws
-    @functools.cached_property
-    def rows(self) -> np.ndarray:
-        """Indices of the fixed draws among the flattened chains."""
-        n = int(np.prod(self.posterior.theta.shape[:2]))
-        step = 1 if not self.max_draws or n <= self.max_draws else int(np.ceil(n / self.max_draws))
-        return np.arange(0, n, step)
-
-    @functools.cached_property
-    def theta(self) -> np.ndarray:
-        th = self.posterior.theta
-        return th.reshape(-1, th.shape[-1])[self.rows]
-
-    @functools.cached_property
-    def beta(self) -> np.ndarray:
-        b = self.posterior.beta
-        return b.reshape(-1, b.shape[-1])[self.rows]
-
-    @property
-    def n_surface(self) -> int:
-        return int(self.data.A.shape[2])
-
+    # ---- blocks: the surface's, then the deviations at the tested pressures
     @property
     def n_k(self) -> int:
-        return int(self.data.s.shape[0])
+        """Coefficients of a deviation in t (the surface's height degree K, plus one)."""
+        return self.orders.K + 1
 
     @property
     def n_channels(self) -> int:
-        return int(self.data.D.shape[2])
+        return self.n_k * (1 if self.force_only else 2)
+
+    def surface_layout(self) -> tuple[BlockSpec, ...]:
+        return SurfaceFit.block_layout(self)
+
+    def block_layout(self) -> tuple[BlockSpec, ...]:
+        dev = tuple(
+            BlockSpec(
+                name,
+                tuple(f"{sym}_{k}_{p:g}bar" for p in self.tested_pressures_bar for k in range(self.n_k)),
+                1.0,
+                "m^2",
+                basis,
+            )
+            for name, sym, basis in BLOCKS[: self.n_channels // self.n_k]
+        )
+        return (*self.surface_layout(), *dev)
+
+    @property
+    def n_surface(self) -> int:
+        return sum(len(b.names) for b in self.surface_layout())
+
+    def _columns(self, x_m, p_bar, c=0.0, e=0.0, d=0.0) -> np.ndarray:
+        """The surface's columns, zeros for the deviation blocks (they enter through
+        ``deviation_draws``)."""
+        cols = super()._columns(x_m, p_bar, c, e, d)
+        pad = len(self.tested_pressures_bar) * self.n_channels
+        return np.concatenate([cols, np.zeros((cols.shape[0], pad))], axis=1)
+
+    @classmethod
+    def from_posterior(cls, posterior, recordings, orders, geometry, stand, *, provenance=None):
+        """The fit from the driver's posterior: the surface's standardised coefficients times their
+        scales, and the deviations at the tested pressures a s_k chol(R(l)) z of every draw."""
+        shell = cls(orders, geometry, np.zeros((1, 1, 0)), {}, np.asarray(recordings.pressures_bar, float), (0.0, 0.0))
+        scales = np.concatenate([np.full(len(b.names), b.scale) for b in shell.surface_layout()])
+        ks = scales.size
+        beta = np.asarray(posterior.beta)
+        C, D, K = beta.shape
+        post = posterior.idata.posterior
+        reported = {n: np.asarray(post[n]) for n in post.data_vars}
+        amps = [reported[n].reshape(-1) for n in HYPER[: shell.n_channels // shell.n_k]]
+        z = beta[..., ks:].reshape(C * D, shell.n_channels, -1)
+        dev = gp.tested_values(
+            z,
+            np.concatenate([a[:, None] * np.full(shell.n_k, gp.COEFFICIENT_SCALE) for a in amps], 1),
+            reported["length_bar"].reshape(-1),
+            shell.tested_pressures_bar,
+        )  # (S, T, n_c)
+        blocks = [dev[:, :, j * shell.n_k : (j + 1) * shell.n_k].reshape(C * D, -1) for j in range(len(amps))]
+        coefficients = np.concatenate(
+            [beta[..., :ks] * scales, np.concatenate(blocks, axis=1).reshape(C, D, -1)], axis=-1
+        )
+        return cls(
+            orders,
+            geometry,
+            coefficients,
+            reported,
+            shell.tested_pressures_bar,
+            tuple(float(v) for v in recordings.height_range_m),
+            recordings,
+            posterior,
+            stand,
+            posterior.convergence,
+            dict(provenance or {}),
+        )
+
+    # ---- the draws between tested pressures
+    @functools.cached_property
+    def rows(self) -> np.ndarray:
+        """Indices of the fixed draws among all draws (the rule of ``thin_rows``)."""
+        return thin_rows(np.arange(int(np.prod(self.coefficients.shape[:2]))), self.max_draws)
 
     @functools.cached_property
     def hyper(self) -> dict:
-        """The draws' amplitudes (S, n_blocks) m^2 and length scales (S,) bar."""
-        nb = self.n_channels // self.n_k
-        nat = np.exp(self.theta[:, -(nb + 1) :])
-        return {"amplitude": nat[:, :nb], "length": nat[:, -1]}
+        """The fixed draws' amplitudes (S, n_blocks) m^2 and length scales (S,) bar."""
+        names = HYPER[: self.n_channels // self.n_k]
+        amps = np.stack([np.asarray(self.reported[n], float).reshape(-1)[self.rows] for n in names], 1)
+        return {"amplitude": amps, "length": np.asarray(self.reported["length_bar"], float).reshape(-1)[self.rows]}
 
     @functools.cached_property
     def channel_scale(self) -> np.ndarray:
         """a s_k of every channel (delta's n_k, then eps's), (S, n_c)."""
-        s = np.asarray(self.data.s, float)
-        return np.concatenate([a[:, None] * s[None, :] for a in self.hyper["amplitude"].T], axis=1)
-
-    @functools.cached_property
-    def surface_view(self) -> surface.SurfaceFit:
-        """The smooth surface of the same draws (its coefficients alone)."""
-        post = dataclasses.replace(self.posterior, beta=self.posterior.beta[..., : self.n_surface])
-        return surface.SurfaceFit(self.recordings, post, self.stand, self.orders, self.geometry)
-
-    @property
-    def surface_beta(self) -> np.ndarray:
-        return self.beta[:, : self.n_surface]
+        return np.repeat(self.hyper["amplitude"], self.n_k, axis=1) * gp.COEFFICIENT_SCALE
 
     @functools.cached_property
     def tested_deviations(self) -> np.ndarray:
-        """The deviations at the tested pressures, (S, T, n_c) m^2: a s_k chol(R(l)) z."""
-        T = self.tested_pressures_bar.size
-        z = self.beta[:, self.n_surface :].reshape(-1, self.n_channels, T)
-        R = gp.matern32(
-            self.tested_pressures_bar[:, None] - self.tested_pressures_bar[None, :],
-            self.hyper["length"][:, None, None],
-        ) + gp.JITTER * np.eye(T)
-        Lr = np.linalg.cholesky(R)
-        return np.einsum("sij,scj->sic", Lr, z) * self.channel_scale[:, None, :]
+        """The deviations at the tested pressures on the fixed draws, (S, T, n_c) m^2."""
+        dev = self.coef[:, self.n_surface :]
+        T = len(self.tested_pressures_bar)
+        per = dev.reshape(dev.shape[0], -1, T, self.n_k)  # (S, block, T, k)
+        return np.concatenate([per[:, j] for j in range(per.shape[1])], axis=2)
 
     @functools.cached_property
     def nodes(self) -> tuple[np.ndarray, np.ndarray]:
         """(node pressures (N,) ascending, deviations there (S, N, n_c)): the tested pressures and
         the virtual ones between them."""
-        tested = self.tested_pressures_bar
+        tested = np.asarray(self.tested_pressures_bar, float)
         grid = gp.grid_nodes(tested)
         S, G, c = self.rows.size, grid.size, self.n_channels
-        rng = np.random.default_rng((self.seed, GRID_STREAM))
-        n_all = int(np.prod(self.posterior.theta.shape[:2]))
+        seed = int(self.provenance.get("seed") or 0)
+        rng = np.random.default_rng((seed, GRID_STREAM))
+        n_all = int(np.prod(self.coefficients.shape[:2]))
         xi = rng.standard_normal((n_all, G, c))[self.rows]
         vg = np.empty((S, G, c))
         for a in range(0, S, GRID_CHUNK):
@@ -230,8 +198,8 @@ class DiscrepancyFit:
         return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
 
     def deviation_draws(self, height_m, p_bar, *, volume: bool = False, check: bool = True):
-        """The deviation of the pressure area (``volume`` True: of the volume-derived area,
-        delta + eps) from the surface's, m^2, (S, *shape)."""
+        """The deviation of the pressure area from the surface's (``volume`` True: of the
+        volume-derived area, delta + eps), m^2, (S, *shape)."""
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
@@ -250,162 +218,81 @@ class DiscrepancyFit:
             out += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
         return out.reshape(-1, *shape)
 
-    # ---- the quantities
+    def _eps_draws(self, height_m, p_bar):
+        return self.deviation_draws(height_m, p_bar, volume=True, check=False) - self.deviation_draws(
+            height_m, p_bar, check=False
+        )
+
     def _p_pa(self, height_m, p_bar):
         shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
         return np.broadcast_to(np.asarray(p_bar, float), shape) * BAR_PA
 
-    def force_draws(self, height_m, p_bar, *, check: bool = True):
+    # ---- the quantities: the surface's plus the deviations
+    def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta."""
-        if check:
-            self.check_range(height_m, p_bar)
-        base = self.surface_view.force_draws(height_m, p_bar, check=False, beta=self.surface_beta)
-        dev = self.deviation_draws(height_m, p_bar, check=False)
-        return base + self._p_pa(height_m, p_bar) * dev
+        base = super().force_draws(height_m, p_bar, check=check)
+        return base + self._p_pa(height_m, p_bar) * self.deviation_draws(height_m, p_bar, check=False)
 
-    def feff_draws(self, height_m, p_bar, *, check: bool = True):
-        """The paper's effective area F_eff = P / p_u (eq. 1) of the mean force, m^2."""
-        return self.force_draws(height_m, p_bar, check=check) / self._p_pa(height_m, p_bar)
-
-    def pressure_area_draws(self, height_m, p_bar, *, check: bool = True):
+    def pressure_area_draws(self, height_m, p_bar, *, check=True):
         """F_p + delta, m^2: the pressure area with its deviation."""
-        base = self.surface_view.pressure_area_draws(
-            height_m, p_bar, check=check, beta=self.surface_beta
-        )
+        base = super().pressure_area_draws(height_m, p_bar, check=check)
         return base + self.deviation_draws(height_m, p_bar, check=False)
 
-    def volume_area_draws(self, height_m, p_bar, *, check: bool = True):
+    def volume_area_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The volume-derived area dV/dx = F_p + D + delta + eps, m^2 (eq. 1's second formula)."""
-        if self.force_only:
-            raise InputError(self.omitted_reason)
-        base = self.surface_view.volume_area_draws(
-            height_m, p_bar, check=check, beta=self.surface_beta
-        )
+        base = super().volume_area_draws(height_m, p_bar, check=check)
         return base + self.deviation_draws(height_m, p_bar, volume=True, check=False)
 
-    def volume_pressure_draws(self, height_m, p_bar, *, check: bool = True):
-        raise InputError(f"{self.label} has no dV/dp_u of its own (isobaric tests do not give it)")
+    def volume_excess_draws(self, height_m, p_bar, *, check=True):
+        """D + eps = -dV/dx - (F_p + delta), m^2."""
+        return super().volume_excess_draws(height_m, p_bar, check=check) + self._eps_draws(
+            height_m, p_bar
+        )
 
-    def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
-        """Pointwise bands of the force, F_eff and the pressure area (refuses extrapolation)."""
-        out = {}
-        for name, fn in (
-            ("pressure_area_m2", self.pressure_area_draws),
-            ("feff_m2", self.feff_draws),
-            ("force_N", self.force_draws),
-        ):
-            m, lo, hi = band(fn(height_m, p_bar), axis=0, level=level)
-            out[name] = {"mean": m, "lower": lo, "upper": hi}
-        return out
+    def spread_draws(self, height_m, p_bar, *, check=True):
+        """p_u (-dV/dx) - P = p_u (D + eps) - E, N."""
+        base = super().spread_draws(height_m, p_bar, check=check)
+        return base + self._p_pa(height_m, p_bar) * self._eps_draws(height_m, p_bar)
 
-    # ---- blocks and the JSON document
-    def blocks(self) -> dict[str, Block]:
-        """The surface's blocks and the deviations at the tested pressures, physical units."""
-        c, e, d, r = self.surface_view.blocks(self.surface_beta)
-        o = self.orders
-        out = {
-            "pressure_area_m2": Block(
-                tuple(f"c_{k}{lq}" for k in range(o.K + 1) for lq in range(o.Lp + 1)),
-                c,
-                "m^2",
-                "F_p = sum c_kl t^k q^l",
-            ),
-            "casing_N": Block(tuple(f"e_{m}" for m in range(o.Ke + 1)), e, "N", "E = sum e_m t^m"),
-        }
-        if not self.force_only:
-            out["volume_excess_m2"] = Block(
-                tuple(f"d_{k}{lq}" for k in range(o.Dk + 1) for lq in range(o.Dl + 1)),
-                d,
-                "m^2",
-                "D = sum d_kl t^k q^l",
-            )
-            out["piston_reference_m"] = Block(
-                tuple(f"r_{p:g}bar" for p in self.tested_pressures_bar),
-                r,
-                "m",
-                "one piston reference per test",
-            )
-        dev = self.tested_deviations
-        for j, (name, basis) in enumerate(
-            (
-                ("pressure_area_deviation_m2", "F_p + sum_k delta_k t^k at each tested pressure"),
-                ("volume_area_deviation_m2", "-dV/dx gains sum_k (delta_k + eps_k) t^k"),
-            )[: self.n_channels // self.n_k]
-        ):
-            sl = slice(j * self.n_k, (j + 1) * self.n_k)
-            names = tuple(
-                f"{'delta' if j == 0 else 'eps'}_{k}_{p:g}bar"
-                for p in self.tested_pressures_bar
-                for k in range(self.n_k)
-            )
-            out[name] = Block(names, dev[:, :, sl].reshape(dev.shape[0], -1), "m^2", basis)
-        return out
-
-    def to_json(self, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
-        """The model's JSON document (``uq surface --model discrepancy --json``)."""
-        return summary(self, comparison, advice)
+    # ---- the JSON document
+    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
+        """The surface's document (``uq surface --json``) with the discrepancy: its kernel, priors,
+        sampled amplitudes and length scale, and its deviation at x0 at and between the tested
+        pressures."""
+        if self.document is not None:
+            return super().to_json(comparison, advice)
+        advice = CLI_ADVICE if advice is None else advice
+        doc = surface_summary(self, comparison, advice)
+        doc["label"] = self.label
+        doc["discrepancy"] = discrepancy_summary(self)
+        return doc
 
 
-def hyper_names(fit: DiscrepancyFit) -> tuple[str, ...]:
-    return ("a_F_m2", "length_bar") if fit.force_only else ("a_F_m2", "a_V_m2", "length_bar")
-
-
-def summary(fit: DiscrepancyFit, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
-    """The JSON document: the surface's orders, the discrepancy's hyperparameters and its
-    deviations at the tested pressures (at x0), force and F_eff at x0, the sampler's verdict."""
-    conv = fit.convergence
-    r_hat_max, ess_bulk_min = conv.worst()
-    post = fit.idata.posterior
-    diag = conv.variables
-    sampled = {}
-    for n in post.data_vars:
-        est = estimate(np.asarray(post[n]))
-        est |= {k: diag[n][k] for k in ("r_hat", "ess_bulk") if k in diag.get(n, {})}
-        sampled[n] = est
-    x0 = np.array(fit.geometry.x0_m)
-    plo, phi = fit.pressure_range_bar
-    tested = fit.tested_pressures_bar
+def discrepancy_summary(fit: DiscrepancyFit) -> dict:
+    names = HYPER[: fit.n_channels // fit.n_k]
+    tested = np.asarray(fit.tested_pressures_bar, float)
     between = (tested[:-1] + tested[1:]) / 2
-    at_x0 = {}
-    for pb in sorted({*tested.tolist(), *between.tolist()}):
-        at_x0[f"{pb:g}"] = {
+    some = fit.on_draws(2000)
+    x0 = np.array(fit.x0_m)
+    at_x0 = {
+        f"{pb:g}": {
             "tested": bool(np.any(np.isclose(pb, tested))),
-            "feff_m2": estimate(fit.feff_draws(x0, pb)),
-            "force_N": estimate(fit.force_draws(x0, pb)),
-            "pressure_area_deviation_m2": estimate(fit.deviation_draws(x0, pb)),
+            "pressure_area_deviation_m2": estimate(some.deviation_draws(x0, pb)),
+            "force_N": estimate(some.force_draws(x0, pb)),
         }
+        for pb in sorted({*tested.tolist(), *between.tolist()})
+    }
     return {
-        "model": fit.name,
-        "label": fit.label,
-        "x0_m": fit.geometry.x0_m,
-        "piston_area_m2": fit.geometry.area_m2,
-        "orders": dataclasses.asdict(fit.orders),
-        "orders_label": fit.surface_label,
-        "discrepancy": {
-            "kernel": "Matern 3/2 in p_u (bar)",
-            "deviation_degree": fit.n_k - 1,
-            "blocks": ["pressure_area_deviation_m2"]
-            + ([] if fit.force_only else ["volume_area_deviation_m2"]),
-            "priors": {
-                "amplitude": f"exponential, P(a > {gp.AMPLITUDE_UPPER_REL:g} x reference area) = "
-                f"{gp.AMPLITUDE_TAIL:g}",
-                "reference_area_m2": float(
-                    -np.log(gp.AMPLITUDE_TAIL) / (gp.AMPLITUDE_UPPER_REL * float(fit.data.rates[0]))
-                ),
-                "length_bar": f"PC prior of a Matern range, P(l < {gp.LENGTH_LOWER_BAR:g} bar) = "
-                f"{gp.LENGTH_TAIL:g}",
-            },
-            "grid_step_bar": float(np.diff(fit.nodes[0]).max()) if fit.nodes[0].size > 1 else 0.0,
-            **{n: sampled[n] for n in hyper_names(fit)},
+        "kernel": "Matern 3/2 in p_u (bar)",
+        "deviation_degree": fit.n_k - 1,
+        "blocks": [b[0] for b in BLOCKS[: fit.n_channels // fit.n_k]],
+        "priors": {
+            "amplitude": f"exponential, P(a > {gp.AMPLITUDE_UPPER_REL:g} x reference area) = "
+            f"{gp.AMPLITUDE_TAIL:g} (reference area: the median pressure area of a least-squares fit)",
+            "length_bar": f"PC prior of a Matern range, P(l < {gp.LENGTH_LOWER_BAR:g} bar) = "
+            f"{gp.LENGTH_TAIL:g}",
         },
-        "stand": dataclasses.asdict(fit.stand),
-        "valid_range": {"height_m": list(fit.height_range_m), "pressure_bar": [plo, phi]},
-        "noise": {n: v for n, v in sampled.items() if n not in hyper_names(fit)},
+        "grid_step_bar": float(np.diff(fit.nodes[0]).max()) if fit.nodes[0].size > 1 else 0.0,
+        **fit.noise_summary(names + ("length_bar",)),
         "at_x0": at_x0,
-        "order_selection": list(fit.selection),
-        "comparison": comparison,
-        "converged": conv.converged,
-        "convergence": conv.to_json(advice, variables=False)
-        | {"r_hat_max": r_hat_max, "ess_bulk_min": ess_bulk_min},
-        "warnings": conv.messages(advice),
     }

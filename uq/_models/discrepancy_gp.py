@@ -48,6 +48,9 @@ LENGTH_TAIL = 0.25
 #: over more than 10 bar use GRID_MAX_NODES nodes
 GRID_STEP_BAR = 0.1
 GRID_MAX_NODES = 201
+#: s_k: the prior sd of every deviation coefficient relative to its block's amplitude (t^k is of
+#: order one over the stroke, |t| <= 0.94 on the paper's heights, so every k gets the same)
+COEFFICIENT_SCALE = 1.0
 #: relative jitter on the correlation matrices' diagonal (a long length scale makes them nearly
 #: singular); 1e-9 of the amplitude's variance, far below anything the data resolve
 JITTER = 1e-9
@@ -100,6 +103,16 @@ def grid_nodes(tested_bar) -> np.ndarray:
     step = (hi - lo) / (n - 1)
     keep = np.min(np.abs(g[:, None] - p[None, :]), axis=1) > step / 4
     return g[keep]
+
+
+def tested_values(z, scales, length, tested_bar):
+    """The deviations at the tested pressures from standard normals: a s_k chol(R(l)) z, draw by
+    draw. ``z`` (S, c, T), ``scales`` (S, c) = a s_k, ``length`` (S,); returns (S, T, c)."""
+    p = np.asarray(tested_bar, float)
+    R = matern32(p[:, None] - p[None, :], np.asarray(length, float)[:, None, None]) + JITTER * np.eye(
+        p.size
+    )
+    return np.einsum("sij,scj->sic", np.linalg.cholesky(R), z) * np.asarray(scales)[:, None, :]
 
 
 def draw_on_grid(values_T, scales, length, tested_bar, grid_bar, xi):

@@ -53,7 +53,10 @@ def dense_designs(rec, d, theta):
         base = surface_likelihood.surface_data(rec, ORDERS, dm.PAPER_STAND)
         Xf, Xl = np.asarray(base.Xf), np.asarray(base.Xl)
     else:
-        Xf, Xl = np.asarray(surface_likelihood.surface_force_data(rec, FORCE_ORDERS, dm.PAPER_STAND).X), None
+        Xf, Xl = (
+            np.asarray(surface_likelihood.surface_force_data(rec, FORCE_ORDERS, dm.PAPER_STAND).X),
+            None,
+        )
     t, idx, p = np.asarray(d.t), np.asarray(d.test), np.asarray(d.p_bar)
     T, nk = p.size, int(d.s.shape[0])
     _, amps, length = (np.asarray(v) for v in dm._split(np.asarray(theta), d))

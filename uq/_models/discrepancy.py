@@ -53,8 +53,8 @@ from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
 from uq._models.discrepancy_fit import DiscrepancyFit
-from uq._models.saved import provenance_of
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
+from uq._models.saved import provenance_of
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
 
 GP_NAMES = ("log_a_F_m2", "log_a_V_m2", "log_length_bar")

@@ -23,7 +23,6 @@ parameters; a fitted or loaded model evaluates in numpy.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -31,7 +30,6 @@ import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import estimate
-from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models.fitted import thin_rows
 from uq._models.linear_fit import BlockSpec
@@ -88,7 +86,11 @@ class DiscrepancyFit(SurfaceFit):
         dev = tuple(
             BlockSpec(
                 name,
-                tuple(f"{sym}_{k}_{p:g}bar" for p in self.tested_pressures_bar for k in range(self.n_k)),
+                tuple(
+                    f"{sym}_{k}_{p:g}bar"
+                    for p in self.tested_pressures_bar
+                    for k in range(self.n_k)
+                ),
                 1.0,
                 "m^2",
                 basis,
@@ -112,7 +114,14 @@ class DiscrepancyFit(SurfaceFit):
     def from_posterior(cls, posterior, recordings, orders, geometry, stand, *, provenance=None):
         """The fit from the driver's posterior: the surface's standardised coefficients times their
         scales, and the deviations at the tested pressures a s_k chol(R(l)) z of every draw."""
-        shell = cls(orders, geometry, np.zeros((1, 1, 0)), {}, np.asarray(recordings.pressures_bar, float), (0.0, 0.0))
+        shell = cls(
+            orders,
+            geometry,
+            np.zeros((1, 1, 0)),
+            {},
+            np.asarray(recordings.pressures_bar, float),
+            (0.0, 0.0),
+        )
         scales = np.concatenate([np.full(len(b.names), b.scale) for b in shell.surface_layout()])
         ks = scales.size
         beta = np.asarray(posterior.beta)
@@ -123,11 +132,16 @@ class DiscrepancyFit(SurfaceFit):
         z = beta[..., ks:].reshape(C * D, shell.n_channels, -1)
         dev = gp.tested_values(
             z,
-            np.concatenate([a[:, None] * np.full(shell.n_k, gp.COEFFICIENT_SCALE) for a in amps], 1),
+            np.concatenate(
+                [a[:, None] * np.full(shell.n_k, gp.COEFFICIENT_SCALE) for a in amps], 1
+            ),
             reported["length_bar"].reshape(-1),
             shell.tested_pressures_bar,
         )  # (S, T, n_c)
-        blocks = [dev[:, :, j * shell.n_k : (j + 1) * shell.n_k].reshape(C * D, -1) for j in range(len(amps))]
+        blocks = [
+            dev[:, :, j * shell.n_k : (j + 1) * shell.n_k].reshape(C * D, -1)
+            for j in range(len(amps))
+        ]
         coefficients = np.concatenate(
             [beta[..., :ks] * scales, np.concatenate(blocks, axis=1).reshape(C, D, -1)], axis=-1
         )
@@ -155,8 +169,13 @@ class DiscrepancyFit(SurfaceFit):
     def hyper(self) -> dict:
         """The fixed draws' amplitudes (S, n_blocks) m^2 and length scales (S,) bar."""
         names = HYPER[: self.n_channels // self.n_k]
-        amps = np.stack([np.asarray(self.reported[n], float).reshape(-1)[self.rows] for n in names], 1)
-        return {"amplitude": amps, "length": np.asarray(self.reported["length_bar"], float).reshape(-1)[self.rows]}
+        amps = np.stack(
+            [np.asarray(self.reported[n], float).reshape(-1)[self.rows] for n in names], 1
+        )
+        return {
+            "amplitude": amps,
+            "length": np.asarray(self.reported["length_bar"], float).reshape(-1)[self.rows],
+        }
 
     @functools.cached_property
     def channel_scale(self) -> np.ndarray:
@@ -219,9 +238,9 @@ class DiscrepancyFit(SurfaceFit):
         return out.reshape(-1, *shape)
 
     def _eps_draws(self, height_m, p_bar):
-        return self.deviation_draws(height_m, p_bar, volume=True, check=False) - self.deviation_draws(
-            height_m, p_bar, check=False
-        )
+        return self.deviation_draws(
+            height_m, p_bar, volume=True, check=False
+        ) - self.deviation_draws(height_m, p_bar, check=False)
 
     def _p_pa(self, height_m, p_bar):
         shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
@@ -231,7 +250,9 @@ class DiscrepancyFit(SurfaceFit):
     def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta."""
         base = super().force_draws(height_m, p_bar, check=check)
-        return base + self._p_pa(height_m, p_bar) * self.deviation_draws(height_m, p_bar, check=False)
+        return base + self._p_pa(height_m, p_bar) * self.deviation_draws(
+            height_m, p_bar, check=False
+        )
 
     def pressure_area_draws(self, height_m, p_bar, *, check=True):
         """F_p + delta, m^2: the pressure area with its deviation."""

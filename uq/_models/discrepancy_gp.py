@@ -109,9 +109,9 @@ def tested_values(z, scales, length, tested_bar):
     """The deviations at the tested pressures from standard normals: a s_k chol(R(l)) z, draw by
     draw. ``z`` (S, c, T), ``scales`` (S, c) = a s_k, ``length`` (S,); returns (S, T, c)."""
     p = np.asarray(tested_bar, float)
-    R = matern32(p[:, None] - p[None, :], np.asarray(length, float)[:, None, None]) + JITTER * np.eye(
-        p.size
-    )
+    R = matern32(
+        p[:, None] - p[None, :], np.asarray(length, float)[:, None, None]
+    ) + JITTER * np.eye(p.size)
     return np.einsum("sij,scj->sic", np.linalg.cholesky(R), z) * np.asarray(scales)[:, None, :]
 
 

@@ -57,7 +57,7 @@ from uq._inference.sampler import Settings  # noqa: E402
 from uq._inference.summary import band  # noqa: E402
 from uq._io.errors import InputError  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
-from uq._models.cubic import fit_campaign  # noqa: E402
+from uq._models.cubic_fit import fit_campaign  # noqa: E402
 from uq._models.cubic_interpolation import CubicInterpolation  # noqa: E402
 from uq._models.discrepancy import fit_discrepancy  # noqa: E402
 from uq._models.surface_likelihood import fit_surface  # noqa: E402

@@ -345,3 +345,13 @@ def test_saved_and_loaded_it_answers_the_same(small_fit, tmp_path):
     np.testing.assert_allclose(
         loaded.force_draws(np.full(4, 0.1), ps), small_fit.force_draws(np.full(4, 0.1), ps)
     )
+
+
+def test_its_page_shows_the_discrepancy(small_fit, tmp_path):
+    """uq report --surface / uq surface --report: the surface's page with the discrepancy's section
+    (the deviation at x0 at and between tested pressures)."""
+    from uq._report.pages import write_model_page
+
+    page = write_model_page(small_fit, small_fit.to_json(), tmp_path).read_text()
+    assert "Surface with a discrepancy in pressure" in page
+    assert "what the smooth surface misses" in page and "between" in page

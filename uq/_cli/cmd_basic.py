@@ -35,6 +35,9 @@ SPRING_NAMES = (
     "n50-traditional",
     "n50-smooth",
     "n50-thermo",
+    "n50-kink",
+    "n50-knee",
+    "n50-ripple",
 )  # uq._stand.simulator.SPRINGS (tested equal)
 
 
@@ -46,7 +49,8 @@ def configure_simulate(p) -> None:
         "--spring",
         default="n50",
         choices=SPRING_NAMES,
-        help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth; n50-thermo: one potential)",
+        help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth; n50-thermo: one potential; "
+        "n50-kink, n50-knee, n50-ripple: one potential, not smooth in pressure)",
     )
     p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
     p.add_argument(

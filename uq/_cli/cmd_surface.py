@@ -147,9 +147,9 @@ def _print_thermo(rec, fit, res, comparison) -> None:
         _print_comparison(fit.name, comparison)
 
 
-def _print_surface(rec, fit, res, comparison) -> None:
+def _print_surface(rec, fit, res, comparison, what: str = "surface model") -> None:
     print(
-        f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
+        f"{rec.path}: {what} over {len(rec.tests)} tests, {rec.n_points} readings "
         f"({fit.orders_label}; {fit.n_coefficients} coefficients)"
     )
     for row in fit.selection:
@@ -186,6 +186,24 @@ def _print_surface(rec, fit, res, comparison) -> None:
         _print_comparison(fit.name, comparison)
 
 
+def _print_discrepancy(rec, fit, res, comparison) -> None:
+    """The surface's summary, then the discrepancy's amplitudes and length scale."""
+    _print_surface(rec, fit, res, None, what=fit.words.removeprefix("the "))
+    d = res["discrepancy"]
+
+    def cm2(e):
+        return f"{e['mean'] * 1e4:.2f} cm^2 [{e['q05'] * 1e4:.2f}, {e['q95'] * 1e4:.2f}]"
+
+    vol = f", of the volume-derived area {cm2(d['a_V_m2'])}" if "a_V_m2" in d else ""
+    ell = d["length_bar"]
+    print(
+        f"  discrepancy ({d['kernel']}): amplitude of the pressure-area deviation {cm2(d['a_F_m2'])}"
+        f"{vol}, length scale {ell['mean']:.2f} bar [{ell['q05']:.2f}, {ell['q95']:.2f}]"
+    )
+    if comparison:
+        _print_comparison(fit.name, comparison)
+
+
 def _print_model(rec, fit, res, comparison) -> None:
     """Any model without a summary of its own: what it is, its sampled parameters, the comparison."""
     print(
@@ -199,4 +217,8 @@ def _print_model(rec, fit, res, comparison) -> None:
 
 
 #: the summaries of the models that have their own, by registry name
-PRINTERS = {registry.SURFACE: _print_surface, registry.THERMODYNAMIC: _print_thermo}
+PRINTERS = {
+    registry.SURFACE: _print_surface,
+    registry.THERMODYNAMIC: _print_thermo,
+    registry.DISCREPANCY: _print_discrepancy,
+}

@@ -39,6 +39,7 @@ ENTRY_POINT_GROUP = "uq.models"
 CUBICS = "cubics"
 SURFACE = "surface"
 THERMODYNAMIC = "thermodynamic"
+DISCREPANCY = "discrepancy"
 
 #: the model over all tests that ``uq margin`` (compared with the cubics), ``uq design``,
 #: ``uq report --surface``, ``uq export`` and ``uq plan`` fit when ``--model`` is not given
@@ -197,5 +198,15 @@ register(
         n_sampled=6,
         needs_volume=True,
         select_orders="uq._models.thermo_likelihood:select_orders",
+    )
+)
+register(
+    ModelEntry(
+        DISCREPANCY,
+        fit="uq._models.discrepancy:fit_discrepancy",
+        model="uq._models.discrepancy_fit:DiscrepancyFit",
+        words="the surface plus, per tested pressure, a deviation drawn from a Gaussian process in "
+        "p_u: between tested pressures the band widens by what the data say the surface misses",
+        n_sampled=8,
     )
 )

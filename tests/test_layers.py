@@ -247,6 +247,7 @@ NOT_MODEL_NAMES = {
     ("_cli/cmd_report.py", "surface"),  # the needs of the command `uq surface` (--surface)
     ("_data/recordings.py", "surface"),  # the needs of the command `uq surface`
     ("_drivers/batch.py", "surface"),  # the batch task "surface"
+    ("_cli/cmd_surface.py", "discrepancy"),  # the JSON key of the discrepancy's summary (CONTRACT)
 }
 
 

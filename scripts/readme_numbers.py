@@ -593,10 +593,11 @@ def between_coverage_summary(rel: str) -> Callable[[], str]:
         if d is None:
             return f"(no results: {rel} is missing)\n"
         models = ("discrepancy", "surface", "cubics")
-        n = d["replications"]
+        reps = d["replications"]
+        n = ", ".join(f"{k} {v}" for k, v in reps.items()) if isinstance(reps, dict) else reps
         pooled, ratio = d["pooled_coverage"], d["width_ratio_discrepancy_over_surface"]
         lines = [
-            f"From `{rel}` (`{d['command'].strip()}`; {n} replications per spring and grid, "
+            f"From `{rel}` (`{d['command'].strip()}`; replications per spring and grid: {n}; "
             f"{d['seconds'] / 3600:.1f} h of wall time; RECONSTRUCTED data). Share of the queries half-way "
             "between tested pressures whose 90 % interval held the truth, pooled over heights, pressures "
             "and replications (a summary: the by-pressure-and-height counts with their binomial "
@@ -630,6 +631,33 @@ def between_coverage_summary(rel: str) -> Callable[[], str]:
             + ", ".join(f"{m} {v:.0f}" for m, v in d["mean_cpu_seconds_per_fit"].items())
             + ".",
         ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+def discrepancy_cost(rel: str) -> Callable[[], str]:
+    """scripts/between_coverage.py's CPU seconds per fit: the discrepancy surface against the smooth
+    surface and the cubics, fitted in one process to the same campaigns."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        models = ("discrepancy", "surface", "cubics")
+        lines = [
+            f"From `{rel}` (CPU seconds of one fit, mean over the replications, one BLAS thread):",
+            "",
+            "| campaigns | fits | discrepancy | surface | cubics | discrepancy / surface |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
+        for key, runs in sorted(d["runs"].items(), key=lambda kv: (kv[0].split("/")[1], kv[0])):
+            cpu = {m: sum(r["cpu_seconds"][m] for r in runs) / len(runs) for m in models}
+            lines.append(
+                f"| {key} | {len(runs)} | "
+                + " | ".join(f"{cpu[m]:.0f} s" for m in models)
+                + f" | {cpu['discrepancy'] / cpu['surface']:.1f} |"
+            )
         return "\n".join(lines) + "\n"
 
     return make
@@ -697,6 +725,7 @@ BLOCKS: dict[str, Block] = {
     "diagnose-proof": report_block(diagnose_proof_summary("reports/diagnose-proof/summary.json")),
     "diagnose-power": report_block(diagnose_power_summary("reports/diagnose-power/power.json")),
     "n50-bands": report_block(n50_bands_summary("reports/between-coverage/n50-bands.json")),
+    "discrepancy-cost": report_block(discrepancy_cost("reports/between-coverage/coverage.json")),
     "between-coverage": report_block(
         between_coverage_summary("reports/between-coverage/coverage.json")
     ),

@@ -55,7 +55,11 @@ COMMANDS = [
         "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)",
     ),
     ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
-    ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
+    (
+        "margin",
+        "uq._cli.cmd_margin",
+        "design-margin queries (by default on the surface with a discrepancy in pressure)",
+    ),
     (
         "design",
         "uq._cli.cmd_design",

@@ -631,6 +631,24 @@ def between_coverage_summary(rel: str) -> Callable[[], str]:
             + ", ".join(f"{m} {v:.0f}" for m, v in d["mean_cpu_seconds_per_fit"].items())
             + ".",
         ]
+        short = [r for r in d["rows"] if r["model"] == "discrepancy" and not r["level_inside"]]
+        lines += [
+            "",
+            "The discrepancy surface's counts outside their interval, by (spring, grid, pressure, "
+            "height): "
+            + (
+                "; ".join(
+                    f"{r['spring']} {r['grid']} {r['what']} at {r['pressure_bar']:g} bar and "
+                    f"{r['height_mm']:g} mm: {r['covered']} of {r['n']} "
+                    f"[{r['interval'][0]:.2f}, {r['interval'][1]:.2f}]"
+                    + (f" ({r['refused']} refused)" if r["refused"] else "")
+                    for r in short
+                )
+                if short
+                else "none"
+            )
+            + ".",
+        ]
         return "\n".join(lines) + "\n"
 
     return make

@@ -125,6 +125,9 @@ class CubicData(NamedTuple):
     ref_force: jnp.ndarray  # (n,) force level of the relative noise term, N
     prior_mean: jnp.ndarray  # (3,) prior centres of the natural noise logs
     weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out (exact LOO refits)
+    #: () sd (m) of the L readings' rounding: a printed volume's last digit, step / sqrt(12) / S
+    #: (:func:`piston_rounding_sd`); 0 for a piston read on the stand
+    piston_floor: jnp.ndarray = 0.0
 
 
 def natural_noise(theta, ref_mean):
@@ -145,9 +148,20 @@ def natural_noise(theta, ref_mean):
     return jnp.concatenate([force, theta[..., 2:]], axis=-1)
 
 
+def piston_sd(log_sigma_L, floor):
+    """The sd of an L reading: the sampled scatter sigma_L and the rounding of a printed volume
+    (``floor``, 0 for a piston) in quadrature (hypot: exactly sigma_L without a floor)."""
+    return jnp.hypot(floor, jnp.exp(log_sigma_L))
+
+
+def _floor(d) -> float:
+    """The L rounding sd of a test's data (only ``CubicData`` carries a printed volume)."""
+    return getattr(d, "piston_floor", 0.0)
+
+
 def _noise(theta, d: CubicData):
     nat = natural_noise(theta, jnp.mean(d.ref_force))
-    sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), jnp.exp(nat[2])
+    sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), piston_sd(nat[2], d.piston_floor)
     sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, d.ref_force))
     return sigma_f, sigma_L, nat
 
@@ -217,13 +231,20 @@ def start(d: CubicData) -> np.ndarray:
         res = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
         return np.sqrt(np.sum(res**2) / max(n - 4, 1))
 
+    floor = float(_floor(d))
     return np.array(
-        [np.log(sd(np.asarray(d.force)) + 1e-9), 0.0, np.log(sd(np.asarray(d.piston)) + 1e-12)]
+        [
+            np.log(sd(np.asarray(d.force)) + 1e-9),
+            0.0,
+            np.log(max(sd(np.asarray(d.piston)), floor) + 1e-12),
+        ]
     )
 
 
 def report(theta, beta, d: CubicData) -> dict:
-    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
+    nat = np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force)))
+    noise = np.exp(nat)
+    noise[:, 2] = np.asarray(piston_sd(nat[:, 2], _floor(d)))  # the sd of an L reading
     force, piston = to_paper_basis(beta[:, :4]), to_paper_basis(beta[:, 4:])
     out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
     out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
@@ -405,6 +426,22 @@ def piston_coordinate(test: PressureTest, piston_area_m2: float):
     if test.volume_m3 is not None:
         return -np.asarray(test.volume_m3, float) / piston_area_m2, "volume"
     return None, None
+
+
+def piston_rounding_sd(test: PressureTest, piston_area_m2: float) -> float:
+    """The sd (m) of the rounding of a test's L readings: a volume column printed to a step q (its
+    last digit, ``PressureTest.volume_step_m3``) is known to within +-q/2, a uniform error of sd
+    q / sqrt(12), which L = -V / S carries divided by S. 0 for a piston read on the stand (its
+    readings are in ``sigma_L``'s prior) and for a volume of unknown step (a test made in code).
+
+    The rounding is a known part of the L readings' noise, like the stand's error budget: without
+    it, a printed volume that a cubic passes through exactly (six catalogue heights whose
+    rounded values happen to lie on a cubic) has a likelihood that grows without bound as
+    sigma_L -> 0, and the fit of that test is lost to float64 (issue 29)."""
+    step = getattr(test, "volume_step_m3", None)
+    if test.piston_m is not None or test.volume_m3 is None or not step:
+        return 0.0
+    return float(step) / math.sqrt(12.0) / piston_area_m2
 
 
 # ----------------------------------------------------------------------------- results
@@ -686,6 +723,7 @@ def _prepare(
         jnp.asarray(ref_force),
         jnp.asarray(noise_prior_mean(stand)),
         jnp.ones(np.size(test.force_N)),
+        jnp.asarray(piston_rounding_sd(test, piston_area_m2)),
     )
     return data, lsq_f, lsq_l, ref_force
 

@@ -180,7 +180,7 @@ def test_docs_figure_from_a_small_report(tmp_path):
     csv, png = tmp_path / "small.csv", tmp_path / "fig.png"
     simulate = ["simulate", "--out", csv, "--pressures", "1,5", "--step-mm", 10]
     assert _run("-m", "uq._cli.main", *simulate).returncode == 0
-    quick = ["--max-steps", 200, "--walkers", 8, "--draws", 50]
+    quick = ["--max-steps", 200, "--walkers", 8, "--draws", 50, "--allow-unconverged"]
     proc = _run("scripts/docs_figure.py", "--recordings", csv, "--out", png, *quick)
     assert proc.returncode == 0, proc.stderr
     image = matplotlib.image.imread(png)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from cli_helpers import one_line, run
 
-QUICK = ["--ensembles", "2", "--max-steps", "200", "--quiet"]
+QUICK = ["--ensembles", "2", "--max-steps", "200", "--quiet", "--allow-unconverged"]
 QUERY = ["--height-mm", "110", "--load-N", "8000", "--pressure-bar", "5", "--tolerance-pct", "5"]
 
 

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from cli_helpers import run
 from scipy import stats
 
 from uq._cli.main import main
@@ -162,9 +163,22 @@ def test_fit_cli_json_contract_strict_and_reproducible(tmp_path, capsys):
         and 0 < t["residual_order"]["piston"]["p"] <= 1
     )
     assert res["model_warnings"] == []  # the paper's stand: independent errors
-    # --strict turns a non-converged run into exit status 1, with a visible warning
-    assert main(["fit", str(csv), "--max-steps", "16", "--walkers", "8", "--strict"]) == 1
-    assert "WARNING" in capsys.readouterr().err
+    # a fit that fails its convergence rules does not pass as a result: exit status 1 (as with
+    # --strict, the old name), the table row and the JSON say so; --allow-unconverged: exit 0
+    short = ["fit", str(csv), "--max-steps", "16", "--walkers", "8", "--json", str(j1)]
+    capsys.readouterr()
+    assert main(short) == 1
+    out, err = capsys.readouterr()
+    assert "NOT CONVERGED" in out and "WARNING" in err
+    assert "uq fit: NOT CONVERGED (the cubics of 2 of 2 tests (2, 6 bar))" in err
+    assert "exit 1" in err and "--allow-unconverged" in err
+    assert json.loads(j1.read_text())["converged"] is False  # written, and saying so
+    assert main([*short, "--strict"]) == 1
+    assert main([*short, "--allow-unconverged"]) == 0
+    assert "accepted with --allow-unconverged: exit 0" in capsys.readouterr().err
+    # the two options contradict each other: a usage error
+    assert run([*short, "--strict", "--allow-unconverged"]) == 2
+    assert "not allowed with" in capsys.readouterr().err
 
 
 def test_fit_out_writes_netcdf(tmp_path):

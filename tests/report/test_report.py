@@ -94,6 +94,7 @@ def test_report_cli_small_campaign(small_csv, tmp_path, capsys):
             "600",
             "--draws",
             "300",
+            "--allow-unconverged",
         ]
     )
     assert rc == 0
@@ -145,6 +146,7 @@ def test_report_links_the_surface_page(tmp_path):
                 "200",
                 "--max-steps",
                 "400",
+                "--allow-unconverged",
             ]
         )
         == 0

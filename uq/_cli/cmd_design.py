@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 import time
 
-from uq._cli.common import _option_type
+from uq._cli.common import _option_type, record_convergence
 
 POLYTROPIC_HELP = (
     "polytropic exponent n: 1 isothermal (slow strokes) .. 1.4 adiabatic (fast strokes), or a range "
@@ -321,7 +321,8 @@ def command_design(args) -> int:
     _sheet_and_json(
         args, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
     )
-    return 1 if (args.strict and not fit.convergence.converged) else 0
+    record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
+    return 0
 
 
 def _advice():

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 
-from uq._cli.common import add_stand, stand_from
+from uq._cli.common import add_stand, record_convergence, stand_from
 from uq._derived.comparison import FITTERS
 from uq._derived.comparison import words as comparison_words
 from uq._models import surface as _surface
@@ -105,7 +105,8 @@ def command_surface(args) -> int:
     # printed, not in the JSON: reruns give identical bytes
     print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(res, args.json)
-    return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0
+    record_convergence(args, res["converged"], f"the {args.model} model's sampler")
+    return 0
 
 
 def _print_comparison(name: str, c: dict) -> None:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from uq._io.files import dumps_json, remove_stale, staged_folder
-from uq._report.html import Figure, _plt, check_format, encode, render
+from uq._report.html import Figure, _plt, check_format, encode, render, stamp_unconverged
 
 PAGE = "design.html"
 #: the files the sheet writes, by pattern (for pruning what an earlier run left)
@@ -227,6 +227,9 @@ def write_design_sheet(
                 "sealed load-deflection and rate curves with 90 % bands",
             )
         figs["design_frequency"] = (figure_frequency_chart(doc), "natural frequency against load")
+    if not doc["source"]["converged"]:
+        for fig, _ in figs.values():
+            stamp_unconverged(fig, f"{doc['model']}'s sampler")
     figures = {
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, (fig, alt) in figs.items()

@@ -69,6 +69,39 @@ def encode(fig, figure_format: str = "png") -> bytes:
     return buf.getvalue()
 
 
+#: what a page or figure drawn from a posterior whose convergence rules failed says it is
+NOT_CONVERGED = "NOT CONVERGED"
+
+
+def stamp_unconverged(fig, what: str) -> None:
+    """Mark ``fig`` as drawn from a posterior whose convergence rules failed (``what``: which fit,
+    e.g. "the 6 bar test"): NOT CONVERGED across it and the reason along its foot, so that the
+    figure cannot pass for a result, also when copied without its page (issue 29)."""
+    fig.text(
+        0.5,
+        0.5,
+        NOT_CONVERGED,
+        ha="center",
+        va="center",
+        rotation=20,
+        fontsize=44,
+        fontweight="bold",
+        color="#c00000",
+        alpha=0.25,
+        zorder=1000,
+    )
+    fig.text(
+        0.5,
+        0.002,
+        f"{NOT_CONVERGED}: {what}: the sampler's convergence rules failed; not a result",
+        ha="center",
+        va="bottom",
+        fontsize=8,
+        color="#c00000",
+        zorder=1000,
+    )
+
+
 def _png(fig) -> bytes:
     """The figure as PNG bytes at ``DPI``; the figure is closed."""
     return encode(fig, "png")

@@ -20,7 +20,7 @@ import numpy as np
 from uq._inference.summary import band
 from uq._io.files import write_bytes_atomic, write_text_atomic
 from uq._models.surface import SurfaceFit, spread_region, volume_omitted_reason
-from uq._report.html import Figure, _plt, check_format, encode, render
+from uq._report.html import Figure, _plt, check_format, encode, render, stamp_unconverged
 
 
 def figure_pressure_area(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
@@ -293,11 +293,20 @@ def comparison_rows(comparison: dict, name: str) -> list[dict]:
     ]
 
 
-def write_figures(figs: dict, out: Path, figure_format: str) -> dict:
+def unconverged_words(result: dict, name: str) -> str:
+    """ "" when the model's sampler passed its convergence rules, else which fit failed, in words
+    (for the page's banner and the figures' stamps)."""
+    return "" if result["converged"] else f"{MODEL_WORDS[name]}'s sampler"
+
+
+def write_figures(figs: dict, out: Path, figure_format: str, unconverged: str = "") -> dict:
     """Encode ``figs`` (stem -> (matplotlib figure, alt text)) as ``figure_format``, write each
-    beside the page; returns stem -> :class:`Figure`."""
+    beside the page; returns stem -> :class:`Figure`. ``unconverged``: which fit failed its
+    convergence rules, in words; every figure is then stamped NOT CONVERGED."""
     figures = {}
     for stem, (fig, alt) in figs.items():
+        if unconverged:
+            stamp_unconverged(fig, unconverged)
         name = f"{stem}.{figure_format}"
         figures[stem] = Figure(name, encode(fig, figure_format), alt)
         write_bytes_atomic(out / name, figures[stem].data)
@@ -325,7 +334,7 @@ def write_surface_report(
     }
     if not fit.force_only:  # the spread needs the volume
         figs["surface_spread"] = (figure_spread(fit), "spread traditional minus measured")
-    figures = write_figures(figs, out, figure_format)
+    figures = write_figures(figs, out, figure_format, unconverged_words(result, "surface"))
     comp = result.get("comparison")
     page = render(
         "surface.html",
@@ -338,5 +347,6 @@ def write_surface_report(
         noise=noise_rows(result["noise"]),
         figures=figures,
         volume_omitted=volume_omitted_reason(fit.recordings),
+        not_converged=unconverged_words(result, "surface"),
     )
     return write_text_atomic(out / "surface.html", page)

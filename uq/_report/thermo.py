@@ -29,6 +29,7 @@ from uq._report.surface import (
     figure_residual_overlay,
     noise_rows,
     preference,
+    unconverged_words,
     write_figures,
 )
 
@@ -192,6 +193,7 @@ def write_thermo_report(
         },
         out,
         figure_format,
+        unconverged_words(result, "thermodynamic"),
     )
     comp = result.get("comparison")
     page = render(
@@ -206,5 +208,6 @@ def write_thermo_report(
         maxwell_share=float(region["excludes_one"].mean()),
         piston=piston_words(result["implied_piston_area_m2"], result["piston_area_m2"]),
         figures=figures,
+        not_converged=unconverged_words(result, "thermodynamic"),
     )
     return write_text_atomic(out / PAGE, page)

@@ -201,7 +201,15 @@ def test_summary_is_short_and_the_sheet_is_complete(sheet):
     with open(folder / "design.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     n_iso, n_chart = len(res["isobaric"]), len(res["frequency_chart"]["rows"])
-    assert len(rows) == 4 * n_iso + 3 * n_chart
+    # the design point's own rows: load, rate, frequency, transmissibility and isolation at 4 Hz
+    assert len(rows) == 4 * n_iso + 3 * n_chart + 5
+    assert {r["quantity"] for r in rows if r["table"] == "design_point"} == {
+        "load",
+        "rate",
+        "natural_frequency",
+        "transmissibility_at_4Hz",
+        "isolation_at_4Hz",
+    }
     rate_at_5 = [
         r
         for r in rows
@@ -212,6 +220,41 @@ def test_summary_is_short_and_the_sheet_is_complete(sheet):
     assert "Reconstructed data" in page and "not measured" in page
     assert "ASSUMED: the volume at 112 mm" in page
     assert page.count("data:image/png;base64,") == 3
+
+
+def test_sheet_shows_a_design_charge_that_was_not_tested_and_ranks_the_model(
+    thermo_campaign, given_fit, tmp_path
+):
+    """A charge between the tested pressures (6 bar of 1, 3, 5, 7, 9): the sheet draws the design
+    point on the frequency chart and its sealed curve, tabulates it (the chart's row in bold, the
+    isobaric table's column at 6 bar marked "not tested", design.csv's design_point rows), and
+    says which model answered and how PSIS-LOO ranks it against the per-pressure cubics."""
+    _, path, _, v_c = thermo_campaign
+    out = tmp_path / "sheet"
+    argv = ["design", path, "--height-mm", 112, "--charge-bar", 6, "--volume-l", f"{v_c:.6f}"]
+    argv += ["--charges-bar", "3,5,7", "--draws", 200, "--out", out, "--json", tmp_path / "r.json"]
+    assert run([*argv, "--quiet", "--allow-unconverged"]) == 0
+    res = json.loads((tmp_path / "r.json").read_text())
+    assert res["tested_pressures_bar"] == [1.0, 3.0, 5.0, 7.0, 9.0]
+    assert {r["pressure_bar"] for r in res["isobaric"]} == {1.0, 3.0, 5.0, 6.0, 7.0, 9.0}
+    c = res["comparison"]
+    assert c["better"] in ("surface", "per-pressure cubics", "indistinguishable", "refused")
+    page = (out / "design.html").read_text()
+    assert "6 bar is not a tested pressure" in page and "design charge, not tested" in page
+    assert "how the data rank it" in page and res["model"] in page
+    assert "<span class='small'>design, not tested</span>" in page  # the chart's design row
+    with open(out / "design.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    design = {r["quantity"]: r for r in rows if r["table"] == "design_point"}
+    assert design["load"]["charge_bar"] == "6"
+    assert float(design["natural_frequency"]["mean"]) == pytest.approx(
+        res["natural_frequency_Hz"]["mean"], rel=1e-5
+    )
+    assert {r["pressure_bar"] for r in rows if r["table"] == "isobaric_design_charge"} == {"6"}
+    # the same run without the ranking says so
+    argv2 = [*argv[:-4], "--json", tmp_path / "n.json", "--no-compare", "--quiet"]
+    assert run([*argv2, "--allow-unconverged"]) == 0
+    assert json.loads((tmp_path / "n.json").read_text())["comparison"] is None
 
 
 def test_sheet_in_a_browser(sheet, tmp_path):

@@ -51,7 +51,7 @@ def test_a_piston_area_error_breaks_it_alike_at_every_pressure():
 def test_table1_committed_report_is_not_a_piston_area_error_alone():
     """reports/maxwell-table1 (scripts/maxwell_table1.py on Table 1 and its covariance), in the
     middle of the stroke: dV/dx exceeds dP/dp_u at 1-5 bar; one value at every pressure is refuted
-    (chi2 over 100 on 10 dof, /work/shared/PHYSICS.md: 120); a step between 5 and 6 bar fits better
+    (chi2 over 100 on 10 dof); a step between 5 and 6 bar fits better
     than a fade with pressure; the cause is left open (no "relaxation", no "fades with pressure");
     if the casing is conservative at 6-10 bar, the relation implies S / (1 + r) near 55.0 cm^2."""
     res = json.loads((ROOT / "reports" / "maxwell-table1" / "maxwell.json").read_text())

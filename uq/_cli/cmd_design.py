@@ -136,6 +136,12 @@ def configure_design(p) -> None:
         help="surface: force and volume surfaces (no dV/dp_u of its own); thermodynamic: force and "
         "volume from one potential (offers --dvdp-l-per-bar model)",
     )
+    g.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="skip ranking the model against the per-pressure cubics by PSIS-LOO (saves the "
+        "cubics' fit; the sheet and the JSON then say the answer was not ranked)",
+    )
     s = p.add_argument_group("the data sheet")
     s.add_argument(
         "--charges-bar",
@@ -289,13 +295,21 @@ def command_design(args) -> int:
         if args.sheet_heights_mm
         else _default_heights(rec, x_c)
     )
-    pressures = sorted({t.pressure_bar for t in rec.tests})
+    tested = sorted({t.pressure_bar for t in rec.tests})
+    # the isobaric table also at the design charge when it was not tested (the sheet marks it)
+    pressures = sorted(set(tested) | {float(args.charge_bar)})
     charges = args.charges_bar or _default_charges(rec)
     if not rec.has_piston:
         return _force_only(args, rec, stand, heights, pressures, t0)
-    from uq._derived.comparison import FITTERS
+    from uq._derived.comparison import FITTERS, fit_both
 
-    fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
+    comparison = None
+    if args.no_compare:
+        fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
+    else:  # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
+        fit, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, model=args.model
+        )
     model = (D.ThermoDesignModel if args.model == "thermodynamic" else D.SurfaceDesignModel)(
         fit, args.draws
     )
@@ -303,6 +317,8 @@ def command_design(args) -> int:
     grid = D.DesignGrid(model, x_c)
     doc = D.design_document(model, design, charges, grid)
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
+    doc["tested_pressures_bar"] = tested
+    doc["comparison"] = comparison
     doc["source"] = {
         "recordings": str(rec.path),
         "n_tests": len(rec.tests),
@@ -370,6 +386,8 @@ def _force_only(args, rec, stand, heights, pressures, t0) -> int:
             model.label,
         ],
         "isobaric": D.isobaric_table(model, pressures, heights, x_c),
+        "tested_pressures_bar": sorted({t.pressure_bar for t in rec.tests}),
+        "comparison": None,  # the per-pressure cubics answer: no other model fitted to rank against
         "source": {
             "recordings": str(rec.path),
             "n_tests": len(rec.tests),
@@ -445,5 +463,12 @@ def _print_sealed(rec, model, doc) -> None:
             f"  sealed curve {c['height_m'][0] * 1e3:g}..{c['height_m'][-1] * 1e3:g} mm"
             + (f" ({c['omitted_reason']})" if c["omitted_reason"] else "")
         )
+    from uq._derived.comparison import words
+
+    c = doc.get("comparison")
+    print(
+        "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
+        + (words(c) if c else "not ranked (--no-compare)")
+    )
     for w in doc["source"]["warnings"]:
         print(f"  warning: {w}", file=sys.stderr)

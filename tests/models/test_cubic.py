@@ -242,7 +242,7 @@ def test_a_printed_volume_carries_its_rounding_and_the_likelihood_is_bounded():
     resid = L - X @ np.linalg.lstsq(X, L, rcond=None)[0]
     assert np.max(np.abs(resid)) < 1e-12  # the cause: the printed volumes lie on a cubic
     floor = 1e-5 / np.sqrt(12.0) / rec.piston_area_m2
-    assert np.isclose(float(d.piston_floor), floor)  # 0.53 mm of piston travel
+    assert np.isclose(float(d.piston_floor), floor)  # 0.53 mm of piston travel (VolumeData)
     theta = np.array([np.log(60.0), 0.0, 0.0])
     lp = []
     for log_sigma_L in (np.log(floor), -12.0, -20.0, -30.0):

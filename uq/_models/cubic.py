@@ -125,9 +125,22 @@ class CubicData(NamedTuple):
     ref_force: jnp.ndarray  # (n,) force level of the relative noise term, N
     prior_mean: jnp.ndarray  # (3,) prior centres of the natural noise logs
     weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out (exact LOO refits)
-    #: () sd (m) of the L readings' rounding: a printed volume's last digit, step / sqrt(12) / S
-    #: (:func:`piston_rounding_sd`); 0 for a piston read on the stand
-    piston_floor: jnp.ndarray = 0.0
+
+
+class VolumeData(NamedTuple):
+    """``CubicData`` of a test whose L readings come from a printed volume column (L = -V / S),
+    with the sd of their rounding: ``MODEL``'s functions add it to sigma_L in quadrature. A type of
+    its own, so that a piston test's program (``CubicData``) is exactly what it was."""
+
+    X: jnp.ndarray
+    force: jnp.ndarray
+    piston: jnp.ndarray
+    ref_force: jnp.ndarray
+    prior_mean: jnp.ndarray
+    weight: jnp.ndarray
+    #: () sd (m) of the L readings' rounding: the volume's last printed digit, step/sqrt(12)/S
+    #: (:func:`piston_rounding_sd`)
+    piston_floor: jnp.ndarray
 
 
 def natural_noise(theta, ref_mean):
@@ -148,20 +161,21 @@ def natural_noise(theta, ref_mean):
     return jnp.concatenate([force, theta[..., 2:]], axis=-1)
 
 
-def piston_sd(log_sigma_L, floor):
-    """The sd of an L reading: the sampled scatter sigma_L and the rounding of a printed volume
-    (``floor``, 0 for a piston) in quadrature (hypot: exactly sigma_L without a floor)."""
-    return jnp.hypot(floor, jnp.exp(log_sigma_L))
+def piston_sd(log_sigma_L, floor=None):
+    """The sd of an L reading: the sampled scatter sigma_L, and for a printed volume its rounding
+    (``floor``; None for a piston read on the stand) in quadrature."""
+    sigma_L = jnp.exp(log_sigma_L)
+    return sigma_L if floor is None else jnp.hypot(floor, sigma_L)
 
 
-def _floor(d) -> float:
-    """The L rounding sd of a test's data (only ``CubicData`` carries a printed volume)."""
-    return getattr(d, "piston_floor", 0.0)
+def _floor(d):
+    """The L rounding sd of a test's data: a ``VolumeData``'s, else None (a piston)."""
+    return getattr(d, "piston_floor", None)
 
 
 def _noise(theta, d: CubicData):
     nat = natural_noise(theta, jnp.mean(d.ref_force))
-    sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), piston_sd(nat[2], d.piston_floor)
+    sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), piston_sd(nat[2], _floor(d))
     sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, d.ref_force))
     return sigma_f, sigma_L, nat
 
@@ -231,7 +245,7 @@ def start(d: CubicData) -> np.ndarray:
         res = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
         return np.sqrt(np.sum(res**2) / max(n - 4, 1))
 
-    floor = float(_floor(d))
+    floor = float(_floor(d) if _floor(d) is not None else 0.0)
     return np.array(
         [
             np.log(sd(np.asarray(d.force)) + 1e-9),
@@ -242,9 +256,9 @@ def start(d: CubicData) -> np.ndarray:
 
 
 def report(theta, beta, d: CubicData) -> dict:
-    nat = np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force)))
-    noise = np.exp(nat)
-    noise[:, 2] = np.asarray(piston_sd(nat[:, 2], _floor(d)))  # the sd of an L reading
+    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
+    if _floor(d) is not None:  # a printed volume: the sd of an L reading holds its rounding
+        noise[:, 2] = np.hypot(float(d.piston_floor), noise[:, 2])
     force, piston = to_paper_basis(beta[:, :4]), to_paper_basis(beta[:, 4:])
     out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
     out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
@@ -707,7 +721,7 @@ def _prepare(
     and ``(lsq_force, lsq_piston, ref_force)``."""
     if noise not in ("budget", "constant"):
         raise ValueError(f"noise must be 'budget' or 'constant', got {noise!r}")
-    piston, _ = piston_coordinate(test, piston_area_m2)
+    piston, source = piston_coordinate(test, piston_area_m2)
     if piston is None:
         raise ValueError(
             f"the {test.label} test is force-only: fit it with FORCE_ONLY (force_data)"
@@ -716,15 +730,18 @@ def _prepare(
     lsq_f = least_squares(u, test.force_N)
     lsq_l = least_squares(u, piston)
     ref_force = noise_reference(lsq_f, u, noise)
-    data = CubicData(
+    fields = (
         basis(u),
         jnp.asarray(test.force_N),
         jnp.asarray(piston),
         jnp.asarray(ref_force),
         jnp.asarray(noise_prior_mean(stand)),
         jnp.ones(np.size(test.force_N)),
-        jnp.asarray(piston_rounding_sd(test, piston_area_m2)),
     )
+    if source == "volume":
+        data = VolumeData(*fields, jnp.asarray(piston_rounding_sd(test, piston_area_m2)))
+    else:
+        data = CubicData(*fields)
     return data, lsq_f, lsq_l, ref_force
 
 
@@ -784,7 +801,7 @@ def fit_tests(
         if t.piston_m is None and t.volume_m3 is None:  # force only
             return "force-measured" if pressure == "measured" else "force"
         if t.piston_m is None:  # L from a volume column: not read off the stand's piston
-            return "plain"
+            return "volume"
         if pressure == "measured":
             return "measured"
         if ar1 == "on" and t.step is not None:
@@ -802,13 +819,14 @@ def fit_tests(
 
     models = {
         "plain": MODEL,
+        "volume": MODEL,  # the plain model on VolumeData: L's rounding in its noise
         "measured": MEASURED,
         "ar1": AR1,
         "force": FORCE_ONLY,
         "force-measured": FORCE_ONLY,
     }
     #: the pressure-holding treatment PressureFit.variant records for each model key
-    holding = {"force": "plain", "force-measured": "measured"}
+    holding = {"force": "plain", "force-measured": "measured", "volume": "plain"}
     variants = [variant_of(t) for t in tests]
 
     def run(indices, variant, label):
@@ -1462,7 +1480,13 @@ AR1 = CollapsedModel(
 
 def collapsed_model(data) -> CollapsedModel:
     """The model bundle whose data ``data`` is (a fit's ``posterior.data``), for refits."""
-    kinds = ((ForceData, FORCE_ONLY), (MeasuredData, MEASURED), (AR1Data, AR1), (CubicData, MODEL))
+    kinds = (
+        (ForceData, FORCE_ONLY),
+        (MeasuredData, MEASURED),
+        (AR1Data, AR1),
+        (CubicData, MODEL),
+        (VolumeData, MODEL),
+    )
     for kind, model in kinds:
         if isinstance(data, kind):
             return model

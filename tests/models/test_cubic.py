@@ -14,7 +14,8 @@ from uq._data.recordings import write_recordings_csv
 from uq._data.reference import table1
 from uq._inference.linear import linear_posterior, posterior_cov
 from uq._inference.sampler import Settings
-from uq._models.cubic import FORCE_PRIOR_SD_N, basis, fit_test, least_squares, to_paper_basis
+from uq._models.cubic import FORCE_PRIOR_SD_N, basis, least_squares, to_paper_basis
+from uq._models.cubic_fit import fit_test
 from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
 FAST = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)
@@ -230,14 +231,14 @@ def _issue_catalogue():
 def test_a_printed_volume_carries_its_rounding_and_the_likelihood_is_bounded():
     import jax.numpy as jnp
 
-    from uq._models.cubic import _prepare, log_prob
-    from uq._stand.simulator import PAPER_STAND
+    from uq._data.stand_description import PAPER_STAND
+    from uq._models.cubic import log_prob, prepare
 
     rec = _issue_catalogue()
     test = rec.tests[2]
     assert test.pressure_bar == 6.0 and test.volume_m3 is not None
     assert np.isclose(test.volume_step_m3, 1e-5)  # 0.01 L, read from the printed values
-    d, *_ = _prepare(test, rec.x0_m, "budget", PAPER_STAND, rec.piston_area_m2)
+    d, *_ = prepare(test, rec.x0_m, "budget", PAPER_STAND, rec.piston_area_m2)
     X, L = np.asarray(d.X), np.asarray(d.piston)
     resid = L - X @ np.linalg.lstsq(X, L, rcond=None)[0]
     assert np.max(np.abs(resid)) < 1e-12  # the cause: the printed volumes lie on a cubic
@@ -258,7 +259,7 @@ def test_a_printed_volume_carries_its_rounding_and_the_likelihood_is_bounded():
 def test_the_issue_catalogue_fits_the_volume_test_to_the_truth():
     """The whole campaign of the issue: every test converges and the 6-bar test's a_P interval
     holds Table 1's (15.90 kN) and is a few hundred newtons wide, not a quarter of a meganewton."""
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     fit = fit_campaign(_issue_catalogue(), seed=20201, settings=FAST)
     assert fit.converged, fit.warnings()

@@ -77,7 +77,7 @@ def _reference(value: str):
 
 def command_report(args) -> int:
     from uq._io.errors import InputError
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     if args.draws < MIN_DRAWS:
         raise InputError(f"option --draws: at least {MIN_DRAWS} draws, got {args.draws}")
@@ -152,5 +152,5 @@ def command_report(args) -> int:
 
     record_convergence(args, cf.converged, unconverged_tests(cf.to_json()))
     if surface is not None:
-        record_convergence(args, surface.convergence.converged, "the surface model")
+        record_convergence(args, surface.convergence.converged, f"{surface.words}'s sampler")
     return 0

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import functools
 
+import numpy as np
+
 #: quantity -> (unit inside, {suffix: pint unit}); the suffixes are those of docs/formats.md section 1.
 _PRESSURE = {"bar": "bar", "psi": "psi", "kPa": "kPa", "MPa": "MPa", "mbar": "mbar"}
 _LENGTH = {"mm": "mm", "m": "m", "in": "inch"}
@@ -83,8 +85,6 @@ def printed_step(values) -> float:
     >>> printed_step([4.2, 3.88, 3.49]), printed_step([2500.0, 3610.0]), printed_step([0.1234567])
     (0.01, 10.0, 1e-07)
     """
-    import numpy as np
-
     v = np.abs(np.asarray(values, float))
     v = v[np.isfinite(v) & (v > 0)]
     for k in range(6, -10, -1):

@@ -39,6 +39,7 @@ every chi-square.
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2
 
 from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA
@@ -197,8 +198,6 @@ def shapes(pressures, mean, cov) -> dict:
     """The four shapes of r over pressure (``SHAPE_RULE``) fitted to the levels ``mean`` (T,) with
     their joint covariance ``cov`` (T, T): each one's chi-square, degrees of freedom, p-value,
     whether it fits, and its coefficients."""
-    from scipy.stats import chi2
-
     p = np.asarray(pressures, float)
     T = p.size
     W = np.linalg.inv(cov)
@@ -258,8 +257,6 @@ def _upper_reading(pressures, mean, cov, from_bar: float, area_m2: float) -> dic
     """The piston area the levels at and above ``from_bar`` imply if the casing is conservative
     there (:func:`piston_area_reading` of their common value, by GLS with their own covariance),
     or None when one value does not fit them (then no single area makes the relation hold there)."""
-    from scipy.stats import chi2
-
     sel = np.asarray(pressures) >= from_bar
     if sel.sum() < 2:
         return None

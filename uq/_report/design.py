@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from uq._derived.comparison import words
 from uq._io.files import dumps_json, remove_stale, staged_folder
-from uq._report.html import Figure, _plt, check_format, encode, render, stamp_unconverged
+from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
 PAGE = "design.html"
 #: the files the sheet writes, by pattern (for pruning what an earlier run left)
@@ -32,7 +33,7 @@ OUTPUTS = ("design_*.png", "design_*.svg", PAGE, "design.csv", "design.json")
 
 
 def _colours(n: int):
-    plt = _plt()
+    plt = pyplot()
     cmap = plt.get_cmap("viridis")
     return [cmap(0.85 * i / max(n - 1, 1)) for i in range(n)]
 
@@ -47,7 +48,7 @@ def figure_sealed_curves(doc: dict, curves: dict):
     """The sealed load-deflection curves, one per charge pressure of the chart (charged at the
     design height), each with its 90 % band, and the design charge's own curve in black (dashed
     when the charge was not a tested pressure); the design height dotted."""
-    plt = _plt()
+    plt = pyplot()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.0, 4.4), layout="constrained")
     cols = _colours(len(curves))
     design = doc.get("sealed_curve")
@@ -88,7 +89,7 @@ def figure_sealed_curves(doc: dict, curves: dict):
 def figure_frequency_chart(doc: dict):
     """Natural frequency against load at the design height, one point per charge pressure with
     its 90 % intervals in both directions (the catalogue's chart)."""
-    plt = _plt()
+    plt = pyplot()
     rows = doc["frequency_chart"]["rows"]
     fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
     L = np.array([[r["load_N"][k] for k in ("mean", "q05", "q95")] for r in rows]) * 1e-3
@@ -146,7 +147,7 @@ def figure_frequency_chart(doc: dict):
 
 def figure_isobaric(doc: dict):
     """The isobaric loads of the table against height, one line per pressure, 90 % bands."""
-    plt = _plt()
+    plt = pyplot()
     rows = doc["isobaric"]
     ps = sorted({r["pressure_bar"] for r in rows})
     fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
@@ -222,8 +223,6 @@ def chart_rows(doc: dict) -> list[dict]:
 def ranking(doc: dict) -> dict:
     """Which model answered and how the data rank it (PSIS-LOO against the per-pressure cubics),
     in words, for the sheet."""
-    from uq._derived.comparison import words
-
     c = doc.get("comparison")
     if c is None:
         why = (

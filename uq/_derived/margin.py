@@ -110,7 +110,7 @@ class SurfaceAnswer(_Ranges):
     def __init__(self, fit: SurfaceFit, max_draws: int = 4000):
         super().__init__(fit.recordings)
         names = SURFACE_NOISE[:3] if fit.force_only else SURFACE_NOISE
-        noise = {n: np.asarray(fit.idata.posterior[n]) for n in names}
+        noise = {n: np.asarray(fit.posterior.reported[n]) for n in names}
         self._setup(
             fit.orders,
             fit.geometry,

@@ -599,7 +599,7 @@ def noise_summary(fit: SurfaceFit) -> dict:
     diag = fit.convergence.variables
     out = {}
     for n in surface_force.NATURAL if fit.force_only else NATURAL_NAMES:
-        est = estimate(np.asarray(fit.idata.posterior[n]))
+        est = estimate(np.asarray(fit.posterior.reported[n]))
         est["r_hat"] = diag[n]["r_hat"]
         est["ess_bulk"] = diag[n]["ess_bulk"]
         out[n] = est

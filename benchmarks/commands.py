@@ -156,46 +156,82 @@ def argv_of(name: str, recordings: Path, out: Path, extra: list[str]) -> list[st
     return [a.format(file=recordings, out=out) for a in COMMANDS[name]] + extra + ["--quiet"]
 
 
+def _with_path(env: dict, path: Path | None) -> dict:
+    """``env`` running the uq package found in ``path`` (a checkout's root) instead of the installed one."""
+    if path is None:
+        return env
+    return dict(
+        env, PYTHONPATH=os.pathsep.join([str(path), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    )
+
+
 def measure(
-    names: list[str], *, reps: int, recordings: Path, extra: list[str], warm: bool, log=None
+    names: list[str],
+    *,
+    reps: int,
+    recordings: Path,
+    extra: list[str],
+    warm: bool,
+    log=None,
+    cache: Path | None = None,
+    code: Path | None = None,
+    baseline: Path | None = None,
+    warm_baseline: bool = True,
 ) -> dict:
-    """The floor/command pairs, ``reps`` times each (see the module docstring)."""
+    """The floor/command pairs, ``reps`` times each (see the module docstring). ``code``: the uq
+    to measure (a folder holding ``uq/``; default the installed one); ``baseline``: another one,
+    run right after it in every repetition (the "before" of a change, under the same load)."""
     rows: dict[str, list[dict]] = {n: [] for n in names}
     with tempfile.TemporaryDirectory(prefix="uq-bench-commands-") as tmp:
-        env = dict(os.environ, UQ_CACHE_DIR=str(Path(tmp) / "jax-cache"))
+        env = dict(os.environ, UQ_CACHE_DIR=str(cache or Path(tmp) / "jax-cache"))
         env.pop("JAX_COMPILATION_CACHE_DIR", None)
+        env.pop("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", None)
         out = Path(tmp) / "out"
+        versions = {"command": _with_path(env, code)}
+        if baseline is not None:
+            versions["baseline"] = _with_path(env, baseline)
         if warm:
             for n in names:
-                t0 = time.perf_counter()
-                run_child(["uq", *argv_of(n, recordings, out, extra)], env)
-                if log:
-                    log(f"warm-up {n}: {time.perf_counter() - t0:.1f} s")
+                for which, e in versions.items():
+                    if which == "baseline" and not warm_baseline:
+                        continue
+                    t0 = time.perf_counter()
+                    run_child(["uq", *argv_of(n, recordings, out, extra)], e)
+                    if log:
+                        log(f"warm-up {n} ({which}): {time.perf_counter() - t0:.1f} s")
         for rep in range(reps):
             for n in names:
                 floor = run_child(["floor", *FLOOR_MODULES], env)
-                cmd = run_child(["uq", *argv_of(n, recordings, out, extra)], env)
-                row = {
-                    "rep": rep,
-                    "load_average_1min": os.getloadavg()[0],
-                    "floor": floor,
-                    "command": cmd,
-                    "ratio_wall": cmd["wall_s"] / floor["wall_s"],
-                    "ratio_cpu": cmd["cpu_s"] / floor["cpu_s"],
-                }
+                row = {"rep": rep, "load_average_1min": os.getloadavg()[0], "floor": floor}
+                for which, e in versions.items():
+                    cmd = run_child(["uq", *argv_of(n, recordings, out, extra)], e)
+                    suffix = "" if which == "command" else "_baseline"
+                    row[which] = cmd
+                    row["ratio_wall" + suffix] = cmd["wall_s"] / floor["wall_s"]
+                    row["ratio_cpu" + suffix] = cmd["cpu_s"] / floor["cpu_s"]
+                    if log:
+                        log(
+                            f"rep {rep + 1}/{reps} {n} ({which}): {cmd['wall_s']:.1f} s (floor "
+                            f"{floor['wall_s']:.1f} s, x{cmd['wall_s'] / floor['wall_s']:.2f}), CPU "
+                            f"{cmd['cpu_s']:.1f} s (x{cmd['cpu_s'] / floor['cpu_s']:.2f}), "
+                            f"peak {cmd['peak_rss_mb']:.0f} MB"
+                        )
                 rows[n].append(row)
-                if log:
-                    log(
-                        f"rep {rep + 1}/{reps} {n}: {cmd['wall_s']:.1f} s (floor {floor['wall_s']:.1f} s, "
-                        f"x{row['ratio_wall']:.2f}), CPU {cmd['cpu_s']:.1f} s, "
-                        f"peak {cmd['peak_rss_mb']:.0f} MB"
-                    )
     commands = {}
     for n, rs in rows.items():
 
         def med(f, rs=rs):
             return statistics.median(f(r) for r in rs)
 
+        if baseline is not None:
+            base = {
+                "ratio_wall": med(lambda r: r["ratio_wall_baseline"]),
+                "ratio_cpu": med(lambda r: r["ratio_cpu_baseline"]),
+                "wall_s": med(lambda r: r["baseline"]["wall_s"]),
+                "cpu_s": med(lambda r: r["baseline"]["cpu_s"]),
+                "peak_rss_mb": med(lambda r: r["baseline"]["peak_rss_mb"]),
+                "children_peak_rss_mb": med(lambda r: r["baseline"]["children_peak_rss_mb"]),
+            }
         commands[n] = {
             "argv": "uq " + " ".join(argv_of(n, Path("FILE"), Path("OUT"), extra)),
             "ratio_wall": med(lambda r: r["ratio_wall"]),
@@ -207,6 +243,7 @@ def measure(
             "floor_wall_s": med(lambda r: r["floor"]["wall_s"]),
             "floor_cpu_s": med(lambda r: r["floor"]["cpu_s"]),
             "goal_ratio": GOALS.get(n),
+            "baseline": base if baseline is not None else None,
             "runs": rs,
         }
     return commands
@@ -221,10 +258,13 @@ def summary(r: dict) -> str:
     ]
     for n, c in r["commands"].items():
         goal = f"{c['goal_ratio']:.1f}" if c["goal_ratio"] else "-"
-        lines.append(
-            f"  {n:<9} {c['ratio_wall']:>8.2f} {goal:>5} {c['wall_s']:>7.1f} {c['cpu_s']:>7.1f} "
-            f"{c['ratio_cpu']:>11.2f} {c['peak_rss_mb']:>8.0f} {c['children_peak_rss_mb']:>10.0f}"
-        )
+        for label, v in ((n, c), (" before", c.get("baseline"))):
+            if v:
+                lines.append(
+                    f"  {label:<9} {v['ratio_wall']:>8.2f} {goal:>5} {v['wall_s']:>7.1f} "
+                    f"{v['cpu_s']:>7.1f} {v['ratio_cpu']:>11.2f} {v['peak_rss_mb']:>8.0f} "
+                    f"{v['children_peak_rss_mb']:>10.0f}"
+                )
     lines.append(
         f"  import floor ({', '.join(FLOOR_MODULES)}): median {r['floor_wall_s']:.2f} s wall, "
         f"{r['floor_cpu_s']:.2f} s CPU"
@@ -266,6 +306,27 @@ def parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--label", default="", help="a name for this run in the JSON (e.g. 'before')")
     p.add_argument(
+        "--cache",
+        type=Path,
+        help="JAX's compilation cache for the run (default: a new folder, warmed by --warm-up)",
+    )
+    p.add_argument(
+        "--code",
+        type=Path,
+        help="measure the uq package in this folder (its root, holding uq/) instead of the installed one",
+    )
+    p.add_argument(
+        "--no-baseline-warm-up",
+        action="store_true",
+        help="warm the cache for the measured uq only (the --cache given is warm for the baseline)",
+    )
+    p.add_argument(
+        "--baseline",
+        type=Path,
+        help="also measure the uq package in this folder (e.g. an export of main: the 'before' "
+        "column), right after the measured one in every repetition",
+    )
+    p.add_argument(
         "--json", metavar="PATH", help="write the result to PATH ('-' for stdout); nothing without"
     )
     return p
@@ -305,6 +366,10 @@ def main(argv: list[str] | None = None) -> int:
         extra=shlex.split(args.extra),
         warm=not args.cold,
         log=log,
+        cache=args.cache,
+        code=args.code,
+        baseline=args.baseline,
+        warm_baseline=not args.no_baseline_warm_up,
     )
     floors = [r["floor"] for c in commands.values() for r in c["runs"]]
     try:
@@ -316,7 +381,9 @@ def main(argv: list[str] | None = None) -> int:
         "commit": git_commit(),
         "date": time.strftime("%Y-%m-%d"),
         "workload": where + (f" with {args.extra}" if args.extra else ""),
-        "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "cores": len(os.sched_getaffinity(0))
+        if hasattr(os, "sched_getaffinity")
+        else os.cpu_count(),
         "load_average_1min": load0,
         "reps": args.reps,
         "warm_cache": not args.cold,
@@ -324,6 +391,8 @@ def main(argv: list[str] | None = None) -> int:
         "floor_wall_s": statistics.median(f["wall_s"] for f in floors),
         "floor_cpu_s": statistics.median(f["cpu_s"] for f in floors),
         "total_s": time.perf_counter() - t0,
+        "code": str(args.code) if args.code else "installed",
+        "baseline": str(args.baseline) if args.baseline else None,
         "commands": commands,
         "measure": "per command the median over reps of (command / import floor) measured back to back, "
         "each in a fresh interpreter; CPU = user + system of the process and its reaped children",

@@ -316,6 +316,11 @@ def parser() -> argparse.ArgumentParser:
         help="measure the uq package in this folder (its root, holding uq/) instead of the installed one",
     )
     p.add_argument(
+        "--baseline-label",
+        default="",
+        help="what the baseline is, for the table (e.g. 'main at 9034f1e')",
+    )
+    p.add_argument(
         "--no-baseline-warm-up",
         action="store_true",
         help="warm the cache for the measured uq only (the --cache given is warm for the baseline)",
@@ -393,6 +398,7 @@ def main(argv: list[str] | None = None) -> int:
         "total_s": time.perf_counter() - t0,
         "code": str(args.code) if args.code else "installed",
         "baseline": str(args.baseline) if args.baseline else None,
+        "baseline_label": args.baseline_label,
         "commands": commands,
         "measure": "per command the median over reps of (command / import floor) measured back to back, "
         "each in a fresh interpreter; CPU = user + system of the process and its reaped children",

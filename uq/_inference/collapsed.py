@@ -10,14 +10,20 @@ and a start for the optimiser. The driver does the rest, the same way for every 
 1. MAP of theta: optimistix BFGS on the collapsed negative log posterior from the model's
    start(s), the best optimum kept; a run that does not report success is restarted once from
    where it stopped and kept only if a Newton step from it would gain less than
-   ``MAP_DECREMENT`` nats. The Laplace covariance is the inverse of JAX's Hessian there.
+   ``MAP_DECREMENT`` nats. The Laplace covariance is the inverse of the Hessian there, by
+   central differences (Richardson-extrapolated) through the same compiled log posterior the
+   sampler calls (:func:`laplace_curvature`): no Hessian program to trace and compile per model.
 2. Sampling of theta: emcee (``uq._inference.sampler.run_many``) from starts overdispersed by
    the Laplace covariance, until the convergence rules pass (``uq._inference.convergence``); or,
    for quick screening (``method="laplace"``), independent draws from the Laplace approximation.
-3. An exact draw of beta for every retained theta (``uq._inference.linear.map_rows``).
-4. Pointwise log-likelihood, optional posterior-predictive replicates, and an ArviZ
-   ``InferenceData`` with ``posterior``, ``log_likelihood``, ``posterior_predictive``,
-   ``observed_data`` and ``sample_stats`` groups, so that ``az.loo`` and ``az.plot_ppc`` work on it.
+3. An exact draw of beta for every retained theta (``uq._inference.linear.map_rows``), the
+   model's reported variables and the convergence verdict.
+4. On demand (:class:`Posterior`: made when first asked for, the same draws whenever): the
+   pointwise log-likelihood, posterior-predictive replicates, the integrated leave-one-out
+   densities and an ArviZ ``InferenceData`` with ``posterior``, ``log_likelihood``,
+   ``posterior_predictive``, ``observed_data`` and ``sample_stats`` groups, so that ``az.loo``
+   and ``az.plot_ppc`` work on it. A command pays only for what it uses (``uq fit`` for none of
+   them; the report's bands need none either).
 
 Several problems of one model (the tests of a campaign) are fitted in one emcee run
 (:func:`fit_collapsed` with a list of data): every problem keeps its own ensembles, burn-in and

@@ -32,7 +32,12 @@ def _loglik(rng, C, D, n, heavy=0.0):
 
 @pytest.mark.parametrize(
     "C, D, n, heavy, reff",
-    [(1, 1000, 50, 0.0, 1.0), (4, 500, 40, 0.1, None), (4, 251, 30, 0.2, None), (2, 40, 9, 0.3, 0.8)],
+    [
+        (1, 1000, 50, 0.0, 1.0),
+        (4, 500, 40, 0.1, None),
+        (4, 251, 30, 0.2, None),
+        (2, 40, 9, 0.3, 0.8),
+    ],
 )
 def test_psis_is_arviz_s_loo(C, D, n, heavy, reff):
     rng = np.random.default_rng(C * D + n)

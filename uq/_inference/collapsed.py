@@ -133,6 +133,15 @@ def _bfgs(fn, x0, active, data):
     return sol.value, objective(sol.value, args), sol.result == optx.RESULTS.successful
 
 
+@functools.partial(jax.jit, static_argnums=0)
+def _gradient_hessian(fn, x, active, data):
+    """JAX's exact gradient and Hessian of the objective: the fallback of the finite differences
+    where they cannot be taken (an optimum on a wall of the support, where every step to one side
+    leaves it); traced only then."""
+    objective = _objective(fn)
+    return jax.grad(objective)(x, (active, data)), jax.hessian(objective)(x, (active, data))
+
+
 def _draw_row(theta, key, fn, data):
     return fn(theta, key, data)
 
@@ -170,6 +179,7 @@ class Optimum:
 #: finds each coordinate's posterior sd, the second takes ``FD_SD_FRACTION`` of it and half that
 FD_STEP = 1e-4
 FD_SD_FRACTION = 0.1
+FD_RETRIES = 4
 
 
 def find_map(model: CollapsedModel, data, active=None, *, block: int = 64) -> Optimum:
@@ -220,7 +230,9 @@ def laplace_curvature(lp, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     the fourth power). Steps that large are needed: the collapsed log posterior is a difference of
     terms far larger than itself (y' W y - m' A m), so its rounding error is about 1e-8, not 1e-16,
     of its size. Agreement with JAX's exact Hessian: within 1e-5 relative on the models checked
-    (tests/inference/test_collapsed.py)."""
+    (tests/inference/test_collapsed.py). Where a step to one side leaves the support at every
+    size tried (an optimum on a wall), the result is not finite and the caller takes JAX's
+    Hessian instead."""
     x = np.atleast_2d(np.asarray(centers, float))
     K, d = x.shape
     eye = np.eye(d)
@@ -233,14 +245,14 @@ def laplace_curvature(lp, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ),
         float,
     )
-    curv = -(f[:, 1 : 1 + d] - 2.0 * f[:, :1] + f[:, 1 + d :]) / h**2
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        curv = -(f[:, 1 : 1 + d] - 2.0 * f[:, :1] + f[:, 1 + d :]) / h**2
         sd = 1.0 / np.sqrt(curv)
     h = np.where(np.isfinite(sd) & (sd > 0), FD_SD_FRACTION * sd, h)
     pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
 
     def stencil(h):
-        steps = [np.zeros((K, d))]
+        steps = [np.zeros_like(h)]
         steps += [s * h * eye[i] for i in range(d) for s in (1.0, -1.0)]
         steps += [
             si * h * eye[i] + sj * h * eye[j]
@@ -250,6 +262,7 @@ def laplace_curvature(lp, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.stack(steps, axis=1)
 
     def differences(f, h):
+        K = f.shape[0]
         f0, fp, fm = f[:, 0], f[:, 1 : 1 + 2 * d : 2], f[:, 2 : 2 + 2 * d : 2]
         grad = (fp - fm) / (2.0 * h)
         hess = np.zeros((K, d, d))
@@ -263,9 +276,31 @@ def laplace_curvature(lp, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return grad, hess
 
     n = 1 + 2 * d + 2 * d * (d - 1)
-    f = np.asarray(lp(x[:, None] + np.concatenate([stencil(h), stencil(h / 2)], axis=1)), float)
-    (g1, h1), (g2, h2) = differences(f[:, :n], h), differences(f[:, n:], h / 2)
-    return (4.0 * g2 - g1) / 3.0, (4.0 * h2 - h1) / 3.0
+    grad, hess = np.full((K, d), np.nan), np.full((K, d, d), np.nan)
+    todo = np.arange(K)
+    for _ in range(FD_RETRIES):  # a step that leaves the support (-inf): ten times smaller
+        hk = h[todo]
+        pts = x[todo, None] + np.concatenate([stencil(hk), stencil(hk / 2)], axis=1)
+        f = np.full((K, pts.shape[1]), -np.inf)
+        f[todo] = np.asarray(lp(_rows_of(pts, todo, K)), float)[todo]
+        with np.errstate(invalid="ignore", over="ignore"):
+            (g1, h1), (g2, h2) = differences(f[todo, :n], hk), differences(f[todo, n:], hk / 2)
+            g, H = (4.0 * g2 - g1) / 3.0, (4.0 * h2 - h1) / 3.0
+        ok = np.all(np.isfinite(g), axis=1) & np.all(np.isfinite(H), axis=(1, 2))
+        grad[todo], hess[todo] = g, H
+        todo = todo[~ok]
+        if todo.size == 0:
+            break
+        h[todo] = h[todo] / 10.0
+    return grad, hess
+
+
+def _rows_of(pts: np.ndarray, todo: np.ndarray, K: int) -> np.ndarray:
+    """``pts`` (len(todo), m, d) of the problems ``todo`` as the (K, m, d) ``lp`` takes (the
+    other problems at the first problem's points: evaluated and discarded)."""
+    out = np.repeat(pts[:1], K, axis=0)
+    out[todo] = pts
+    return out
 
 
 def _optima(model: CollapsedModel, datas: list, act: np.ndarray, lp) -> list[Optimum]:
@@ -279,8 +314,14 @@ def _optima(model: CollapsedModel, datas: list, act: np.ndarray, lp) -> list[Opt
     dims = np.flatnonzero(act)
     grads, hessians = laplace_curvature(lp, np.stack([b[0][dims] for b in bests]))
     out = []
-    for (x, f, ok), g, H in zip(bests, grads, hessians, strict=True):
+    for (x, f, ok), g, H, d in zip(bests, grads, hessians, datas, strict=True):
         g, H = -g, -H  # of the objective, the negative log posterior
+        if not (np.all(np.isfinite(g)) and np.all(np.isfinite(H))):  # on a wall: JAX's Hessian
+            flags = jnp.asarray(act.astype(float))
+            g, H = (
+                np.asarray(a) for a in _gradient_hessian(model.log_prob, jnp.asarray(x), flags, d)
+            )
+            g, H = g[dims], H[np.ix_(dims, dims)]
         try:
             cov = np.linalg.inv(H)
             np.linalg.cholesky(cov)

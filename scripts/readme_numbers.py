@@ -493,6 +493,8 @@ def commands_bench_summary(rel: str) -> Callable[[], str]:
                 f"| {pair('cpu_s', '.1f')} | {pair('peak_rss_mb', '.0f')} "
                 f"| {pair('children_peak_rss_mb', '.0f')} |"
             )
+        if r.get("note"):
+            lines += ["", f"Note: {r['note']}"]
         return "\n".join(lines) + "\n"
 
     return make

@@ -669,8 +669,10 @@ def fit_collapsed(
     ``max_draws`` retained draws per problem) or "laplace" (``n_laplace`` independent draws from
     the Laplace approximation: quick screening, no convergence verdict). ``active`` (n_theta,)
     bool: the coordinates of theta that are free (the others are held at zero). ``seeds``: the
-    seed of each problem's exact draws (default: derived from ``seed``). Returns a
-    :class:`Posterior` (or a list of them for a list of data).
+    seed of each problem's exact draws (default: derived from ``seed``). ``predictive``: whether
+    the posterior's InferenceData carries posterior-predictive replicates (made, as every part
+    beyond the draws, only when first asked for). Returns a :class:`Posterior` (or a list of them
+    for a list of data).
     """
     many = isinstance(data, list)
     datas = data if many else [data]

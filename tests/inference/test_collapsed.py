@@ -36,7 +36,7 @@ def test_saved_posteriors_work_with_arviz(tmp_path):
     matplotlib.use("Agg")
     rec = uq.simulate("n50", seed=5, layout=LAYOUT)
     fit = uq.fit_campaign(rec, seed=5, settings=uq.Settings(max_steps=400))
-    (path,) = fit.save(tmp_path)
+    (path,) = fit.save_posteriors(tmp_path)
     idata = az.from_netcdf(path)
     assert {"posterior", "log_likelihood", "posterior_predictive", "observed_data"} <= set(
         idata.groups()
@@ -66,7 +66,7 @@ def _cubic_case():
     from uq._models import cubic
 
     test = uq.simulate("n50", seed=6, layout=LAYOUT).tests[0]
-    return cubic.MODEL, cubic._prepare(test, 0.112, "budget", uq.PAPER_STAND)[0], None
+    return cubic.MODEL, cubic.prepare(test, 0.112, "budget", uq.PAPER_STAND)[0], None
 
 
 def _diagnose_case():
@@ -103,7 +103,7 @@ def test_posterior_makes_its_parts_on_demand_and_the_same_whenever():
     from uq._models import cubic
 
     test = uq.simulate("n50", seed=8, layout=uq.Layout(pressures_bar=(5.0,), step_m=0.01)).tests[0]
-    data = cubic._prepare(test, 0.112, "budget", uq.PAPER_STAND)[0]
+    data = cubic.prepare(test, 0.112, "budget", uq.PAPER_STAND)[0]
     quick = uq.Settings(max_steps=300)
     a = uq._inference.collapsed.fit_collapsed(cubic.MODEL, data, seed=3, settings=quick)
     b = uq._inference.collapsed.fit_collapsed(cubic.MODEL, data, seed=3, settings=quick)

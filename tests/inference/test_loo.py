@@ -1,62 +1,62 @@
-"""PSIS-LOO vectorised over readings (uq/_inference/loo.py) is ArviZ's ``az.loo``: the same
-pointwise values, Pareto k and p_loo on log-likelihoods with good and with heavy tails, with
-ties, with several chains and with ArviZ's own estimate of the relative efficiency."""
+"""The one remedy for a comparison PSIS-LOO cannot be trusted with (uq._inference.loo.remedy),
+used by the model comparison and the discrepancy engine: exact refits of the unreliable terms up
+to MAX_REFITS of them in a model, K-fold of both models beyond."""
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-import pytest
 
-from uq._inference.loo import loglik_idata, psis
-
-
-def _arviz(ll, reff):
-    import arviz as az
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        r = az.loo(loglik_idata(ll), pointwise=True, reff=reff)
-    return np.asarray(r.loo_i), np.asarray(r.pareto_k), float(r.p_loo)
+from uq._inference import loo as L
 
 
-def _loglik(rng, C, D, n, heavy=0.0):
-    """Gaussian log-likelihoods of n readings under C x D draws of a location; ``heavy``: the
-    share of readings far out (outliers: Pareto k well above 0.7)."""
-    mu = rng.standard_normal((C, D, 1)) * 0.3
-    y = rng.standard_normal(n)
-    y[: int(heavy * n)] += 6.0
-    return -0.5 * (y - mu) ** 2 - 0.9189385332046727
+def _loo(n_bad: int, n: int = 60, value: float = -1.0) -> L.Loo:
+    k = np.zeros(n)
+    k[:n_bad] = 0.9
+    return L.Loo(np.full(n, value), k)
 
 
-@pytest.mark.parametrize(
-    "C, D, n, heavy, reff",
-    [
-        (1, 1000, 50, 0.0, 1.0),
-        (4, 500, 40, 0.1, None),
-        (4, 251, 30, 0.2, None),
-        (2, 40, 9, 0.3, 0.8),
-    ],
-)
-def test_psis_is_arviz_s_loo(C, D, n, heavy, reff):
-    rng = np.random.default_rng(C * D + n)
-    ll = _loglik(rng, C, D, n, heavy)
-    want_i, want_k, want_p = _arviz(ll, reff)
-    got = psis(ll, reff=reff)
-    np.testing.assert_allclose(got.loo_i, want_i, rtol=1e-10, atol=1e-10)
-    np.testing.assert_allclose(got.pareto_k, want_k, rtol=1e-8, atol=1e-10)
-    assert got.p_loo == pytest.approx(want_p, rel=1e-9, abs=1e-9)
+def test_reliable_terms_are_kept():
+    a, b, how = L.remedy(_loo(0), _loo(0), refit=(None, None), kfold_both=None)
+    assert how == "psis-loo" and a.elpd == -60.0 and b.elpd == -60.0
 
 
-def test_psis_with_ties_and_short_tails_follows_arviz():
-    """Readings whose tail is cut by tied values, and draws too few for a tail fit (k = inf),
-    take ArviZ's own per-reading path: the same values."""
-    rng = np.random.default_rng(2)
-    ll = _loglik(rng, 1, 300, 12, 0.2)
-    ll[0, :, 3] = np.round(ll[0, :, 3], 1)  # many ties
-    for x in (ll, ll[:, :15]):
-        want_i, want_k, _ = _arviz(x, 1.0)
-        got = psis(x, reff=1.0)
-        np.testing.assert_allclose(got.loo_i, want_i, rtol=1e-10, atol=1e-10)
-        np.testing.assert_allclose(got.pareto_k, want_k, rtol=1e-8)
+def test_a_few_unreliable_terms_are_refitted_exactly():
+    calls = []
+
+    def refit(i):
+        calls.append(i)
+        return -2.0
+
+    a, b, how = L.remedy(_loo(3), _loo(0), refit=(refit, None), kfold_both=None)
+    assert calls == [0, 1, 2] and a.reliable and a.n_refits == 3 and a.elpd == -63.0
+    assert how.startswith("psis-loo, k > 0.7 terms refitted exactly") and b.elpd == -60.0
+    # a model that offers no refit keeps its unreliable terms: the verdict stays refused
+    a, b, _ = L.remedy(_loo(0), _loo(2), refit=(refit, None), kfold_both=None)
+    assert not b.reliable and L.verdict(a, b, ("a", "b"))["better"] == "refused"
+
+
+def test_many_unreliable_terms_send_both_models_to_kfold():
+    folds = L.Loo(np.full(60, -1.5), np.zeros(60), "10-fold cross-validation")
+
+    def refit(i):
+        raise AssertionError("no refits beyond MAX_REFITS")
+
+    a, b, how = L.remedy(
+        _loo(L.MAX_REFITS + 1), _loo(0), refit=(refit, refit), kfold_both=lambda: (folds, folds)
+    )
+    assert a is folds and b is folds and how == "10-fold cross-validation"
+    a, b, how = L.remedy(_loo(L.MAX_REFITS + 1), _loo(0), refit=(refit, refit), kfold_both=None)
+    assert not a.reliable and "not refitted" in how
+
+
+def test_kfold_holds_every_term_out_once():
+    held_counts = np.zeros(25, int)
+
+    def score(held):
+        held_counts[held] += 1
+        return np.where(held, -1.0, np.nan)
+
+    res = L.kfold(25, score, n_folds=5, seed=3)
+    assert (
+        np.all(held_counts == 1) and res.elpd == -25.0 and res.method == "5-fold cross-validation"
+    )

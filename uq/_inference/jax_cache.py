@@ -20,6 +20,7 @@ own: it runs before uq compiles anything).
 from __future__ import annotations
 
 import os
+import sys
 
 #: programs that compiled faster than this are not cached (JAX's default: 1 s)
 MIN_COMPILE_SECONDS = 0.0
@@ -40,8 +41,6 @@ def cache_dir() -> str | None:
 def set_environment() -> None:
     """The cache through JAX's environment variables (the command line, before JAX is imported;
     nothing is done once JAX is imported or when the user set JAX's own variable)."""
-    import sys
-
     where = cache_dir()
     if where is None or "JAX_COMPILATION_CACHE_DIR" in os.environ or "jax" in sys.modules:
         return

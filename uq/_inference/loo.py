@@ -28,9 +28,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-import arviz as az
 import numpy as np
-from arviz.stats.stats import _psislw
 from scipy.stats import norm
 
 #: a PSIS-LOO term is unreliable when its Pareto k exceeds this (Vehtari et al. 2017/2024)
@@ -88,6 +86,9 @@ class Loo:
 
 def loglik_idata(loglik):
     """ArviZ InferenceData holding pointwise log-likelihoods ``loglik`` (chains, draws, n) only."""
+    # reason: ArviZ (and xarray under it) costs about a second to import; a fit never needs it
+    import arviz as az
+
     ll = np.asarray(loglik)
     return az.from_dict(posterior={"_": np.zeros(ll.shape[:2])}, log_likelihood={"reading": ll})
 
@@ -190,6 +191,9 @@ def psis_loo(loglik: np.ndarray, reff: float = 1.0) -> tuple[np.ndarray, np.ndar
         placed[placed > 0] = 0.0
         lw[fit] = placed
     for i in np.flatnonzero(~regular):  # ArviZ's own code for the irregular readings
+        # reason: ArviZ (and xarray under it) costs about a second to import; rarely needed here
+        from arviz.stats.stats import _psislw
+
         lw[i], k[i] = _psislw(-ll[i] - np.max(-ll[i]), -n_tail - 1, cutoffmin, False)
     lw = lw - _logsumexp(lw)[:, None]
     loo_i = _logsumexp(lw + ll)

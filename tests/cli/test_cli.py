@@ -364,7 +364,10 @@ def small(tmp_path_factory):
         == 0
     )
     fit = d / "fit.json"
-    assert main(["fit", str(csv), "--json", str(fit), "--max-steps", "400"]) == 0
+    assert (
+        main(["fit", str(csv), "--json", str(fit), "--max-steps", "400", "--allow-unconverged"])
+        == 0
+    )
     means = [
         {
             "pressure_bar": t["pressure_bar"],
@@ -380,7 +383,7 @@ def small(tmp_path_factory):
 
 
 def _json_rows(d: Path, csv: Path, fit: Path):
-    quick = ["--max-steps", "300", "--walkers", "8"]
+    quick = ["--max-steps", "300", "--walkers", "8", "--allow-unconverged"]
     return {
         "simulate": ["simulate", "--out", d / "s.csv", "--pressures", "1,2", "--step-mm", "10"],
         "fit": ["fit", csv, *quick],
@@ -392,8 +395,19 @@ def _json_rows(d: Path, csv: Path, fit: Path):
             "--no-compare",
             "--max-steps",
             "300",
+            "--allow-unconverged",
         ],  # 5 sampled parameters: >= 10 walkers
-        "margin": ["margin", csv, "--height-mm", 110, "--load-N", 8000, "--max-steps", "300"],
+        "margin": [
+            "margin",
+            csv,
+            "--height-mm",
+            110,
+            "--load-N",
+            8000,
+            "--max-steps",
+            "300",
+            "--allow-unconverged",
+        ],
         "diagnose": ["diagnose", csv, "--max-mechanisms", "0", *quick],
         "design": [
             "design",
@@ -410,6 +424,7 @@ def _json_rows(d: Path, csv: Path, fit: Path):
             200,
             "--max-steps",
             "300",
+            "--allow-unconverged",
         ],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
         "batch": ["batch", d / "batch.csv", "--out", d / "batch"],

@@ -36,7 +36,15 @@ from uq._io.files import (
 from uq._io.version import __version__
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
-from uq._report.html import FIGURE_FORMATS, Figure, check_format, encode, pyplot, render
+from uq._report.html import (
+    FIGURE_FORMATS,
+    Figure,
+    check_format,
+    encode,
+    pyplot,
+    render,
+    stamp_unconverged,
+)
 from uq._report.pages import write_model_page
 
 #: Names of the files write_report and the surface page write (uq._io.files.remove_stale prunes the rest).
@@ -561,10 +569,28 @@ def _absent(ax, words: str, x, y: float = 0.5) -> None:
 
 
 def encoded_test_figure(
-    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None
+    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None, converged=True
 ) -> bytes:
-    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns)."""
-    return encode(figure_test(t, force_mean, x0_m, tb, cb, piston_m), figure_format)
+    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns), stamped NOT
+    CONVERGED when the test's fit failed its convergence rules."""
+    fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m)
+    if not converged:
+        stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
+    return encode(fig, figure_format)
+
+
+def not_converged(cf) -> tuple[str, list[str]]:
+    """Which tests of ``cf`` failed their convergence rules, in words ("" when none), and their
+    failed rules (for the page's banner and the figures' stamps)."""
+    bad = [t for t in cf.tests if not t.convergence.converged]
+    if not bad:
+        return "", []
+    what = (
+        f"{len(bad)} of {len(cf.tests)} tests ({', '.join(f'{t.pressure_bar:g}' for t in bad)} bar)"
+    )
+    return what, [
+        f"{t.pressure_bar:g} bar: {m}" for t in bad for m in t.convergence.messages(CLI_ADVICE)
+    ]
 
 
 def _ignore_interrupts() -> None:
@@ -605,7 +631,16 @@ class _TestFigures:
     def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png"):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
-            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid, figure_format, _piston(tf))
+            (
+                tf.test,
+                tf.flat("force").mean(0),
+                tf.x0_m,
+                tb,
+                grid,
+                figure_format,
+                _piston(tf),
+                tf.convergence.converged,
+            )
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
         self._pool, self._futures = None, []
@@ -930,6 +965,10 @@ def _draw_figures(
                 "F_eff scatter vs height",
             )
         )
+    what, _ = not_converged(cf)
+    if what:  # the campaign's figures show every test
+        for _, fig, _ in drawn:
+            stamp_unconverged(fig, what)
     figs = {
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, fig, alt in drawn
@@ -1053,6 +1092,8 @@ def _write_page(
         bands_seed=cb.seed,
         fit_seed=cf.seed,
         n_not_converged=sum(not t.convergence.converged for t in cf.tests),
+        not_converged_what=not_converged(cf)[0],
+        not_converged_messages=not_converged(cf)[1],
         reference_bar=cb.reference_bar,
         reference_note=cb.reference_note,
         scatter_pressures=cb.scatter_pressures_bar,

@@ -532,6 +532,9 @@ BLOCKS: dict[str, Block] = {
         "0.1,1,2,3,4,5,6,7,8,9,10 --x-max-mm 155 --x-min-mm 65 --step-mm 5 --piston-area-cm2 54.82"
     ),
     "fit-bad-csv": run_block("fit docs/examples/bad-cell.csv", statuses=(2,)),
+    "fit-bluehill-sign": run_block(
+        "fit data/n50-bluehill/recordings.csv --columns height=Position,force=Load", statuses=(2,)
+    ),
     "fit-n50": run_block(f"fit {DATA} --json reports/n50-fit.json"),
     "check-n50": run_block(
         "check reports/n50-fit.json --against fits/n50/table1_points.json", requires=("fit-n50",)

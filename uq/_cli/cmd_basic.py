@@ -15,6 +15,7 @@ from uq._cli.common import (
     add_sampling,
     add_stand,
     boolean,
+    column_map,
     compression,
     load,
     positive_float,
@@ -23,6 +24,7 @@ from uq._cli.common import (
     seed,
     settings_from,
     stand_from,
+    units_row,
     walkers,
 )
 from uq._io.errors import InputError
@@ -116,6 +118,13 @@ def configure_simulate(p) -> None:
         action="store_true",
         help="write compression as negative force (a load frame's convention)",
     )
+    g.add_argument(
+        "--instrument",
+        choices=("bluehill",),
+        help="write an instrument's export instead: bluehill, an Instron Bluehill RawData file "
+        "(title rows, header Time,Position,Load,Pressure, a units row, the compression pass of each "
+        "test with its measured pressure, no piston, compression negative; docs/recordings.md)",
+    )
     add_json(p)
 
 
@@ -162,6 +171,7 @@ def _pressures(text: str) -> tuple[float, ...]:
 
 def command_simulate(args) -> int:
     from uq._data.recordings import write_recordings_csv
+    from uq._data.writing import write_bluehill_csv
     from uq._io.files import emit_json, write_text_atomic
     from uq._physics.mechanisms import parse_effects
     from uq._stand import shapes
@@ -174,6 +184,7 @@ def command_simulate(args) -> int:
             f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}"
         )
     pressures = _pressures(args.pressures)
+    _check_instrument(args)
     volume_at = _volume_at(args, pressures)
     layout = Layout(pressures, args.x_max_mm * 1e-3, args.x_min_mm * 1e-3, args.step_mm * 1e-3)
     tests = simulate(
@@ -184,7 +195,7 @@ def command_simulate(args) -> int:
         piston_area_m2=args.piston_area_cm2 * 1e-4,
         stand=stand,
     )
-    if args.record_pressure:
+    if args.record_pressure or args.instrument:
         tests = shapes.record_pressure(tests, args.seed)
     if args.catalogue:
         tests = shapes.catalogue(
@@ -215,7 +226,9 @@ def command_simulate(args) -> int:
     described = _shape_comment(args, volume_at, stand)
     if described:
         comment = comment + "\n" + described
-    text = write_recordings_csv(
+    text = (
+        write_bluehill_csv(tests, comment, units=units) if args.instrument == "bluehill" else None
+    ) or write_recordings_csv(
         tests,
         comment,
         units=units,
@@ -252,11 +265,37 @@ def command_simulate(args) -> int:
                 "volume_at_bar": volume_at if args.catalogue and not args.force_only else None,
                 "record_pressure": args.record_pressure,
                 "compression_negative": bool(args.compression_negative),
+                "instrument": args.instrument,
             },
         },
         args.json,
     )
     return 0
+
+
+def _check_instrument(args) -> None:
+    """An instrument's export has its own shape: the shape options it sets itself are refused."""
+    if not args.instrument:
+        return
+    clash = [
+        o
+        for o, given in (
+            ("--catalogue", args.catalogue),
+            ("--force-only", args.force_only),
+            ("--record-pressure", args.record_pressure),
+            ("--compression-negative", args.compression_negative),
+        )
+        if given
+    ]
+    if clash:
+        raise InputError(
+            f"option --instrument {args.instrument}: writes its own shape (one compression pass per test, "
+            f"measured pressure, no piston, compression negative); drop {clash[0]}"
+        )
+    if args.units and "volume" in args.units:
+        raise InputError(
+            f"option --units: --instrument {args.instrument} writes no volume column; drop {args.units['volume']}"
+        )
 
 
 def _volume_at(args, pressures: tuple[float, ...]) -> float | None:
@@ -287,6 +326,8 @@ def _shape_options(args, volume_at) -> str:
         words.append(f"--record-pressure {args.record_pressure}")
     if args.compression_negative:
         words.append("--compression-negative")
+    if args.instrument:
+        words.append(f"--instrument {args.instrument}")
     return " ".join(words)
 
 
@@ -318,6 +359,12 @@ def _shape_comment(args, volume_at, stand) -> str:
         )
     if args.compression_negative:
         lines.append("Force: compression written negative (read with --compression negative).")
+    if args.instrument == "bluehill":
+        lines.append(
+            "Shape: an Instron Bluehill RawData export, the compression pass of each test with its "
+            "measured pressure, compression negative; read with --columns height=Position,force=Load "
+            "--compression negative."
+        )
     return "\n".join(lines)
 
 
@@ -350,6 +397,9 @@ CONFIG_KEYS = {
         "absolute_pressure": ("absolute_pressure", boolean),
         "p_atm_bar": ("p_atm_bar", positive_float),
         "pressure_tolerance_bar": ("pressure_tolerance_bar", positive_float),
+        "columns": ("columns", column_map),
+        "units_row": ("units_row", units_row),
+        "header_row": ("header_row", positive_int),
     },
     "sampling": {
         "seed": ("seed", seed),

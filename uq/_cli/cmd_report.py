@@ -18,7 +18,7 @@ from uq._cli.common import (
 from uq._derived.bands import campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
-from uq._report.campaign import MIN_DRAWS, omitted_lines, read_comments, write_report
+from uq._report.campaign import MIN_DRAWS, omitted_lines, write_report
 from uq._report.html import FIGURE_FORMATS
 
 
@@ -106,7 +106,7 @@ def command_report(args) -> int:
         args.out,
         bands=cb,
         seed=args.seed,
-        comments=read_comments(args.file),
+        comments=list(rec.comments),
         surface=surface,
         comparison=comparison,
         jobs=None,  # per-test figures in worker processes, one per CPU

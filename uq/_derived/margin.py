@@ -39,7 +39,7 @@ import numpy as np
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
-from uq._io.files import sha256_of  # noqa: F401  (the saved answer's provenance; uq margin uses it)
+from uq._io.files import sha256_of  # noqa: F401  (uq margin checks the file against the saved hash)
 from uq._models.pair import refuse_extrapolation
 from uq._models.surface import SurfaceFit
 from uq._physics.quantities import BAR_PA
@@ -549,7 +549,7 @@ def answer_idata(
         "label": ans.label,
         "model_info_json": dumps_json(info),
         "recordings_path": str(Path(recordings.path).resolve()),
-        "recordings_sha256": sha256_of(recordings.path),
+        "recordings_sha256": recordings.sha256 or sha256_of(recordings.path),
         "x0_mm": recordings.x0_m * 1e3,
         "piston_area_cm2": recordings.piston_area_m2 * 1e4,
         "uq_version": __version__,

@@ -16,7 +16,6 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from uq._data.recordings import leading_comments
 from uq._data.reference import Reference, is_n50_reconstruction, paper_reference
 from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
@@ -47,12 +46,6 @@ TABLE1_COLUMNS = [
 ]
 PAPER_SCATTER_PCT = {"x0": 8.41, "x_max": 26.3, "x_min": 8.51}
 MIN_DRAWS = 10  # fewer posterior draws give no 90 % band worth drawing
-
-
-def read_comments(path) -> list[str]:
-    """The leading ``#`` lines of a recordings file, without the ``#``."""
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        return leading_comments(fh)
 
 
 # ----------------------------------------------------------------------------- figures
@@ -835,10 +828,10 @@ def _reference(reference, comments) -> Reference | None:
 
 def provenance(rec, stand) -> dict:
     """The footer of a page: uq's version, the date (``SOURCE_DATE_EPOCH`` when set, for
-    reproducible pages), the recordings' file and SHA-256, and the stand description used."""
+    reproducible pages), the recordings' file and SHA-256 (taken when they were read), and the
+    stand description used."""
     import datetime
 
-    from uq._io.files import sha256_of
     from uq._io.version import __version__
 
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
@@ -847,10 +840,7 @@ def provenance(rec, stand) -> dict:
         if epoch and epoch.isdigit()
         else datetime.datetime.now(datetime.UTC)
     )
-    try:
-        digest = sha256_of(rec.path)
-    except OSError:
-        digest = None
+    digest = getattr(rec, "sha256", None)
     changes = stand.changes()
     return {
         "version": __version__,
@@ -867,16 +857,8 @@ def provenance(rec, stand) -> dict:
 
 
 def _comments(rec, comments) -> list[str]:
-    """The comment lines given, else the recordings', else those read from its file (none if unreadable)."""
-    if comments is not None:
-        return comments
-    comments = list(getattr(rec, "comments", ()))
-    if not comments:
-        try:
-            comments = read_comments(rec.path)
-        except OSError:
-            comments = []
-    return comments
+    """The comment lines given, else the recordings' (read with them)."""
+    return list(getattr(rec, "comments", ())) if comments is None else comments
 
 
 def _draw_figures(

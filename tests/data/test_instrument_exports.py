@@ -5,6 +5,7 @@ the reader without pint and pandas (issue 32); the recordings' hash and comments
 from __future__ import annotations
 
 import hashlib
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -383,11 +384,32 @@ def test_units_row_modes_equal_the_library():
 
 
 def test_the_bluehill_export_through_the_command_line(tmp_path, capsys):
-    """Notes on stderr, the readings fitted (a short run: the reading is the point here)."""
-    out = tmp_path / "fit.json"
+    """Notes on stderr, the readings fitted (a short run: the reading is the point here), and the
+    summary and coefficient table in the units the file came in (``--units input --csv``)."""
+    out, table = tmp_path / "fit.json", tmp_path / "coefficients.csv"
     argv = ["fit", str(BLUEHILL), "--columns", MAP, "--compression", "negative", "--json", str(out)]
-    argv += ["--max-steps", "300", "--quiet"]
+    argv += ["--max-steps", "300", "--quiet", "--units", "input", "--csv", str(table)]
     assert main(argv) in (0, 1)
-    err = capsys.readouterr().err
-    assert err.count("note: ") == 2 and "a units row under the header" in err
-    assert out.is_file()
+    captured = capsys.readouterr()
+    assert captured.err.count("note: ") == 2 and "a units row under the header" in captured.err
+    assert "p_u bar" in captured.out and "a_P kN" in captured.out and "x0 = 112 mm" in captured.out
+    got = pd.read_csv(table)
+    assert list(got.columns) == [
+        "pressure_bar",
+        "block",
+        "coefficient",
+        "unit",
+        "mean",
+        "sd",
+        "q05",
+        "q50",
+        "q95",
+        "r_hat",
+        "ess_bulk",
+        "x0_mm",
+    ]
+    assert set(got.block) == {"force"} and len(got) == 4 * 5  # force-only: no piston rows
+    assert list(got.unit[:4]) == ["kN", "kN/mm", "kN/mm^2", "kN/mm^3"]
+    doc = json.loads(out.read_text())  # the JSON stays SI
+    a_si = doc["tests"][0]["force"]["a_P"]["mean"]
+    assert got.iloc[0]["mean"] == pytest.approx(a_si / 1000.0, rel=1e-9)

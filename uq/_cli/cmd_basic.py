@@ -10,6 +10,7 @@ from uq._cli.common import (
     DEFAULT_PISTON_AREA_CM2,
     DEFAULT_SEED,
     add_json,
+    add_output_units,
     add_pressure_ar1,
     add_recordings,
     add_sampling,
@@ -18,6 +19,7 @@ from uq._cli.common import (
     column_map,
     compression,
     load,
+    output_units,
     positive_float,
     positive_int,
     pressure_ar1,
@@ -384,6 +386,13 @@ def configure_fit(p) -> None:
         metavar="FILE.toml",
         help="fit definition (e.g. fits/n50/fit.toml): recordings, stand constants, sampler; options given on the command line win",
     )
+    p.add_argument(
+        "--csv",
+        metavar="PATH",
+        help="write the coefficient table: one row per test and coefficient, posterior mean, sd, "
+        "5/50/95 %% quantiles, R-hat and ESS",
+    )
+    add_output_units(p)
 
 
 #: fit.toml keys -> (option dest, parser of the option); paths are relative to the TOML file.
@@ -477,6 +486,39 @@ def _bars(pressures) -> str:
     return ", ".join(f"{p:g}" for p in pressures) + " bar"
 
 
+def _units_words(which: str) -> str:
+    return (
+        "units of the recordings, u = x - x0 in their height unit"
+        if which == "input"
+        else "SI, u = x - x0 in m, as uq fit --json"
+    )
+
+
+def _print_fit_table(rec, result: dict, units) -> None:
+    """The per-test summary, in the units asked for (``--units``): the force's a_P with its 90 %
+    interval, b_L, the deviation measures and the worst R-hat and ESS."""
+    h, f = units.shown("height"), units.shown("force")
+    x0 = units.value("height", rec.x0_m)
+    a_scale = units.coefficient("force", 0)[0]
+    b_scale = units.coefficient("piston", 1)[0]
+    print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {x0:g} {h}")
+    print(
+        f"{'p_u ' + units.shown('pressure'):>8} {'a_P ' + f:>10} {'90% interval':>23} {'b_L':>8} "
+        f"{'s_P ' + f:>8} {'eps_P %':>8}  R-hat  ESS"
+    )
+    for t in result["tests"]:
+        a = {k: v * a_scale for k, v in t["force"]["a_P"].items() if k in ("mean", "q05", "q95")}
+        blocks = t["force"] | t.get("piston", {})
+        b = f"{t['piston']['b_L']['mean'] * b_scale:>8.3f}" if "piston" in t else f"{'-':>8}"
+        rmax = max(v["r_hat"] for v in blocks.values())
+        emin = min(v["ess_bulk"] for v in blocks.values())
+        p = units.value("pressure", t["pressure_bar"])
+        print(
+            f"{p:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b} "
+            f"{t['s_P_N'] * a_scale:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}"
+        )
+
+
 def command_fit(args) -> int:
     if args.file is None:
         raise InputError(
@@ -495,20 +537,8 @@ def command_fit(args) -> int:
         pressure_ar1=args.pressure_ar1,
     )
     result = cf.to_json()
-    print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {rec.x0_m * 1e3:g} mm")
-    print(
-        f"{'p_u bar':>8} {'a_P N':>10} {'90% interval':>23} {'b_L':>8} {'s_P N':>8} {'eps_P %':>8}  R-hat  ESS"
-    )
-    for t in result["tests"]:
-        a = t["force"]["a_P"]
-        blocks = t["force"] | t.get("piston", {})
-        b = f"{t['piston']['b_L']['mean']:>8.3f}" if "piston" in t else f"{'-':>8}"
-        rmax = max(v["r_hat"] for v in blocks.values())
-        emin = min(v["ess_bulk"] for v in blocks.values())
-        print(
-            f"{t['pressure_bar']:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b} "
-            f"{t['s_P_N']:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}"
-        )
+    units = output_units(rec, args.units)
+    _print_fit_table(rec, result, units)
     for line in omitted_lines(rec, result):
         print(line)
     for t in result["tests"]:
@@ -535,6 +565,14 @@ def command_fit(args) -> int:
         print(f"WARNING: {w}", file=sys.stderr)
     for w in result["model_warnings"]:
         print(f"WARNING (model): {w}", file=sys.stderr)
+    if args.csv:
+        from uq._derived.export import JSON_UNITS, coefficient_table
+        from uq._io.files import write_text_atomic
+        from uq._io.tables import csv_text
+
+        header, rows = coefficient_table(cf, JSON_UNITS if args.units == "si" else units)
+        write_text_atomic(args.csv, csv_text(header, rows))
+        print(f"coefficient table: {args.csv} ({len(rows)} rows, {_units_words(args.units)})")
     if args.out:  # the posteriors and fit.json whole or not at all (a full disk leaves none)
         with staged_folder(args.out, last=("fit.json",)) as stage:
             paths = cf.save(stage)

@@ -178,6 +178,25 @@ def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> N
     )
 
 
+def add_output_units(p: argparse.ArgumentParser) -> None:
+    """``--units si|input``: tables and labels in the contract's units or in the recordings' own."""
+    p.add_argument(
+        "--units",
+        choices=("si", "input"),  # uq._data.units.OUTPUT_CHOICES (tested equal)
+        default="si",
+        help="units of the tables and labels: si (bar, mm, N; coefficients in SI as the JSON) or "
+        "input, the units the recordings came in (pressure_psi, height_in, force_lbf give psi, in, "
+        "lbf); JSON stays SI",
+    )
+
+
+def output_units(rec, which: str):
+    """The :class:`uq._data.units.OutputUnits` of ``--units`` for recordings ``rec``."""
+    from uq._data.units import OutputUnits
+
+    return OutputUnits.of(getattr(rec, "units", None), which)
+
+
 def add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
     p.add_argument(

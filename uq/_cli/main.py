@@ -81,7 +81,7 @@ COMMANDS = [
 #: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"
 #: (the folder to write into). --out is always "where this command writes": the file for
 #: simulate (--out FILE.csv), the folder for every other command.
-OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir"}
+OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir", "csv": "file"}
 OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
 
 #: the library's parameter names (``InputError.param``) and the options that set them

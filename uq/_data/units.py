@@ -11,6 +11,8 @@ paper's units (bar, mm, N) is read bit for bit as before units existed.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 INCH_M = 0.0254  # exact (1959 international yard and pound)
 LBF_N = 0.45359237 * 9.80665  # exact: the pound mass times standard gravity
 PA_PER_BAR = 1e5
@@ -94,3 +96,87 @@ def suffix_of(quantity: str, text: str) -> str | None:
         if text in (suffix, shown(suffix)):
             return suffix
     return None
+
+
+# ----------------------------------------------------------------------------- output units
+
+#: Areas are no recordings column, but outputs give them (F_eff): suffix -> factor to m^2.
+AREAS = {"m2": 1.0, "cm2": 1e-4, "mm2": 1e-6, "in2": _digits(INCH_M**2)}
+OUTPUT_CHOICES = ("si", "input")
+_SHOWN_AREA = {"m2": "m^2", "cm2": "cm^2", "mm2": "mm^2", "in2": "in^2"}
+
+
+@dataclass(frozen=True)
+class OutputUnits:
+    """The units an output's tables and labels are written in.
+
+    ``si`` (``--units si``, the default): the contract's units, bar for pressures, mm for heights
+    and piston coordinates, N for forces, m^2 for areas, litres for volumes (a catalogue's table;
+    JSON stays SI whatever is chosen). ``input`` (``--units input``): the units the recordings
+    came in (``Recordings.units``), areas in in^2 and volumes in in^3 when heights were in
+    inches, and the volume column's unit when the file had one.
+
+    >>> u = OutputUnits.of({"pressure": "psi", "height": "in", "force": "lbf"}, "input")
+    >>> u.pressure, u.height, u.force, u.area, u.volume, u.column("force")
+    ('psi', 'in', 'lbf', 'in2', 'in3', 'force_lbf')
+    >>> round(u.value("force", 4448.2216152605), 9), round(u.value("height", 0.0254), 12)
+    (1000.0, 1.0)
+    """
+
+    pressure: str = "bar"
+    height: str = "mm"
+    force: str = "N"
+    piston: str = "mm"
+    area: str = "m2"
+    volume: str = "l"
+
+    @classmethod
+    def of(cls, recording_units: dict | None, which: str = "si") -> OutputUnits:
+        if which not in OUTPUT_CHOICES:
+            raise ValueError(f"units: expected si or input, got {which!r}")
+        if which == "si" or not recording_units:
+            return cls()
+        u = dict(PAPER_UNITS) | dict(recording_units)
+        inch = u["height"] == "in"
+        return cls(
+            pressure=u["pressure"],
+            height=u["height"],
+            force=u["force"],
+            piston=u.get("piston", u["height"]),
+            area="in2" if inch else "m2",
+            volume=u.get("volume", "in3" if inch else "l"),
+        )
+
+    def suffix(self, quantity: str) -> str:
+        return getattr(self, "pressure" if quantity == "set_pressure" else quantity)
+
+    def factor(self, quantity: str) -> float:
+        """Output unit -> the unit inside (bar for pressures, SI else)."""
+        if quantity == "area":
+            return AREAS[self.area]
+        return factor(quantity, self.suffix(quantity))
+
+    def value(self, quantity: str, inside):
+        """``inside`` (bar for pressures, SI else; a number or an array) in the output unit."""
+        return inside / self.factor(quantity)
+
+    def shown(self, quantity: str) -> str:
+        """The unit as labels write it (``in^2``, ``L``)."""
+        s = self.suffix(quantity)
+        return _SHOWN_AREA.get(s, shown(s)) if quantity == "area" else shown(s)
+
+    def column(self, quantity: str) -> str:
+        """A column name with the unit as suffix (``force_lbf``, ``height_in``, ``feff_in2``)."""
+        return f"{'feff' if quantity == 'area' else quantity}_{self.suffix(quantity)}"
+
+    def coefficient(self, block: str, k: int) -> tuple[float, str]:
+        """(factor, unit) that turn coefficient k of the cubic of ``block`` ("force" or "piston"),
+        in SI against u = x - x0 in metres, into these units against u in ``height`` units:
+        a_k h^k / y for y = P or L, h and y the output units' factors to SI."""
+        h = self.factor("height")
+        y = self.factor(block)
+        per = {0: "", 1: f"/{self.shown('height')}"}.get(k, f"/{self.shown('height')}^{k}")
+        unit = f"{self.shown(block)}{per}"
+        if block == "piston" and self.piston == self.height and k >= 1:
+            unit = "1" if k == 1 else f"1/{self.shown('height')}" + ("" if k == 2 else f"^{k - 1}")
+        return h**k / y, unit

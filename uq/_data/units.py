@@ -148,12 +148,17 @@ class OutputUnits:
         )
 
     def suffix(self, quantity: str) -> str:
+        """The unit's suffix in column names (``psi``, ``in2``; ``lbf_per_in`` for a stiffness)."""
+        if quantity == "stiffness":
+            return f"{self.force}_per_{self.height}"
         return getattr(self, "pressure" if quantity == "set_pressure" else quantity)
 
     def factor(self, quantity: str) -> float:
         """Output unit -> the unit inside (bar for pressures, SI else)."""
         if quantity == "area":
             return AREAS[self.area]
+        if quantity == "stiffness":
+            return factor("force", self.force) / factor("height", self.height)
         return factor(quantity, self.suffix(quantity))
 
     def value(self, quantity: str, inside):
@@ -161,7 +166,9 @@ class OutputUnits:
         return inside / self.factor(quantity)
 
     def shown(self, quantity: str) -> str:
-        """The unit as labels write it (``in^2``, ``L``)."""
+        """The unit as labels write it (``in^2``, ``L``, ``N/mm``)."""
+        if quantity == "stiffness":
+            return f"{shown(self.force)}/{shown(self.height)}"
         s = self.suffix(quantity)
         return _SHOWN_AREA.get(s, shown(s)) if quantity == "area" else shown(s)
 

@@ -6,10 +6,16 @@ contract's, or the units the recordings came in (``--units input``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 
 from uq._data.reference import FORCE_NAMES, PISTON_NAMES
 from uq._data.units import OutputUnits
+from uq._derived.design import DesignGrid, check_design, sealed_draws
+from uq._io import teimorbit
+from uq._io.errors import InputError
+from uq._physics.quantities import BAR_PA
 
 #: The coefficients' units of ``uq fit --json`` (SI, u = x - x0 in metres): ``--units si``.
 JSON_UNITS = OutputUnits(height="m", piston="m")
@@ -63,3 +69,650 @@ def coefficient_table(cf, units: OutputUnits = JSON_UNITS) -> tuple[list[str], l
                     ]
                 )
     return header, rows
+
+
+# ----------------------------------------------------------------------------- the grid of estimates
+
+#: Gauss-Legendre nodes for the volume increment: exact for a dV/dx polynomial in x of degree <= 15.
+N_LEGENDRE = 8
+DEFAULT_QUANTILES = (0.05, 0.5, 0.95)
+DEFAULT_DRAWS = 4000
+
+
+def quantile_name(q: float) -> str:
+    """``q05`` for 0.05, ``q50``, ``q95`` (the contract's names); ``q2.5`` for 0.025.
+
+    >>> [quantile_name(q) for q in (0.05, 0.5, 0.95, 0.025, 0.999)]
+    ['q05', 'q50', 'q95', 'q2.5', 'q99.9']
+    """
+    pct = round(100 * q, 6)
+    return f"q{int(pct):02d}" if pct == int(pct) else f"q{pct:g}"
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """One exported quantity on the grid: ``draws`` (S, H, P) in the unit used inside (N, m^2,
+    m^3, N/m; bar for pressures); ``kind`` its kind for OutputUnits ("force", "area", "volume",
+    "stiffness", "pressure"); ``stem`` the column stem in the contract's units (``force_N``)."""
+
+    key: str
+    words: str
+    kind: str
+    draws: np.ndarray
+
+
+#: kind -> (SI column suffix of the contract's table, JSON name suffix)
+_CONTRACT_SUFFIX = {
+    "force": ("N", "N"),
+    "area": ("m2", "m2"),
+    "volume": ("l", "m3"),
+    "stiffness": ("N_per_mm", "N_per_m"),
+    "pressure": ("bar", "bar"),
+}
+
+
+@dataclass(frozen=True)
+class ExportGrid:
+    """Estimates on heights x pressures: each quantity's draws, and what answered.
+
+    heights_m (H,), pressures_bar (P,); ``model_name``/``model_label``: the fitted model that
+    answered (between tested pressures too); ``notes``: one line each, what was left out and why,
+    what was extrapolated; ``provenance``: file, hash, model, uq version, date, seed.
+    """
+
+    heights_m: np.ndarray
+    pressures_bar: np.ndarray
+    quantities: tuple[Quantity, ...]
+    quantiles: tuple[float, ...]
+    model_name: str
+    model_label: str
+    notes: tuple[str, ...]
+    provenance: dict
+    sealed: dict | None = None
+
+    def quantity(self, key: str) -> Quantity:
+        return next(q for q in self.quantities if q.key == key)
+
+    def stats(self, key: str) -> dict[str, np.ndarray]:
+        """ "mean", "sd" and each quantile's name -> (H, P) arrays, in the unit used inside."""
+        d = self.quantity(key).draws
+        out = {"mean": d.mean(axis=0), "sd": d.std(axis=0, ddof=1)}
+        qs = np.quantile(d, self.quantiles, axis=0)
+        out |= {quantile_name(q): qs[i] for i, q in enumerate(self.quantiles)}
+        return out
+
+
+def parse_heights_mm(text: str) -> np.ndarray:
+    """``65,80,100`` or ``A:B:STEP`` (A to B inclusive) -> heights in mm, ascending, distinct.
+    ValueError with one line on a bad list.
+
+    >>> parse_heights_mm("70:80:2.5").tolist()
+    [70.0, 72.5, 75.0, 77.5, 80.0]
+    """
+    text = text.strip()
+    if ":" in text:
+        parts = text.split(":")
+        if len(parts) != 3:
+            raise ValueError(f"'{text}': expected A:B:STEP (e.g. 65:155:5) or a list 65,80,100")
+        a, b, step = (_float(p, text) for p in parts)
+        if not step > 0 or not b >= a:
+            raise ValueError(f"'{text}': expected A <= B and a positive STEP")
+        n = int(np.floor((b - a) / step + 1e-9))
+        if n > 10000:
+            raise ValueError(f"'{text}': {n + 1} heights; at most 10001")
+        values = a + step * np.arange(n + 1)
+        values = np.round(values, 9)
+    else:
+        values = np.array([_float(p, text) for p in text.split(",") if p.strip()])
+    if values.size == 0:
+        raise ValueError(f"'{text}': no heights")
+    if not np.all(values > 0):
+        raise ValueError(f"'{text}': heights must be positive (mm)")
+    if np.unique(values).size != values.size:
+        raise ValueError(f"'{text}': a height is listed twice")
+    return np.sort(values)
+
+
+def parse_pressures_bar(text: str) -> np.ndarray:
+    """``1,2.5,4`` -> pressures in bar, ascending, distinct, positive."""
+    values = np.array([_float(p, text) for p in text.split(",") if p.strip()])
+    if values.size == 0 or not np.all(values > 0):
+        raise ValueError(f"'{text}': expected positive overpressures in bar, e.g. 1,2.5,4")
+    if np.unique(values).size != values.size:
+        raise ValueError(f"'{text}': a pressure is listed twice")
+    return np.sort(values)
+
+
+def parse_quantiles(text: str) -> tuple[float, ...]:
+    """``0.05,0.5,0.95`` -> the quantiles, ascending, each strictly between 0 and 1."""
+    values = sorted({_float(p, text) for p in text.split(",") if p.strip()})
+    if not values or not all(0 < v < 1 for v in values):
+        raise ValueError(
+            f"'{text}': expected quantiles strictly between 0 and 1, e.g. 0.05,0.5,0.95"
+        )
+    return tuple(values)
+
+
+def _float(p: str, text: str) -> float:
+    try:
+        v = float(p)
+    except ValueError:
+        raise ValueError(f"'{text}': '{p.strip()}' is not a number") from None
+    if not np.isfinite(v):
+        raise ValueError(f"'{text}': '{p.strip()}' is not a finite number")
+    return v
+
+
+def default_heights_m(model) -> np.ndarray:
+    """Every tested height (the recordings'), or 10 mm steps over the tested range when the model
+    came without recordings (a saved answer)."""
+    rec = getattr(model, "recordings", None)
+    if rec is not None:
+        return np.unique(np.round(np.concatenate([t.height_m for t in rec.tests]), 9))
+    lo, hi = model.height_range_m
+    return np.round(np.arange(np.ceil(lo * 100) / 100, hi + 1e-12, 0.01), 9)
+
+
+def _check_grid(
+    model, heights_m: np.ndarray, pressures_bar: np.ndarray, extrapolate: bool
+) -> list[str]:
+    """Refuse, in one line, heights and pressures beyond what the recordings support; with
+    ``extrapolate``, the notes saying which are beyond."""
+    notes = []
+    hlo, hhi = model.height_range_m
+    plo, phi = model.pressure_range_bar
+    tol = 1e-9
+    out_h = heights_m[(heights_m < hlo - tol) | (heights_m > hhi + tol)]
+    out_p = pressures_bar[(pressures_bar < plo - tol) | (pressures_bar > phi + tol)]
+    if out_h.size:
+        if not extrapolate:
+            raise InputError(
+                f"heights_m: {out_h[0] * 1e3:g} mm is outside the tested heights {hlo * 1e3:g}..{hhi * 1e3:g} mm "
+                "the recordings support; give heights within them, or `extrapolate`",
+                param="heights_m",
+            )
+        notes.append(
+            f"extrapolated: heights {', '.join(f'{h * 1e3:g}' for h in out_h)} mm lie outside the tested "
+            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model's polynomial is continued there, no data supports it"
+        )
+    if out_p.size:
+        if not extrapolate:
+            raise InputError(
+                f"pressures_bar: {out_p[0]:g} bar is outside the tested pressures {plo:g}..{phi:g} bar the "
+                "recordings support; give pressures within them, or `extrapolate`",
+                param="pressures_bar",
+            )
+        notes.append(
+            f"extrapolated: pressures {', '.join(f'{p:g}' for p in out_p)} bar lie outside the tested "
+            f"{plo:g}..{phi:g} bar; no test supports them"
+        )
+    return notes
+
+
+def export_grid(
+    model,
+    heights_m=None,
+    pressures_bar=None,
+    *,
+    quantiles=DEFAULT_QUANTILES,
+    extrapolate: bool = False,
+    n_draws: int = DEFAULT_DRAWS,
+    provenance: dict | None = None,
+) -> ExportGrid:
+    """The characteristic of a fitted model (uq._models.fitted.FittedModel) on a grid, on its
+    fixed draws (at most ``n_draws``, thinned evenly): the force P (mean curve, reading noise
+    excluded), the effective area F_eff = P / p_u (eq. 1) and, where the model has volume, the
+    volume-derived area dV/dx and the volume increment from the grid's highest height,
+    V(x) - V(x_top) = integral of dV/dx (Gauss-Legendre, exact for the models' polynomials).
+
+    ``heights_m`` default: every tested height; ``pressures_bar`` default: the tested pressures.
+    Between tested pressures the model answers as it does every between-answer (its own
+    interpolation, or its pressure dependence). Heights or pressures beyond the tested ranges are
+    refused in one line (``param`` heights_m or pressures_bar) unless ``extrapolate``, which the
+    notes then say.
+    """
+    model = model.on_draws(n_draws) if getattr(model, "n_draws", 0) > n_draws else model
+    h = default_heights_m(model) if heights_m is None else np.asarray(heights_m, float).ravel()
+    p = (
+        np.asarray(model.tested_pressures_bar, float)
+        if pressures_bar is None
+        else np.asarray(pressures_bar, float).ravel()
+    )
+    notes = _check_grid(model, h, p, extrapolate)
+    X, P = np.meshgrid(h, p, indexing="ij")
+    check = not extrapolate
+    quantities = [
+        Quantity(
+            "force",
+            "force P of the element, mean curve (reading noise excluded), compression positive",
+            "force",
+            np.asarray(model.force_draws(X, P, check=check), float),
+        ),
+        Quantity(
+            "feff",
+            "effective area F_eff = P / p_u (eq. 1)",
+            "area",
+            np.asarray(model.feff_draws(X, P, check=check), float),
+        ),
+    ]
+    if model.has_volume:
+        quantities.append(
+            Quantity(
+                "feff_volume",
+                "volume-derived effective area dV/dx (eq. 1's second form)",
+                "area",
+                np.asarray(model.volume_area_draws(X, P, check=check), float),
+            )
+        )
+        quantities.append(
+            Quantity(
+                "volume_increment",
+                f"volume increment V(x) - V({h.max() * 1e3:g} mm) at the test's pressure",
+                "volume",
+                _volume_increment(model, h, p, check),
+            )
+        )
+    else:
+        notes.append(
+            "volume results omitted: "
+            + (model.omitted_reason or "the model has no volume-derived area")
+        )
+    return ExportGrid(
+        heights_m=h,
+        pressures_bar=p,
+        quantities=tuple(quantities),
+        quantiles=tuple(float(q) for q in quantiles),
+        model_name=model.name,
+        model_label=model.label,
+        notes=tuple(notes),
+        provenance=dict(provenance or {}),
+    )
+
+
+def _volume_increment(model, h: np.ndarray, p: np.ndarray, check: bool) -> np.ndarray:
+    """integral from h.max() to each height of dV/dx, per draw: (S, H, P), m^3."""
+    t, w = np.polynomial.legendre.leggauss(N_LEGENDRE)
+    top = float(h.max())
+    # nodes between top and each height: (H, K)
+    half = 0.5 * (h - top)
+    nodes = top + half[:, None] * (t[None, :] + 1.0)
+    X = np.broadcast_to(nodes[:, None, :], (h.size, p.size, t.size))
+    P = np.broadcast_to(p[None, :, None], X.shape)
+    area = np.asarray(model.volume_area_draws(X, P, check=check), float)  # (S, H, P, K)
+    return np.einsum("shpk,k->shp", area, w) * half[None, :, None]
+
+
+# ----------------------------------------------------------------------------- the formats
+
+FORMATS = ("csv", "xlsx", "simscape", "teimorbit", "json")
+#: The export table's units when the contract's are asked (``--units si``): bar, mm, N, m^2, L.
+CONTRACT_UNITS = OutputUnits()
+
+
+def _stem(q: Quantity, units: OutputUnits) -> str:
+    return f"{q.key}_{units.suffix(q.kind)}"
+
+
+def _stat_order(grid: ExportGrid) -> list[str]:
+    return ["mean", *(quantile_name(q) for q in grid.quantiles)]
+
+
+def table_columns(
+    grid: ExportGrid, units: OutputUnits = CONTRACT_UNITS
+) -> list[tuple[str, str, str]]:
+    """(column, quantity key, stat) of the CSV table after its pressure and height columns.
+
+    The contract's columns come first and in its order (../shared/CONTRACT.md, ``uq export
+    --format csv``): force mean and quantiles, F_eff mean and quantiles but the median; then the
+    rest (sds, F_eff's median, the volume quantities).
+    """
+    first, rest = [], []
+    median = quantile_name(0.5)
+    for q in grid.quantities:
+        stem = _stem(q, units)
+        for stat in _stat_order(grid):
+            col = (f"{stem}_{stat}", q.key, stat)
+            if q.key == "force" or (q.key == "feff" and stat != median):
+                first.append(col)
+            else:
+                rest.append(col)
+        rest.append((f"{stem}_sd", q.key, "sd"))
+    # the sds of force and F_eff first among the rest, in the quantities' order
+    rest.sort(key=lambda c: [q.key for q in grid.quantities].index(c[1]))
+    return first + rest
+
+
+def csv_rows(grid: ExportGrid, units: OutputUnits = CONTRACT_UNITS) -> tuple[list[str], list[list]]:
+    """The table: one row per (pressure, height), pressures in order, heights ascending."""
+    cols = table_columns(grid, units)
+    header = [units.column("pressure"), units.column("height"), *(c for c, _, _ in cols)]
+    stats = {q.key: grid.stats(q.key) for q in grid.quantities}
+    kinds = {q.key: q.kind for q in grid.quantities}
+    rows = []
+    for j, p in enumerate(grid.pressures_bar):
+        for i, h in enumerate(grid.heights_m):
+            row = [float(units.value("pressure", p)), float(units.value("height", h))]
+            row += [float(units.value(kinds[key], stats[key][stat][i, j])) for _, key, stat in cols]
+            rows.append(row)
+    return header, rows
+
+
+def provenance_rows(grid: ExportGrid, units: OutputUnits, fmt: str) -> list[tuple[str, str]]:
+    """What every format says about where its numbers came from, as (key, value) pairs."""
+    p = grid.provenance
+    rows = [
+        ("made by", f"uq export --format {fmt} (airspring-uq {p.get('uq_version', '?')})"),
+        ("date", str(p.get("date", ""))),
+        ("recordings", str(p.get("recordings_path", ""))),
+        ("recordings sha256", str(p.get("recordings_sha256", ""))),
+        ("model", f"{grid.model_label} ({grid.model_name})"),
+        ("between tested pressures", p.get("between", f"the {grid.model_name} model answers")),
+        ("seed", str(p.get("seed", ""))),
+        ("draws", str(grid.quantity("force").draws.shape[0])),
+        ("quantiles", ", ".join(f"{q:g}" for q in grid.quantiles)),
+        (
+            "units",
+            f"pressure {units.shown('pressure')} (gauge), height {units.shown('height')}, force "
+            f"{units.shown('force')}, area {units.shown('area')}, volume {units.shown('volume')}",
+        ),
+        (
+            "what",
+            "posterior of the element's mean force (reading noise excluded) and effective areas; "
+            "mean, sd and quantiles over the posterior draws",
+        ),
+    ]
+    if p.get("source"):
+        rows.append(("loaded from", str(p["source"])))
+    rows += [("note", n) for n in grid.notes]
+    return rows
+
+
+def xlsx_sheets(
+    grid: ExportGrid, units: OutputUnits = CONTRACT_UNITS
+) -> list[tuple[str, list[list]]]:
+    """The catalogue's wide shape: a sheet per quantity and statistic, heights down, pressures
+    across; a last sheet ``provenance``."""
+    sheets = []
+    hcol, pcol = units.column("height"), units.column("pressure")
+    heights = [float(units.value("height", h)) for h in grid.heights_m]
+    pressures = [float(units.value("pressure", p)) for p in grid.pressures_bar]
+    for q in grid.quantities:
+        stats = grid.stats(q.key)
+        stem = _stem(q, units)
+        for stat in [*_stat_order(grid), "sd"]:
+            values = units.value(q.kind, stats[stat])
+            rows = [[f"{hcol} \\ {pcol}", *pressures]]
+            rows += [[h, *map(float, values[i])] for i, h in enumerate(heights)]
+            sheets.append((f"{stem} {stat}"[:31], rows))
+    sheets.append(
+        ("provenance", [["key", "value"], *map(list, provenance_rows(grid, units, "xlsx"))])
+    )
+    return sheets
+
+
+def json_document(grid: ExportGrid) -> dict:
+    """The grid with the contract's estimate objects (SI: m, N, m^2, m^3; pressures in bar)."""
+    si = {"force": "N", "area": "m2", "volume": "m3", "stiffness": "N_per_m", "pressure": "bar"}
+    stats = {q.key: grid.stats(q.key) for q in grid.quantities}
+    points = []
+    for j, p in enumerate(grid.pressures_bar):
+        for i, h in enumerate(grid.heights_m):
+            point = {"pressure_bar": float(p), "height_m": float(h)}
+            for q in grid.quantities:
+                s = stats[q.key]
+                point[f"{q.key}_{si[q.kind]}"] = {k: float(v[i, j]) for k, v in s.items()}
+            points.append(point)
+    doc = {
+        "model": {"name": grid.model_name, "label": grid.model_label},
+        "heights_m": grid.heights_m,
+        "pressures_bar": grid.pressures_bar,
+        "quantiles": list(grid.quantiles),
+        "quantities": {f"{q.key}_{si[q.kind]}": q.words for q in grid.quantities},
+        "notes": list(grid.notes),
+        "provenance": grid.provenance,
+        "grid": points,
+    }
+    if grid.sealed is not None:
+        doc["sealed"] = grid.sealed["json"]
+    return doc
+
+
+def simscape_fields(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, object, str]]:
+    """The struct ``airspring`` for the Simscape Air Spring block: ``height`` (the block's Height
+    vector), ``pressure``, and per statistic ``load.<stat>`` (heights x pressures: column k is the
+    Load vector at pressure k), ``feff.<stat>``; with a sealed spring, ``sealed.*`` for the
+    stiffness parameterisation."""
+    h, f = units.shown("height"), units.shown("force")
+    fields = [
+        ("height", units.value("height", grid.heights_m), f"Height vector ({h})"),
+        (
+            "pressure",
+            units.value("pressure", grid.pressures_bar),
+            f"gauge overpressure of each column ({units.shown('pressure')})",
+        ),
+    ]
+    for key, name, kind in (("force", "load", "force"), ("feff", "feff", "area")):
+        stats = grid.stats(key)
+        for stat in [*_stat_order(grid), "sd"]:
+            fields.append(
+                (
+                    f"{name}.{stat}",
+                    units.value(kind, stats[stat]),
+                    f"{'Load vector' if name == 'load' else 'effective area'} ({units.shown(kind)}), "
+                    f"{stat}; column k at pressure(k)",
+                )
+            )
+    if grid.sealed is not None:
+        s = grid.sealed
+        fields.append(
+            ("sealed.height", units.value("height", s["heights_m"]), f"Height vector ({h})")
+        )
+        for stat, values in s["force"].items():
+            fields.append(
+                ("sealed.load." + stat, units.value("force", values), f"Load vector ({f}), {stat}")
+            )
+        for stat, values in s["stiffness"].items():
+            fields.append(
+                (
+                    "sealed.stiffness." + stat,
+                    units.value("stiffness", values),
+                    f"Stiffness vector ({units.shown('stiffness')}), {stat}: load ./ height, the block's relation",
+                )
+            )
+        for stat, values in s["rate"].items():
+            fields.append(
+                (
+                    "sealed.rate." + stat,
+                    units.value("stiffness", values),
+                    f"vertical rate -dP/dx ({units.shown('stiffness')}), {stat}",
+                )
+            )
+    fields += [
+        ("source", str(grid.provenance.get("recordings_path", "")), ""),
+        ("sha256", str(grid.provenance.get("recordings_sha256", "")), ""),
+        ("model", f"{grid.model_label} ({grid.model_name})", ""),
+        ("made_by", f"uq export (airspring-uq {grid.provenance.get('uq_version', '?')})", ""),
+    ]
+    return fields
+
+
+def simscape_comments(grid: ExportGrid, units: OutputUnits) -> list[str]:
+    h, f = units.shown("height"), units.shown("force")
+    out = [
+        "Air spring characteristic for the Simscape Air Spring block (Simscape > Driveline > Couplings & Drives)",
+        "with posterior quantiles, so nominal and worst-case simulations run side by side.",
+        "Parameterization 'Load as a function of height': Height vector = airspring.height "
+        f"(unit {h}), Load vector = airspring.load.q50(:, k) (unit {f}) for the k-th pressure of",
+        "airspring.pressure; use airspring.load.q05 / .q95 for the bounds. These are isobaric curves",
+        "(force at a held overpressure), the pressure characteristic tables the block's documentation",
+        "says manufacturers provide; for the closed spring's own curve export with --sealed.",
+    ]
+    if grid.sealed is not None:
+        out += [
+            "Parameterization 'Stiffness as a function of height' (the closed spring, --sealed):",
+            "Height vector = airspring.sealed.height, Stiffness vector = airspring.sealed.stiffness.q50;",
+            "the block's force is the element-wise product of Stiffness vector and Height vector, so the",
+            "stiffness written is load ./ height; airspring.sealed.rate is the vertical rate -dP/dx.",
+        ]
+    out += [f"{k}: {v}" for k, v in provenance_rows(grid, units, "simscape")]
+    return out
+
+
+def teimorbit_files(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, str]]:
+    """(statistic, file text) of the TeimOrbit air-spring property files, one per statistic
+    (mean and each quantile): ``[MDI_HEADER]``, ``[UNITS]`` (the table's length and force units),
+    ``[AIRSPRING]`` with the sub-block ``(Z_DATA)``, the static pressure of each curve in the
+    file's force per length squared, and ``(XY_DATA)``, the height then one force column per
+    pressure (Altair MotionView, "TeimOrbit File for AirSpring"). With a sealed spring, the
+    closed spring's curve is one more file per statistic (``sealed_<stat>``), its Z_DATA the
+    charge pressure at the design height."""
+    out = []
+    stats = grid.stats("force")
+    for stat in _stat_order(grid):
+        out.append(
+            (
+                stat,
+                _teimorbit_text(
+                    grid, units, grid.heights_m, grid.pressures_bar, stats[stat], stat, "isobaric"
+                ),
+            )
+        )
+    if grid.sealed is not None:
+        s = grid.sealed
+        for stat, values in s["force"].items():
+            out.append(
+                (
+                    f"sealed_{stat}",
+                    _teimorbit_text(
+                        grid,
+                        units,
+                        s["heights_m"],
+                        np.array([s["charge_bar"]]),
+                        np.asarray(values)[:, None],
+                        stat,
+                        "sealed",
+                    ),
+                )
+            )
+    return out
+
+
+def _teimorbit_text(grid, units, heights_m, pressures_bar, forces_N, stat: str, kind: str) -> str:
+    length_m = units.factor("height")  # metres per file length unit
+    force_N = units.factor("force")  # newtons per file force unit
+    per_area = force_N / length_m**2  # Pa per file pressure unit (force / length^2)
+    z = [[float(p * BAR_PA / per_area)] for p in pressures_bar]
+    forces = np.asarray(forces_N, float) / force_N
+    rows = [[float(h / length_m), *map(float, forces[i])] for i, h in enumerate(heights_m)]
+    labels = ["height", *(f"force_{k + 1}" for k in range(len(pressures_bar)))]
+    what = (
+        f"the closed spring charged at {grid.sealed['charge_bar']:g} bar at {grid.sealed['design_height_m'] * 1e3:g} mm"
+        if kind == "sealed"
+        else f"force against height at {len(pressures_bar)} static pressures"
+    )
+    unit_words = f"{teimorbit.FORCE_UNITS[units.force]}/{teimorbit.LENGTH_UNITS[units.height]}^2"
+    blocks = [
+        teimorbit.header("airspring", [f"uq export: {what}, posterior {stat}"]),
+        teimorbit.units(units.height, units.force),
+        teimorbit.Block(
+            "AIRSPRING",
+            comments=[
+                f"Z_DATA: gauge overpressure of each curve ({unit_words}); "
+                "XY_DATA: spring height, then the force at each pressure"
+            ],
+            sub_blocks=[
+                teimorbit.SubBlock("Z_DATA", labels=["pressure"], rows=z),
+                teimorbit.SubBlock("XY_DATA", labels=labels, rows=rows),
+            ],
+        ),
+    ]
+    comments = [
+        f"Air spring property file (TeimOrbit): {what}, posterior {stat} of the force",
+        *(f"{k}: {v}" for k, v in provenance_rows(grid, units, "teimorbit")),
+    ]
+    return teimorbit.text(blocks, comments)
+
+
+def sealed_export(grid: ExportGrid, model, design, heights_m=None) -> ExportGrid:
+    """``grid`` with the closed spring of ``design`` (uq._derived.design.SealedDesign: charged at
+    its height to its pressure, closed, optionally with a reservoir; ``uq design``'s options): its
+    force, the stiffness load/height the Simscape block's stiffness parameterisation takes, the
+    vertical rate -dP/dx and the overpressure along the stroke, at ``heights_m`` (default: the
+    grid's heights where every draw's sealed pressure stays within the tested pressures; asked
+    heights beyond them are refused in one line, the model does not extrapolate there).
+    """
+    check_design(model, design)
+    dgrid = DesignGrid(model, design.height_m)
+    asked = heights_m is not None
+    h = np.asarray(grid.heights_m if heights_m is None else heights_m, float).ravel()
+    lo, hi = model.height_range_m
+    inside = (h >= lo - 1e-9) & (h <= hi + 1e-9)
+    if asked and not inside.all():
+        raise InputError(
+            f"heights_m: the sealed spring is known only within the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm; "
+            f"{h[~inside][0] * 1e3:g} mm is not (`extrapolate` does not reach the closed spring)",
+            param="heights_m",
+        )
+    h = h[inside]
+    path, statement = sealed_draws(dgrid, design, heights_m=h)
+    ok = path.in_range.all(axis=0)
+    if asked and not ok.all():
+        plo, phi = model.pressure_range_bar
+        raise InputError(
+            f"heights_m: at {h[~ok][0] * 1e3:g} mm the closed spring's pressure leaves the tested pressures "
+            f"{plo:g}..{phi:g} bar in some draws; the model does not extrapolate (give heights nearer "
+            f"{design.height_m * 1e3:g} mm)",
+            param="heights_m",
+        )
+    notes = list(grid.notes)
+    if not ok.all():
+        notes.append(
+            f"sealed spring: heights {', '.join(f'{x * 1e3:g}' for x in h[~ok])} mm left out, where its "
+            "pressure leaves the tested pressures in some draws"
+        )
+    h = h[ok]
+    force, rate = path.force_N[:, ok], path.rate_N_per_m[:, ok]
+    pressure = path.overpressure_pa[:, ok] / BAR_PA
+    stiffness = force / h[None, :]
+
+    def stats(d):
+        out = {"mean": d.mean(axis=0)}
+        out |= {quantile_name(q): np.quantile(d, q, axis=0) for q in grid.quantiles}
+        out["sd"] = d.std(axis=0, ddof=1)
+        return out
+
+    sealed = {
+        "heights_m": h,
+        "design_height_m": design.height_m,
+        "charge_bar": design.charge_bar,
+        "force": stats(force),
+        "stiffness": stats(stiffness),
+        "rate": stats(rate),
+        "pressure_bar": stats(pressure),
+        "assumptions": [statement, *_sealed_words(design)],
+    }
+    sealed["json"] = {
+        "height_m": design.height_m,
+        "charge_bar": design.charge_bar,
+        "volume_l": design.volume_l,
+        "polytropic": list(design.polytropic_range),
+        "reservoir_l": design.reservoir_l,
+        "assumptions": sealed["assumptions"],
+        "heights_m": h,
+        "force_N": sealed["force"],
+        "stiffness_N_per_m": sealed["stiffness"],
+        "rate_N_per_m": sealed["rate"],
+        "pressure_bar": sealed["pressure_bar"],
+    }
+    return replace(grid, sealed=sealed, notes=tuple(notes))
+
+
+def _sealed_words(design) -> list[str]:
+    lo, hi = design.polytropic_range
+    n = f"n = {lo:g}" if lo == hi else f"n uniform in {lo:g}..{hi:g}"
+    return [
+        f"closed at {design.height_m * 1e3:g} mm charged to {design.charge_bar:g} bar with "
+        f"{design.volume_l:g} L inside (sd {design.volume_sd_l:g} L), reservoir {design.reservoir_l:g} L, "
+        f"polytropic {n}",
+        "stiffness = load / height (the Simscape block's relation); rate = -dP/dx along the stroke",
+    ]

@@ -37,3 +37,28 @@ def csv_text(header: list[str], rows, comments: list[str] = ()) -> str:
     for row in rows:
         w.writerow([cell(v) for v in row])
     return out.getvalue()
+
+
+def xlsx_bytes(sheets: list[tuple[str, list[list]]], when=None) -> bytes:
+    """An .xlsx workbook, one sheet per (name, rows); numbers stay numbers. ``when`` (a datetime)
+    is written as the workbook's created/modified time, so a rerun gives the same cells."""
+    import openpyxl  # only a workbook needs it (a dependency, but heavy to import for every command)
+
+    book = openpyxl.Workbook()
+    book.remove(book.active)
+    for name, rows in sheets:
+        sheet = book.create_sheet(name)
+        for row in rows:
+            sheet.append([_xlsx_cell(v) for v in row])
+    if when is not None:
+        book.properties.created = book.properties.modified = when
+    buf = io.BytesIO()
+    book.save(buf)
+    return buf.getvalue()
+
+
+def _xlsx_cell(v):
+    if v is None or isinstance(v, str | bool | int):
+        return v
+    f = float(v)
+    return None if math.isnan(f) else f

@@ -1,0 +1,430 @@
+"""``uq export``'s grid and formats (issue 30 items 1, 5): every format read back by an independent
+reader (pandas and openpyxl for the tables, scipy.io for .mat, a MATLAB-assignment reader and a
+TeimOrbit parser written here from the formats' documentation) and compared with the model's draws.
+
+The model is a closed-form FittedModel (the protocol of uq._models.fitted) defined here: force
+P = p_u A(x) with A(x) = a + b (x - x_r) per draw, dV/dx = (1 + c) A(x) (so dV/dp_u = 0), and every
+number the export writes is known.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import shlex
+from dataclasses import replace
+
+import numpy as np
+import openpyxl
+import pandas as pd
+import pytest
+import scipy.io
+
+from uq._data.units import OutputUnits
+from uq._derived.design import SealedDesign
+from uq._derived.export import (
+    ExportGrid,
+    csv_rows,
+    export_grid,
+    json_document,
+    parse_heights_mm,
+    parse_pressures_bar,
+    parse_quantiles,
+    quantile_name,
+    sealed_export,
+    simscape_fields,
+    teimorbit_files,
+    xlsx_sheets,
+)
+from uq._io import matlab
+from uq._io.errors import InputError
+from uq._io.tables import csv_text, xlsx_bytes
+from uq._models.fitted import FittedModel
+
+X_REF = 0.11
+CONTRACT = (
+    "pressure_bar,height_mm,force_N_mean,force_N_q05,force_N_q50,force_N_q95,"
+    "feff_m2_mean,feff_m2_q05,feff_m2_q95"
+).split(",")
+
+
+class LinearArea:
+    """A fitted model known in closed form (the FittedModel protocol)."""
+
+    name = "linear-area"
+    label = "closed-form test model (area linear in height)"
+    height_range_m = (0.065, 0.155)
+    pressure_range_bar = (1.0, 10.0)
+    tested_pressures_bar = np.array([1.0, 5.0, 10.0])
+    has_volume = True
+    has_dvdp = True  # V(x, p_u) = V0 + integral of (1 + c) A(x) dx: dV/dp_u = 0 exactly
+    recordings = None
+    convergence = None
+    idata = None
+    omitted_reason = None
+
+    def __init__(self, n: int = 3000, seed: int = 0, volume: bool = True):
+        rng = np.random.default_rng(seed)
+        self.a = rng.normal(0.0150, 2e-4, n)
+        self.b = rng.normal(-0.05, 0.004, n)
+        self.c = rng.normal(0.05, 0.01, n)
+        self.n_draws = n
+        self.has_volume = volume
+        self.omitted_reason = None if volume else "force-only test model: no volume"
+        self.provenance = {"recordings_path": "closed form", "recordings_sha256": "0" * 64}
+
+    def _draws(self, v, h, p):
+        h, p = np.broadcast_arrays(np.asarray(h, float), np.asarray(p, float))
+        e = (slice(None),) + (None,) * h.ndim
+        return v[e], h, p
+
+    def _area(self, h, p):
+        a, h, p = self._draws(self.a, h, p)
+        return a + self.b[(slice(None),) + (None,) * h.ndim] * (h - X_REF), h, p
+
+    def check_range(self, height_m, p_bar, param=None):
+        lo, hi = self.height_range_m
+        if np.any(np.asarray(height_m) < lo) or np.any(np.asarray(height_m) > hi):
+            raise InputError(f"{param or 'height_m'}: outside", param=param)
+
+    def force_draws(self, height_m, p_bar, *, check=True):
+        area, h, p = self._area(height_m, p_bar)
+        return area * p * 1e5
+
+    def feff_draws(self, height_m, p_bar, *, check=True):
+        return self._area(height_m, p_bar)[0]
+
+    def volume_area_draws(self, height_m, p_bar, *, check=True):
+        area, h, _ = self._area(height_m, p_bar)
+        return area * (1.0 + self.c[(slice(None),) + (None,) * h.ndim])
+
+    def volume_pressure_draws(self, height_m, p_bar, *, check=True):
+        return 0.0 * self._area(height_m, p_bar)[0]
+
+    def on_draws(self, n):
+        m = LinearArea.__new__(LinearArea)
+        m.__dict__ = dict(self.__dict__)
+        idx = np.linspace(0, self.n_draws - 1, n).round().astype(int)
+        m.a, m.b, m.c, m.n_draws = self.a[idx], self.b[idx], self.c[idx], n
+        return m
+
+    def blocks(self):
+        return {}
+
+    def to_json(self, comparison=None, advice=None):
+        return {}
+
+    def save(self, path, **provenance):
+        raise NotImplementedError
+
+
+MODEL = LinearArea()
+HEIGHTS = np.array([0.07, 0.09, 0.11, 0.13, 0.15])
+PRESSURES = np.array([1.0, 2.5, 5.0, 10.0])
+
+
+@pytest.fixture(scope="module")
+def grid() -> ExportGrid:
+    return export_grid(
+        MODEL, HEIGHTS, PRESSURES, provenance={"recordings_path": "r.csv", "uq_version": "t"}
+    )
+
+
+def _truth(quantity: str) -> np.ndarray:
+    """(S, H, P) draws of a quantity, straight from the model's parameters."""
+    h, p = HEIGHTS[None, :, None], PRESSURES[None, None, :]
+    a, b, c = (v[:, None, None] for v in (MODEL.a, MODEL.b, MODEL.c))
+    area = a + b * (h - X_REF) + 0 * p
+    top = HEIGHTS.max()
+    return {
+        "force": area * p * 1e5,
+        "feff": area,
+        "feff_volume": area * (1 + c),
+        # integral from top to h of (1 + c)(a + b (x - x_r)) dx
+        "volume_increment": (1 + c)
+        * (a * (h - top) + b / 2 * ((h - X_REF) ** 2 - (top - X_REF) ** 2))
+        + 0 * p,
+    }[quantity]
+
+
+def test_the_test_model_follows_the_protocol():
+    assert isinstance(MODEL, FittedModel)
+
+
+def test_grid_holds_the_models_draws_and_the_exact_volume_increment(grid):
+    for key in ("force", "feff", "feff_volume", "volume_increment"):
+        assert np.allclose(grid.quantity(key).draws, _truth(key), rtol=1e-12, atol=1e-15), key
+    s = grid.stats("force")
+    assert set(s) == {"mean", "sd", "q05", "q50", "q95"}
+    assert np.allclose(s["q05"], np.quantile(_truth("force"), 0.05, axis=0), rtol=1e-12)
+    assert grid.model_name == "linear-area" and grid.notes == ()
+
+
+def test_grid_refuses_beyond_the_tested_ranges_unless_told():
+    with pytest.raises(
+        InputError, match=r"heights_m: 160 mm is outside the tested heights 65..155"
+    ) as e:
+        export_grid(MODEL, np.array([0.1, 0.16]), PRESSURES)
+    assert e.value.param == "heights_m" and "`extrapolate`" in str(e.value)
+    with pytest.raises(
+        InputError, match=r"pressures_bar: 12 bar is outside the tested pressures 1..10"
+    ):
+        export_grid(MODEL, HEIGHTS, np.array([5.0, 12.0]))
+    g = export_grid(MODEL, np.array([0.1, 0.16]), np.array([12.0]), extrapolate=True)
+    assert len(g.notes) == 2 and all(n.startswith("extrapolated:") for n in g.notes)
+
+
+def test_force_only_models_omit_the_volume_with_the_reason():
+    g = export_grid(LinearArea(300, volume=False), HEIGHTS, PRESSURES)
+    assert [q.key for q in g.quantities] == ["force", "feff"]
+    assert g.notes == ("volume results omitted: force-only test model: no volume",)
+
+
+def test_options_parse_and_refuse_in_one_line():
+    assert parse_heights_mm("65:155:45").tolist() == [65.0, 110.0, 155.0]
+    assert parse_heights_mm("100, 70,80").tolist() == [70.0, 80.0, 100.0]
+    assert parse_pressures_bar("5,1").tolist() == [1.0, 5.0]
+    assert parse_quantiles("0.95,0.05,0.5") == (0.05, 0.5, 0.95)
+    for bad, f in (
+        ("65:60:5", parse_heights_mm),
+        ("a,b", parse_heights_mm),
+        ("70,70", parse_heights_mm),
+        ("0,1", parse_pressures_bar),
+        ("1.5", parse_quantiles),
+    ):
+        with pytest.raises(ValueError):
+            f(bad)
+    assert [quantile_name(q) for q in (0.05, 0.5, 0.95, 0.025)] == ["q05", "q50", "q95", "q2.5"]
+
+
+# ----------------------------------------------------------------------------- CSV
+
+
+def test_csv_has_the_contracts_columns_first_and_the_models_numbers(grid):
+    header, rows = csv_rows(grid)
+    table = pd.read_csv(io.StringIO(csv_text(header, rows)))
+    assert list(table.columns[: len(CONTRACT)]) == CONTRACT
+    assert len(table) == HEIGHTS.size * PRESSURES.size
+    force, feff = _truth("force"), _truth("feff")
+    for j, p in enumerate(PRESSURES):
+        for i, h in enumerate(HEIGHTS):
+            r = table[(table.pressure_bar == p) & np.isclose(table.height_mm, h * 1e3)].iloc[0]
+            assert r.force_N_mean == pytest.approx(force[:, i, j].mean(), rel=1e-9)
+            assert r.force_N_q95 == pytest.approx(np.quantile(force[:, i, j], 0.95), rel=1e-9)
+            assert r.feff_m2_q05 == pytest.approx(np.quantile(feff[:, i, j], 0.05), rel=1e-9)
+            assert r.volume_increment_l_q50 == pytest.approx(
+                np.quantile(_truth("volume_increment")[:, i, j], 0.5) * 1e3, rel=1e-8, abs=1e-12
+            )
+
+
+def test_csv_in_the_recordings_units(grid):
+    us = OutputUnits.of({"pressure": "psi", "height": "in", "force": "lbf"}, "input")
+    header, rows = csv_rows(grid, us)
+    table = pd.read_csv(io.StringIO(csv_text(header, rows)))
+    assert list(table.columns[:4]) == [
+        "pressure_psi",
+        "height_in",
+        "force_lbf_mean",
+        "force_lbf_q05",
+    ]
+    assert "feff_in2_mean" in table and "volume_increment_in3_q50" in table
+    r = table.iloc[0]
+    assert r.pressure_psi == pytest.approx(PRESSURES[0] / 0.0689475729316836, rel=1e-9)
+    assert r.height_in == pytest.approx(HEIGHTS[0] / 0.0254, rel=1e-9)
+    assert r.force_lbf_mean == pytest.approx(
+        _truth("force")[:, 0, 0].mean() / 4.4482216152605, rel=1e-9
+    )
+
+
+# ----------------------------------------------------------------------------- xlsx
+
+
+def test_xlsx_is_the_catalogues_wide_shape_with_provenance(grid):
+    book = openpyxl.load_workbook(io.BytesIO(xlsx_bytes(xlsx_sheets(grid))))
+    assert "force_N q95" in book.sheetnames and book.sheetnames[-1] == "provenance"
+    sheet = book["force_N q95"]
+    rows = list(sheet.iter_rows(values_only=True))
+    assert rows[0][0] == "height_mm \\ pressure_bar" and list(rows[0][1:]) == PRESSURES.tolist()
+    assert [r[0] for r in rows[1:]] == pytest.approx((HEIGHTS * 1e3).tolist())
+    q95 = np.quantile(_truth("force"), 0.95, axis=0)
+    assert np.allclose(np.array([r[1:] for r in rows[1:]], float), q95, rtol=1e-12)
+    provenance = dict(list(book["provenance"].iter_rows(values_only=True))[1:])
+    assert provenance["recordings"] == "r.csv" and "linear-area" in provenance["model"]
+    assert {"recordings sha256", "date", "between tested pressures", "made by"} <= set(provenance)
+
+
+# ----------------------------------------------------------------------------- JSON
+
+
+def test_json_grid_has_the_contracts_estimate_objects(grid):
+    doc = json.loads(json.dumps(json_document(grid), default=lambda a: np.asarray(a).tolist()))
+    assert (
+        doc["model"]["name"] == "linear-area" and len(doc["grid"]) == HEIGHTS.size * PRESSURES.size
+    )
+    point = doc["grid"][HEIGHTS.size + 2]  # the second pressure, the third height
+    assert (point["pressure_bar"], point["height_m"]) == (PRESSURES[1], HEIGHTS[2])
+    est = point["force_N"]
+    assert {"mean", "sd", "q05", "q95"} <= set(est)
+    assert est["sd"] == pytest.approx(_truth("force")[:, 2, 1].std(ddof=1), rel=1e-9)
+    assert point["volume_increment_m3"]["mean"] == pytest.approx(
+        _truth("volume_increment")[:, 2, 1].mean(), rel=1e-9
+    )
+
+
+# ----------------------------------------------------------------------------- MATLAB
+
+
+def _matlab_assignments(text: str) -> dict:
+    """A reader of the assignments a MATLAB script makes (``s.a.b = [1; 2];``): numbers, column
+    vectors, matrices (rows split by ';', columns by spaces), strings; comments (%) dropped."""
+    out = {}
+    for line in text.splitlines():
+        line = line.split("%", 1)[0].strip() if not re.search(r"=\s*'", line) else line.strip()
+        m = re.match(r"^([A-Za-z]\w*(?:\.\w+)*)\s*=\s*(.*);", line)
+        if not m or m.group(2) == "struct()":
+            continue
+        name, value = m.group(1), m.group(2).strip()
+        if value.startswith("'"):
+            out[name] = value[1 : value.rindex("'")].replace("''", "'")
+            continue
+        rows = [r.split() for r in value.strip("[]").split(";")]
+        a = np.array([[float(v) for v in r] for r in rows])
+        out[name] = a
+    return out
+
+
+def test_simscape_script_and_mat_file_hold_every_quantile(grid):
+    units = OutputUnits()
+    fields = simscape_fields(grid, units)
+    text = matlab.script("airspring", fields, ["a comment"])
+    parsed = _matlab_assignments(text)
+    assert parsed["airspring.height"].ravel() == pytest.approx((HEIGHTS * 1e3).tolist())
+    force = _truth("force")
+    for stat, q in (("q05", 0.05), ("q50", 0.5), ("q95", 0.95)):
+        assert np.allclose(
+            parsed[f"airspring.load.{stat}"], np.quantile(force, q, axis=0), rtol=1e-9
+        )
+    assert parsed["airspring.source"] == "r.csv"
+    mat = scipy.io.loadmat(io.BytesIO(matlab.mat_bytes("airspring", fields)), simplify_cells=True)
+    s = mat["airspring"]
+    assert np.allclose(s["load"]["q95"], np.quantile(force, 0.95, axis=0), rtol=1e-12)
+    assert np.allclose(np.ravel(s["height"]), HEIGHTS * 1e3)
+    assert s["model"].startswith("closed-form test model")
+
+
+# ----------------------------------------------------------------------------- TeimOrbit
+
+
+def parse_teimorbit(text: str) -> dict:
+    """A TeimOrbit reader from the format's rules (Adams Tire "About the TeimOrbit format", Altair
+    "About TeimOrbit Files"): [BLOCK], (SUB_BLOCK), NAME = value parameters, {labels} tables whose
+    rows follow until the next table, sub-block, block, comment or blank line; comments start with
+    '$' or '!'. Returns block -> {"params", sub-block -> {"params", "labels", "rows"}}."""
+    blocks: dict = {}
+    block = sub = table = None
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line[0] in "$!":
+            table = None
+            continue
+        if line.startswith("["):
+            name = line[1 : line.index("]")].upper()
+            block = blocks.setdefault(name, {"params": {}})
+            sub, table = None, None
+        elif line.startswith("("):
+            sub = block.setdefault(line[1 : line.index(")")].upper(), {"params": {}})
+            table = None
+        elif line.startswith("{"):
+            table = (sub if sub is not None else block).setdefault("table", {})
+            table["labels"] = line[1 : line.index("}")].split()
+            table["rows"] = []
+        elif "=" in line and table is None:
+            k, v = (x.strip() for x in line.split("=", 1))
+            v = v.strip("'\"") if v[0] in "'\"" else float(v)
+            (sub if sub is not None else block)["params"][k.upper()] = v
+        elif table is not None:
+            table["rows"].append([_token(c) for c in shlex.split(line)])
+    return blocks
+
+
+def _token(text: str):
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def test_teimorbit_files_one_per_statistic_read_back(grid):
+    units = OutputUnits()
+    files = dict(teimorbit_files(grid, units))
+    assert list(files) == ["mean", "q05", "q50", "q95"]
+    f = parse_teimorbit(files["q95"])
+    assert f["MDI_HEADER"]["params"]["FILE_FORMAT"] == "ASCII"
+    assert f["UNITS"]["params"] == {
+        "LENGTH": "mm",
+        "FORCE": "newton",
+        "ANGLE": "degree",
+        "MASS": "kg",
+        "TIME": "second",
+    }
+    z = np.array(f["AIRSPRING"]["Z_DATA"]["table"]["rows"]).ravel()
+    assert z == pytest.approx(PRESSURES * 1e5 / 1e6)  # bar in N/mm^2
+    xy = f["AIRSPRING"]["XY_DATA"]["table"]
+    assert xy["labels"][0] == "height" and len(xy["labels"]) == 1 + PRESSURES.size
+    data = np.array(xy["rows"])
+    assert data[:, 0] == pytest.approx(HEIGHTS * 1e3)
+    assert np.allclose(data[:, 1:], np.quantile(_truth("force"), 0.95, axis=0), rtol=1e-9)
+
+
+def test_teimorbit_in_inches_and_pounds(grid):
+    us = OutputUnits.of({"pressure": "psi", "height": "in", "force": "lbf"}, "input")
+    f = parse_teimorbit(dict(teimorbit_files(grid, us))["q50"])
+    assert (f["UNITS"]["params"]["LENGTH"], f["UNITS"]["params"]["FORCE"]) == (
+        "inch",
+        "pound_force",
+    )
+    z = np.array(f["AIRSPRING"]["Z_DATA"]["table"]["rows"]).ravel()
+    assert z == pytest.approx(PRESSURES / 0.0689475729316836, rel=1e-9)  # lbf/in^2 = psi
+    data = np.array(f["AIRSPRING"]["XY_DATA"]["table"]["rows"])
+    assert data[:, 0] == pytest.approx(HEIGHTS / 0.0254)
+    assert np.allclose(
+        data[:, 1:], np.quantile(_truth("force"), 0.5, axis=0) / 4.4482216152605, rtol=1e-9
+    )
+
+
+# ----------------------------------------------------------------------------- sealed
+
+
+def test_sealed_spring_force_stiffness_and_rate(grid):
+    design = SealedDesign(height_m=0.11, charge_bar=5.0, volume_l=5.0)
+    g = sealed_export(grid, MODEL, design)
+    s = g.sealed
+    assert 0.11 in s["heights_m"].tolist()
+    k = s["heights_m"].tolist().index(0.11)
+    # at the design height the closed spring carries the isobaric force at its charge
+    charge = _truth("force")[:, HEIGHTS.tolist().index(0.11), PRESSURES.tolist().index(5.0)]
+    assert s["force"]["mean"][k] == pytest.approx(charge.mean(), rel=1e-6)
+    assert np.allclose(s["stiffness"]["mean"], s["force"]["mean"] / s["heights_m"], rtol=1e-12)
+    assert np.all(s["rate"]["q05"] > 0)  # a closed spring stiffens as it is compressed
+    files = dict(teimorbit_files(g, OutputUnits()))
+    sealed = parse_teimorbit(files["sealed_q50"])
+    assert np.array(sealed["AIRSPRING"]["Z_DATA"]["table"]["rows"]).ravel() == pytest.approx([0.5])
+    fields = {f: v for f, v, _ in simscape_fields(g, OutputUnits())}
+    assert np.allclose(fields["sealed.stiffness.q50"], s["stiffness"]["q50"] / 1e3)  # N/mm
+
+
+def test_sealed_heights_beyond_the_tested_pressures_are_refused(grid):
+    design = SealedDesign(height_m=0.11, charge_bar=9.5, volume_l=5.0)
+    g = sealed_export(grid, MODEL, design)  # default heights: those the pressures allow, said
+    assert any("sealed spring: heights" in n for n in g.notes)
+    with pytest.raises(InputError, match="leaves the tested pressures"):
+        sealed_export(grid, MODEL, design, heights_m=HEIGHTS)
+    with pytest.raises(InputError, match="only within the tested heights"):
+        sealed_export(grid, MODEL, replace(design, charge_bar=5.0), heights_m=np.array([0.2]))
+
+
+def test_writers_are_deterministic(grid):
+    a = csv_text(*csv_rows(grid))
+    b = csv_text(*csv_rows(export_grid(MODEL, HEIGHTS, PRESSURES, provenance=grid.provenance)))
+    assert a == b

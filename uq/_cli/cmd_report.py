@@ -6,11 +6,13 @@ import sys
 import time
 
 from uq._cli.common import (
+    add_output_units,
     add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
     load,
+    output_units,
     positive_int,
     settings_from,
     stand_from,
@@ -60,6 +62,7 @@ def configure_report(p) -> None:
         "auto (default): the paper's tables for the bundled N-50 reconstruction, nothing otherwise",
     )
     add_stand(p)
+    add_output_units(p)
     add_pressure_ar1(p)
 
 
@@ -112,6 +115,7 @@ def command_report(args) -> int:
         jobs=None,  # per-test figures in worker processes, one per CPU
         figure_format=args.figures,
         reference=reference,
+        units=output_units(rec, "input") if args.units == "input" else None,
     )
     t_all = time.perf_counter() - t0
     print(

@@ -522,10 +522,11 @@ def _absent(ax, words: str, x, y: float = 0.5) -> None:
 
 
 def encoded_test_figure(
-    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None
+    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None, units=None
 ) -> bytes:
-    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns)."""
-    return encode(figure_test(t, force_mean, x0_m, tb, cb, piston_m), figure_format)
+    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns); ``units``: second
+    axes in the recordings' units (``uq report --units input``)."""
+    return encode(figure_test(t, force_mean, x0_m, tb, cb, piston_m), figure_format, units)
 
 
 def _ignore_interrupts() -> None:
@@ -566,10 +567,19 @@ class _TestFigures:
 
     MIN_TESTS = 4  # below this, starting workers costs more than it saves
 
-    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png"):
+    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png", units=None):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
-            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid, figure_format, _piston(tf))
+            (
+                tf.test,
+                tf.flat("force").mean(0),
+                tf.x0_m,
+                tb,
+                grid,
+                figure_format,
+                _piston(tf),
+                units,
+            )
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
         self._pool, self._futures = None, []
@@ -868,9 +878,10 @@ def _draw_figures(
     test_figures: _TestFigures,
     figure_format: str,
     ref: Reference | None = None,
+    units=None,
 ) -> dict[str, Figure]:
     """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
-    the extension (``"fig2_force"``)."""
+    the extension (``"fig2_force"``); ``units``: second axes in the recordings' units."""
     drawn = [("fig2_force", figure_force(cf, cb), "Figure 2: force vs height")]
     if any(tb.has_volume for tb in cb.tests):
         drawn.append(("fig3_volume", figure_volume(cf, cb), "Figure 3: volume increment vs height"))
@@ -892,7 +903,7 @@ def _draw_figures(
             )
         )
     figs = {
-        stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
+        stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format, units), alt)
         for stem, fig, alt in drawn
     }
     for i, tf in enumerate(cf.tests):
@@ -919,6 +930,7 @@ def write_report(
     jobs: int | None = 1,
     figure_format: str = "png",
     reference: Reference | str | None = "auto",
+    units=None,
 ) -> Path:
     """Write ``out_dir/report.html`` and its figures, as ``uq report`` does; return the page's path.
 
@@ -942,7 +954,9 @@ def write_report(
     spring (their header says so) and nothing otherwise, ``"paper"``, ``None``, or a
     :class:`uq._data.reference.Reference` (``uq report --reference FILE``). The page's footer
     names the uq version, the date (``SOURCE_DATE_EPOCH`` when set), the recordings' SHA-256 and
-    the stand description used.
+    the stand description used. ``units``: a :class:`uq._data.units.OutputUnits`
+    (``uq report --units input``): every figure axis in mm, N, kN, cm² or litres gets a second
+    axis in those units (the recordings' own: psi, in, lbf, ...).
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -970,9 +984,9 @@ def write_report(
                 surface, summary(surface, comparison), stage, figure_format=figure_format
             ).name
         n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
-        with _TestFigures(cf, cb, n_jobs, figure_format) as test_figures:
+        with _TestFigures(cf, cb, n_jobs, figure_format, units) as test_figures:
             page, names = _write_page(
-                cf, cb, stage, test_figures, comments, surface_page, figure_format, reference
+                cf, cb, stage, test_figures, comments, surface_page, figure_format, reference, units
             )
     # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
     if surface is not None:  # this run's surface figures, in this run's format
@@ -994,13 +1008,14 @@ def _write_page(
     surface_page,
     figure_format: str = "png",
     reference: Reference | str | None = "auto",
+    units=None,
 ) -> tuple[Path, set]:
     """report.html (the template ``report.html``) and its figures in ``out``; returns the page and
     the figures' file names."""
     rec = cf.recordings
     comments = _comments(rec, comments)
     ref = _reference(reference, comments)
-    figures = _draw_figures(cf, cb, out, test_figures, figure_format, ref)
+    figures = _draw_figures(cf, cb, out, test_figures, figure_format, ref, units)
     lo, hi = rec.height_range_m
     t1_rows, n_out, n_cmp = _table1(cf, ref)
     page = render(

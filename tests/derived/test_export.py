@@ -428,3 +428,28 @@ def test_writers_are_deterministic(grid):
     a = csv_text(*csv_rows(grid))
     b = csv_text(*csv_rows(export_grid(MODEL, HEIGHTS, PRESSURES, provenance=grid.provenance)))
     assert a == b
+
+
+def test_write_every_format_to_its_files(grid, tmp_path):
+    from uq._derived.export import FORMATS, write
+
+    g = sealed_export(grid, MODEL, SealedDesign(height_m=0.11, charge_bar=5.0, volume_l=5.0))
+    names = {
+        "csv": ["t.csv", "t_sealed.csv"],
+        "xlsx": ["t.xlsx"],
+        "json": ["t.json"],
+        "simscape": ["t.m"],
+        "teimorbit": [f"t_{s}.tpf" for s in ("mean", "q05", "q50", "q95")]
+        + [f"t_sealed_{s}.tpf" for s in ("mean", "q05", "q50", "q95")],
+    }
+    for fmt in FORMATS:
+        suffix = {"simscape": ".m", "teimorbit": ".tpf"}.get(fmt, f".{fmt}")
+        paths = write(g, fmt, tmp_path / f"t{suffix}", when="2026-11-27 10:00 UTC")
+        assert sorted(p.name for p in paths) == sorted(names[fmt]), fmt
+    mat = write(g, "simscape", tmp_path / "t.mat")[0]
+    assert "sealed" in scipy.io.loadmat(mat, simplify_cells=True)["airspring"]
+    sealed = pd.read_csv(tmp_path / "t_sealed.csv")
+    assert list(sealed.columns[:3]) == ["height_mm", "sealed_force_N_mean", "sealed_force_N_q05"]
+    book = openpyxl.load_workbook(tmp_path / "t.xlsx")
+    assert book.sheetnames[-2:] == ["sealed", "provenance"]
+    assert json.loads((tmp_path / "t.json").read_text())["sealed"]["charge_bar"] == 5.0

@@ -6,15 +6,19 @@ contract's, or the units the recordings came in (``--units input``).
 
 from __future__ import annotations
 
+import datetime
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from uq._data.reference import FORCE_NAMES, PISTON_NAMES
 from uq._data.units import OutputUnits
 from uq._derived.design import DesignGrid, check_design, sealed_draws
-from uq._io import teimorbit
+from uq._io import matlab, teimorbit
 from uq._io.errors import InputError
+from uq._io.files import dumps_json, write_bytes_atomic, write_text_atomic
+from uq._io.tables import csv_text, xlsx_bytes
 from uq._physics.quantities import BAR_PA
 
 #: The coefficients' units of ``uq fit --json`` (SI, u = x - x0 in metres): ``--units si``.
@@ -579,7 +583,8 @@ def teimorbit_files(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, str
         )
     if grid.sealed is not None:
         s = grid.sealed
-        for stat, values in s["force"].items():
+        for stat in _stat_order(grid):
+            values = s["force"][stat]
             out.append(
                 (
                     f"sealed_{stat}",
@@ -715,4 +720,75 @@ def _sealed_words(design) -> list[str]:
         f"{design.volume_l:g} L inside (sd {design.volume_sd_l:g} L), reservoir {design.reservoir_l:g} L, "
         f"polytropic {n}",
         "stiffness = load / height (the Simscape block's relation); rate = -dP/dx along the stroke",
+    ]
+
+
+def sealed_rows(
+    grid: ExportGrid, units: OutputUnits = CONTRACT_UNITS
+) -> tuple[list[str], list[list]]:
+    """The closed spring's table: one row per height, its force, stiffness (load/height), rate
+    (-dP/dx) and overpressure, each mean, quantiles and sd."""
+    s = grid.sealed
+    parts = (
+        ("force", "force", s["force"]),
+        ("stiffness", "stiffness", s["stiffness"]),
+        ("rate", "stiffness", s["rate"]),
+        ("pressure", "pressure", s["pressure_bar"]),
+    )
+    header = [units.column("height")]
+    for key, kind, stats in parts:
+        header += [f"sealed_{key}_{units.suffix(kind)}_{stat}" for stat in stats]
+    rows = []
+    for i, h in enumerate(s["heights_m"]):
+        row = [float(units.value("height", h))]
+        for _, kind, stats in parts:
+            row += [float(units.value(kind, v[i])) for v in stats.values()]
+        rows.append(row)
+    return header, rows
+
+
+def _beside(out: Path, tag: str) -> Path:
+    return out.with_name(f"{out.stem}_{tag}{out.suffix}")
+
+
+def write(
+    grid: ExportGrid, fmt: str, out, units: OutputUnits = CONTRACT_UNITS, when=None
+) -> list[Path]:
+    """Write ``grid`` as ``fmt`` (one of FORMATS) to ``out``, every file atomically; the paths
+    written. teimorbit: one file per statistic, ``out`` with ``_mean``, ``_q05``, ... (and
+    ``_sealed_...``) before its suffix; csv with a sealed spring: its table in ``out`` with
+    ``_sealed``; simscape: a MAT-file when ``out`` ends in ``.mat``, else a MATLAB script.
+    ``when``: the provenance's date ("YYYY-MM-DD HH:MM UTC"), a workbook's created time."""
+    if fmt not in FORMATS:
+        raise InputError(f"format: one of {', '.join(FORMATS)}, got {fmt!r}", param="format")
+    out = Path(out)
+    if fmt == "csv":
+        paths = [write_text_atomic(out, csv_text(*csv_rows(grid, units)))]
+        if grid.sealed is not None:
+            paths.append(
+                write_text_atomic(_beside(out, "sealed"), csv_text(*sealed_rows(grid, units)))
+            )
+        return paths
+    if fmt == "xlsx":
+        sheets = xlsx_sheets(grid, units)
+        if grid.sealed is not None:
+            header, rows = sealed_rows(grid, units)
+            sheets.insert(-1, ("sealed", [header, *rows]))
+        stamp = None
+        if when:
+            stamp = datetime.datetime.strptime(str(when), "%Y-%m-%d %H:%M UTC")
+        return [write_bytes_atomic(out, xlsx_bytes(sheets, when=stamp))]
+    if fmt == "json":
+        return [write_text_atomic(out, dumps_json(json_document(grid)))]
+    if fmt == "simscape":
+        fields = simscape_fields(grid, units)
+        if out.suffix.lower() == ".mat":
+            return [write_bytes_atomic(out, matlab.mat_bytes("airspring", fields))]
+        return [
+            write_text_atomic(
+                out, matlab.script("airspring", fields, simscape_comments(grid, units))
+            )
+        ]
+    return [
+        write_text_atomic(_beside(out, stat), text) for stat, text in teimorbit_files(grid, units)
     ]

@@ -208,13 +208,13 @@ def _float(p: str, text: str) -> float:
 
 
 def default_heights_m(model) -> np.ndarray:
-    """Every tested height (the recordings'), or 10 mm steps over the tested range when the model
-    came without recordings (a saved answer)."""
+    """Every tested height (the recordings'), or 5 mm steps over the tested range, both ends
+    included, when the model came without recordings (a saved model)."""
     rec = getattr(model, "recordings", None)
     if rec is not None:
         return np.unique(np.round(np.concatenate([t.height_m for t in rec.tests]), 9))
     lo, hi = model.height_range_m
-    return np.round(np.arange(np.ceil(lo * 100) / 100, hi + 1e-12, 0.01), 9)
+    return np.round(np.append(np.arange(lo, hi - 1e-9, 0.005), hi), 9)
 
 
 def _check_grid(
@@ -237,7 +237,7 @@ def _check_grid(
             )
         notes.append(
             f"extrapolated: heights {', '.join(f'{h * 1e3:g}' for h in out_h)} mm lie outside the tested "
-            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model's polynomial is continued there, no data supports it"
+            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model is continued there, no reading supports it"
         )
     if out_p.size:
         if not extrapolate:
@@ -317,9 +317,9 @@ def export_grid(
             )
         )
     else:
+        why = model.omitted_reason or "the model has no volume-derived area"
         notes.append(
-            "volume results omitted: "
-            + (model.omitted_reason or "the model has no volume-derived area")
+            why if why.startswith("volume results omitted") else f"volume results omitted: {why}"
         )
     return ExportGrid(
         heights_m=h,
@@ -567,12 +567,12 @@ def teimorbit_files(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, str
     (mean and each quantile): ``[MDI_HEADER]``, ``[UNITS]`` (the table's length and force units),
     ``[AIRSPRING]`` with the sub-block ``(Z_DATA)``, the static pressure of each curve in the
     file's force per length squared, and ``(XY_DATA)``, the height then one force column per
-    pressure (Altair MotionView, "TeimOrbit File for AirSpring"). With a sealed spring, the
-    closed spring's curve is one more file per statistic (``sealed_<stat>``), its Z_DATA the
-    charge pressure at the design height."""
+    pressure (Altair MotionView, "TeimOrbit File for AirSpring"). With a sealed spring the files
+    are the closed spring's curve instead (``sealed_<stat>``), its Z_DATA the charge pressure at
+    the design height."""
     out = []
     stats = grid.stats("force")
-    for stat in _stat_order(grid):
+    for stat in _stat_order(grid) if grid.sealed is None else ():
         out.append(
             (
                 stat,
@@ -638,37 +638,27 @@ def _teimorbit_text(grid, units, heights_m, pressures_bar, forces_N, stat: str, 
     return teimorbit.text(blocks, comments)
 
 
-def sealed_export(grid: ExportGrid, model, design, heights_m=None) -> ExportGrid:
+def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
     """``grid`` with the closed spring of ``design`` (uq._derived.design.SealedDesign: charged at
     its height to its pressure, closed, optionally with a reservoir; ``uq design``'s options): its
     force, the stiffness load/height the Simscape block's stiffness parameterisation takes, the
-    vertical rate -dP/dx and the overpressure along the stroke, at ``heights_m`` (default: the
-    grid's heights where every draw's sealed pressure stays within the tested pressures; asked
-    heights beyond them are refused in one line, the model does not extrapolate there).
+    vertical rate -dP/dx and the overpressure along the stroke, at ``uq design``'s heights (its grid
+    of HEIGHT_STEP_M steps about the design height, on which the gas law is solved) within the
+    export's height span, where every draw's sealed pressure stays within the tested pressures
+    (the heights beyond are said in the notes: the model does not extrapolate there).
     """
     check_design(model, design)
     dgrid = DesignGrid(model, design.height_m)
-    asked = heights_m is not None
-    h = np.asarray(grid.heights_m if heights_m is None else heights_m, float).ravel()
-    lo, hi = model.height_range_m
-    inside = (h >= lo - 1e-9) & (h <= hi + 1e-9)
-    if asked and not inside.all():
+    lo, hi = float(grid.heights_m.min()), float(grid.heights_m.max())
+    h = dgrid.heights[(dgrid.heights >= lo - 1e-9) & (dgrid.heights <= hi + 1e-9)]
+    if not lo - 1e-9 <= design.height_m <= hi + 1e-9:
         raise InputError(
-            f"heights_m: the sealed spring is known only within the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm; "
-            f"{h[~inside][0] * 1e3:g} mm is not (`extrapolate` does not reach the closed spring)",
-            param="heights_m",
+            f"height_m: the design height {design.height_m * 1e3:g} mm lies outside the exported heights "
+            f"{lo * 1e3:g}..{hi * 1e3:g} mm",
+            param="height_m",
         )
-    h = h[inside]
     path, statement = sealed_draws(dgrid, design, heights_m=h)
     ok = path.in_range.all(axis=0)
-    if asked and not ok.all():
-        plo, phi = model.pressure_range_bar
-        raise InputError(
-            f"heights_m: at {h[~ok][0] * 1e3:g} mm the closed spring's pressure leaves the tested pressures "
-            f"{plo:g}..{phi:g} bar in some draws; the model does not extrapolate (give heights nearer "
-            f"{design.height_m * 1e3:g} mm)",
-            param="heights_m",
-        )
     notes = list(grid.notes)
     if not ok.all():
         notes.append(

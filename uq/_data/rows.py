@@ -195,7 +195,7 @@ def _workbook_rows(
 ) -> tuple[list[tuple[int, list]], list[str], str]:
     """The sheet's filled rows that are not comments (row number, cell texts), its leading
     comments, and the sheet's name."""
-    import pandas as pd  # only a workbook needs pandas (and openpyxl or odfpy under it)
+    import pandas as pd  # reason: heavy; only a workbook needs pandas (and openpyxl or odfpy)
 
     try:
         with warnings.catch_warnings():

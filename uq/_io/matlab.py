@@ -6,7 +6,6 @@ from __future__ import annotations
 import io
 
 import numpy as np
-from scipy.io import savemat
 
 #: Digits of every number in a script (the tables' own).
 DIGITS = 10
@@ -51,6 +50,8 @@ def mat_bytes(name: str, fields: list[tuple[str, object, str]]) -> bytes:
         for p in parts[:-1]:
             here = here.setdefault(p, {})
         here[parts[-1]] = value if isinstance(value, str) else np.asarray(value, float)
+    from scipy.io import savemat  # reason: scipy.io takes 1 s to import; only a MAT-file needs it
+
     buf = io.BytesIO()
     savemat(buf, {name: struct}, do_compression=True, oned_as="column")
     return buf.getvalue()

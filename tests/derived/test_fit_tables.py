@@ -222,4 +222,4 @@ def test_check_takes_a_fit_result_through_the_command_line(n50_fit, tmp_path, ca
     assert main(["check", str(ref), "--against", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "tests[2] (2 bar).covariance: missing" in err
-    assert "as the stored estimates needs its posterior covariance" in err
+    assert "a fit result as the stored estimates needs its posterior covariance" in err

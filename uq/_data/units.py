@@ -1,8 +1,8 @@
 """Units of the recordings' columns: the suffix of a column name is its unit (docs/formats.md section 1).
 
 ``pressure_psi`` is the pressure in psi, ``height_in`` the height in inches, ``volume_l`` the
-element's volume in litres. The list of units is closed (../shared/CONTRACT.md section 1), so a
-table of factors does the job: each suffix's factor to the unit used inside, bar for pressures
+element's volume in litres. The list of units is closed (the contract's, docs/formats.md section
+1), so a table of factors does the job: each suffix's factor to the unit used inside, bar for pressures
 (the test's label stays in bar), SI for everything else, from the units' definitions (the inch
 is 0.0254 m and the pound-force 0.45359237 kg x 9.80665 m/s^2, both exact by international
 agreement; psi is lbf/in^2). Conversions are multiplications by that factor, so a file in the

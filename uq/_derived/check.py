@@ -180,8 +180,8 @@ def read_points(doc: dict, path: str) -> list[dict]:
                 path,
                 f"{label}.covariance",
                 hint=(
-                    " (a `uq fit --json` result as the stored estimates needs its posterior "
-                    "covariance, which `uq fit --json` writes; rerun the fit with this version)"
+                    " (a fit result as the stored estimates needs its posterior covariance, which a "
+                    "fit's JSON carries; fit again with this version)"
                     if fit
                     else ""
                 ),
@@ -202,7 +202,7 @@ def _point(value, path: str, key: str, fit: bool) -> float:
     if not isinstance(value, dict):
         raise InputError(
             f'{path}: {key}: expected an estimate object {{"mean", ...}} as in the rest of this '
-            f"`uq fit --json` result, got {json.dumps(value)[:40]}"
+            f"fit result, got {json.dumps(value)[:40]}"
         )
     if "mean" not in value:
         raise InputError(f"{path}: {key}.mean: missing")

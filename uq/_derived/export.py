@@ -366,7 +366,7 @@ def table_columns(
 ) -> list[tuple[str, str, str]]:
     """(column, quantity key, stat) of the CSV table after its pressure and height columns.
 
-    The contract's columns come first and in its order (../shared/CONTRACT.md, ``uq export
+    The contract's columns come first and in its order (docs/formats.md, ``uq export
     --format csv``): force mean and quantiles, F_eff mean and quantiles but the median; then the
     rest (sds, F_eff's median, the volume quantities).
     """

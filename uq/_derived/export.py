@@ -81,6 +81,8 @@ def coefficient_table(cf, units: OutputUnits = JSON_UNITS) -> tuple[list[str], l
 N_LEGENDRE = 8
 DEFAULT_QUANTILES = (0.05, 0.5, 0.95)
 DEFAULT_DRAWS = 4000
+#: draws x grid values evaluated at once (the heights are taken in chunks): about 100 MB
+MAX_VALUES = 12_000_000
 
 
 def quantile_name(q: float) -> str:
@@ -95,14 +97,15 @@ def quantile_name(q: float) -> str:
 
 @dataclass(frozen=True)
 class Quantity:
-    """One exported quantity on the grid: ``draws`` (S, H, P) in the unit used inside (N, m^2,
-    m^3, N/m; bar for pressures); ``kind`` its kind for OutputUnits ("force", "area", "volume",
-    "stiffness", "pressure"); ``stem`` the column stem in the contract's units (``force_N``)."""
+    """One exported quantity on the grid: its summaries ``stats`` ("mean", "sd" and each
+    quantile's name -> (H, P) arrays) in the unit used inside (N, m^2, m^3, N/m; bar for
+    pressures); ``kind`` its kind for OutputUnits ("force", "area", "volume", "stiffness",
+    "pressure")."""
 
     key: str
     words: str
     kind: str
-    draws: np.ndarray
+    stats: dict
 
 
 #: kind -> (SI column suffix of the contract's table, JSON name suffix)
@@ -132,6 +135,7 @@ class ExportGrid:
     model_label: str
     notes: tuple[str, ...]
     provenance: dict
+    n_draws: int = 0
     sealed: dict | None = None
 
     def quantity(self, key: str) -> Quantity:
@@ -139,11 +143,14 @@ class ExportGrid:
 
     def stats(self, key: str) -> dict[str, np.ndarray]:
         """ "mean", "sd" and each quantile's name -> (H, P) arrays, in the unit used inside."""
-        d = self.quantity(key).draws
-        out = {"mean": d.mean(axis=0), "sd": d.std(axis=0, ddof=1)}
-        qs = np.quantile(d, self.quantiles, axis=0)
-        out |= {quantile_name(q): qs[i] for i, q in enumerate(self.quantiles)}
-        return out
+        return self.quantity(key).stats
+
+
+def summarise(draws: np.ndarray, quantiles) -> dict[str, np.ndarray]:
+    """Mean, sd and quantiles over the first axis (the draws)."""
+    out = {"mean": draws.mean(axis=0), "sd": draws.std(axis=0, ddof=1)}
+    qs = np.quantile(draws, quantiles, axis=0)
+    return out | {quantile_name(q): qs[i] for i, q in enumerate(quantiles)}
 
 
 def parse_heights_mm(text: str) -> np.ndarray:
@@ -283,40 +290,46 @@ def export_grid(
         else np.asarray(pressures_bar, float).ravel()
     )
     notes = _check_grid(model, h, p, extrapolate)
-    X, P = np.meshgrid(h, p, indexing="ij")
     check = not extrapolate
-    quantities = [
-        Quantity(
-            "force",
+    quantiles = tuple(float(q) for q in quantiles)
+    words = {
+        "force": (
             "force P of the element, mean curve (reading noise excluded), compression positive",
             "force",
-            np.asarray(model.force_draws(X, P, check=check), float),
         ),
+        "feff": ("effective area F_eff = P / p_u (eq. 1)", "area"),
+        "feff_volume": ("volume-derived effective area dV/dx (eq. 1's second form)", "area"),
+        "volume_increment": (
+            f"volume increment V(x) - V({h.max() * 1e3:g} mm) at the test's pressure",
+            "volume",
+        ),
+    }
+    keys = ["force", "feff"] + (["feff_volume", "volume_increment"] if model.has_volume else [])
+    parts: dict[str, list] = {k: [] for k in keys}
+    # heights in chunks, so that the draws held at once stay near MAX_VALUES whatever the grid
+    per_height = model.n_draws * p.size * (N_LEGENDRE if model.has_volume else 1)
+    step = max(1, MAX_VALUES // max(per_height, 1))
+    for lo in range(0, h.size, step):
+        hh = h[lo : lo + step]
+        X, P = np.meshgrid(hh, p, indexing="ij")
+        draws = {
+            "force": model.force_draws(X, P, check=check),
+            "feff": model.feff_draws(X, P, check=check),
+        }
+        if model.has_volume:
+            draws["feff_volume"] = model.volume_area_draws(X, P, check=check)
+            draws["volume_increment"] = _volume_increment(model, hh, p, float(h.max()), check)
+        for k in keys:
+            parts[k].append(summarise(np.asarray(draws[k], float), quantiles))
+    quantities = [
         Quantity(
-            "feff",
-            "effective area F_eff = P / p_u (eq. 1)",
-            "area",
-            np.asarray(model.feff_draws(X, P, check=check), float),
-        ),
+            k,
+            *words[k],
+            {stat: np.concatenate([part[stat] for part in parts[k]]) for stat in parts[k][0]},
+        )
+        for k in keys
     ]
-    if model.has_volume:
-        quantities.append(
-            Quantity(
-                "feff_volume",
-                "volume-derived effective area dV/dx (eq. 1's second form)",
-                "area",
-                np.asarray(model.volume_area_draws(X, P, check=check), float),
-            )
-        )
-        quantities.append(
-            Quantity(
-                "volume_increment",
-                f"volume increment V(x) - V({h.max() * 1e3:g} mm) at the test's pressure",
-                "volume",
-                _volume_increment(model, h, p, check),
-            )
-        )
-    else:
+    if not model.has_volume:
         why = model.omitted_reason or "the model has no volume-derived area"
         notes.append(
             why if why.startswith("volume results omitted") else f"volume results omitted: {why}"
@@ -325,18 +338,18 @@ def export_grid(
         heights_m=h,
         pressures_bar=p,
         quantities=tuple(quantities),
-        quantiles=tuple(float(q) for q in quantiles),
+        quantiles=quantiles,
         model_name=model.name,
         model_label=model.label,
         notes=tuple(notes),
         provenance=dict(provenance or {}),
+        n_draws=int(model.n_draws),
     )
 
 
-def _volume_increment(model, h: np.ndarray, p: np.ndarray, check: bool) -> np.ndarray:
-    """integral from h.max() to each height of dV/dx, per draw: (S, H, P), m^3."""
+def _volume_increment(model, h: np.ndarray, p: np.ndarray, top: float, check: bool) -> np.ndarray:
+    """integral from ``top`` to each height of dV/dx, per draw: (S, H, P), m^3."""
     t, w = np.polynomial.legendre.leggauss(N_LEGENDRE)
-    top = float(h.max())
     # nodes between top and each height: (H, K)
     half = 0.5 * (h - top)
     nodes = top + half[:, None] * (t[None, :] + 1.0)
@@ -412,7 +425,7 @@ def provenance_rows(grid: ExportGrid, units: OutputUnits, fmt: str) -> list[tupl
         ("model", f"{grid.model_label} ({grid.model_name})"),
         ("between tested pressures", p.get("between", f"the {grid.model_name} model answers")),
         ("seed", str(p.get("seed", ""))),
-        ("draws", str(grid.quantity("force").draws.shape[0])),
+        ("draws", str(grid.n_draws)),
         ("quantiles", ", ".join(f"{q:g}" for q in grid.quantiles)),
         (
             "units",
@@ -671,10 +684,8 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
     stiffness = force / h[None, :]
 
     def stats(d):
-        out = {"mean": d.mean(axis=0)}
-        out |= {quantile_name(q): np.quantile(d, q, axis=0) for q in grid.quantiles}
-        out["sd"] = d.std(axis=0, ddof=1)
-        return out
+        out = summarise(d, grid.quantiles)
+        return {k: out[k] for k in ("mean", *map(quantile_name, grid.quantiles), "sd")}
 
     sealed = {
         "heights_m": h,

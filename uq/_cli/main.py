@@ -67,6 +67,11 @@ COMMANDS = [
         "locate the mismatch with the traditional model, name and model the missing physics",
     ),
     (
+        "export",
+        "uq._cli.cmd_export",
+        "the characteristic as tables for other tools (CSV, xlsx, Simscape, TeimOrbit, JSON) with quantiles",
+    ),
+    (
         "calibrate",
         "uq._cli.cmd_calibrate",
         "coverage of the credible intervals on simulated campaigns with known truth",
@@ -82,7 +87,7 @@ COMMANDS = [
 #: (the folder to write into). --out is always "where this command writes": the file for
 #: simulate (--out FILE.csv), the folder for every other command.
 OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir", "csv": "file"}
-OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
+OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file", ("export", "out"): "file"}
 
 #: the library's parameter names (``InputError.param``) and the options that set them
 PARAM_OPTIONS = {

@@ -135,7 +135,8 @@ def test_the_json_summary(recordings, tmp_path, capsys):
     argv = ["export", str(recordings / "r.csv"), "--out", str(out), "--model", NAME, "--quiet"]
     code, stdout, _ = _run(argv + ["--json", "-"], capsys)
     doc = json.loads(stdout)
-    assert code == 0 and doc["model"]["name"] == NAME and doc["out"] == [str(out)]
+    assert code == 0 and doc["model"]["name"] == NAME
+    assert doc["out"] == [str(out), str(tmp_path / "e_provenance.csv")]
     assert doc["format"] == "csv" and doc["n_draws"] == 400
 
 
@@ -189,3 +190,91 @@ def test_a_folder_names_its_saved_model_or_is_refused(tmp_path, capsys):
     assert (
         code == 2 and "a folder; give the recordings or a saved model (it holds no .nc file)" in err
     )
+
+
+def _unconverged_fit(recordings, **options):
+    from uq._models.fitted import Verdict
+
+    model = _fit(recordings, **options)
+    model.convergence = Verdict(False, ("R-hat of c_00 is 1.31 > 1.01 (a test's warning)",))
+    return model
+
+
+@pytest.fixture
+def unconverged():
+    name = "linear-area-unconverged"
+    registry.register(
+        registry.ModelEntry(
+            name, fit=_unconverged_fit, model=LinearArea, words="a test's model", n_sampled=1
+        ),
+        replace=True,
+    )
+    yield name
+    registry.unregister(name)
+
+
+def test_an_unconverged_fit_is_refused_unless_allowed_and_then_said_everywhere(
+    recordings, tmp_path, capsys, unconverged
+):
+    out = tmp_path / "e.csv"
+    argv = ["export", str(recordings / "r.csv"), "--out", str(out), "--model", unconverged]
+    code, _, err = _run(argv, capsys)
+    assert code == 1 and not list(tmp_path.iterdir())
+    assert one_line(err).startswith("uq export: NOT CONVERGED (closed-form test model")
+    assert "R-hat of c_00 is 1.31" in err and "pass --allow-unconverged" in err
+    for name in ("e.csv", "e.json", "e.m", "e.tpf"):
+        path = tmp_path / name
+        args = ["--out", str(path), "--allow-unconverged", "--quiet"]
+        code, stdout, _ = _run([*argv[:2], *argv[4:], *args], capsys)
+        assert code == 0 and "NOT CONVERGED" in stdout
+    prov = pd.read_csv(tmp_path / "e_provenance.csv")
+    assert prov.value[prov.key == "note"].str.startswith("NOT CONVERGED").any()
+    assert json.loads((tmp_path / "e.json").read_text())["notes"][0].startswith("NOT CONVERGED")
+    assert "airspring.notes = 'NOT CONVERGED" in (tmp_path / "e.m").read_text()
+    assert "% note: NOT CONVERGED" in (tmp_path / "e.m").read_text()
+    assert "$ note: NOT CONVERGED" in (tmp_path / "e_q50.tpf").read_text()
+
+
+def test_the_json_is_the_contracts_estimate_objects(recordings, tmp_path, capsys):
+    """--json: the grid in SI with {"mean", "sd", "q05", "q95"} objects, whatever --quantiles."""
+    out = tmp_path / "e.xlsx"
+    argv = ["export", str(recordings / "r.csv"), "--out", str(out), "--model", NAME, "--quiet"]
+    code, stdout, _ = _run(argv + ["--quantiles", "0.1,0.9", "--json", "-"], capsys)
+    doc = json.loads(stdout)
+    assert code == 0 and doc["converged"] is True and doc["quantiles"] == [0.1, 0.9]
+    point = doc["grid"][0]
+    assert set(point) >= {"pressure_bar", "height_m", "force_N", "feff_m2"}
+    assert set(point["force_N"]) == {"mean", "sd", "q05", "q10", "q90", "q95"}
+    book = openpyxl.load_workbook(out, read_only=True)
+    assert "force_N q10" in book.sheetnames and "force_N q05" not in book.sheetnames
+    # the workbook's cell (first height, first pressure) is the JSON's first point
+    first = list(book["force_N q10"].iter_rows(values_only=True))[1]
+    assert first[0] == pytest.approx(point["height_m"] * 1e3)
+    assert first[1] == pytest.approx(point["force_N"]["q10"], rel=1e-12)
+
+
+def test_a_saved_fit_is_exported_without_a_refit(n50_surface, tmp_path, capsys):
+    """A saved NetCDF model (uq surface --out's file): its numbers, its provenance, and the
+    reconstruction of data/n50 said in every format."""
+    saved = tmp_path / "surface.nc"
+    n50_surface.save(saved, written_by="the test")
+    out = tmp_path / "n.csv"
+    argv = ["export", str(saved), "--out", str(out), "--heights-mm", "70:150:40", "--quiet"]
+    code, stdout, err = _run(argv + ["--pressures-bar", "2,5.5", "--draws", "500"], capsys)
+    assert code == 0, err
+    assert "not measured data; their header says: RECONSTRUCTED" in stdout
+    t = pd.read_csv(out)
+    model = n50_surface.on_draws(500)
+    X, P = np.meshgrid([0.07, 0.11, 0.15], [2.0, 5.5], indexing="xy")
+    draws = model.force_draws(X.T, P.T)  # (S, H, P)
+    for j, p in enumerate((2.0, 5.5)):
+        at = t[t.pressure_bar == p].sort_values("height_mm")
+        assert np.allclose(at.force_N_mean, draws[:, :, j].mean(axis=0), rtol=1e-9)
+        assert np.allclose(at.force_N_q05, np.quantile(draws[:, :, j], 0.05, axis=0), rtol=1e-9)
+    prov = dict(pd.read_csv(tmp_path / "n_provenance.csv").values)
+    assert prov["recordings"] == "recordings.csv" and len(prov["recordings sha256"]) == 64
+    assert "no refit" in prov["loaded from"]
+    code, _, err = _run(argv + ["--units", "input"], capsys)
+    assert code == 2 and "option --units input" in one_line(err)
+    code, _, err = _run(argv + ["--model", "cubics"], capsys)
+    assert code == 2 and "option --model cubics" in one_line(err)

@@ -369,7 +369,7 @@ def test_write_every_format_to_its_files(grid, tmp_path):
 
     g = sealed_export(grid, MODEL, SealedDesign(height_m=0.11, charge_bar=5.0, volume_l=5.0))
     names = {
-        "csv": ["t.csv", "t_sealed.csv"],
+        "csv": ["t.csv", "t_sealed.csv", "t_provenance.csv"],
         "xlsx": ["t.xlsx"],
         "json": ["t.json"],
         "simscape": ["t.m"],
@@ -386,6 +386,21 @@ def test_write_every_format_to_its_files(grid, tmp_path):
     book = openpyxl.load_workbook(tmp_path / "t.xlsx")
     assert book.sheetnames[-2:] == ["sealed", "provenance"]
     assert json.loads((tmp_path / "t.json").read_text())["sealed"]["charge_bar"] == 5.0
+    provenance = pd.read_csv(tmp_path / "t_provenance.csv")  # the workbook's sheet, row for row
+    rows = list(book["provenance"].iter_rows(values_only=True))
+    assert list(provenance.columns) == list(rows[0])
+    assert [r[0] for r in rows[1:]] == provenance.key.tolist()
+    assert pd.read_csv(tmp_path / "t.csv").columns[0] == "pressure_bar"  # the header first
+
+
+def test_json_objects_carry_the_contracts_quantiles_whatever_is_asked():
+    g = export_grid(MODEL, HEIGHTS, PRESSURES, quantiles=(0.25, 0.75))
+    point = json_document(g)["grid"][3]
+    assert list(point["force_N"]) == ["mean", "sd", "q05", "q25", "q75", "q95"]
+    truth = _truth("force")[:, 3, 0]
+    assert point["force_N"]["q05"] == pytest.approx(np.quantile(truth, 0.05), rel=1e-12)
+    header, _ = csv_rows(g)
+    assert "force_N_q25" in header and "force_N_q05" not in header  # the tables: those asked
 
 
 def test_large_grids_are_evaluated_in_chunks_of_heights(monkeypatch):

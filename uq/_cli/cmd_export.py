@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
+import sys
 from pathlib import Path
 
 from uq._cli.common import (
@@ -166,8 +167,23 @@ def configure_export(p) -> None:
         help="dV/dp_u at the design height, L/bar (default 0, stated), or 'model'",
     )
     add_sampling(p)
+    _add_allow_unconverged(p)
     add_stand(p)
     add_json(p)
+
+
+def _add_allow_unconverged(p) -> None:
+    """``--allow-unconverged``: export a fit that failed its convergence rules, marked so."""
+    try:
+        p.add_argument(
+            "--allow-unconverged",
+            action="store_true",
+            help="export a fit that failed its convergence rules (R-hat, ESS, chain length): every "
+            "file then says NOT CONVERGED; without it such a fit is refused and nothing is written "
+            "(exit status 1)",
+        )
+    except argparse.ArgumentError:  # the sampling options give it already (one name everywhere)
+        pass
 
 
 def _format(args) -> str:
@@ -320,6 +336,9 @@ def _export(args) -> int:
             "recordings; export from the recordings, or with --units si"
         )
     model, rec, provenance = _model(args, saved)
+    unconverged = _unconverged(args, model, saved)
+    if unconverged is not None:
+        return 1
     units = output_units(rec, args.units)
     heights = None if args.heights_mm is None else export.parse_heights_mm(args.heights_mm) * 1e-3
     pressures = (
@@ -342,6 +361,7 @@ def _export(args) -> int:
     if args.sealed:
         design = sealed_design(args, args.height_mm * 1e-3, args.charge_bar)
         grid = export.sealed_export(grid, model, design)
+    grid = export.with_notes(grid, _source_notes(model, rec, args))
     paths = export.write(grid, fmt, args.out, units, when=provenance["date"])
     shape = f"{grid.pressures_bar.size} pressures x {grid.heights_m.size} heights"
     say(
@@ -352,19 +372,66 @@ def _export(args) -> int:
     )
     for note in grid.notes:
         say(f"  {note}", args.json)
-    emit_json(
-        {
-            "out": [str(p) for p in paths],
-            "format": fmt,
-            "model": {"name": model.name, "label": model.label},
-            "heights_m": grid.heights_m,
-            "pressures_bar": grid.pressures_bar,
-            "quantiles": list(grid.quantiles),
-            "units": "si" if args.units == "si" else units.__dict__,
-            "notes": list(grid.notes),
-            "sealed": args.sealed,
-            "n_draws": grid.n_draws,
-        },
-        args.json,
-    )
+    if args.json:  # the grid with the contract's estimate objects (SI), and what was written
+        doc = export.json_document(grid)
+        emit_json(
+            {
+                "out": [str(p) for p in paths],
+                "format": fmt,
+                "units": "si" if args.units == "si" else units.__dict__,
+                "converged": _converged(model),
+                "n_draws": grid.n_draws,
+                **doc,
+            },
+            args.json,
+        )
     return 0
+
+
+def _converged(model) -> bool:
+    conv = getattr(model, "convergence", None)
+    return conv is None or bool(conv.converged)  # None: exact, independent draws
+
+
+def _unconverged(args, model, saved: bool) -> str | None:
+    """A fit that failed its convergence rules is refused (one line on stderr, nothing written,
+    None returned only when it passed) unless ``--allow-unconverged``."""
+    from uq._inference.convergence import CLI_ADVICE
+
+    if _converged(model) or args.allow_unconverged:
+        return None
+    warnings = model.convergence.messages(CLI_ADVICE)
+    first = warnings[0] if warnings else "its convergence rules failed"
+    where = (
+        f"{args.file} holds a fit that failed its convergence rules; fit the recordings again with "
+        "more steps"
+        if saved
+        else "raise --max-steps or use more walkers"
+    )
+    sys.stderr.write(
+        f"uq export: NOT CONVERGED ({model.label}: {' '.join(first.split())}); nothing written: "
+        f"{where}, or pass --allow-unconverged to export it marked NOT CONVERGED\n"
+    )
+    return first
+
+
+def _source_notes(model, rec, args) -> list[str]:
+    """Notes every format carries about where the numbers came from: a fit that failed its
+    convergence rules (exported with --allow-unconverged), and recordings that are not measured
+    (their header says RECONSTRUCTED, as data/n50's does)."""
+    notes = []
+    if not _converged(model):
+        notes.append(
+            "NOT CONVERGED: the fit failed its convergence rules (exported with "
+            "--allow-unconverged); these numbers are not a result yet"
+        )
+    comments = (
+        list(rec.comments)
+        if rec is not None
+        else list(model.provenance.get("recordings_comments", []))
+    )
+    for c in comments:
+        if "RECONSTRUCTED" in c.upper():
+            words = " ".join(c.split())
+            notes.append(f"the recordings are not measured data; their header says: {words}")
+    return notes

@@ -1,4 +1,5 @@
-"""Tables of a fit for the tools engineers use (issue 30): the coefficient table of ``uq fit --csv``.
+"""Tables of a fit for the tools engineers use (issue 30): the coefficient table of ``uq fit --csv``
+and the characteristic on a grid of heights and pressures in every format of ``uq export``.
 
 Every table is written in the units asked for (:class:`uq._data.units.OutputUnits`): the
 contract's, or the units the recordings came in (``--units input``).
@@ -146,11 +147,23 @@ class ExportGrid:
         return self.quantity(key).stats
 
 
+#: the quantiles every JSON estimate object carries whatever ``--quantiles`` asks (the contract's
+#: ``{"mean", "sd", "q05", "q95"}``)
+CONTRACT_QUANTILES = (0.05, 0.95)
+
+
 def summarise(draws: np.ndarray, quantiles) -> dict[str, np.ndarray]:
-    """Mean, sd and quantiles over the first axis (the draws)."""
+    """Mean, sd and quantiles over the first axis (the draws): those asked, and the contract's
+    q05 and q95 (the JSON's estimate objects carry them; the tables show only those asked)."""
     out = {"mean": draws.mean(axis=0), "sd": draws.std(axis=0, ddof=1)}
-    qs = np.quantile(draws, quantiles, axis=0)
-    return out | {quantile_name(q): qs[i] for i, q in enumerate(quantiles)}
+    every = sorted(set(quantiles) | set(CONTRACT_QUANTILES))
+    qs = np.quantile(draws, every, axis=0)
+    return out | {quantile_name(q): qs[i] for i, q in enumerate(every)}
+
+
+def with_notes(grid: ExportGrid, notes) -> ExportGrid:
+    """``grid`` with ``notes`` (one line each) before its own: every format carries them."""
+    return replace(grid, notes=(*notes, *grid.notes)) if notes else grid
 
 
 def parse_heights_mm(text: str) -> np.ndarray:
@@ -549,6 +562,7 @@ def simscape_fields(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, obj
         ("sha256", str(grid.provenance.get("recordings_sha256", "")), ""),
         ("model", f"{grid.model_label} ({grid.model_name})", ""),
         ("made_by", f"uq export (airspring-uq {grid.provenance.get('uq_version', '?')})", ""),
+        ("notes", " | ".join(grid.notes), "what was left out, extrapolated or not measured"),
     ]
     return fields
 
@@ -683,9 +697,13 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
     pressure = path.overpressure_pa[:, ok] / BAR_PA
     stiffness = force / h[None, :]
 
-    def stats(d):
+    def stats(d):  # the tables' statistics in their order (the JSON adds q05 and q95 below)
         out = summarise(d, grid.quantiles)
         return {k: out[k] for k in ("mean", *map(quantile_name, grid.quantiles), "sd")}
+
+    def every(d):
+        out = summarise(d, grid.quantiles)
+        return {k: out[k] for k in ("mean", "sd", *sorted(set(out) - {"mean", "sd"}, key=_q))}
 
     sealed = {
         "heights_m": h,
@@ -705,12 +723,17 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
         "reservoir_l": design.reservoir_l,
         "assumptions": sealed["assumptions"],
         "heights_m": h,
-        "force_N": sealed["force"],
-        "stiffness_N_per_m": sealed["stiffness"],
-        "rate_N_per_m": sealed["rate"],
-        "pressure_bar": sealed["pressure_bar"],
+        "force_N": every(force),
+        "stiffness_N_per_m": every(stiffness),
+        "rate_N_per_m": every(rate),
+        "pressure_bar": every(pressure),
     }
     return replace(grid, sealed=sealed, notes=tuple(notes))
+
+
+def _q(name: str) -> float:
+    """The quantile of a statistic's name (``q05`` -> 5)."""
+    return float(name[1:])
 
 
 def _sealed_words(design) -> list[str]:
@@ -757,18 +780,23 @@ def write(
 ) -> list[Path]:
     """Write ``grid`` as ``fmt`` (one of FORMATS) to ``out``, every file atomically; the paths
     written. teimorbit: one file per statistic, ``out`` with ``_mean``, ``_q05``, ... (and
-    ``_sealed_...``) before its suffix; csv with a sealed spring: its table in ``out`` with
-    ``_sealed``; simscape: a MAT-file when ``out`` ends in ``.mat``, else a MATLAB script.
+    ``_sealed_...``) before its suffix; csv: the provenance (key, value) in ``out`` with
+    ``_provenance`` (the table itself keeps the contract's header as its first line), with a
+    sealed spring its table in ``out`` with ``_sealed``; simscape: a MAT-file when ``out`` ends in ``.mat``, else a MATLAB script.
     ``when``: the provenance's date ("YYYY-MM-DD HH:MM UTC"), a workbook's created time."""
     if fmt not in FORMATS:
         raise InputError(f"format: one of {', '.join(FORMATS)}, got {fmt!r}", param="format")
     out = Path(out)
-    if fmt == "csv":
+    if fmt == "csv":  # the table as the contract has it (header first); provenance beside it
         paths = [write_text_atomic(out, csv_text(*csv_rows(grid, units)))]
         if grid.sealed is not None:
             paths.append(
                 write_text_atomic(_beside(out, "sealed"), csv_text(*sealed_rows(grid, units)))
             )
+        rows = [list(r) for r in provenance_rows(grid, units, "csv")]
+        paths.append(
+            write_text_atomic(_beside(out, "provenance"), csv_text(["key", "value"], rows))
+        )
         return paths
     if fmt == "xlsx":
         sheets = xlsx_sheets(grid, units)

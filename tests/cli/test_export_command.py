@@ -262,7 +262,7 @@ def test_a_saved_fit_is_exported_without_a_refit(n50_surface, tmp_path, capsys):
     argv = ["export", str(saved), "--out", str(out), "--heights-mm", "70:150:40", "--quiet"]
     code, stdout, err = _run(argv + ["--pressures-bar", "2,5.5", "--draws", "500"], capsys)
     assert code == 0, err
-    assert "not measured data; their header says: RECONSTRUCTED" in stdout
+    assert "not measured data: the recordings are the paper's N-50 spring reconstructed" in stdout
     t = pd.read_csv(out)
     model = n50_surface.on_draws(500)
     X, P = np.meshgrid([0.07, 0.11, 0.15], [2.0, 5.5], indexing="xy")

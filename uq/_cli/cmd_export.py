@@ -419,6 +419,8 @@ def _source_notes(model, rec, args) -> list[str]:
     """Notes every format carries about where the numbers came from: a fit that failed its
     convergence rules (exported with --allow-unconverged), and recordings that are not measured
     (their header says RECONSTRUCTED, as data/n50's does)."""
+    from uq._data.reference import is_n50_reconstruction
+
     notes = []
     if not _converged(model):
         notes.append(
@@ -430,8 +432,14 @@ def _source_notes(model, rec, args) -> list[str]:
         if rec is not None
         else list(model.provenance.get("recordings_comments", []))
     )
-    for c in comments:
-        if "RECONSTRUCTED" in c.upper():
-            words = " ".join(c.split())
-            notes.append(f"the recordings are not measured data; their header says: {words}")
+    if is_n50_reconstruction(comments):
+        notes.append(
+            "not measured data: the recordings are the paper's N-50 spring reconstructed from its "
+            "Table 1 by airspring-uq's virtual test stand (their header says so)"
+        )
+    else:
+        for c in comments:
+            if "RECONSTRUCTED" in c.upper():
+                words = " ".join(c.split())
+                notes.append(f"not measured data: the recordings' header says: {words}")
     return notes

@@ -75,10 +75,15 @@ class Loo:
         return self.n_bad == 0
 
     def pareto(self) -> dict:
-        """PSIS reliability: the largest Pareto k and how many terms exceed 0.7."""
+        """PSIS reliability: the largest Pareto k and how many terms exceed 0.7.
+
+        A k ArviZ could not estimate (``inf``: a tail too short or degenerate to fit) counts as
+        over 0.7; ``max`` is then None (JSON has no infinity) and ``n_undefined`` says how many."""
+        finite = np.isfinite(self.pareto_k)
         return {
-            "max": float(np.max(self.pareto_k)),
+            "max": float(np.max(self.pareto_k)) if finite.all() else None,
             "n_over_0.7": self.n_bad,
+            "n_undefined": int(np.sum(~finite)),
             "n_terms": int(self.pareto_k.size),
         }
 

@@ -1,10 +1,14 @@
 """The bundled campaign's characteristic in every tool's format: reports/export/ (docs/export.md).
 
-Fits the surface model to data/n50/recordings.csv once (``uq surface --out``: the model every
-answer between tested pressures uses), then exports the saved model, without a refit, as the
-contract's CSV table, a workbook, a Simscape script and MAT-file, TeimOrbit property files and
-JSON, and the closed spring (``--sealed``, charged at 112 mm to 5 bar with 5 L inside) for
-Simscape's stiffness parameterisation and a TeimOrbit file. Every command is run as a user runs
+data/n50 is not measured data: it is the paper's N-50 spring reconstructed from its Table 1 by the
+project's virtual test stand (data/n50/README.md). Its header says so, and every file written here
+repeats it (a note in each format, from the recordings' header kept in the saved model).
+
+Fits ``uq export``'s default model (the registry's) to data/n50/recordings.csv once (``uq surface
+--model ... --out``), then exports the saved model, without a refit, as the contract's CSV table
+(with its provenance beside it), a workbook, a Simscape script and MAT-file, TeimOrbit property
+files and JSON, and the closed spring (``--sealed``, charged at 112 mm to 5 bar with 5 L inside)
+for Simscape's stiffness parameterisation and TeimOrbit files. Every command is run as a user runs
 it (``uq ...``); SOURCE_DATE_EPOCH fixes the date the files carry.
 
     python scripts/export_n50.py                       # reports/export/ (about two minutes)
@@ -23,6 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from uq._cli.main import main  # noqa: E402  (the repository's uq, also from a plain checkout)
+from uq._io.files import write_text_atomic  # noqa: E402
+from uq._models import registry  # noqa: E402
 
 DATA = "data/n50/recordings.csv"
 SEALED = ["--sealed", "--height-mm", "112", "--charge-bar", "5", "--volume-l", "5"]
@@ -36,8 +42,16 @@ EXPORTS = [
     ("n50.mat", []),
     ("n50.tpf", []),
     ("n50-sealed.m", SEALED),
-    ("n50-sealed.tpf", SEALED),
+    ("n50.tpf", SEALED),  # n50_sealed_q50.tpf, ...
 ]
+README = """# reports/export: data/n50's characteristic for other tools
+
+Made by `python scripts/export_n50.py` (docs/export.md explains every file). **data/n50 is not
+measured data**: it is the paper's N-50 spring reconstructed from its Table 1 by airspring-uq's
+virtual test stand (data/n50/README.md); every file here says so in its notes.
+
+{listing}
+"""
 
 
 def run(argv: list[str]) -> None:
@@ -65,12 +79,16 @@ def export_n50(
     os.environ.setdefault("SOURCE_DATE_EPOCH", "1764201600")  # 2025-11-27: the files' date
     with tempfile.TemporaryDirectory() as tmp:
         if saved is None:
-            fit = ["surface", DATA, "--no-compare", "--out", tmp, "--quiet"]
+            model = registry.default("export")
+            fit = ["surface", DATA, "--model", model, "--no-compare", "--out", tmp, "--quiet"]
             run(fit + ([] if max_steps is None else ["--max-steps", str(max_steps)]))
-            saved = Path(tmp) / "surface.nc"
+            saved = Path(tmp) / f"{model}.nc"
         for name, extra in EXPORTS:
             argv = ["export", str(saved), "--out", str(out / name), "--draws", str(draws)]
             run(argv + ["--quiet", *extra])
+    names = sorted(p.name for p in out.iterdir() if p.name != "README.md")
+    listing = "\n".join(f"- `{n}`" for n in names)
+    write_text_atomic(out / "README.md", README.format(listing=listing))
     return sorted(out.iterdir())
 
 

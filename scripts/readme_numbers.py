@@ -212,14 +212,16 @@ def export_xlsx_summary() -> str:
         " | ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in r[:7]) + " | ..."
         for r in rows[:4]
     ]
-    provenance = [f"{k}: {v}" for k, v in list(book["provenance"].iter_rows(values_only=True))[1:6]]
+    rows = list(book["provenance"].iter_rows(values_only=True))[1:]
+    provenance = [f"{k}: {v}" for k, v in rows[:5]] + ["..."]
+    provenance += [f"{k}: {v}" for k, v in rows if k == "note"]
     return body_of(
         [
             f"{EXPORT}/n50.xlsx: {len(book.sheetnames)} sheets: {', '.join(book.sheetnames[:6])}, ..., "
             f"{book.sheetnames[-1]}",
             "sheet 'force_N q50' (the first rows and columns):",
             *shown,
-            "sheet 'provenance' (the first rows):",
+            "sheet 'provenance' (the first rows, and the notes):",
             *provenance,
         ]
     )

@@ -13,7 +13,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import openpyxl
 import pytest
+import scipy.io
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -303,10 +305,18 @@ def test_export_n50_from_a_saved_model(n50_surface, tmp_path):
     assert proc.returncode == 0, proc.stderr
     stats = ("mean", "q05", "q50", "q95")
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        ["n50.csv", "n50.xlsx", "n50.json", "n50.m", "n50.mat"]
+        ["README.md", "n50.csv", "n50_provenance.csv", "n50.xlsx", "n50.json", "n50.m", "n50.mat"]
         + [f"n50_{s}.tpf" for s in stats]
         + ["n50-sealed.m"]
-        + [f"n50-sealed_sealed_{s}.tpf" for s in stats]
+        + [f"n50_sealed_{s}.tpf" for s in stats]
     )
     committed = ROOT / "reports" / "export" / "n50.csv"
     assert (out / "n50.csv").read_text().splitlines()[0] == committed.read_text().splitlines()[0]
+    # every file says that data/n50 is reconstructed, not measured
+    said = "not measured data: the recordings are the paper's N-50 spring reconstructed from its Table 1"
+    for name in ("n50_provenance.csv", "n50.json", "n50.m", "n50_q50.tpf", "n50_sealed_q50.tpf"):
+        assert said in (out / name).read_text(), name
+    sheet = openpyxl.load_workbook(out / "n50.xlsx")["provenance"]
+    assert any(said in str(v) for row in sheet.iter_rows(values_only=True) for v in row)
+    assert said in scipy.io.loadmat(out / "n50.mat", simplify_cells=True)["airspring"]["notes"]
+    assert "reconstructed from its Table 1" in (out / "README.md").read_text()

@@ -156,6 +156,7 @@ def test_the_json_summary(recordings, tmp_path, capsys):
         (["--sealed", "--height-mm", "112"], "option --sealed: needs --charge-bar, --volume-l"),
         (["--charge-bar", "5"], "option --charge-bar: only with --sealed"),
         (["--format", "nope"], "argument --format: invalid choice"),
+        (["--format", "xlsx"], "option --format xlsx: --out's suffix '.csv' names csv"),
     ],
 )
 def test_refusals_are_one_line_and_write_nothing(recordings, tmp_path, capsys, extra, expect):

@@ -187,9 +187,17 @@ def _add_allow_unconverged(p) -> None:
 
 
 def _format(args) -> str:
-    if args.format:
-        return args.format
     suffix = Path(args.out).suffix.lower()
+    named = SUFFIX_FORMATS.get(suffix)
+    if args.format:
+        if named is not None and named != args.format:  # an xlsx named .csv opens as nonsense
+            raise InputError(
+                f"option --format {args.format}: --out's suffix '{suffix}' names {named}; give "
+                f"--out a suffix of {args.format} ("
+                + ", ".join(s for s, f in SUFFIX_FORMATS.items() if f == args.format)
+                + ") or leave --format out"
+            )
+        return args.format
     if suffix not in SUFFIX_FORMATS:
         raise InputError(
             f"option --format: needed, --out's suffix '{suffix}' names no format "

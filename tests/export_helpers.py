@@ -1,8 +1,12 @@
-"""A fitted model known in closed form, for the tests of ``uq export`` (tests/derived/test_export.py,
+"""A fitted model known in closed form, and independent readers of the MATLAB and TeimOrbit files,
+for the tests of ``uq export`` (tests/derived/test_export.py,
 tests/cli/test_export_command.py): the FittedModel protocol (uq._models.fitted) implemented by a
 force P = p_u A(x), A(x) = a + b (x - X_REF) per draw, and dV/dx = (1 + c) A(x), so dV/dp_u = 0."""
 
 from __future__ import annotations
+
+import re
+import shlex
 
 import numpy as np
 
@@ -79,3 +83,64 @@ class LinearArea:
 
     def save(self, path, **provenance):
         raise NotImplementedError
+
+
+# ----------------------------------------------------------------------------- readers
+
+
+def matlab_assignments(text: str) -> dict:
+    """A reader of the assignments a MATLAB script makes (``s.a.b = [1; 2];``): numbers, column
+    vectors, matrices (rows split by ';', columns by spaces), strings; comments (%) dropped."""
+    out = {}
+    for line in text.splitlines():
+        line = line.split("%", 1)[0].strip() if not re.search(r"=\s*'", line) else line.strip()
+        m = re.match(r"^([A-Za-z]\w*(?:\.\w+)*)\s*=\s*(.*);", line)
+        if not m or m.group(2) == "struct()":
+            continue
+        name, value = m.group(1), m.group(2).strip()
+        if value.startswith("'"):
+            out[name] = value[1 : value.rindex("'")].replace("''", "'")
+            continue
+        rows = [r.split() for r in value.strip("[]").split(";")]
+        a = np.array([[float(v) for v in r] for r in rows])
+        out[name] = a
+    return out
+
+
+def parse_teimorbit(text: str) -> dict:
+    """A TeimOrbit reader from the format's rules (Adams Tire "About the TeimOrbit format", Altair
+    "About TeimOrbit Files"): [BLOCK], (SUB_BLOCK), NAME = value parameters, {labels} tables whose
+    rows follow until the next table, sub-block, block, comment or blank line; comments start with
+    '$' or '!'. Returns block -> {"params", sub-block -> {"params", "labels", "rows"}}."""
+    blocks: dict = {}
+    block = sub = table = None
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line[0] in "$!":
+            table = None
+            continue
+        if line.startswith("["):
+            name = line[1 : line.index("]")].upper()
+            block = blocks.setdefault(name, {"params": {}})
+            sub, table = None, None
+        elif line.startswith("("):
+            sub = block.setdefault(line[1 : line.index(")")].upper(), {"params": {}})
+            table = None
+        elif line.startswith("{"):
+            table = (sub if sub is not None else block).setdefault("table", {})
+            table["labels"] = line[1 : line.index("}")].split()
+            table["rows"] = []
+        elif "=" in line and table is None:
+            k, v = (x.strip() for x in line.split("=", 1))
+            v = v.strip("'\"") if v[0] in "'\"" else float(v)
+            (sub if sub is not None else block)["params"][k.upper()] = v
+        elif table is not None:
+            table["rows"].append([_token(c) for c in shlex.split(line)])
+    return blocks
+
+
+def _token(text: str):
+    try:
+        return float(text)
+    except ValueError:
+        return text

@@ -2,7 +2,8 @@
 
 The model answering is the closed-form model of tests/export_helpers.py, plugged in through the
 registry as a model from outside ``uq`` is (uq._models.registry), so these runs fit nothing; the
-real fit and saved model run in tests/test_scripts.py (scripts/export_n50.py).
+shared fit of data/n50 (tests/conftest.py) is exported saved (NetCDF) here and by
+scripts/export_n50.py in tests/test_scripts.py.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import pandas as pd
 import pytest
 import scipy.io
 from cli_helpers import one_line
-from export_helpers import LinearArea
+from export_helpers import LinearArea, matlab_assignments, parse_teimorbit
 
 from uq._cli.main import main
 from uq._data.recordings import write_recordings_csv
@@ -87,6 +88,42 @@ def test_every_format_from_the_suffix(recordings, tmp_path, capsys, name, read):
     assert code == 0, err
     assert "closed-form test model" in stdout and "3 pressures x 5 heights" in stdout
     assert read(out) is not None
+
+
+def test_every_format_reads_back_to_the_models_numbers(recordings, tmp_path, capsys):
+    """Each file, read by a reader that is not uq's (pandas, openpyxl, json, scipy.io, a reader of
+    MATLAB assignments, a TeimOrbit parser from the format's rules), holds the model's q95 force."""
+    from uq._cli.common import DEFAULT_SEED
+
+    heights = np.arange(70.0, 151.0, 20.0)
+    pressures = np.array([1.0, 5.0, 10.0])
+    X, P = np.meshgrid(heights * 1e-3, pressures, indexing="ij")
+    truth = np.quantile(LinearArea(400, seed=DEFAULT_SEED).force_draws(X, P), 0.95, axis=0)
+    for name in ("e.csv", "e.xlsx", "e.json", "e.m", "e.mat", "e.tpf"):
+        argv = ["export", str(recordings / "r.csv"), "--out", str(tmp_path / name), "--quiet"]
+        assert _run(argv + ["--model", NAME, "--heights-mm", "70:150:20"], capsys)[0] == 0
+    t = pd.read_csv(tmp_path / "e.csv").pivot(
+        index="height_mm", columns="pressure_bar", values="force_N_q95"
+    )
+    assert np.allclose(t.to_numpy(), truth, rtol=1e-9)
+    rows = list(
+        openpyxl.load_workbook(tmp_path / "e.xlsx")["force_N q95"].iter_rows(values_only=True)
+    )
+    assert list(rows[0][1:]) == pressures.tolist()
+    assert np.allclose(np.array([r[1:] for r in rows[1:]], float), truth, rtol=1e-12)
+    grid = json.loads((tmp_path / "e.json").read_text())["grid"]
+    q95 = np.array([g["force_N"]["q95"] for g in grid]).reshape(pressures.size, heights.size)
+    assert np.allclose(q95.T, truth, rtol=1e-12)
+    script = matlab_assignments((tmp_path / "e.m").read_text())
+    assert np.allclose(script["airspring.load.q95"], truth, rtol=1e-9)
+    mat = scipy.io.loadmat(tmp_path / "e.mat", simplify_cells=True)["airspring"]
+    assert np.allclose(mat["load"]["q95"], truth, rtol=1e-12)
+    tpf = parse_teimorbit((tmp_path / "e_q95.tpf").read_text())
+    assert tpf["UNITS"]["params"]["LENGTH"] == "mm" and tpf["UNITS"]["params"]["FORCE"] == "newton"
+    z = np.array(tpf["AIRSPRING"]["Z_DATA"]["table"]["rows"]).ravel()
+    assert np.allclose(z, pressures * 0.1)  # bar in N/mm^2
+    xy = np.array(tpf["AIRSPRING"]["XY_DATA"]["table"]["rows"])
+    assert np.allclose(xy[:, 0], heights) and np.allclose(xy[:, 1:], truth, rtol=1e-9)
 
 
 def test_csv_reads_as_the_contract_says(recordings, tmp_path, capsys):
@@ -279,3 +316,13 @@ def test_a_saved_fit_is_exported_without_a_refit(n50_surface, tmp_path, capsys):
     assert code == 2 and "option --units input" in one_line(err)
     code, _, err = _run(argv + ["--model", "cubics"], capsys)
     assert code == 2 and "option --model cubics" in one_line(err)
+    # a fit saved as failing its convergence rules: refused, then exported when allowed
+    bad = tmp_path / "bad.nc"
+    n50_surface.save(bad, converged=False, warnings=["R-hat of c_00 is 1.2 (a test's warning)"])
+    out = tmp_path / "bad.json"
+    argv = ["export", str(bad), "--out", str(out), "--heights-mm", "70,110", "--quiet"]
+    code, _, err = _run(argv, capsys)
+    assert code == 1 and not out.exists()
+    assert f"{bad} holds a fit that failed its convergence rules" in one_line(err)
+    code, _, err = _run(argv + ["--allow-unconverged"], capsys)
+    assert code == 0 and json.loads(out.read_text())["notes"][0].startswith("NOT CONVERGED")

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import io
 import json
-import re
-import shlex
 from dataclasses import replace
 
 import numpy as np
@@ -20,7 +18,7 @@ import openpyxl
 import pandas as pd
 import pytest
 import scipy.io
-from export_helpers import X_REF, LinearArea
+from export_helpers import X_REF, LinearArea, matlab_assignments, parse_teimorbit
 
 from uq._data.units import OutputUnits
 from uq._derived.design import SealedDesign
@@ -208,30 +206,11 @@ def test_json_grid_has_the_contracts_estimate_objects(grid):
 # ----------------------------------------------------------------------------- MATLAB
 
 
-def _matlab_assignments(text: str) -> dict:
-    """A reader of the assignments a MATLAB script makes (``s.a.b = [1; 2];``): numbers, column
-    vectors, matrices (rows split by ';', columns by spaces), strings; comments (%) dropped."""
-    out = {}
-    for line in text.splitlines():
-        line = line.split("%", 1)[0].strip() if not re.search(r"=\s*'", line) else line.strip()
-        m = re.match(r"^([A-Za-z]\w*(?:\.\w+)*)\s*=\s*(.*);", line)
-        if not m or m.group(2) == "struct()":
-            continue
-        name, value = m.group(1), m.group(2).strip()
-        if value.startswith("'"):
-            out[name] = value[1 : value.rindex("'")].replace("''", "'")
-            continue
-        rows = [r.split() for r in value.strip("[]").split(";")]
-        a = np.array([[float(v) for v in r] for r in rows])
-        out[name] = a
-    return out
-
-
 def test_simscape_script_and_mat_file_hold_every_quantile(grid):
     units = OutputUnits()
     fields = simscape_fields(grid, units)
     text = matlab.script("airspring", fields, ["a comment"])
-    parsed = _matlab_assignments(text)
+    parsed = matlab_assignments(text)
     assert parsed["airspring.height"].ravel() == pytest.approx((HEIGHTS * 1e3).tolist())
     force = _truth("force")
     for stat, q in (("q05", 0.05), ("q50", 0.5), ("q95", 0.95)):
@@ -247,45 +226,6 @@ def test_simscape_script_and_mat_file_hold_every_quantile(grid):
 
 
 # ----------------------------------------------------------------------------- TeimOrbit
-
-
-def parse_teimorbit(text: str) -> dict:
-    """A TeimOrbit reader from the format's rules (Adams Tire "About the TeimOrbit format", Altair
-    "About TeimOrbit Files"): [BLOCK], (SUB_BLOCK), NAME = value parameters, {labels} tables whose
-    rows follow until the next table, sub-block, block, comment or blank line; comments start with
-    '$' or '!'. Returns block -> {"params", sub-block -> {"params", "labels", "rows"}}."""
-    blocks: dict = {}
-    block = sub = table = None
-    for raw in text.splitlines():
-        line = raw.strip()
-        if not line or line[0] in "$!":
-            table = None
-            continue
-        if line.startswith("["):
-            name = line[1 : line.index("]")].upper()
-            block = blocks.setdefault(name, {"params": {}})
-            sub, table = None, None
-        elif line.startswith("("):
-            sub = block.setdefault(line[1 : line.index(")")].upper(), {"params": {}})
-            table = None
-        elif line.startswith("{"):
-            table = (sub if sub is not None else block).setdefault("table", {})
-            table["labels"] = line[1 : line.index("}")].split()
-            table["rows"] = []
-        elif "=" in line and table is None:
-            k, v = (x.strip() for x in line.split("=", 1))
-            v = v.strip("'\"") if v[0] in "'\"" else float(v)
-            (sub if sub is not None else block)["params"][k.upper()] = v
-        elif table is not None:
-            table["rows"].append([_token(c) for c in shlex.split(line)])
-    return blocks
-
-
-def _token(text: str):
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def test_teimorbit_files_one_per_statistic_read_back(grid):

@@ -167,23 +167,21 @@ def configure_export(p) -> None:
         help="dV/dp_u at the design height, L/bar (default 0, stated), or 'model'",
     )
     add_sampling(p)
-    _add_allow_unconverged(p)
+    _export_allow_unconverged_help(p)
     add_stand(p)
     add_json(p)
 
 
-def _add_allow_unconverged(p) -> None:
-    """``--allow-unconverged``: export a fit that failed its convergence rules, marked so."""
-    try:
-        p.add_argument(
-            "--allow-unconverged",
-            action="store_true",
-            help="export a fit that failed its convergence rules (R-hat, ESS, chain length): every "
-            "file then says NOT CONVERGED; without it such a fit is refused and nothing is written "
-            "(exit status 1)",
-        )
-    except argparse.ArgumentError:  # the sampling options give it already (one name everywhere)
-        pass
+def _export_allow_unconverged_help(p) -> None:
+    """``--allow-unconverged`` (uq._cli.common.add_convergence, via the sampling options) says what
+    it means here: uq export writes nothing for such a fit without it."""
+    for action in p._actions:
+        if "--allow-unconverged" in action.option_strings:
+            action.help = (
+                "export a fit that failed its convergence rules (R-hat, ESS, chain length), from "
+                "recordings or saved so: every file then says NOT CONVERGED and the exit status is "
+                "0; without it such a fit is refused, nothing is written, exit status 1"
+            )
 
 
 def _format(args) -> str:
@@ -344,8 +342,7 @@ def _export(args) -> int:
             "recordings; export from the recordings, or with --units si"
         )
     model, rec, provenance = _model(args, saved)
-    unconverged = _unconverged(args, model, saved)
-    if unconverged is not None:
+    if _refused_unconverged(args, model, saved):
         return 1
     units = output_units(rec, args.units)
     heights = None if args.heights_mm is None else export.parse_heights_mm(args.heights_mm) * 1e-3
@@ -401,13 +398,19 @@ def _converged(model) -> bool:
     return conv is None or bool(conv.converged)  # None: exact, independent draws
 
 
-def _unconverged(args, model, saved: bool) -> str | None:
-    """A fit that failed its convergence rules is refused (one line on stderr, nothing written,
-    None returned only when it passed) unless ``--allow-unconverged``."""
+def _refused_unconverged(args, model, saved: bool) -> bool:
+    """A fit that failed its convergence rules: refused (one line on stderr, True: nothing is to
+    be written, exit status 1) unless ``--allow-unconverged``, when it is recorded for the command
+    line's policy (uq._cli.common.convergence_status: exit 0, said on stderr) and exported with a
+    NOT CONVERGED note in every file."""
+    from uq._cli.common import record_convergence
     from uq._inference.convergence import CLI_ADVICE
 
-    if _converged(model) or args.allow_unconverged:
-        return None
+    if _converged(model):
+        return False
+    if args.allow_unconverged:
+        record_convergence(args, False, f"{model.label}'s sampler")
+        return False
     warnings = model.convergence.messages(CLI_ADVICE)
     first = warnings[0] if warnings else "its convergence rules failed"
     where = (
@@ -420,7 +423,7 @@ def _unconverged(args, model, saved: bool) -> str | None:
         f"uq export: NOT CONVERGED ({model.label}: {' '.join(first.split())}); nothing written: "
         f"{where}, or pass --allow-unconverged to export it marked NOT CONVERGED\n"
     )
-    return first
+    return True
 
 
 def _source_notes(model, rec, args) -> list[str]:

@@ -187,6 +187,96 @@ def report_block(summarise: Callable[[], str]) -> Block:
     return Block("report", summarise=summarise)
 
 
+EXPORT = "reports/export"  # scripts/export_n50.py
+
+
+def _cut(line: str, width: int = 150) -> str:
+    return line if len(line) <= width else line[: width - 4] + " ..."
+
+
+def export_text(
+    name: str, start: str | None = None, lines: int = 12, pick=None
+) -> Callable[[], str]:
+    """Lines of a committed export (reports/export/NAME), as a code block: from the first line
+    that starts with ``start`` (or the top), ``lines`` of them, or the lines ``pick`` keeps."""
+
+    def make() -> str:
+        path = ROOT / EXPORT / name
+        if not path.exists():
+            return f"(no export yet: {EXPORT}/{name} is missing; python scripts/export_n50.py)\n"
+        text = path.read_text().splitlines()
+        if pick is not None:
+            text = [ln for ln in text if pick(ln)]
+        elif start is not None:
+            text = text[next(i for i, ln in enumerate(text) if ln.startswith(start)) :]
+        shown = [_cut(ln) for ln in text[:lines]]
+        if len(text) > lines:
+            shown.append(f"... ({len(text) - lines} more lines)")
+        return body_of([f"{EXPORT}/{name}:", *shown])
+
+    return make
+
+
+def export_csv_summary() -> str:
+    """The table's first rows, the contract's nine columns, and the names of the others."""
+    path = ROOT / EXPORT / "n50.csv"
+    if not path.exists():
+        return f"(no export yet: {EXPORT}/n50.csv is missing; python scripts/export_n50.py)\n"
+    rows = [ln.split(",") for ln in path.read_text().splitlines()]
+    shown = [",".join(r[:9]) for r in rows[:4]]
+    return body_of(
+        [
+            f"{EXPORT}/n50.csv, the first rows, the contract's columns ({len(rows) - 1} rows):",
+            *shown,
+            f"... then the columns {', '.join(rows[0][9:])}",
+        ]
+    )
+
+
+def export_xlsx_summary() -> str:
+    import openpyxl
+
+    path = ROOT / EXPORT / "n50.xlsx"
+    if not path.exists():
+        return f"(no export yet: {EXPORT}/n50.xlsx is missing; python scripts/export_n50.py)\n"
+    book = openpyxl.load_workbook(path, read_only=True)
+    rows = list(book["force_N q50"].iter_rows(values_only=True))
+    shown = [
+        " | ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in r[:7]) + " | ..."
+        for r in rows[:4]
+    ]
+    rows = list(book["provenance"].iter_rows(values_only=True))[1:]
+    provenance = [f"{k}: {v}" for k, v in rows[:5]] + ["..."]
+    provenance += [f"{k}: {v}" for k, v in rows if k == "note"]
+    return body_of(
+        [
+            f"{EXPORT}/n50.xlsx: {len(book.sheetnames)} sheets: {', '.join(book.sheetnames[:6])}, ..., "
+            f"{book.sheetnames[-1]}",
+            "sheet 'force_N q50' (the first rows and columns):",
+            *shown,
+            "sheet 'provenance' (the first rows, and the notes):",
+            *provenance,
+        ]
+    )
+
+
+def export_json_summary() -> str:
+    path = ROOT / EXPORT / "n50.json"
+    if not path.exists():
+        return f"(no export yet: {EXPORT}/n50.json is missing; python scripts/export_n50.py)\n"
+    doc = json.loads(path.read_text())
+    point = doc["grid"][len(doc["heights_m"]) * 5 + 9]
+    lines = json.dumps(
+        {k: point[k] for k in ("pressure_bar", "height_m", "force_N", "feff_m2")}, indent=1
+    )
+    return body_of(
+        [
+            f"{EXPORT}/n50.json: model {doc['model']['label']}; one of {len(doc['grid'])} grid points:"
+        ]
+        + [_cut(ln) for ln in lines.splitlines()]
+    )
+
+
 def shown(args: str, lines: list[str], keep: int | None) -> list[str]:
     """The lines a block shows for one command: ``$ uq ARGS`` and its output (maybe cut short)."""
     if keep is not None and len(lines) > keep:
@@ -801,6 +891,9 @@ BLOCKS: dict[str, Block] = {
         "0.1,1,2,3,4,5,6,7,8,9,10 --x-max-mm 155 --x-min-mm 65 --step-mm 5 --piston-area-cm2 54.82"
     ),
     "fit-bad-csv": run_block("fit docs/examples/bad-cell.csv", statuses=(2,)),
+    "fit-bluehill-sign": run_block(
+        "fit data/n50-bluehill/recordings.csv --columns height=Position,force=Load", statuses=(2,)
+    ),
     "fit-n50": run_block(f"fit {DATA} --json reports/n50-fit.json"),
     "check-n50": run_block(
         "check reports/n50-fit.json --against fits/n50/table1_points.json", requires=("fit-n50",)
@@ -863,6 +956,41 @@ BLOCKS: dict[str, Block] = {
     "between-coverage": report_block(
         between_coverage_summary("reports/between-coverage/coverage.json")
     ),
+    "export-csv": report_block(export_csv_summary),
+    "export-xlsx": report_block(export_xlsx_summary),
+    "export-simscape": report_block(
+        export_text(
+            "n50.m",
+            pick=lambda ln: (
+                ln.startswith(
+                    (
+                        "% Parameterization",
+                        "airspring.height",
+                        "airspring.pressure",
+                        "airspring.load.q",
+                    )
+                )
+                or ln.startswith("% model:")
+            ),
+            lines=9,
+        )
+    ),
+    "export-teimorbit": report_block(export_text("n50_q50.tpf", start="$----", lines=34)),
+    "export-sealed": report_block(
+        export_text(
+            "n50-sealed.m",
+            pick=lambda ln: ln.startswith(
+                (
+                    "airspring.sealed.height",
+                    "airspring.sealed.load.q50",
+                    "airspring.sealed.stiffness.q50",
+                    "airspring.sealed.rate.q50",
+                )
+            ),
+            lines=4,
+        )
+    ),
+    "export-json": report_block(export_json_summary),
 }
 
 

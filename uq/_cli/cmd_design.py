@@ -471,8 +471,9 @@ def _print_check(check: dict) -> None:
     from uq._derived.model_check import table, words
 
     print(f"  the model at the tested points ({check['model']}): {words(check)}")
-    for line in table(check):
-        print(f"  {line}")
+    if check["misses"]:  # the per-pressure table where it matters
+        for line in table(check):
+            print(f"  {line}")
 
 
 def _print_sealed(rec, model, doc) -> None:

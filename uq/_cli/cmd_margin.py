@@ -475,8 +475,9 @@ def command_margin(args) -> int:
     elif queries:
         _print_one(source, ans, info, queries[0], results[0])
     print(f"  the model at the tested points: {check_words(check)}")
-    for line in check_table(check):
-        print(f"  {line}")
+    if check["misses"]:  # the per-pressure table where it matters
+        for line in check_table(check):
+            print(f"  {line}")
     for q, r in zip(queries, results, strict=True):
         if "design" in r:
             _print_design(q, r["design"], len(queries) > 1)

@@ -88,11 +88,15 @@ def volume_statement(
     )
     if prior_l_per_bar is not None:
         value, sd, source = prior_l_per_bar
-        kind = "ASSUMED" if value == 0 else "GIVEN"
+        width = (
+            f"dV/dp_u = {value:.4g} +- {sd:.2g} L per bar (1 sd, drawn per posterior draw; "
+            f"isobaric tests cannot tell; {source})"
+        )
         how = (
-            f"{kind}: the volume at {height_m * 1e3:g} mm changes with pressure by dV/dp_u = "
-            f"{value:.4g} +- {sd:.2g} L per bar (1 sd, drawn per posterior draw; isobaric tests "
-            f"cannot tell; {source})"
+            f"ASSUMED: the volume at {height_m * 1e3:g} mm does not change with pressure, give or "
+            f"take {sd:.2g} L per bar: {width}"
+            if value == 0
+            else f"GIVEN: the volume at {height_m * 1e3:g} mm changes with pressure by {width}"
         )
     elif isinstance(dvdp_m3_per_pa, str):
         how = f"how the volume at {height_m * 1e3:g} mm changes with pressure: the model's own dV/dp_u ({dvdp_m3_per_pa})"

@@ -291,8 +291,9 @@ class DesignGrid:
 DVDP_STREAM = 29
 #: where the sd of dV/dp_u at x_c comes from, in words for the statement
 DVDP_SD_WORDS = {
-    "recordings": "the sd is the largest change of dV/dp_u between the design height and the "
-    "tested heights that the recordings show at the charge pressure (dvdp_prior_sd)",
+    "recordings": "the sd is the rms change of dV/dp_u between the design height and the tested "
+    "heights that the recordings show at the charge pressure: where the volume does not change "
+    "with pressure is taken anywhere over the tested heights (dvdp_prior_sd)",
     "given": "the sd as given",
 }
 #: heights over the tested range on which dvdp_prior_sd integrates the area's pressure slope
@@ -300,18 +301,20 @@ PRIOR_HEIGHTS = 61
 
 
 def dvdp_prior_sd(model, height_m: float, charge_bar: float) -> float:
-    """The sd (L/bar) of the default assumption on dV/dp_u at the design height: the largest
-    |dV/dp_u(x, p_c) - dV/dp_u(x_c, p_c)| over the tested heights x, from the posterior-mean
-    volume-derived area (``model.volume_area_draws``).
+    """The sd (L/bar) of the default assumption on dV/dp_u at the design height: the root mean
+    square over the tested heights x of dV/dp_u(x, p_c) - dV/dp_u(x_c, p_c), from the
+    posterior-mean volume-derived area (``model.volume_area_draws``).
 
     Isobaric tests cannot give dV/dp_u at one height, but they give how it changes with height:
     d/dx (dV/dp_u) = d/dp_u (dV/dx), the pressure slope of the volume-derived area, so
-    dV/dp_u(x) - dV/dp_u(x_c) = int_{x_c}^{x} d(dV/dx)/dp_u dx' (uq._physics.volume). The casing's
-    compliance at x_c is then taken to be zero give or take as much as the recordings show it
-    varies over the stroke: a compliance that changes by that much between x_c and another tested
-    height is of that size somewhere, and nothing singles out x_c as the height where it vanishes.
-    The pressure slope is the central difference over +-5 % of the tested pressure range (within
-    it). A model whose area does not depend on pressure gives 0 (its statement says so)."""
+    dV/dp_u(x) - dV/dp_u(x_c) = int_{x_c}^{x} d(dV/dx)/dp_u dx' (uq._physics.volume). The default
+    takes the volume at x_c not to change with pressure (the contract's assumption); where the
+    casing's volume does not change with pressure is what the tests cannot tell, so the height x*
+    where it does not is taken anywhere over the tested heights, uniformly: dV/dp_u(x_c) =
+    -[dV/dp_u(x*) - dV/dp_u(x_c)], whose root mean square over x* is this sd (the Normal(0, sd)
+    the design draws has that second moment). The pressure slope is the central difference over
+    +-5 % of the tested pressure range (within it). A model whose area does not depend on
+    pressure gives 0 (its statement says so)."""
     (hlo, hhi), (plo, phi) = model.height_range_m, model.pressure_range_bar
     xs = np.union1d(np.linspace(hlo, hhi, PRIOR_HEIGHTS), [height_m])
     dp = 0.05 * (phi - plo)
@@ -322,8 +325,9 @@ def dvdp_prior_sd(model, height_m: float, charge_bar: float) -> float:
     a_hi = np.asarray(model.volume_area_draws(xs, np.full(xs.shape, p_hi)), float).mean(axis=0)
     slope = (a_hi - a_lo) / ((p_hi - p_lo) * BAR_PA)  # d(dV/dx)/dp_u, m^2/Pa
     anti = CubicSpline(xs, slope).antiderivative()
-    change = anti(xs) - anti(height_m)  # dV/dp_u(x) - dV/dp_u(x_c), m^3/Pa
-    return float(np.max(np.abs(change)) * L_PER_M3 * BAR_PA)
+    uniform = np.linspace(hlo, hhi, PRIOR_HEIGHTS)  # x* uniform over the tested heights
+    change = anti(uniform) - anti(height_m)  # dV/dp_u(x*) - dV/dp_u(x_c), m^3/Pa
+    return float(np.sqrt(np.mean(change**2)) * L_PER_M3 * BAR_PA)
 
 
 def sealed_draws(

@@ -305,6 +305,7 @@ def command_design(args) -> int:
 
     from uq._cli.common import load, settings_from, stand_from
     from uq._derived import design as D
+    from uq._derived.comparison import comparable, fit_both
     from uq._derived.model_check import predictive_check
 
     t0 = time.perf_counter()
@@ -327,13 +328,11 @@ def command_design(args) -> int:
     if not rec.has_piston:
         return _force_only(args, rec, stand, settings, heights, pressures, t0)
     comparison = None
-    if args.no_compare or not entry.over_all_tests:
-        fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
-    else:  # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
-        from uq._derived.comparison import fit_both
-
-        fit, _, comparison = fit_both(
-            rec, seed=args.seed, settings=settings, stand=stand, model=args.model
+    fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+    if not args.no_compare and entry.over_all_tests and comparable(fit):
+        # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
+        _, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
     model = fit.on_draws(args.draws)
@@ -511,7 +510,11 @@ def _print_sealed(rec, model, doc) -> None:
     c = doc.get("comparison")
     print(
         "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
-        + (words(c) if c else "not ranked (--no-compare, or the cubics answered)")
+        + (
+            words(c)
+            if c
+            else "not ranked (--no-compare, the cubics answered, or the model keeps no pointwise log-likelihood)"
+        )
     )
     _print_check(doc["model_check"])
     for w in doc["source"]["warnings"]:

@@ -530,6 +530,48 @@ def ess_bench_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def commands_bench_summary(rel: str) -> Callable[[], str]:
+    """The before/after table of ``benchmarks/commands.py --baseline`` (issue 32's goals)."""
+
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return (
+                f"(no benchmark yet: `python benchmarks/commands.py --baseline MAIN --json {rel}` "
+                "writes it)\n"
+            )
+        lines = [
+            f"From `{rel}` (`python benchmarks/commands.py`, {r['cores']} cores at load average "
+            f"{r['load_average_1min']:.1f}, {r['date']}): {r['workload']}, warm compilation cache, "
+            f"median of {r['reps']} repetitions; each command and the import floor "
+            f"(`import {', '.join(r['floor_modules'])}`: median {r['floor_wall_s']:.1f} s wall, "
+            f"{r['floor_cpu_s']:.1f} s CPU) in fresh interpreters, back to back. Before: "
+            f"{r.get('baseline_label') or 'the baseline checkout'}; after: commit {r['commit']}.",
+            "",
+            "| command | goal (x floor) | wall x floor, before | after | CPU x floor, before | after "
+            "| CPU s, before | after | peak RSS MB, before | after | largest worker MB, before | after |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for n, c in r["commands"].items():
+            b = c.get("baseline") or {}
+
+            def pair(key, fmt, b=b, c=c):
+                before = format(b[key], fmt) if key in b else "-"
+                return f"{before} | {format(c[key], fmt)}"
+
+            goal = f"{c['goal_ratio']:.1f}" if c.get("goal_ratio") else "-"
+            lines.append(
+                f"| `uq {n}` | {goal} | {pair('ratio_wall', '.2f')} | {pair('ratio_cpu', '.2f')} "
+                f"| {pair('cpu_s', '.1f')} | {pair('peak_rss_mb', '.0f')} "
+                f"| {pair('children_peak_rss_mb', '.0f')} |"
+            )
+        if r.get("note"):
+            lines += ["", f"Note: {r['note']}"]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def margin_bench_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         d = _load(rel)
@@ -746,6 +788,7 @@ BLOCKS: dict[str, Block] = {
     ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),
+    "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),
     "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
     "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),

@@ -20,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Every script and the test that runs it (test_every_script_is_run_by_a_test checks the list).
 RUN_BY = {
     "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
+    "benchmarks/commands.py": "test_commands_bench_tiny_run",
     "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
     "scripts/diagnose_proof.py": "test_diagnose_proof_small",
     "scripts/diagnose_power.py": "test_diagnose_power_tiny",
@@ -234,6 +235,33 @@ def test_bench_tiny_run_writes_only_where_asked(tmp_path):
         want = r["project"]["ess_per_s_each"][n] / r["baseline"]["ess_per_s_each"][n]
         assert r["ratio_each"][n] == want
     assert "ratio project / baseline" in proc.stdout and f"written to {out}" in proc.stdout
+
+
+def test_commands_bench_tiny_run(tmp_path):
+    """The command benchmark on a small campaign with a short chain, one repetition, the same
+    code as its own baseline: the JSON's ratios are the medians of its pairs, the summary names
+    every command; never timing."""
+    csv, out = tmp_path / "small.csv", tmp_path / "r.json"
+    simulate = ["simulate", "--out", csv, "--pressures", "1,5", "--step-mm", 10]
+    assert _run("-m", "uq._cli.main", *simulate).returncode == 0
+    proc = _run(
+        ROOT / "benchmarks" / "commands.py",
+        *("--commands", "fit", "--reps", 1, "--cold", "--recordings", csv),
+        *("--extra", "--max-steps 100 --walkers 8", "--baseline", ROOT, "--json", out),
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    r = json.loads(out.read_text())
+    fit = r["commands"]["fit"]
+    (run,) = fit["runs"]
+    assert (
+        fit["ratio_wall"] == run["ratio_wall"] == run["command"]["wall_s"] / run["floor"]["wall_s"]
+    )
+    assert fit["baseline"]["ratio_cpu"] == run["ratio_cpu_baseline"] > 0
+    assert fit["goal_ratio"] == 1.6 and fit["peak_rss_mb"] > 0
+    assert "fit" in proc.stdout and "import floor" in proc.stdout
+    bad = _run(ROOT / "benchmarks" / "commands.py", "--commands", "fit,nope")
+    assert bad.returncode == 2 and "--commands" in bad.stderr
 
 
 @pytest.mark.parametrize(

@@ -229,6 +229,22 @@ def test_help_imports_nothing_heavy():
     assert r.returncode == 0 and all(name in r.stdout for name, _, _ in COMMANDS)
 
 
+def test_fit_imports_neither_arviz_nor_xarray_nor_matplotlib(tmp_path):
+    """`uq fit` without --out builds no InferenceData, saves no NetCDF and draws no figure, so it
+    imports none of ArviZ, xarray and matplotlib (about a second of its time, issue 32): a whole
+    fit of a tiny campaign in a fresh interpreter, short chains (imports are the point)."""
+    csv = tmp_path / "tiny.csv"
+    assert main(["simulate", "--out", str(csv), "--pressures", "2,5", "--step-mm", "15"]) == 0
+    code = (
+        "import sys\n"
+        "from uq._cli.main import main\n"
+        f"rc = main(['fit', {str(csv)!r}, '--walkers', '8', '--max-steps', '40', '--quiet'])\n"
+        "print(rc, sorted(m for m in ('arviz', 'xarray', 'matplotlib') if m in sys.modules))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.stdout.strip().splitlines()[-1] in ("0 []", "1 []"), r.stdout[-500:] + r.stderr[-2000:]
+
+
 @pytest.mark.parametrize("name", [c[0] for c in COMMANDS])
 def test_compilation_cache_is_on_for_every_command(name, tmp_path):
     """The persistent compilation cache must be configured before a command's module is imported

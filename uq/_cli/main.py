@@ -271,24 +271,13 @@ def _fail(name: str, text: str, status: int) -> int:
 
 
 def _compile_cache() -> None:
-    """JAX's persistent compilation cache for the command line (not for library users): compiled
-    log-probabilities are kept in ``$UQ_CACHE_DIR`` (default ``$XDG_CACHE_HOME/airspring-uq/jax``,
-    i.e. ``~/.cache/airspring-uq/jax``), so a second run skips XLA compilation. ``UQ_CACHE_DIR=off``
-    turns it off. Only environment variables are set (JAX reads them when first imported), so
-    commands that never import JAX stay fast; a cache location set by the user wins."""
-    where = os.environ.get("UQ_CACHE_DIR", "")
-    if (
-        where.lower() in ("off", "0", "none")
-        or "JAX_COMPILATION_CACHE_DIR" in os.environ
-        or "jax" in sys.modules
-    ):
-        return
-    if not where:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        where = os.path.join(base, "airspring-uq", "jax")
-    os.environ["JAX_COMPILATION_CACHE_DIR"] = where
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+    """JAX's persistent compilation cache (``uq._inference.jax_cache``): only environment
+    variables are set, before any command module is imported (JAX reads them when first
+    imported), so commands that never import JAX stay fast; a cache location set by the user
+    wins; ``UQ_CACHE_DIR=off`` turns it off."""
+    from uq._inference.jax_cache import set_environment
+
+    set_environment()
 
 
 def _interrupts_are_not_lost() -> None:

@@ -821,6 +821,13 @@ def _sample(fit: Fit, d, seed: int, settings: Settings):
 # ----------------------------------------------------------------------------- output
 
 
+def _k_max(pareto: dict) -> str:
+    """The largest Pareto k as printed: a number, or how many terms have none (``Loo.pareto``)."""
+    if pareto["max"] is None:
+        return f"undefined for {pareto['n_undefined']} terms"
+    return f"{pareto['max']:.2f}"
+
+
 def _volume_rms(v) -> str:
     return "" if v is None else f", volume rms {v:.1f} cm^3"  # None: a force-only campaign
 
@@ -877,7 +884,7 @@ def summary_text(res: dict) -> str:
     pk = f["pareto_k"]
     lines.append(
         f"final model ({' + '.join(f['model'])}): force rms {f['rms_N']:.1f} N"
-        f"{_volume_rms(f['volume_rms_cm3'])}, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {pk['max']:.2f}, "
+        f"{_volume_rms(f['volume_rms_cm3'])}, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {_k_max(pk)}, "
         f"{pk['n_over_0.7']} of {pk['n_terms']} over 0.7)"
     )
     lines.append(

@@ -163,6 +163,17 @@ def _band_note(ax, widths, factor: float, unit: str) -> str:
     return f"the curves' 90 % bands are at most {widest:.3g} {unit} wide ({seen})"
 
 
+def _band_note_after_layout(fig, ax, title: str, widths, factor: float, unit: str) -> str:
+    """:func:`_band_note` of the laid-out figure, laid out once: the title's two lines are set
+    (with a stand-in second line) before the one layout pass, and the layout is then kept
+    (``set_layout_engine("none")``), so that saving the figure does not lay it out again (the
+    constrained layout of a figure with a dozen residual panels costs about a second a pass)."""
+    ax.set_title(title.format("the curves' 90 % bands are at most 0.000 N wide (seen)"), fontsize=9)
+    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
+    fig.set_layout_engine("none")
+    return _band_note(ax, widths, factor, unit)
+
+
 def _residual_grid(fig, gs, n: int, cols: int):
     """``n`` small axes in the rows of ``gs`` below its first, sharing their x axis."""
     axes = []
@@ -255,12 +266,12 @@ def figure_force(cf, cb: CampaignBands):
     ax.grid(alpha=0.3)
     _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
     _residual_labels(fig, res, "reading − mean (N)")
-    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
-    note = _band_note(ax, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N")
+    title = "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n{}"
+    note = _band_note_after_layout(
+        fig, ax, title, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N"
+    )
     ax.set_title(
-        "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n"
-        f"{note}; below: readings and bands minus the mean curve",
-        fontsize=9,
+        title.format(f"{note}; below: readings and bands minus the mean curve"), fontsize=9
     )
     return fig
 
@@ -301,11 +312,15 @@ def figure_volume(cf, cb: CampaignBands):
     ax.grid(alpha=0.3)
     _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
     _residual_labels(fig, res, "S (L − mean L) (cm³)")
-    fig.draw_without_rendering()
-    note = _band_note(ax, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³")
+    title = (
+        "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean "
+        "curves\n{}"
+    )
+    note = _band_note_after_layout(
+        fig, ax, title, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³"
+    )
     ax.set_title(
-        "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean curves\n"
-        f"{note}; below: piston readings and bands minus the mean L(x), times S",
+        title.format(f"{note}; below: piston readings and bands minus the mean L(x), times S"),
         fontsize=9,
     )
     return fig

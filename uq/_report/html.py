@@ -132,6 +132,12 @@ def _escape(value):
     return Markup(html.escape(str(value)))
 
 
+def _fmt(value, spec: str) -> str:
+    """``format(value, spec)``; a quantity the JSON leaves undefined (None, e.g. a Pareto k ArviZ
+    could not estimate) prints as "undefined"."""
+    return "undefined" if value is None else format(value, spec)
+
+
 @functools.cache
 def _environment():
     env = Environment(
@@ -143,7 +149,7 @@ def _environment():
         lstrip_blocks=True,
         keep_trailing_newline=True,
     )
-    env.filters["fmt"] = format  # {{ x|fmt(".1f") }} is f"{x:.1f}"
+    env.filters["fmt"] = _fmt  # {{ x|fmt(".1f") }} is f"{x:.1f}"
     env.filters["sig4"] = sig4
     return env
 

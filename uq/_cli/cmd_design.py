@@ -305,7 +305,7 @@ def command_design(args) -> int:
 
     from uq._cli.common import load, settings_from, stand_from
     from uq._derived import design as D
-    from uq._derived.comparison import comparable, fit_both
+    from uq._derived.comparison import fit_both
     from uq._derived.model_check import predictive_check
 
     t0 = time.perf_counter()
@@ -329,7 +329,7 @@ def command_design(args) -> int:
         return _force_only(args, rec, stand, settings, heights, pressures, t0)
     comparison = None
     fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
-    if not args.no_compare and entry.over_all_tests and comparable(fit):
+    if not args.no_compare and entry.over_all_tests:
         # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
         _, _, comparison = fit_both(
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
@@ -510,11 +510,7 @@ def _print_sealed(rec, model, doc) -> None:
     c = doc.get("comparison")
     print(
         "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
-        + (
-            words(c)
-            if c
-            else "not ranked (--no-compare, the cubics answered, or the model keeps no pointwise log-likelihood)"
-        )
+        + (words(c) if c else "not ranked (--no-compare, or the cubics answered)")
     )
     _print_check(doc["model_check"])
     for w in doc["source"]["warnings"]:

@@ -209,19 +209,6 @@ def fit_both(
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 
-def comparable(fit) -> bool:
-    """Whether ``fit`` can be ranked against the per-pressure cubics: a fit over all tests whose
-    posterior keeps its pointwise log-likelihood and leave-one-out densities (a model plugged in
-    without them, or a saved model, cannot)."""
-    post = getattr(fit, "posterior", None)
-    return (
-        fit.recordings is not None
-        and post is not None
-        and hasattr(post, "loglik_total")
-        and getattr(fit, "loglik_loo", None) is not None
-    )
-
-
 def words(c: dict) -> str:
     """One line for a :func:`compare` result."""
     if c["better"] in ("refused", "indistinguishable"):

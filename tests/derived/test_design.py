@@ -316,7 +316,11 @@ def test_design_on_a_fitted_surface_of_a_simulated_campaign():
     model = fit.on_draws(cfg["max_draws"])
     s = ThermoSpring()
     tr = _truth(s, [0.112], charge_bar=5.0)
-    doc = design_document(model, SealedDesign(0.112, 5.0, tr.volume_c_m3 * 1e3, forcing_Hz=4.0))
+    # the truth's n and its exact dV/dp_u at x0 (0): the fit's own propagation, nothing else
+    d = SealedDesign(
+        0.112, 5.0, tr.volume_c_m3 * 1e3, polytropic=1.0, forcing_Hz=4.0, dvdp_sd_l_per_bar=0.0
+    )
+    doc = design_document(model, d)
     for key, true, tol in (
         ("load_N", tr.force_N[0], 0.01),
         ("rate_N_per_m", tr.rate_N_per_m[0], 0.03),

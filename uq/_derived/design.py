@@ -291,9 +291,8 @@ class DesignGrid:
 DVDP_STREAM = 29
 #: where the sd of dV/dp_u at x_c comes from, in words for the statement
 DVDP_SD_WORDS = {
-    "recordings": "the sd is the rms change of dV/dp_u between the design height and the tested "
-    "heights that the recordings show at the charge pressure: where the volume does not change "
-    "with pressure is taken anywhere over the tested heights (dvdp_prior_sd)",
+    "recordings": "the sd is the rms change of dV/dp_u from the design height over the tested "
+    "heights, as the recordings show it at the charge pressure (docs/design.md section 2)",
     "given": "the sd as given",
 }
 #: heights over the tested range on which dvdp_prior_sd integrates the area's pressure slope

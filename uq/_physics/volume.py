@@ -88,15 +88,13 @@ def volume_statement(
     )
     if prior_l_per_bar is not None:
         value, sd, source = prior_l_per_bar
-        width = (
-            f"dV/dp_u = {value:.4g} +- {sd:.2g} L per bar (1 sd, drawn per posterior draw; "
-            f"isobaric tests cannot tell; {source})"
-        )
+        drawn = f"1 sd, drawn per posterior draw; isobaric tests cannot tell; {source}"
         how = (
             f"ASSUMED: the volume at {height_m * 1e3:g} mm does not change with pressure, give or "
-            f"take {sd:.2g} L per bar: {width}"
+            f"take {sd:.2g} L per bar (dV/dp_u = 0 +- {sd:.2g} L/bar, {drawn})"
             if value == 0
-            else f"GIVEN: the volume at {height_m * 1e3:g} mm changes with pressure by {width}"
+            else f"GIVEN: the volume at {height_m * 1e3:g} mm changes with pressure by "
+            f"{value:.4g} +- {sd:.2g} L per bar ({drawn})"
         )
     elif isinstance(dvdp_m3_per_pa, str):
         how = f"how the volume at {height_m * 1e3:g} mm changes with pressure: the model's own dV/dp_u ({dvdp_m3_per_pa})"

@@ -424,7 +424,8 @@ def command_margin(args) -> int:
             _check_ranges(q, ans.height_range_m, ans.pressure_range_bar, "the model")
         diagnostics = {"warnings": meta["warnings"], "converged": meta["converged"]}
         source, rec = args.fit, None
-        check = unavailable(
+        # the check made when the fit was saved (uq margin --save-fit), else none: no readings
+        check = meta.get("model_check") or unavailable(
             ans, "a saved fit keeps no readings' replicates: fit the recordings to check it"
         )
     else:
@@ -464,6 +465,7 @@ def command_margin(args) -> int:
             model_info=info,
             converged=diagnostics["converged"],
             warnings=diagnostics["warnings"],
+            model_check=check,
         )
         print(
             f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"

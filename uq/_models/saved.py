@@ -8,7 +8,8 @@ section 6, has the tables):
   ``recordings_path``, ``recordings_sha256``, ``x0_mm``, ``piston_area_cm2``, ``seed``,
   ``uq_version``, ``written_by``, ``settings_json``, ``stand_json``, ``converged``,
   ``warnings_json`` (the sampler's verdict and warnings), ``max_draws`` (the fixed draws' bound,
-  -1 for none) and whatever else the writer adds (``model_info_json``: why ``uq margin`` chose it);
+  -1 for none) and whatever else the writer adds (``model_info_json``: why ``uq margin`` chose it;
+  ``model_check_json``: its posterior-predictive check at the tested points when it was fitted);
 * group ``posterior``: every named coefficient block as a variable (chain, draw, coefficient) in
   physical units, and the sampled parameters as reported (chain, draw);
 * group ``constant_data``: the model's orders and geometry (``orders``/``orders_field``,
@@ -83,6 +84,8 @@ def _attrs(model, provenance: dict) -> dict:
     }
     if prov.get("model_info") is not None:
         attrs["model_info_json"] = dumps_json(prov["model_info"])
+    if prov.get("model_check") is not None:  # uq margin --save-fit: the check at the tested points
+        attrs["model_check_json"] = dumps_json(prov["model_check"])
     return attrs
 
 
@@ -177,6 +180,8 @@ def provenance_from(attrs: dict) -> dict:
     out["warnings"] = json.loads(attrs.get("warnings_json", "[]"))
     if "model_info_json" in attrs:
         out["model_info"] = json.loads(attrs["model_info_json"])
+    if "model_check_json" in attrs:
+        out["model_check"] = json.loads(attrs["model_check_json"])
     return out
 
 

@@ -925,6 +925,9 @@ BLOCKS: dict[str, Block] = {
     "sealed-coverage": report_block(
         sealed_coverage_summary("reports/sealed-coverage/coverage.json")
     ),
+    "sealed-coverage-user": report_block(
+        sealed_coverage_summary("reports/sealed-coverage-user/coverage.json")
+    ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),
     "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),

@@ -113,6 +113,8 @@ def test_saved_fit_gives_the_same_answer(which, request, tmp_path, capsys):
     assert_same(json.loads(out.read_text()), original)
     text = capsys.readouterr().out
     assert "no refit" in text and "answered by the" in text
+    # the check at the tested points made when the fit was saved, with the answer (issue 29)
+    assert original["model_check"]["available"] and "the model at the tested points" in text
     assert original["model"]["name"] == ("surface" if which == "surface_saved" else "cubics")
     assert "usable_stroke" in original and "force_at_pressure" in original
 
@@ -469,6 +471,7 @@ def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
     fit, original, _ = surface_saved
     out = tmp_path / "d.json"
     argv = ["margin", "--fit", fit, *QUERY, *DESIGN, "--volume-l", "3.0", "--json", out]
+    argv += ["--polytropic", "1", "--dvdp-sd-l-per-bar", "0"]  # the closed form's n and dV/dp_u
     assert run([*argv, *UNCONV]) == 0
     text = capsys.readouterr().out
     res = json.loads(out.read_text())

@@ -14,6 +14,7 @@ import pytest
 import uq
 from uq._data.stand_description import PAPER_STAND
 from uq._derived import plan as P
+from uq._derived import plan_search as E
 from uq._derived.plan_frames import CubicFrames, PairFrames
 from uq._derived.plan_targets import SealedInputs, parse_target
 from uq._inference.float64 import jax, jnp
@@ -100,8 +101,8 @@ def test_planned_precision_is_the_pair_likelihoods(pilot):
     builder, _ = _surface_builder(pilot, n_draws=4)
     new = np.array([3.5, 6.5])
     frame = builder.frame(new)
-    readings = [P.Reading(0, 0.080), P.Reading(0, 0.110), P.Reading(1, 0.140), P.Reading(1, 0.140)]
-    A = frame.precision + P.added_precision(frame, readings)
+    readings = [E.Reading(0, 0.080), E.Reading(0, 0.110), E.Reading(1, 0.140), E.Reading(1, 0.140)]
+    A = frame.precision + E.added_precision(frame, readings)
     d = _combined(builder, frame, new, readings)
     chol = jax.jit(jax.vmap(lambda th: pair.posterior(th, d).chol))(jnp.asarray(builder.theta))
     for s in range(frame.n_draws):
@@ -124,8 +125,8 @@ def test_greedy_updates_match_the_exact_evaluation(pilot):
     builder, _ = _surface_builder(pilot)
     frame = builder.frame(np.array([3.5, 6.5]))
     targets = [parse_target("force@110mm,6.5bar"), parse_target("pressure_for@110mm,9000N")]
-    path = P.search(frame, targets, HEIGHTS, max_readings=20, draws=8)
-    exact = np.sqrt(P.evaluate(frame, targets, path.readings).mean(0))
+    path = E.search(frame, targets, HEIGHTS, max_readings=20, draws=8)
+    exact = np.sqrt(E.evaluate(frame, targets, path.readings).mean(0))
     np.testing.assert_allclose(path.sd[-1], exact, rtol=1e-6)
     assert path.n_readings[-1] == len(path.readings) <= 20
 
@@ -153,8 +154,8 @@ def test_preposterior_against_brute_force_simulation(wide_pilot):
     new = np.array([3.25, 6.25])
     frame = builder.frame(new)
     targets = [parse_target("force@110mm,6.5bar"), parse_target("pressure_for@110mm,9000N")]
-    readings = [P.Reading(0, h) for h in HEIGHTS] + [P.Reading(1, h) for h in HEIGHTS[::2]]
-    predicted = P.evaluate(frame, targets, readings)  # (S, T)
+    readings = [E.Reading(0, h) for h in HEIGHTS] + [E.Reading(1, h) for h in HEIGHTS[::2]]
+    predicted = E.evaluate(frame, targets, readings)  # (S, T)
     d = _combined(builder, frame, new, readings)
     n0 = builder.data.F.shape[0]
     xs = np.array([r.height_m for r in readings])
@@ -245,7 +246,7 @@ def _toy(rows, k=2):
     """A frame of k coefficients with unit prior, one draw, and new tests whose reading rows at
     heights h are rows[j](h) (r = 1); the force row is the first coefficient."""
     J = len(rows)
-    return P.Frame(
+    return E.Frame(
         name="toy",
         label="toy",
         precision=np.eye(k)[None],
@@ -267,7 +268,7 @@ def test_greedy_reads_the_most_informative_height_once_per_branch():
     frame = _toy([lambda h: np.array([h, 0.0]), lambda h: np.array([0.0, 10 * h])])
     heights = np.array([0.5, 1.0, 2.0, 3.0])
     target = parse_target("force@100mm,1bar")
-    path = P.search(frame, [target], heights, max_readings=10, cost_per_pressure=0.0, draws=1)
+    path = E.search(frame, [target], heights, max_readings=10, cost_per_pressure=0.0, draws=1)
     assert {r.test for r in path.readings} == {0}
     assert [r.height_m for r in path.readings][:2] == [3.0, 3.0]
     assert sorted(r.height_m for r in path.readings) == [0.5, 0.5, 1.0, 1.0, 2.0, 2.0, 3.0, 3.0]
@@ -283,13 +284,13 @@ def test_no_reading_helps_a_target_at_a_tested_pressure_of_the_cubics(pilot):
     b = _cubic_builder(pilot)
     frame = b.frame(np.array([3.5, 6.5, 9.0]))
     at5 = parse_target("force@110mm,5bar")
-    path = P.search(frame, [at5], HEIGHTS, max_readings=12, draws=8)
+    path = E.search(frame, [at5], HEIGHTS, max_readings=12, draws=8)
     assert path.readings == [] and path.stop.startswith("no reading")
     with pytest.raises(InputError, match="no planned reading reduces"):
         P.make_plan(b, [at5], HEIGHTS, np.array([3.5, 6.5]), max_readings=12, draws=8)
     at65 = parse_target("force@110mm,6.5bar")
-    now = P.evaluate(frame, [at65]).mean()
-    few = P.evaluate(frame, [at65], [P.Reading(1, h) for h in HEIGHTS]).mean()
+    now = E.evaluate(frame, [at65]).mean()
+    few = E.evaluate(frame, [at65], [E.Reading(1, h) for h in HEIGHTS]).mean()
     assert few > now
 
 
@@ -299,7 +300,7 @@ def test_a_costly_pressure_change_is_made_only_when_it_pays():
     frame = _toy([lambda h: np.array([h, 0.0]), lambda h: np.array([h, 0.0])])
     heights = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
     target = parse_target("force@100mm,1bar")
-    dear = P.search(frame, [target], heights, max_readings=10, cost_per_pressure=1000.0, draws=1)
+    dear = E.search(frame, [target], heights, max_readings=10, cost_per_pressure=1000.0, draws=1)
     assert len({r.test for r in dear.readings}) == 1
 
 
@@ -347,7 +348,7 @@ def test_required_test_beyond_the_tested_pressures():
 
 
 def test_recording_order_and_uniform_layout():
-    readings = [P.Reading(1, 0.08), P.Reading(0, 0.1), P.Reading(1, 0.12), P.Reading(1, 0.08)]
+    readings = [E.Reading(1, 0.08), E.Reading(0, 0.1), E.Reading(1, 0.12), E.Reading(1, 0.08)]
     order = P.recording_order(readings, np.array([7.0, 3.0]))
     assert [t["pressure_bar"] for t in order] == [3.0, 7.0]
     assert order[0]["heights_m"] == [0.12, 0.08, 0.08] and order[1]["heights_m"] == [0.1]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from uq._derived.plan import MIN_TEST_READINGS, Frame
+from uq._derived.plan_search import MIN_TEST_READINGS, Frame
 from uq._inference.float64 import jax, jnp
 from uq._io.errors import InputError
 from uq._models import pair, surface, thermo

@@ -277,7 +277,15 @@ def _check_model(args, rec, targets) -> None:
 
 
 def _fit(args, rec, targets, stand, settings):
-    """(fit to plan with, model description): the model ``uq margin`` would choose, or the user's."""
+    """(fit to plan with, model description with ``converged``): the model ``uq margin`` would
+    choose, or the user's."""
+    fit, info = _choose(args, rec, targets, stand, settings)
+    conv = getattr(fit, "converged", None)
+    info["converged"] = bool(fit.convergence.converged if conv is None else conv)
+    return fit, info
+
+
+def _choose(args, rec, targets, stand, settings):
     from uq._derived.comparison import FITTERS, fit_both
     from uq._derived.margin import choose_model
     from uq._models.cubic import fit_campaign
@@ -513,9 +521,7 @@ def command_plan(args) -> int:
         print(f"  figure: {args.plot}")
     print(f"  {time.perf_counter() - t0:.1f} s")
     emit_json(doc, args.json)
-    converged = getattr(fit, "converged", None)
-    if converged is None:
-        converged = fit.convergence.converged
+    converged = info.get("converged", True)
     if not converged:
         print(
             "  warning: the fit of FILE did not converge (rerun with more --max-steps)",

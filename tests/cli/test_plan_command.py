@@ -18,7 +18,7 @@ from plan_helpers import surface_builder
 
 ROOT = Path(__file__).resolve().parents[2]
 FORCE_ONLY = ROOT / "data" / "n50-force-only" / "recordings.csv"
-SMALL = ["--walkers", "8", "--ensembles", "2", "--max-steps", "300"]
+SMALL = ["--walkers", "16", "--ensembles", "2", "--max-steps", "300"]
 
 
 @pytest.fixture(scope="module")

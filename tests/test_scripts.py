@@ -29,6 +29,7 @@ RUN_BY = {
     "(and the mkdocs build of scripts/test.sh)",
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
     "scripts/margin_coverage.py": "test_margin_coverage_tiny",
+    "scripts/plan_proof.py": "test_plan_proof_tiny",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
     "scripts/sealed_coverage.py": "tests/derived/test_design.py::test_coverage_script_runs_with_tiny_settings",
     "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",
@@ -289,3 +290,14 @@ def test_margin_coverage_tiny(tmp_path):
     assert {r["model"] for r in doc["rows"]} == {"surface", "cubics", "chosen"}
     assert all(r["covered"] + r["refused"] <= 1 for r in doc["rows"])
     assert "coarse pressure grids" in (tmp_path / "summary.md").read_text()
+
+
+@pytest.mark.slow  # about 2.5 min; the claims it measures are carried by tests/derived/test_plan.py
+def test_plan_proof_tiny(tmp_path):
+    """One replication of one scenario with tiny settings: the JSON and the summary page."""
+    proc = _run("scripts/plan_proof.py", "--tiny", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "proof.json").read_text())
+    assert doc["replications"] == 1 and doc["intervals"] == 2
+    assert all(t["sd_achieved"] > 0 and t["sd_predicted"] > 0 for t in doc["rows"][0]["targets"])
+    assert "uq plan on the virtual stand" in (tmp_path / "summary.md").read_text()

@@ -352,3 +352,29 @@ def test_targets_parse():
     assert w.sum() == pytest.approx(1.0) and n.min() > 1.0 and n.max() < 1.4
     with pytest.raises(InputError, match="file holds one test"):
         parse_target("elastic_casing").with_range([5.0])
+
+
+@pytest.mark.parametrize("kind", ["thermodynamic", "force-only"])
+def test_planned_precision_of_the_other_models(pilot, kind):
+    """The same identity for the thermodynamic model (its travel factor scales the piston rows) and
+    the force surface of a campaign without piston readings (one row per reading)."""
+    from plan_helpers import model_precision, pair_builder
+
+    from uq._data.recordings import recordings_from_text, write_recordings_csv
+    from uq._stand.simulator import Layout, simulate
+
+    if kind == "force-only":
+        layout = Layout(pressures_bar=(2.0, 5.0, 8.0), step_m=0.015)
+        text = write_recordings_csv(simulate("n50-smooth", seed=3, layout=layout), piston=False)
+        rec = recordings_from_text(text, "force-only pilot")
+        builder = pair_builder(rec, n_draws=3)
+    else:
+        builder = pair_builder(pilot, "thermodynamic", n_draws=3)
+    new = np.array([3.5, 6.5])
+    frame = builder.frame(new)
+    assert (frame.area_rows is None) == (kind == "force-only")
+    readings = [E.Reading(0, 0.080), E.Reading(1, 0.110), E.Reading(1, 0.110)]
+    A = frame.precision + E.added_precision(frame, readings)
+    for s in range(frame.n_draws):
+        want = model_precision(builder, new, readings, builder.theta[s])
+        np.testing.assert_allclose(A[s], want, rtol=1e-9, atol=1e-9 * np.abs(want).max())

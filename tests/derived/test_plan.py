@@ -21,6 +21,7 @@ from uq._derived.plan_targets import SealedInputs, parse_target
 from uq._inference.float64 import jax, jnp
 from uq._io.errors import InputError
 from uq._models import cubic, pair, surface
+from uq._physics.quantities import BAR_PA
 
 HEIGHTS = np.round(np.arange(0.065, 0.1551, 0.015), 6)
 
@@ -378,3 +379,114 @@ def test_planned_precision_of_the_other_models(pilot, kind):
     for s in range(frame.n_draws):
         want = model_precision(builder, new, readings, builder.theta[s])
         np.testing.assert_allclose(A[s], want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+
+
+# ----------------------------------------------------------------------------- the targets' closed forms
+
+
+def _element_frame(area_rows, force_rows):
+    """A one-draw frame of two coefficients with the given force and area rows."""
+    return E.Frame(
+        name="toy",
+        label="toy",
+        precision=np.eye(2)[None],
+        mean=np.zeros((1, 2)),
+        tested_bar=np.array([1.0, 10.0]),
+        new_bar=np.zeros(0),
+        x0_m=0.112,
+        reading_rows=None,
+        force_rows=force_rows,
+        area_rows=area_rows,
+    )
+
+
+def _inextensible():
+    """P = p_u A(x), dV/dx = A(x), A = b0 + b1 t (t = (x - x0) / 0.05 m)."""
+
+    def area(x, p, o=None):
+        t = (np.asarray(x, float) - 0.112) / 0.05
+        return np.stack([np.ones_like(t), t], axis=-1)
+
+    def force(x, p, o=None):
+        return area(x, p) * (np.asarray(p, float) * BAR_PA)[:, None]
+
+    return _element_frame(area, force)
+
+
+def test_natural_frequency_is_the_sealed_springs_and_its_gradient_exact():
+    """For an inextensible element the sealed rate is n p_abs A^2 / V - p_u dA/dx
+    (uq._physics.sealed.inextensible_rate): the target's value there, and its gradient against
+    central differences in the coefficients."""
+    from uq._physics.sealed import G_STANDARD, inextensible_rate
+
+    frame = _inextensible()
+    beta = np.array([[0.025, -0.002]])
+    t = parse_target(
+        "natural_frequency@120mm,5bar", SealedInputs(volume_l=4.0, polytropic=1.3, reservoir_l=1.0)
+    )
+    value, grad, extra = t.linearise(frame, beta, np.zeros(0, bool))
+    tt = (0.120 - 0.112) / 0.05
+    A, dA = beta[0, 0] + beta[0, 1] * tt, beta[0, 1] / 0.05
+    k = inextensible_rate(5 * BAR_PA, A, dA, 4e-3, 1.3, 1e-3)
+    want = np.sqrt(k * G_STANDARD / (5 * BAR_PA * A)) / (2 * np.pi)
+    assert value[0] == pytest.approx(want, rel=1e-6)
+    assert extra[0] == 0.0
+    for j in range(2):
+        h = 1e-7 * abs(beta[0, j])
+        up, down = beta.copy(), beta.copy()
+        up[0, j] += h
+        down[0, j] -= h
+        fd = (t.linearise(frame, up, None)[0] - t.linearise(frame, down, None)[0]) / (2 * h)
+        assert grad[0, j] == pytest.approx(fd[0], rel=1e-5)
+
+
+def test_natural_frequency_spread_of_a_polytropic_range_is_irreducible():
+    frame = _inextensible()
+    beta = np.array([[0.025, -0.002]])
+    one = parse_target("natural_frequency@112mm,5bar", SealedInputs(volume_l=4.0, polytropic=1.2))
+    rng = parse_target(
+        "natural_frequency@112mm,5bar", SealedInputs(volume_l=4.0, polytropic=(1.0, 1.4))
+    )
+    assert one.linearise(frame, beta, None)[2][0] == 0.0
+    spread = rng.linearise(frame, beta, None)[2][0]
+    lo = parse_target("natural_frequency@112mm,5bar", SealedInputs(volume_l=4.0, polytropic=1.0))
+    hi = parse_target("natural_frequency@112mm,5bar", SealedInputs(volume_l=4.0, polytropic=1.4))
+    f_lo, f_hi = (x.linearise(frame, beta, None)[0][0] for x in (lo, hi))
+    # a uniform n over the range: sd about (f_hi - f_lo) / sqrt(12) (f nearly linear in n)
+    assert np.sqrt(spread) == pytest.approx(abs(f_hi - f_lo) / np.sqrt(12), rel=0.05)
+
+
+def test_elastic_casing_reads_the_mechanisms_magnitude():
+    """dV/dx = V0'(1 + m p_u) at x0 (docs/formats.md section 3): the target is m for any two
+    pressures, and its gradient matches central differences."""
+
+    def area(x, p, o=None):
+        return np.stack([np.ones(np.size(p)), np.asarray(p, float)], axis=-1)
+
+    frame = _element_frame(area, None)
+    V0, m = 0.027, 0.013
+    beta = np.array([[V0, V0 * m]])
+    for pair_ in ((1.0, 10.0), (0.1, 4.0)):
+        t = parse_target(f"elastic_casing@{pair_[0]}bar,{pair_[1]}bar")
+        value, grad, _ = t.linearise(frame, beta, None)
+        assert value[0] == pytest.approx(m, rel=1e-12)
+        for j in range(2):
+            h = 1e-6 * beta[0, j]
+            up, down = beta.copy(), beta.copy()
+            up[0, j] += h
+            down[0, j] -= h
+            fd = (t.linearise(frame, up, None)[0] - t.linearise(frame, down, None)[0]) / (2 * h)
+            assert grad[0, j] == pytest.approx(fd[0], rel=1e-6)
+
+
+def test_pressure_for_is_the_root_and_its_gradient_the_implicit_one():
+    """P = p_u A with A = b0 + b1 t: the pressure carrying W at x is W / A(x) exactly."""
+    frame = _inextensible()
+    beta = np.array([[0.025, -0.002], [0.026, 0.001]])
+    t = parse_target("pressure_for@100mm,12000N")
+    value, grad, _ = t.linearise(frame, beta, np.zeros(0, bool))
+    A = beta[:, 0] + beta[:, 1] * (0.100 - 0.112) / 0.05
+    np.testing.assert_allclose(value, 12000.0 / A, rtol=1e-6)
+    # d(W / A) / d b = -W / A^2 (1, t)
+    want = -(12000.0 / A**2)[:, None] * np.array([1.0, (0.100 - 0.112) / 0.05])[None]
+    np.testing.assert_allclose(grad, want, rtol=1e-4)

@@ -266,6 +266,12 @@ def _check_model(args, rec, targets) -> None:
             f"option --target {volume[0]}: the per-pressure cubics do not interpolate the volume-derived "
             "area between tested pressures; plan with --model surface or thermodynamic"
         )
+    if args.model == "cubics" and rec.pressure_measured:
+        raise InputError(
+            f"option --model cubics: {rec.path} gives measured pressures, which the per-pressure cubics "
+            "take as a covariate with a sensor offset per test; uq plan plans with the plain cubics "
+            "only: plan with --model surface"
+        )
     if args.model == "thermodynamic" and len(rec.tests) < 2:
         raise InputError(
             f"option --model thermodynamic: {rec.path} holds one test; the thermodynamic model needs "
@@ -286,7 +292,7 @@ def _fit(args, rec, targets, stand, settings):
 
 
 def _choose(args, rec, targets, stand, settings):
-    from uq._derived.comparison import FITTERS, fit_both
+    from uq._derived.comparison import FITTERS, fit_both, force_side
     from uq._derived.margin import choose_model
     from uq._models.cubic import fit_campaign
 
@@ -294,18 +300,20 @@ def _choose(args, rec, targets, stand, settings):
         fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
         return fit, {"name": args.model, "why": f"chosen by the user (--model {args.model})"}
     if args.model == "cubics":
-        cub = fit_campaign(rec, seed=args.seed, settings=settings, stand=stand)
+        cub = fit_campaign(force_side(rec), seed=args.seed, settings=settings, stand=stand)
         return cub, {"name": "cubics", "why": "chosen by the user (--model cubics)"}
     fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand)
     _, info = choose_model(fit, cub, comparison)
     info = {k: v for k, v in info.items() if k in ("why", "comparison")}
     if info.get("why", "").startswith("the data prefer the per-pressure cubics"):
+        reason = None
         if any(t.needs_volume for t in targets):
+            reason = "the targets need the volume-derived area between tested pressures, which the cubics do not interpolate"
+        elif rec.pressure_measured:
+            reason = "uq plan plans with the plain cubics, and these take the measured pressures as a covariate"
+        if reason:
             info["name"] = "surface"
-            info["why"] += (
-                "; but the targets need the volume-derived area between tested pressures, which the "
-                "cubics do not interpolate: planned with the surface model"
-            )
+            info["why"] += f"; but {reason}: planned with the surface model"
             return fit, info
         info["name"] = "cubics"
         return cub, info
@@ -346,6 +354,12 @@ def _print(rec, plan, info) -> None:
         if up:
             line += f"; up {' '.join(up)} mm"
         print(line)
+    if len(plan.tried) > 1:
+        print("  plans tried (new tests: readings, predicted sd per target):")
+        for t in plan.tried:
+            sds = ", ".join(_fmt(v, x.unit) for v, x in zip(t["sd"], plan.targets, strict=True))
+            mark = " <- chosen" if t["new_tests"] == plan.n_pressure_changes else ""
+            print(f"    {t['new_tests']}: {t['n_readings']} readings, {sds} ({t['label']}){mark}")
     u, pp = plan.uniform, plan.paper
     print(
         f"predicted sd (theta-averaged closed form): now | after the plan | uniform grid "

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from uq._data.reference import PAPER_PRESSURES_BAR, PAPER_X_MAX_M, PAPER_X_MIN_M
 from uq._derived.plan_search import (
     COST_PER_PRESSURE,
     MAX_PER_HEIGHT,
@@ -220,8 +221,6 @@ def _layout(builder, targets, tests) -> tuple[list, np.ndarray, Frame]:
 def paper_tests(tested_bar, heights_m=None):
     """The paper's protocol (section 3.4) at its pressures not yet tested: 155 -> 65 -> 155 mm in
     5 mm steps (37 readings a test)."""
-    from uq._data.reference import PAPER_PRESSURES_BAR, PAPER_X_MAX_M, PAPER_X_MIN_M
-
     down = np.round(np.arange(PAPER_X_MAX_M, PAPER_X_MIN_M - 1e-9, -0.005), 6)
     hs = np.concatenate([down, down[::-1][1:]])
     tested = np.asarray(tested_bar, float)

@@ -25,7 +25,7 @@ import numpy as np
 from uq._derived.plan_search import MIN_TEST_READINGS, Frame
 from uq._inference.float64 import jax, jnp
 from uq._io.errors import InputError
-from uq._models import pair, surface, thermo
+from uq._models import cubic, pair, surface, thermo
 from uq._physics.quantities import BAR_PA, force_noise_var
 
 DRAWS = 200  # draws of theta behind every frame
@@ -276,8 +276,6 @@ class CubicFrames:
         ``thetas``: each test's draws of theta (S, 3 or 2; the same S for all), ``mean_coef``
         (T0, 4): each test's posterior-mean force cubic in the paper's basis (a + b u + c u^2 +
         d u^3, SI): the budget's reference and the curvature in pressure. Tests in ``rec``'s order."""
-        from uq._models import cubic
-
         self.rec = rec
         p = np.array([t.pressure_bar for t in rec.tests])
         order = np.argsort(p)
@@ -362,8 +360,6 @@ class CubicFrames:
 
     # ---- the frame
     def frame(self, new_bar=(), after_bar=None) -> Frame:
-        from uq._models.cubic import basis
-
         new = np.asarray(new_bar, float).reshape(-1)
         _new_index(new, self.tested)
         T0, J, b = self.tested.size, new.size, self.block
@@ -395,7 +391,7 @@ class CubicFrames:
 
         def reading_rows(j, heights_m):
             x = np.asarray(heights_m, float).reshape(-1)
-            X = np.asarray(basis(x - x0))  # (n, 4)
+            X = np.asarray(cubic.basis(x - x0))  # (n, 4)
             s0, rel, sL = self._noise[nearest[j]]
             ref = np.abs(self.mean_force(x, np.full(x.shape, new[j])))
             sf = np.sqrt(force_noise_var(s0[:, None], rel[:, None], ref[None]))  # (S, n)
@@ -417,7 +413,7 @@ class CubicFrames:
         def force_rows(x, p, open_=None):
             x, p = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(x, p))
             ps, idx = tests_of(open_)
-            X = np.asarray(basis(x - x0))
+            X = np.asarray(cubic.basis(x - x0))
             rows = np.zeros((x.size, k))
             n = np.arange(x.size)
             if ps.size == 1:

@@ -84,8 +84,10 @@ class Frame:
     def n_draws(self) -> int:
         return self.precision.shape[0]
 
-    def pressure_range(self, open_) -> tuple[float, float]:
-        p = np.concatenate([self.tested_bar, self.new_bar[np.asarray(open_, bool)]])
+    def pressure_range(self, open_=None) -> tuple[float, float]:
+        """The lowest and highest pressure of the tests that exist (the file's and ``open_``)."""
+        o = np.zeros(self.new_bar.size, bool) if open_ is None else np.asarray(open_, bool)
+        p = np.concatenate([self.tested_bar, self.new_bar[o]])
         return float(p.min()), float(p.max())
 
     def thinned(self, n: int) -> Frame:

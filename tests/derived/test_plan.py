@@ -490,3 +490,18 @@ def test_pressure_for_is_the_root_and_its_gradient_the_implicit_one():
     # d(W / A) / d b = -W / A^2 (1, t)
     want = -(12000.0 / A**2)[:, None] * np.array([1.0, (0.100 - 0.112) / 0.05])[None]
     np.testing.assert_allclose(grad, want, rtol=1e-4)
+
+
+def test_target_sd_stops_where_the_sd_is_reached():
+    """--target-sd: readings are added until the predicted sd is at most the target, no more. The
+    toy's variance after readings at heights h is 1 / (1 + sum h^2): a new test's first batch is at
+    least 8 readings (5, 5, 4, 4, 3, 3, 2, 2: 1 / 109), one more at 1 reaches 1 / 110."""
+    frame = _toy([lambda h: np.array([h, 0.0])])
+    heights = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    target = parse_target("force@100mm,1bar")
+    tau = (1.0 / 110.0) ** 0.5
+    path = E.search(frame, [target], heights, target_sd=[tau * 1.0001], draws=1)
+    assert path.stop == "target sd reached"
+    assert sorted(r.height_m for r in path.readings) == [1, 2, 2, 3, 3, 4, 4, 5, 5]
+    assert path.n_readings == [0, 8, 9]
+    assert path.sd[-1][0] == pytest.approx(tau) and path.sd[-2][0] > tau * 1.0001

@@ -379,6 +379,20 @@ def _print(rec, plan, info) -> None:
         if plan.target_sd is not None:
             line += f"  (target {_fmt(plan.target_sd[i], t.unit)}: {'reached' if plan.reached[i] else 'NOT reached'})"
         print(line)
+    worse = [
+        t.spec
+        for t, now, after in zip(plan.targets, plan.sd_now, plan.sd_predicted, strict=True)
+        if now is not None and after is not None and after > now
+    ]
+    if worse:
+        print(
+            f"  note: after the plan {', '.join(worse)} {'is' if len(worse) == 1 else 'are'} less "
+            f"certain than now: the model fitted after it ({plan.label}) has more coefficients than "
+            f"now's ({plan.label_now}): its orders follow the number of tests (the plans tried, "
+            "above, show each number of new tests)"
+            if plan.label != plan.label_now
+            else f"  note: after the plan {', '.join(worse)} is less certain than now"
+        )
     print(
         "  left out: the spread of the estimate over the noise parameters (now, per target: "
         + ", ".join(

@@ -430,6 +430,8 @@ def plan_document(plan: Plan, model_info: dict | None = None) -> dict:
             "sd_uniform_grid": plan.uniform["sd"][i],
             "sd_paper_protocol": plan.paper["sd"][i],
         }
+        now, after = plan.sd_now[i], plan.sd_predicted[i]
+        row["less_certain_than_now"] = bool(now is not None and after is not None and after > now)
         if plan.target_sd is not None:
             row["target_sd"] = plan.target_sd[i]
             row["reached"] = plan.reached[i]

@@ -91,10 +91,10 @@ def test_now_frame_mean_is_the_models_posterior_mean(pilot):
 
 def test_greedy_updates_match_the_exact_evaluation(pilot):
     """The search's rank-2 updates and the exact Cholesky evaluation of the same readings agree."""
-    builder, _ = _surface_builder(pilot)
+    builder, _ = _surface_builder(pilot, n_draws=4)
     frame = builder.frame(np.array([3.5, 6.5]))
     targets = [parse_target("force@110mm,6.5bar"), parse_target("pressure_for@110mm,9000N")]
-    path = E.search(frame, targets, HEIGHTS, max_readings=20, draws=8)
+    path = E.search(frame, targets, HEIGHTS, max_readings=20, draws=4)
     exact = np.sqrt(E.evaluate(frame, targets, path.readings).mean(0))
     np.testing.assert_allclose(path.sd[-1], exact, rtol=1e-6)
     assert path.n_readings[-1] == len(path.readings) <= 20
@@ -276,6 +276,7 @@ def test_a_costly_pressure_change_is_made_only_when_it_pays():
 # ----------------------------------------------------------------------------- plans and layouts
 
 
+@pytest.mark.slow  # the plan's document: tests/cli/test_plan_command.py::test_json_has_the_contracts_keys
 def test_make_plan_surface_states_now_after_and_the_comparisons(pilot):
     builder, _ = _surface_builder(pilot, n_draws=6)
     targets = [
@@ -355,6 +356,8 @@ def test_targets_parse():
         parse_target("elastic_casing").with_range([5.0])
 
 
+# the identity's shared code path: test_planned_precision_is_the_pair_likelihoods
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["thermodynamic", "force-only"])
 def test_planned_precision_of_the_other_models(pilot, kind):
     """The same identity for the thermodynamic model (its travel factor scales the piston rows) and

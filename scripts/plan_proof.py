@@ -2,7 +2,7 @@
 after it cover the truth, and does it beat a uniform grid of the same size? Writes proof.json and
 summary.md into ``--out`` (default reports/plan-proof/; committed).
 
-    nice -n 10 .venv/bin/python scripts/plan_proof.py [--reps 8] [--scenarios A,B,C] [--tiny]
+    nice -n 10 .venv/bin/python scripts/plan_proof.py [--scenarios A:12,B:10,C:6] [--tiny]
 
 Each replication of a scenario: the virtual stand records a pilot campaign of a known spring
 (uq._stand.simulator); it is fitted as ``uq plan`` fits it (the surface model, or for ``auto`` the
@@ -395,23 +395,31 @@ def markdown(doc: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--reps", type=int, default=8)
-    ap.add_argument("--scenarios", default="A,B,C")
+    ap.add_argument(
+        "--scenarios",
+        default="A:12,B:10,C:6",
+        help="scenarios and their replications, NAME:REPS,...",
+    )
     ap.add_argument("--draws", type=int, default=100, help="theta draws of the frames")
     ap.add_argument("--search-draws", type=int, default=50)
     ap.add_argument("--tiny", action="store_true", help="one replication of scenario A, 200 steps")
     ap.add_argument("--out", default=str(ROOT / "reports" / "plan-proof"))
     args = ap.parse_args(argv)
     settings = Settings()
-    names = [s.strip() for s in args.scenarios.split(",") if s.strip()]
-    reps = args.reps
+    plan = []
+    for item in (s.strip() for s in args.scenarios.split(",") if s.strip()):
+        name, _, n = item.partition(":")
+        if name not in SCENARIOS:
+            ap.error(f"--scenarios: unknown scenario '{name}'; expected {', '.join(SCENARIOS)}")
+        plan.append((name, int(n) if n else 1))
     if args.tiny:
-        names, reps, settings = names[:1], 1, Settings(n_walkers=16, n_ensembles=2, max_steps=200)
+        plan = [(plan[0][0], 1)]
+        settings = Settings(n_walkers=16, n_ensembles=2, max_steps=200)
         args.draws, args.search_draws = 20, 10
     command = "python scripts/plan_proof.py " + " ".join(argv if argv is not None else sys.argv[1:])
     rows = []
     out = Path(args.out)
-    for name in names:
+    for name, reps in plan:
         sc = SCENARIOS[name]
         if args.tiny:
             sc = Scenario(**{**sc.__dict__, "max_readings": 16})

@@ -138,45 +138,44 @@ class Target:
             np.broadcast_to(extra, (S,)).astype(float),
         )
 
-    def _point(self, frame, open_, x, p):
-        row = frame.force_rows(np.atleast_1d(x), np.atleast_1d(p), open_)
-        extra = _extra(frame, np.atleast_1d(x), np.atleast_1d(p), open_)
-        return row, extra
-
     def _force(self, frame, beta, open_):
-        row, extra = self._point(frame, open_, self.height_m, self.pressure_bar)
-        return beta @ row[0], row[0], extra[0]
+        S = beta.shape[0]
+        row = _rows(frame.force_rows, [self.height_m], [self.pressure_bar], open_, S)[:, 0]
+        extra = _extra(frame, [self.height_m], [self.pressure_bar], open_, S)[:, 0]
+        return np.sum(beta * row, axis=1), row, extra
 
     def _feff(self, frame, beta, open_):
-        row, extra = self._point(frame, open_, self.height_m, self.pressure_bar)
+        value, row, extra = self._force(frame, beta, open_)
         p_pa = self.pressure_bar * BAR_PA
-        return beta @ row[0] / p_pa, row[0] / p_pa, extra[0] / p_pa**2
+        return value / p_pa, row / p_pa, extra / p_pa**2
 
     def _pressure_for(self, frame, beta, open_):
         """The root p* of P(x, p) = W per draw (the force rises with pressure), d p*/d beta =
         -f(x, p*) / (dP/dp_u): the implicit function theorem."""
+        S = beta.shape[0]
         lo, hi = frame.pressure_range(open_)
         ps = np.linspace(lo, hi, N_ROOT_GRID)
         x = np.full(ps.shape, self.height_m)
-        P = beta @ frame.force_rows(x, ps, open_).T  # (S, G)
+        P = np.einsum("sk,sgk->sg", beta, _rows(frame.force_rows, x, ps, open_, S))
         above = P >= self.load_N
         first = np.argmax(above, axis=1)
         ok = above.any(axis=1) & ~above[:, 0]
         if not ok.all():
             return np.nan, np.zeros(beta.shape[1]), np.nan
         i = first
-        rows = np.arange(P.shape[0])
+        rows = np.arange(S)
         p0, p1, f0, f1 = ps[i - 1], ps[i], P[rows, i - 1], P[rows, i]
         root = p0 + (self.load_N - f0) / (f1 - f0) * (p1 - p0)
         xs = np.full(root.shape, self.height_m)
-        row = frame.force_rows(xs, root, open_)  # (S, k)
+        row = _rows_each(frame.force_rows, xs, root, open_, S)  # (S, k)
         up = np.minimum(root + STEP_P_BAR, hi)
         down = np.maximum(root - STEP_P_BAR, lo)
-        slope_rows = (frame.force_rows(xs, up, open_) - frame.force_rows(xs, down, open_)) / (
-            (up - down)[:, None] * BAR_PA
-        )
+        slope_rows = (
+            _rows_each(frame.force_rows, xs, up, open_, S)
+            - _rows_each(frame.force_rows, xs, down, open_, S)
+        ) / ((up - down)[:, None] * BAR_PA)
         slope = np.sum(beta * slope_rows, axis=1)  # dP/dp_u, N/Pa
-        extra = _extra(frame, xs, root, open_) / slope**2
+        extra = _extra(frame, xs, root, open_, S)[rows, rows] / slope**2
         return root * BAR_PA, -row / slope[:, None], extra
 
     def _natural_frequency(self, frame, beta, open_):
@@ -190,14 +189,15 @@ class Target:
         xs = np.array([x, x + STEP_X_M, x - STEP_X_M, x, x])
         pu, pd = min(p + STEP_P_BAR, hi), max(p - STEP_P_BAR, lo)
         ps = np.array([p, p, p, pu, pd])
-        F = frame.force_rows(xs, ps, open_)
+        S = beta.shape[0]
+        F = _rows(frame.force_rows, xs, ps, open_, S)
         rows = {
-            "P": F[0],
-            "Px": (F[1] - F[2]) / (2 * STEP_X_M),
-            "Pp": (F[3] - F[4]) / ((pu - pd) * BAR_PA),
-            "A": frame.area_rows(np.array([x]), np.array([p]), open_)[0],
-        }
-        v = {k: beta @ r for k, r in rows.items()}  # (S,) each
+            "P": F[:, 0],
+            "Px": (F[:, 1] - F[:, 2]) / (2 * STEP_X_M),
+            "Pp": (F[:, 3] - F[:, 4]) / ((pu - pd) * BAR_PA),
+            "A": _rows(frame.area_rows, [x], [p], open_, S)[:, 0],
+        }  # (S, k) each
+        v = {k: np.sum(beta * r, axis=1) for k, r in rows.items()}  # (S,) each
         p_pa, p_atm = p * BAR_PA, s.p_atm_bar * BAR_PA
         vr, vp = s.reservoir_l * 1e-3, s.dvdp_l_per_bar * 1e-3 / BAR_PA
         ns, vs, ws = s.nodes()
@@ -217,11 +217,9 @@ class Target:
             )
         # df = f/2 (dk/k - dP/P); dk = -(dPx + dPp dpdx + Pp d(dpdx)), d(dpdx) = dpdx dA / A
         dk = -(
-            rows["Px"][None]
-            + dpdx[:, None] * rows["Pp"][None]
-            + (v["Pp"] * dpdx / v["A"])[:, None] * rows["A"][None]
+            rows["Px"] + dpdx[:, None] * rows["Pp"] + (v["Pp"] * dpdx / v["A"])[:, None] * rows["A"]
         )
-        grad = (f / 2)[:, None] * (dk / k[:, None] - rows["P"][None] / v["P"][:, None])
+        grad = (f / 2)[:, None] * (dk / k[:, None] - rows["P"] / v["P"][:, None])
         spread = np.stack([freq(v, n, V)[0] for n, V in zip(ns, vs, strict=True)])  # (nodes, S)
         extra = ws @ (spread - ws @ spread) ** 2
         return f, grad, extra
@@ -232,18 +230,41 @@ class Target:
         C'(x0) / V0'(x0), whichever two pressures."""
         p_lo, p_hi = self.pressures_bar
         x0 = frame.x0_m
-        rows = frame.area_rows(np.array([x0, x0]), np.array([p_lo, p_hi]), open_)
-        a_lo, a_hi = beta @ rows[0], beta @ rows[1]
+        rows = _rows(frame.area_rows, [x0, x0], [p_lo, p_hi], open_, beta.shape[0])
+        a_lo, a_hi = np.sum(beta * rows[:, 0], axis=1), np.sum(beta * rows[:, 1], axis=1)
         N, D = a_hi - a_lo, p_hi * a_lo - p_lo * a_hi
         value = N / D
         d_hi = (D + N * p_lo) / D**2
         d_lo = -(D + N * p_hi) / D**2
-        return value, d_hi[:, None] * rows[1][None] + d_lo[:, None] * rows[0][None], 0.0
+        return value, d_hi[:, None] * rows[:, 1] + d_lo[:, None] * rows[:, 0], 0.0
 
 
-def _extra(frame, x, p, open_) -> np.ndarray:
+def _rows(fn, x, p, open_, S: int) -> np.ndarray:
+    """A frame's rows at points, per draw, (S, n, k): rows that do not depend on the draw ((n, k),
+    the models linear in fixed functions) are broadcast without copying; a model whose rows between
+    tests depend on its sampled parameters (a Gaussian process in pressure) gives (S, n, k)."""
+    r = np.asarray(
+        fn(np.atleast_1d(np.asarray(x, float)), np.atleast_1d(np.asarray(p, float)), open_)
+    )
+    return np.broadcast_to(r, (S, *r.shape)) if r.ndim == 2 else r
+
+
+def _rows_each(fn, x, p, open_, S: int) -> np.ndarray:
+    """Draw s's row at point s, (S, k) (x, p of S points: a root per draw)."""
+    r = np.asarray(fn(np.asarray(x, float), np.asarray(p, float), open_))
+    return r if r.ndim == 2 else r[np.arange(S), np.arange(S)]
+
+
+def _extra(frame, x, p, open_, S: int) -> np.ndarray:
+    """The force's irreducible variance at points, per draw, (S, n) (zero without one)."""
     fn = getattr(frame, "extra_force_var", None)
-    return np.zeros(np.shape(x)) if fn is None else np.asarray(fn(x, p, open_), float)
+    n = np.size(x)
+    if fn is None:
+        return np.zeros((S, n))
+    e = np.asarray(
+        fn(np.atleast_1d(np.asarray(x, float)), np.atleast_1d(np.asarray(p, float)), open_), float
+    )
+    return np.broadcast_to(e, (S, n)) if e.ndim == 1 else e
 
 
 _SPEC = re.compile(r"^\s*([a-z_]+)\s*(?:@(.*))?$")

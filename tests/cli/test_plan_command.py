@@ -60,6 +60,7 @@ def no_fitting(monkeypatch):
         ),
         (["--target", "elastic_casing", "--model", "cubics"], "do not interpolate the volume"),
         (["--target", "force@110mm,6bar", "--target", "force@110mm,6bar"], "given twice"),
+        (["--target", "force@110mm,6bar", "--walkers", "8"], "option --walkers: 8 walkers"),
     ],
 )
 def test_refused_before_the_fit(pilot, no_fitting, capsys, extra, match):

@@ -519,6 +519,7 @@ def command_plan(args) -> int:
     targets = _targets(args)
     args.target_specs = [f"--target {s}" for s in args.target]
     settings = settings_from(args)
+    settings.require_walkers({"thermodynamic": 6, "cubics": 3}.get(args.model, 5))
     stand = stand_from(args)
     rec = load(args)
     targets = [t.with_range([x.pressure_bar for x in rec.tests]) for t in targets]

@@ -60,9 +60,10 @@ class Frame:
     new test j (r = 2: force and piston; 1 for a force-only model).
     force_rows(x (n,), p (n,), open (J,) bool) -> (n, k): the mean force at (x, p) is rows @ beta,
     with the new tests ``open`` made (an interpolating model's rows depend on which tests exist:
-    ``rows_follow_tests``); area_rows the same for dV/dx (None: the model has no volume, and
-    ``volume_why`` says why); extra_force_var(x, p, open) -> (n,) N^2 the force's variance no
-    reading at other pressures reduces (an interpolation error), or None.
+    ``rows_follow_tests``), or (S, n, k) for rows that depend on the draw; area_rows the same for
+    dV/dx (None: the model has no volume, and ``volume_why`` says why); extra_force_var(x, p, open)
+    -> (n,) or (S, n), N^2: the force's variance no reading at other pressures reduces (an
+    interpolation error), or None.
     """
 
     name: str
@@ -101,8 +102,25 @@ class Frame:
         def reading_rows(j, heights_m):
             return rows(j, heights_m)[idx]
 
+        def per_draw(fn, ndim):
+            """``fn`` with its per-draw results (``ndim`` dimensions) on the kept draws."""
+            if fn is None:
+                return None
+
+            def kept(*a):
+                r = np.asarray(fn(*a))
+                return r[idx] if r.ndim == ndim else r
+
+            return kept
+
         return replace(
-            self, precision=self.precision[idx], mean=self.mean[idx], reading_rows=reading_rows
+            self,
+            precision=self.precision[idx],
+            mean=self.mean[idx],
+            reading_rows=reading_rows,
+            force_rows=per_draw(self.force_rows, 3),
+            area_rows=per_draw(self.area_rows, 3),
+            extra_force_var=per_draw(self.extra_force_var, 2),
         )
 
 

@@ -27,6 +27,7 @@ grid's (by how much, per target). Where the prediction is poor, summary.md says 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -384,11 +385,35 @@ def markdown(doc: dict) -> str:
             f"({t['ratio_min']:.2f}-{t['ratio_max']:.2f}) | {t['covered']}/{t['n']} | "
             f"{t['uniform_over_plan_sd']:.2f} | {t['plan_better']}/{t['n']} |"
         )
+    lines += ["", "Where the prediction is poor (flagged from the rows above):", ""]
+    flagged = False
+    for t in doc["by_target"]:
+        lo, hi = binomial_region(t["n"])
+        why = []
+        if not 0.8 <= t["ratio_mean"] <= 1.25:
+            why.append(f"achieved/predicted {t['ratio_mean']:.2f} on average")
+        if t["ratio_min"] < 0.6 or t["ratio_max"] > 1.6:
+            why.append(f"a replication at {t['ratio_min']:.2f}-{t['ratio_max']:.2f}")
+        if t["covered"] < lo:
+            why.append(f"{t['covered']}/{t['n']} covered, below the binomial region {lo}-{hi}")
+        if why:
+            flagged = True
+            lines.append(f"- {t['scenario']} `{t['spec']}`: " + "; ".join(why))
+    switched = [r for r in doc["rows"] if "model_after_auto" in r]
+    if switched:
+        n = sum(r["model_after_auto"] != r["model"] for r in switched)
+        flagged = flagged or n > 0
+        lines.append(
+            f"- model choice (`auto`): planned with {', '.join(sorted({r['model'] for r in switched}))}; "
+            f"after the new data PSIS-LOO chose another model in {n} of {len(switched)} replications"
+        )
+    if not flagged:
+        lines.append("- none")
     lines += ["", "Scenarios:", ""]
     for name in sorted({r["scenario"] for r in doc["rows"]}):
         sc = SCENARIOS[name]
         lines.append(
-            f"- {name}: {sc.words}; targets {', '.join(sc.targets)}; {sc.max_readings} readings."
+            f"- {name}: {sc.words}; targets {', '.join(sc.targets)}; at most {sc.max_readings} readings."
         )
     return "\n".join(lines) + "\n"
 
@@ -403,8 +428,18 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=100, help="theta draws of the frames")
     ap.add_argument("--search-draws", type=int, default=50)
     ap.add_argument("--tiny", action="store_true", help="one replication of scenario A, 200 steps")
+    ap.add_argument(
+        "--summary-only",
+        action="store_true",
+        help="rewrite summary.md from the proof.json in --out (no replication run)",
+    )
     ap.add_argument("--out", default=str(ROOT / "reports" / "plan-proof"))
     args = ap.parse_args(argv)
+    out = Path(args.out)
+    if args.summary_only:
+        doc = json.loads((out / "proof.json").read_text())
+        write_text_atomic(out / "summary.md", markdown(doc))
+        return 0
     settings = Settings()
     plan = []
     for item in (s.strip() for s in args.scenarios.split(",") if s.strip()):
@@ -418,7 +453,6 @@ def main(argv=None) -> int:
         args.draws, args.search_draws = 20, 10
     command = "python scripts/plan_proof.py " + " ".join(argv if argv is not None else sys.argv[1:])
     rows = []
-    out = Path(args.out)
     for name, reps in plan:
         sc = SCENARIOS[name]
         if args.tiny:

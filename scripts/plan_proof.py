@@ -168,8 +168,8 @@ def fit_model(rec, model: str, seed: int, settings):
     if model == "cubics":
         return fit_campaign(rec, seed=seed, settings=settings), "cubics", "given"
     fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-    _, info = choose_model(fit, cub, comparison)
-    if info["why"].startswith("the data prefer the per-pressure cubics"):
+    ans, info = choose_model(fit, cub, comparison)
+    if isinstance(ans, CubicInterpolation):
         return cub, "cubics", info["why"]
     return fit, "surface", info["why"]
 

@@ -293,7 +293,7 @@ def _fit(args, rec, targets, stand, settings):
 
 def _choose(args, rec, targets, stand, settings):
     from uq._derived.comparison import FITTERS, fit_both, force_side
-    from uq._derived.margin import choose_model
+    from uq._derived.margin import CubicInterpolation, choose_model
     from uq._models.cubic import fit_campaign
 
     if args.model in FITTERS:
@@ -303,9 +303,9 @@ def _choose(args, rec, targets, stand, settings):
         cub = fit_campaign(force_side(rec), seed=args.seed, settings=settings, stand=stand)
         return cub, {"name": "cubics", "why": "chosen by the user (--model cubics)"}
     fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand)
-    _, info = choose_model(fit, cub, comparison)
+    ans, info = choose_model(fit, cub, comparison)
     info = {k: v for k, v in info.items() if k in ("why", "comparison")}
-    if info.get("why", "").startswith("the data prefer the per-pressure cubics"):
+    if isinstance(ans, CubicInterpolation):
         reason = None
         if any(t.needs_volume for t in targets):
             reason = "the targets need the volume-derived area between tested pressures, which the cubics do not interpolate"

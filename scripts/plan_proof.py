@@ -337,6 +337,28 @@ def summarise(rows: list[dict], command: str) -> dict:
                 "plan_better": int(np.sum(gain > 1)),
             }
         )
+    poor = []
+    for t in targets:
+        lo, hi = binomial_region(t["n"])
+        why = []
+        if not 0.8 <= t["ratio_mean"] <= 1.25:
+            why.append(f"achieved/predicted {t['ratio_mean']:.2f} on average")
+        if t["ratio_min"] < 0.6 or t["ratio_max"] > 1.6:
+            why.append(f"a replication at {t['ratio_min']:.2f}-{t['ratio_max']:.2f}")
+        if t["covered"] < lo:
+            why.append(f"{t['covered']}/{t['n']} covered, below the binomial region {lo}-{hi}")
+        if why:
+            poor.append(f"{t['scenario']} `{t['spec']}`: " + "; ".join(why))
+    auto = [r for r in rows if "model_after_auto" in r]
+    choice = None
+    if auto:
+        n = sum(r["model_after_auto"] != r["model"] for r in auto)
+        choice = (
+            f"model choice (`auto`): planned with {', '.join(sorted({r['model'] for r in auto}))}; "
+            f"after the new data PSIS-LOO chose another model in {n} of {len(auto)} replications"
+        )
+        if n:
+            poor.append(choice)
     n_all = sum(t["n"] for t in targets)
     cov_all = sum(t["covered"] for t in targets)
     ratios = np.array([t["ratio"] for r in rows for t in r["targets"]])
@@ -358,6 +380,8 @@ def summarise(rows: list[dict], command: str) -> dict:
             else None,
         },
         "by_target": targets,
+        "poor": poor,
+        "model_choice": choice,
         "converged": {k: int(sum(r["converged"][k] for r in rows)) for k in ("plan", "uniform")},
         "rows": rows,
     }
@@ -386,29 +410,9 @@ def markdown(doc: dict) -> str:
             f"{t['uniform_over_plan_sd']:.2f} | {t['plan_better']}/{t['n']} |"
         )
     lines += ["", "Where the prediction is poor (flagged from the rows above):", ""]
-    flagged = False
-    for t in doc["by_target"]:
-        lo, hi = binomial_region(t["n"])
-        why = []
-        if not 0.8 <= t["ratio_mean"] <= 1.25:
-            why.append(f"achieved/predicted {t['ratio_mean']:.2f} on average")
-        if t["ratio_min"] < 0.6 or t["ratio_max"] > 1.6:
-            why.append(f"a replication at {t['ratio_min']:.2f}-{t['ratio_max']:.2f}")
-        if t["covered"] < lo:
-            why.append(f"{t['covered']}/{t['n']} covered, below the binomial region {lo}-{hi}")
-        if why:
-            flagged = True
-            lines.append(f"- {t['scenario']} `{t['spec']}`: " + "; ".join(why))
-    switched = [r for r in doc["rows"] if "model_after_auto" in r]
-    if switched:
-        n = sum(r["model_after_auto"] != r["model"] for r in switched)
-        flagged = flagged or n > 0
-        lines.append(
-            f"- model choice (`auto`): planned with {', '.join(sorted({r['model'] for r in switched}))}; "
-            f"after the new data PSIS-LOO chose another model in {n} of {len(switched)} replications"
-        )
-    if not flagged:
-        lines.append("- none")
+    lines += [f"- {w}" for w in doc["poor"]] or ["- none"]
+    if doc.get("model_choice"):
+        lines += ["", f"{doc['model_choice'][0].upper()}{doc['model_choice'][1:]}."]
     lines += ["", "Scenarios:", ""]
     for name in sorted({r["scenario"] for r in doc["rows"]}):
         sc = SCENARIOS[name]
@@ -431,13 +435,16 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--summary-only",
         action="store_true",
-        help="rewrite summary.md from the proof.json in --out (no replication run)",
+        help="recompute the summary (proof.json's, summary.md) from the rows of the proof.json in "
+        "--out (no replication run)",
     )
     ap.add_argument("--out", default=str(ROOT / "reports" / "plan-proof"))
     args = ap.parse_args(argv)
     out = Path(args.out)
     if args.summary_only:
-        doc = json.loads((out / "proof.json").read_text())
+        old = json.loads((out / "proof.json").read_text())
+        doc = summarise(old["rows"], old["command"])
+        write_text_atomic(out / "proof.json", dumps_json(doc))
         write_text_atomic(out / "summary.md", markdown(doc))
         return 0
     settings = Settings()

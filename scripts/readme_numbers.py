@@ -554,6 +554,15 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
                 f"({t['ratio_min']:.2f}-{t['ratio_max']:.2f}) | {t['covered']}/{t['n']} | "
                 f"{t['uniform_over_plan_sd']:.2f} | {t['plan_better']}/{t['n']} |"
             )
+        lines += [
+            "",
+            "Flagged (a mean ratio outside 0.8-1.25, a replication outside 0.6-1.6, coverage "
+            "below its binomial region, a model choice that changed):",
+            "",
+        ]
+        lines += [f"- {w}" for w in d.get("poor", [])] or ["- none"]
+        if d.get("model_choice"):
+            lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
         return "\n".join(lines) + "\n"
 
     return make

@@ -93,7 +93,7 @@ QUANTITIES = (*FORCE_NAMES, "sigma0_N", "rel_force")
 def run_project(
     test: PressureTest, x0_m: float, *, seed: int, seconds: float, settings: Settings
 ) -> dict:
-    from uq._models.cubic import fit_test
+    from uq._models.cubic_fit import fit_test
 
     # JIT warm-up, not timed: a whole fit, so the draw programs of the timed runs' bucket are compiled too
     fit_test(test, x0_m, seed=seed, settings=settings)
@@ -326,7 +326,7 @@ def scaling(
     given beside the wall time; memory is the peak RSS the fit added over the RSS before it."""
     import tempfile
 
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="uq-bench-scaling-") as tmp:
@@ -468,7 +468,8 @@ def margin_speed(
 
     from uq._data.recordings import read_recordings, write_recordings_csv
     from uq._data.stand_description import PAPER_STAND
-    from uq._derived.margin import fit_and_choose, load_answer, margin, save_answer
+    from uq._derived.comparison import fit_and_choose
+    from uq._derived.margin import load_answer, margin
     from uq._io.files import dumps_json
     from uq._stand.simulator import simulate
 
@@ -521,16 +522,12 @@ def margin_speed(
         t_answer = time.perf_counter() - t0
         path = Path(tmp) / "fit.nc"
         t0 = time.perf_counter()
-        save_answer(
+        ans.save(
             path,
-            ans,
-            info,
-            recordings=rec,
-            seed=seed,
             written_by="benchmarks/bench.py --margin",
-            settings=settings,
-            stand=PAPER_STAND,
-            diagnostics=diagnostics,
+            model_info=info,
+            converged=diagnostics["converged"],
+            warnings=diagnostics["warnings"],
         )
         t_save = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -839,9 +836,10 @@ def measure(args) -> tuple[str, dict]:
     if args.batch:
         return "batch", record | batch_speedup(args.batch, seed=args.seed)
     if args.margin:
-        from uq._models.surface import NOISE_NAMES
+        from uq._models import registry
 
-        settings.require_walkers(len(NOISE_NAMES))  # the surface model samples its noise
+        # the default model samples its noise
+        settings.require_walkers(registry.entry(registry.default("margin")).n_sampled)
         r = margin_speed(
             seed=args.seed, settings=settings, recordings=args.recordings, n_queries=args.queries
         )

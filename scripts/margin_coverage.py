@@ -49,15 +49,11 @@ from scipy import stats  # noqa: E402
 from uq._data.recordings import read_recordings, write_recordings_csv  # noqa: E402
 from uq._data.stand_description import PAPER_STAND  # noqa: E402
 from uq._derived.comparison import fit_both  # noqa: E402
-from uq._derived.margin import (  # noqa: E402
-    CubicInterpolation,
-    SurfaceAnswer,
-    choose_model,
-    pressure_needed,
-)
+from uq._derived.margin import choose, pressure_needed  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.errors import InputError  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
+from uq._models.cubic_interpolation import CubicInterpolation  # noqa: E402
 from uq._stand.shapes import catalogue_recordings  # noqa: E402
 from uq._stand.simulator import SPRINGS, Layout, simulate  # noqa: E402
 
@@ -97,10 +93,10 @@ def one_campaign(
         path.write_text(write_recordings_csv(simulate(spring, seed=seed, layout=layout)))
         rec = read_recordings(str(path))
     surface, cubics, comparison = fit_both(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-    chosen, info = choose_model(surface, cubics, comparison)
+    chosen, info = choose(surface, cubics, comparison)
     answers = {
-        "surface": SurfaceAnswer(surface),
-        "cubics": CubicInterpolation(cubics, seed=seed),
+        "surface": surface,
+        "cubics": CubicInterpolation.of(cubics, seed=seed),
         "chosen": chosen,
     }
     truth = SPRINGS[spring]()

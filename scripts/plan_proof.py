@@ -2,10 +2,10 @@
 after it cover the truth, and does it beat a uniform grid of the same size? Writes proof.json and
 summary.md into ``--out`` (default reports/plan-proof/; committed).
 
-    nice -n 10 .venv/bin/python scripts/plan_proof.py [--scenarios A:12,B:10,C:6] [--tiny]
+    nice -n 10 .venv/bin/python scripts/plan_proof.py [--scenarios A:12,B:10,C:6,D:4] [--keep-rows] [--tiny]
 
 Each replication of a scenario: the virtual stand records a pilot campaign of a known spring
-(uq._stand.simulator); it is fitted as ``uq plan`` fits it (the surface model, or for ``auto`` the
+(uq._stand.simulator); it is fitted as ``uq plan`` fits it (the scenario's registry model, or for ``auto`` the
 model ``uq margin`` would choose); ``uq plan``'s engine plans ``--max-readings`` readings for the
 scenario's targets (uq._derived.plan.make_plan); the stand reads the planned tests
 (``simulate_planned``), and, apart, a uniform grid of the same size (same readings, same number of
@@ -43,16 +43,15 @@ from scipy.optimize import brentq  # noqa: E402
 
 from uq._data.recordings import recordings_from_text, write_recordings_csv  # noqa: E402
 from uq._data.stand_description import PAPER_STAND  # noqa: E402
-from uq._derived.comparison import fit_both  # noqa: E402
-from uq._derived.design import DesignGrid, SealedDesign, SurfaceDesignModel, sealed_draws  # noqa: E402
-from uq._derived.margin import CubicInterpolation, SurfaceAnswer, choose_model, pressure_needed  # noqa: E402
+from uq._derived.comparison import fit_both, force_side  # noqa: E402
+from uq._derived.design import DesignGrid, SealedDesign, sealed_draws  # noqa: E402
+from uq._derived.margin import AUTO, choose, pressure_needed  # noqa: E402
 from uq._derived.plan import make_plan, plan_document, uniform_readings  # noqa: E402
 from uq._derived.plan_frames import frames_of  # noqa: E402
 from uq._derived.plan_targets import SealedInputs, parse_target  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
-from uq._models.cubic import fit_campaign  # noqa: E402
-from uq._models.surface import fit_surface  # noqa: E402
+from uq._models import registry  # noqa: E402
 from uq._physics.quantities import BAR_PA  # noqa: E402
 from uq._physics.sealed import natural_frequency_Hz  # noqa: E402
 from uq._stand.sealed_test import sealed_truth  # noqa: E402
@@ -70,7 +69,7 @@ class Scenario:
     pressures_bar: tuple
     step_m: float
     targets: tuple
-    model: str = "surface"  # or "auto": the model uq margin would choose
+    model: str = registry.SURFACE  # a registry name, or AUTO: the model uq margin would choose
     max_readings: int = 60
     candidates_bar: tuple = (0.1, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10)
     extra: dict = field(default_factory=dict)
@@ -103,7 +102,18 @@ SCENARIOS = {
         (1.0, 4.0, 7.0, 10.0),
         0.010,
         ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
-        model="auto",
+        model=AUTO,
+        candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
+    ),
+    "D": Scenario(
+        "D",
+        "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, planned "
+        "and fitted with the surface with a discrepancy in pressure",
+        "n50",
+        (1.0, 4.0, 7.0, 10.0),
+        0.010,
+        ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
+        model=registry.DISCREPANCY,
         candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
     ),
 }
@@ -162,24 +172,21 @@ def sealed_inputs(sc: Scenario) -> SealedInputs | None:
 
 
 def fit_model(rec, model: str, seed: int, settings):
-    """(fit, name, why): the surface, or the model uq margin would choose (``auto``)."""
-    if model == "surface":
-        return fit_surface(rec, seed=seed, settings=settings), "surface", "given"
-    if model == "cubics":
-        return fit_campaign(rec, seed=seed, settings=settings), "cubics", "given"
+    """(fit, name, why): the registry's model ``model``, or the model uq margin would choose
+    (``AUTO``: the registry's default against the per-pressure cubics)."""
+    if model != AUTO:
+        side = force_side(rec) if model == registry.CUBICS else rec
+        fit = registry.fit(model, side, seed=seed, settings=settings, stand=PAPER_STAND)
+        return fit, fit.name, "given"
     fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=PAPER_STAND)
-    ans, info = choose_model(fit, cub, comparison)
-    if isinstance(ans, CubicInterpolation):
-        return cub, "cubics", info["why"]
-    return fit, "surface", info["why"]
+    ans, info = choose(fit, cub, comparison)
+    return ans, ans.name, info["why"]
 
 
 def answer(fit, name: str, target, sealed: SealedInputs | None) -> np.ndarray:
-    """Posterior draws of the target as the commands give it, target units."""
-    if name == "cubics":
-        ans = CubicInterpolation(fit)
-    else:
-        ans = SurfaceAnswer(fit)
+    """Posterior draws of the target as the commands give it (the FittedModel protocol), target
+    units."""
+    ans = fit
     if target.kind == "force":
         return ans.force_draws(np.array(target.height_m), target.pressure_bar)
     if target.kind == "feff":
@@ -201,9 +208,8 @@ def answer(fit, name: str, target, sealed: SealedInputs | None) -> np.ndarray:
 
 def natural_frequency_draws(fit, target, sealed) -> np.ndarray:
     """``uq design``'s natural frequency at the design point, per draw (its sealed path there)."""
-    model = SurfaceDesignModel(fit, 1000)
     design = SealedDesign(target.height_m, target.pressure_bar, sealed.volume_l)
-    grid = DesignGrid(model, target.height_m)
+    grid = DesignGrid(fit.on_draws(1000), target.height_m)
     path, _ = sealed_draws(grid, design, target.pressure_bar, [target.height_m])
     return natural_frequency_Hz(path.rate_N_per_m[:, 0], path.force_N[:, 0])
 
@@ -257,9 +263,9 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
     fits = {}
     for kind, tests in (("plan", doc["tests"]), ("uniform", uni_tests)):
         rec = combined(sc, pilot_tests, tests, seed + 500 + (kind == "uniform"))
-        f, n2, why2 = fit_model(rec, sc.model if sc.model != "auto" else name, seed + 7, settings)
-        if sc.model == "auto" and kind == "plan":  # would uq margin still choose it?
-            _, n_auto, why_auto = fit_model(rec, "auto", seed + 7, settings)
+        f, n2, why2 = fit_model(rec, sc.model if sc.model != AUTO else name, seed + 7, settings)
+        if sc.model == AUTO and kind == "plan":  # would uq margin still choose it?
+            _, n_auto, why_auto = fit_model(rec, AUTO, seed + 7, settings)
             out["model_after_auto"] = n_auto
             out["model_after_why"] = why_auto
         fits[kind] = (f, n2, _converged(f))
@@ -438,6 +444,12 @@ def main(argv=None) -> int:
         help="recompute the summary (proof.json's, summary.md) from the rows of the proof.json in "
         "--out (no replication run)",
     )
+    ap.add_argument(
+        "--keep-rows",
+        action="store_true",
+        help="keep the rows of the scenarios not run from the proof.json in --out (their command "
+        "is kept in 'commands')",
+    )
     ap.add_argument("--out", default=str(ROOT / "reports" / "plan-proof"))
     args = ap.parse_args(argv)
     out = Path(args.out)
@@ -459,7 +471,13 @@ def main(argv=None) -> int:
         settings = Settings(n_walkers=16, n_ensembles=2, max_steps=200)
         args.draws, args.search_draws = 20, 10
     command = "python scripts/plan_proof.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    rows = []
+    rows, commands = [], []
+    if args.keep_rows and (out / "proof.json").exists():
+        old = json.loads((out / "proof.json").read_text())
+        run_now = {name for name, _ in plan}
+        rows = [r for r in old["rows"] if r["scenario"] not in run_now]
+        commands = [c for c in old.get("commands", [old["command"]]) if c != command.strip()]
+    commands.append(command.strip())
     for name, reps in plan:
         sc = SCENARIOS[name]
         if args.tiny:
@@ -477,7 +495,7 @@ def main(argv=None) -> int:
                 + f" ({row['seconds']:.0f} s)",
                 flush=True,
             )
-            doc = summarise(rows, command.strip())
+            doc = summarise(rows, "; ".join(commands)) | {"commands": commands}
             write_text_atomic(out / "proof.json", dumps_json(doc))
             write_text_atomic(out / "summary.md", markdown(doc))
     return 0

@@ -568,6 +568,115 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def n50_bands_summary(rel: str) -> Callable[[], str]:
+    """scripts/n50_bands.py: the three models' 90 % force bands on data/n50 against Table 1's curves."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        models = ("discrepancy", "surface", "cubics")
+        heights = ", ".join(f"{h:g}" for h in d["heights_mm"])
+        lines = [
+            f"From `{rel}` (`{d['command'].strip()}`; {d['source']}, seed {d['seed']}; truth: Table 1's "
+            "cubics, PCHIP between the tested pressures). The 90 % force band holds the truth at:",
+            "",
+            "| points | discrepancy surface | smooth surface | per-pressure cubics |",
+            "| --- | --- | --- | --- |",
+        ]
+        for key, words in (
+            ("tested_33", f"the 11 tested pressures at {heights} mm"),
+            ("tested_all", "every tested (pressure, height)"),
+            ("between", f"half-way between tested pressures at {heights} mm"),
+        ):
+            cells = " | ".join(
+                f"{d[key][m]['covered']} of {d[key][m]['of']} (mean width {d[key][m]['mean_width_N']:.0f} N)"
+                for m in models
+            )
+            lines.append(f"| {words} | {cells} |")
+        a = d["at_tested_against_cubics"]["discrepancy"]
+        s = d["at_tested_against_cubics"]["surface"]
+        hp = d["hyperparameters"]
+        lines += [
+            "",
+            f"At the tested points the discrepancy surface's band is {a['width_over_cubics_median']:.2f} "
+            f"times as wide as the cubics' (median; {a['width_over_cubics_range'][0]:.2f}-"
+            f"{a['width_over_cubics_range'][1]:.2f}) and its centre {a['centre_shift_in_cubic_sd_median']:.2f} "
+            f"cubic sd from theirs (median; at most {a['centre_shift_in_cubic_sd_max']:.2f}); the smooth "
+            f"surface's centre is {s['centre_shift_in_cubic_sd_median']:.2f} cubic sd from theirs (at most "
+            f"{s['centre_shift_in_cubic_sd_max']:.2f}). Posterior: a_F {hp['a_F_m2']['mean'] * 1e4:.1f} cm^2 "
+            f"[{hp['a_F_m2']['q05'] * 1e4:.1f}, {hp['a_F_m2']['q95'] * 1e4:.1f}], a_V "
+            f"{hp['a_V_m2']['mean'] * 1e4:.1f} cm^2 [{hp['a_V_m2']['q05'] * 1e4:.1f}, "
+            f"{hp['a_V_m2']['q95'] * 1e4:.1f}], length scale {hp['length_bar']['mean']:.2f} bar "
+            f"[{hp['length_bar']['q05']:.2f}, {hp['length_bar']['q95']:.2f}]; "
+            f"{'converged' if d['converged'] else 'NOT converged'}.",
+        ]
+        b = d.get("between_nodes")
+        if b:
+            lines += [
+                "",
+                f"Between the virtual pressures ({b['node_step_bar']:.2f} bar apart): "
+                f"{100 * b['share_length_below_0.5_bar']:.0f} % of the draws have a length scale below "
+                f"0.5 bar, {100 * b['share_length_below_0.25_bar']:.0f} % below 0.25 bar; the conditional "
+                "variance the two-point mean neglects half-way between nodes is, averaged over the draws, "
+                f"{100 * b['mean_neglected_variance']:.2f} % of the deviation's prior variance.",
+            ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+def between_coverage_summary(rel: str) -> Callable[[], str]:
+    """scripts/between_coverage.py: pooled coverage per spring and grid, the width ratio, the
+    counts outside their interval."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        models = ("discrepancy", "surface", "cubics")
+        n = d["replications"]
+        pooled, ratio = d["pooled_coverage"], d["width_ratio_discrepancy_over_surface"]
+        lines = [
+            f"From `{rel}` (`{d['command'].strip()}`; {n} replications per spring and grid, "
+            f"{d['seconds'] / 3600:.1f} h of wall time; RECONSTRUCTED data). Share of the queries half-way "
+            "between tested pressures whose 90 % interval held the truth, pooled over heights, pressures "
+            "and replications (a summary: the by-pressure-and-height counts with their binomial "
+            "intervals are in `reports/between-coverage/summary.md`):",
+            "",
+            "| spring | grid | what | discrepancy | surface | cubics | width: discrepancy / surface |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        keys = sorted({k.rsplit("/", 2)[0] for k in pooled}, key=lambda k: (k.split("/")[1], k))
+        for key in keys:
+            spring, grid = key.split("/")
+            for what in ("force", "margin"):
+                vals = [pooled.get(f"{key}/{m}/{what}") for m in models]
+                r = ratio.get(f"{key}/{what}")
+                lines.append(
+                    f"| {spring} | {grid} | {what} | "
+                    + " | ".join("-" if v is None else f"{v:.2f}" for v in vals)
+                    + f" | {'-' if r is None else f'{r:.2f}'} |"
+                )
+        out = {m: 0 for m in models}
+        total = {m: 0 for m in models}
+        for r in d["rows"]:
+            total[r["model"]] += 1
+            out[r["model"]] += not r["level_inside"]
+        lines += [
+            "",
+            "Counts (by spring, grid, pressure, height and force or margin) whose exact 90 % interval "
+            "excludes 0.90: "
+            + ", ".join(f"{m} {out[m]} of {total[m]}" for m in models)
+            + ". CPU seconds per fit (mean): "
+            + ", ".join(f"{m} {v:.0f}" for m, v in d["mean_cpu_seconds_per_fit"].items())
+            + ".",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 BLOCKS: dict[str, Block] = {
     "simulate-n50": run_block(
         "simulate --out data/n50/recordings.csv --spring n50 --seed 20201 --pressures "
@@ -636,6 +745,10 @@ BLOCKS: dict[str, Block] = {
     ),
     "plan-proof": report_block(plan_proof_summary("reports/plan-proof/proof.json")),
     "diagnose-power": report_block(diagnose_power_summary("reports/diagnose-power/power.json")),
+    "n50-bands": report_block(n50_bands_summary("reports/between-coverage/n50-bands.json")),
+    "between-coverage": report_block(
+        between_coverage_summary("reports/between-coverage/coverage.json")
+    ),
 }
 
 

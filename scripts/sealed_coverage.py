@@ -36,15 +36,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from uq._data.stand_description import PAPER_STAND  # noqa: E402
-from uq._derived.design import (  # noqa: E402
-    DesignGrid,
-    SealedDesign,
-    SurfaceDesignModel,
-    sealed_draws,
-)
+from uq._derived.design import DesignGrid, SealedDesign, sealed_draws  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
-from uq._models.surface import DEFAULT_ORDERS, Orders, fit_surface  # noqa: E402
+from uq._models.surface import DEFAULT_ORDERS, Orders  # noqa: E402
+from uq._models.surface_likelihood import fit_surface  # noqa: E402
 from uq._physics.sealed import natural_frequency_Hz  # noqa: E402
 from uq._stand.sealed_test import simulate_sealed  # noqa: E402
 from uq._stand.simulator import Layout, simulate_recordings  # noqa: E402
@@ -146,7 +142,7 @@ def scenario_rows(model, scenario, seed: int) -> dict:
 def replicate(seed: int, layout, orders, settings, max_draws) -> list[dict]:
     rec = simulate_recordings(SPRING, seed=seed, layout=layout)
     fit = fit_surface(rec, orders, seed=seed, settings=settings, max_draws=max_draws)
-    model = SurfaceDesignModel(fit, max_draws)
+    model = fit.on_draws(max_draws)
     rows = [scenario_rows(model, sc, seed) for sc in SCENARIOS]
     for r in rows:
         r["converged"] = bool(fit.convergence.converged)

@@ -23,7 +23,7 @@ def n50_recordings():
 def n50_fit(n50_recordings):
     """The bundled campaign fitted once with the default settings and seed (about 35 s)."""
     from uq._cli.common import DEFAULT_SEED
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     return fit_campaign(n50_recordings, seed=DEFAULT_SEED)
 
@@ -31,6 +31,6 @@ def n50_fit(n50_recordings):
 @pytest.fixture(scope="session")
 def n50_surface(n50_recordings):
     """The surface model fitted once to the bundled campaign (the default orders and settings)."""
-    from uq._models.surface import fit_surface
+    from uq._models.surface_likelihood import fit_surface
 
     return fit_surface(n50_recordings, seed=20201)

@@ -10,10 +10,13 @@ from __future__ import annotations
 import doctest
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 import uq
+
+ROOT = Path(__file__).resolve().parents[1]
 
 SMALL = dict(layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
 QUICK = uq.Settings(max_steps=200)
@@ -110,7 +113,8 @@ def test_docstring_examples(name):
 
 @pytest.mark.slow
 def test_package_examples_surface_margin_diagnose():
-    """uq/__init__.py's examples: fit_surface, margin, SurfaceAnswer, diagnose (minutes: JIT and screening)."""
+    """uq/__init__.py's examples: fit_surface, margin, the draws of a FittedModel, diagnose (minutes:
+    JIT and screening)."""
     _run_examples(uq, "uq")
 
 
@@ -187,3 +191,34 @@ def test_cli_words_library_errors_with_its_options():
         PARAM_OPTIONS
     )
     assert str(e) == "x.csv: two clusters; give a smaller --pressure-tolerance-bar"
+
+
+def test_objects_a_user_makes_print_in_one_line(n50_recordings):
+    """The recordings, a test, the stand, the settings and the orders print in a line (the
+    recordings' dataclass repr was 23,751 characters)."""
+    for obj in (
+        n50_recordings,
+        n50_recordings.tests[0],
+        uq.PAPER_STAND,
+        uq.PAPER_STAND.replace(load_cell_rel_sd=0.003),
+        uq.Settings(),
+        uq.Layout(),
+        uq.Orders(),
+        uq.ThermoOrders(),
+        uq.SealedDesign(0.112, 5.0, 3.4),
+    ):
+        text = repr(obj)
+        assert len(text) < 200 and "\n" not in text, text[:300]
+    assert repr(n50_recordings).startswith("Recordings(") and "11 tests" in repr(n50_recordings)
+
+
+def test_the_notebook_api_takes_every_fitted_model(n50_fit):
+    """docs/api.md as a notebook user meets it: a margin from the cubics, a pressure without a
+    test named with the tested ones, and uq.check of a fit against a file of point estimates."""
+    answer = uq.margin(n50_fit, 0.112, 13020.0)
+    assert answer["model"]["name"] == "cubics" and 4.9 < answer["pressure_bar_for_prob"] < 5.2
+    with pytest.raises(uq.InputError, match=r"no test at 5.5 bar; the tests are at 0.1, 1, 2, "):
+        n50_fit.at(5.5)
+    verdict = uq.check(n50_fit, ROOT / "fits" / "n50" / "table1_points.json")
+    assert verdict["agree"] and verdict["n_blocks"] == 22
+    assert isinstance(n50_fit, uq.FittedModel) and n50_fit.on_draws(100).n_draws == 100

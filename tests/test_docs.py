@@ -184,7 +184,7 @@ PATH = re.compile(
     r"(?<![\w/.-])((?:uq|tests|scripts|fits|data|docs|reports|benchmarks|requirements)/"
     r"[\w./-]*\.(?:py|md|json|csv|toml|png|html|nc|txt|sh|css))\b"
 )
-#: A dotted name of a private module, e.g. uq._models.cubic.fit_test.
+#: A dotted name of a private module, e.g. uq._models.cubic_fit.fit_test.
 DOTTED = re.compile(r"\buq\.(_\w+(?:\.\w+)*)")
 
 
@@ -243,7 +243,7 @@ def test_reference_checker_catches_what_it_must():
     assert OUTSIDE.search("see PHYSICS.md, sampling note") and OUTSIDE.search("shared/paper/x.txt")
     assert PATH.search("stated in `uq/_stand.py`")[1] == "uq/_stand.py"
     assert not (ROOT / "uq/_stand.py").exists() and not (ROOT / "tests/test_stand.py").exists()
-    assert _resolves("_models.cubic.fit_test") and _resolves("_inference")
+    assert _resolves("_models.cubic_fit.fit_test") and _resolves("_inference")
     assert not _resolves("_models.nonexistent_module.f") and not _resolves("_reference")
     assert _resolves("_API") and _output("reports/n50/report.html") and not _output("README.md")
 

@@ -215,3 +215,122 @@ def test_functions_are_short():
         and n.end_lineno - n.lineno + 1 > 120
     ]
     assert not long, "functions over 120 lines:\n" + "\n".join(long)
+
+
+# ----------------------------------------------------------------------------- three habits
+
+
+def _trees():
+    for path in sorted(UQ.rglob("*.py")):
+        yield path, ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name with a leading underscore is its module's own: no other uq module imports it (what
+    another module needs is public, named without the underscore)."""
+    found = [
+        f"{path.relative_to(UQ.parent)}:{node.lineno} imports {node.module}.{a.name}"
+        for path, tree in _trees()
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("uq")
+        for a in node.names
+        if a.name.startswith("_") and a.name != "__version__"
+    ]
+    assert not found, "private names imported across modules:\n" + "\n".join(found)
+
+
+#: literals equal to a model's name that mean something else (file, literal): the command and the
+#: batch task named "surface", which are not the model of that name
+NOT_MODEL_NAMES = {
+    ("_cli/main.py", "surface"),  # the command `uq surface`
+    ("_cli/cmd_surface.py", "surface"),  # its own command name (registry.default("surface"))
+    ("_cli/cmd_report.py", "surface"),  # the needs of the command `uq surface` (--surface)
+    ("_data/recordings.py", "surface"),  # the needs of the command `uq surface`
+    ("_drivers/batch.py", "surface"),  # the batch task "surface"
+    ("_cli/cmd_surface.py", "discrepancy"),  # the JSON key of the discrepancy's summary (CONTRACT)
+}
+
+
+def _docstrings(tree) -> set[int]:
+    ids = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                ids.add(id(body[0].value))
+    return ids
+
+
+def test_no_model_name_literal_outside_the_models():
+    """A model is known by its registry entry (uq._models.registry), never by a string typed
+    elsewhere: no string literal equal to a registered model's name outside uq/_models/."""
+    from uq._models import registry
+
+    names = set(registry.names())
+    found = []
+    for path, tree in _trees():
+        rel = path.relative_to(UQ).as_posix()
+        if rel.startswith("_models/"):
+            continue
+        docs = _docstrings(tree)
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Constant)
+                and node.value in names
+                and id(node) not in docs
+                and (rel, node.value) not in NOT_MODEL_NAMES
+            ):
+                found.append(f"uq/{rel}:{node.lineno} '{node.value}'")
+    assert not found, "model names typed outside uq/_models/:\n" + "\n".join(found)
+
+
+#: optional heavy dependencies a function may import where it needs them (with a "# reason:")
+LATE_IMPORTS = {"matplotlib", "dask", "distributed", "pandas"}
+#: modules other engineers rewrite this round (the reader; the sampler's speed): their
+#: function-level imports move when that work lands (tracked in the round's issues)
+PENDING = {
+    "_data/rows.py",
+    "_data/units.py",
+    "_data/cells.py",
+    "_inference/collapsed.py",
+    "_inference/sampler.py",
+    "_inference/convergence.py",
+}
+
+
+def test_imports_are_at_the_top_outside_the_command_line():
+    """Outside uq/_cli/ (whose commands import only what the command runs, so that --help stays
+    light) every import is at the top of its module, except an optional heavy dependency
+    (LATE_IMPORTS) imported where it is used, each with a one-line ``# reason:`` comment."""
+    found = []
+    for path, tree in _trees():
+        rel = path.relative_to(UQ).as_posix()
+        if rel.startswith("_cli/") or rel in PENDING:
+            continue
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for fn in ast.walk(tree):
+            if not isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            for node in ast.walk(fn):
+                if not isinstance(node, ast.Import | ast.ImportFrom):
+                    continue
+                mods = (
+                    [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module]
+                )
+                late = all((m or "").split(".")[0] in LATE_IMPORTS for m in mods)
+                said = any("# reason:" in lines[i] for i in (node.lineno - 2, node.lineno - 1))
+                if not (late and said):
+                    found.append(f"uq/{rel}:{node.lineno} {', '.join(m or '' for m in mods)}")
+    found = sorted(set(found))
+    assert not found, "function-level imports:\n" + "\n".join(found)
+
+
+def test_the_models_and_the_inference_do_not_import_the_virtual_stand():
+    """The likelihoods take a stand's description (uq._data.stand_description: its error budget,
+    its pressure sensor), never the virtual stand that makes recordings."""
+    bad = [
+        f"{a} -> {b}: {', '.join(w)}"
+        for (a, b), w in import_graph().items()
+        if a.split(".")[0] in ("_inference", "_models") and b.startswith("_stand")
+    ]
+    assert not bad, "\n".join(bad)

@@ -30,6 +30,8 @@ RUN_BY = {
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
     "scripts/margin_coverage.py": "test_margin_coverage_tiny",
     "scripts/plan_proof.py": "test_plan_proof_tiny",
+    "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
+    "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
     "scripts/sealed_coverage.py": "tests/derived/test_design.py::test_coverage_script_runs_with_tiny_settings",
     "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",

@@ -13,13 +13,22 @@ Every ``uq`` command is a function here, and no step needs a file in between::
     verdict = uq.check(fit.to_json(), points)  # posterior vs stored estimates       (uq check)
     surface = uq.fit_surface(rec, seed=1)     # one model over height and pressure  (uq surface)
     answer = uq.margin(surface, 0.112, 20e3)  # pressure that carries 20 kN at 112 mm (uq margin)
+    answer = uq.margin(fit, 0.112, 20e3)      # ... from any fitted model: here the cubics
+    surface.save("surface.nc")                # one saved format; uq.load_model("surface.nc")
     found = uq.diagnose(rec, seed=1)          # the physics the traditional theory misses (uq diagnose)
+
+Every fitted model (the cubics, the surface, the thermodynamic model, one loaded from a file or
+plugged in from outside) is a ``uq.FittedModel``: draws of the mean force and the volume-derived
+area on a fixed set of posterior draws, its tested ranges, named coefficient blocks, ``to_json``
+and ``save``; margins and the sealed spring take any of them. The models ``--model`` takes are
+the registry's (``uq.model_names()``; ``uq.register_model(uq.ModelEntry(...))`` adds one).
 
 The library is layered, each layer a subpackage of private modules, bottom to top: ``_io``
 (atomic writes, JSON, errors), ``_physics`` (units, basis scale, the noise formula, the
 mechanisms), ``_data`` (recordings, the paper's tables, stand descriptions), ``_stand`` (the
 virtual test stand), ``_inference`` (exact linear-Gaussian draws, the emcee edge, convergence),
-``_models`` (cubic, surface, diagnose models), ``_diagnose`` (the discrepancy engine),
+``_models`` (the fitted-model protocol and registry; cubic, surface, thermodynamic and diagnose
+models), ``_diagnose`` (the discrepancy engine),
 ``_derived`` (bands, margins, checks, result documents), ``_report`` (HTML pages and figures),
 ``_drivers`` (batch, calibration) and ``_cli`` (one module per command). A module imports
 only from its own layer or below (tests/test_layers.py). The names below are the public API.
@@ -46,7 +55,7 @@ Surface model and a margin query (``orders`` kept small for three tests):
 >>> answer = uq.margin(surface, height_m=0.112, load_N=15e3, prob=0.95)
 >>> 4.0 < answer["pressure_bar_for_prob"] < 8.0, answer["model"]["name"]
 (True, 'surface')
->>> draws = uq.SurfaceAnswer(surface).force_draws(0.112, 5.0)   # posterior draws of the force, N
+>>> draws = surface.force_draws(0.112, 5.0)   # posterior draws of the force, N (FittedModel)
 >>> draws.ndim, bool(10e3 < draws.mean() < 16e3)
 (1, True)
 
@@ -68,10 +77,10 @@ from uq._io.version import __version__
 
 #: public name -> module that defines it, or (module, name there)
 _API = {
-    "CampaignFit": "_models.cubic",
-    "PressureFit": "_models.cubic",
-    "fit_campaign": "_models.cubic",
-    "fit_test": "_models.cubic",
+    "CampaignFit": "_models.cubic_results",
+    "PressureFit": "_models.cubic_results",
+    "fit_campaign": "_models.cubic_fit",
+    "fit_test": "_models.cubic_fit",
     "least_squares": "_models.cubic",
     "InputError": "_io.errors",
     "MECHANISMS": "_physics.mechanisms",
@@ -94,26 +103,29 @@ _API = {
     "write_report": "_report.campaign",
     "campaign_bands": "_derived.bands",
     "CampaignBands": "_derived.bands",
-    "fit_surface": "_models.surface",
-    "fit_thermo": "_models.thermo",
+    "fit_surface": "_models.surface_likelihood",
+    "fit_thermo": "_models.thermo_likelihood",
     "ThermoFit": "_models.thermo",
     "ThermoOrders": "_models.thermo",
     "SurfaceFit": "_models.surface",
     "Orders": "_models.surface",
+    "FittedModel": "_models.fitted",
+    "Block": "_models.fitted",
+    "LinearFit": "_models.linear_fit",
+    "CubicInterpolation": "_models.cubic_interpolation",
+    "ModelEntry": "_models.registry",
+    "register_model": ("_models.registry", "register"),
+    "model_names": ("_models.registry", "names"),
+    "load_model": ("_models.saved", "load"),
     "margin": "_derived.margin",
-    "SurfaceAnswer": "_derived.margin",
-    "save_answer": "_derived.margin",
-    "load_answer": "_derived.margin",
     "diagnose": "_diagnose.engine",
     "check": ("_derived.check", "check_documents"),
     "StandDescription": "_data.stand_description",
     "PAPER_STAND": "_data.stand_description",
     "read_stand": "_data.stand_description",
     "SealedDesign": "_derived.design",
-    "SurfaceDesignModel": "_derived.design",
     "design_document": "_derived.design",
     "design_margin": "_derived.design",
-    "ThermoDesignModel": "_derived.design",
     "simulate_sealed": "_stand.sealed_test",
 }
 

@@ -36,11 +36,13 @@ def no_fitting(monkeypatch):
 
     import uq._diagnose.engine
     import uq._drivers.calibrate
-    import uq._models.cubic
-    import uq._models.surface
+    import uq._models.cubic_fit
+    import uq._models.surface_likelihood
+    import uq._models.thermo_likelihood
 
-    monkeypatch.setattr(uq._models.cubic, "fit_campaign", forbidden)
-    monkeypatch.setattr(uq._models.surface, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
+    monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
     monkeypatch.setattr(uq._drivers.calibrate, "calibrate", forbidden)
     monkeypatch.setattr(uq._diagnose.engine, "diagnose", forbidden)
 
@@ -128,10 +130,12 @@ def test_bad_usage_exits_2_with_one_line_before_any_work(row, tmp_path, capsys, 
 def test_margin_prob_refused_before_reading_or_fitting(monkeypatch, capsys):
     """The issue's example: --prob 1.5 used to fail only after 30 s of fitting."""
     import uq._cli.common
-    import uq._models.surface
+    import uq._models.surface_likelihood
 
     calls = []
-    monkeypatch.setattr(uq._models.surface, "fit_surface", lambda *a, **k: calls.append("fit"))
+    monkeypatch.setattr(
+        uq._models.surface_likelihood, "fit_surface", lambda *a, **k: calls.append("fit")
+    )
     monkeypatch.setattr(uq._cli.common, "load", lambda *a, **k: calls.append("load"))
     assert run(["margin", N50, "--height-mm", 112, "--load-N", 13020, "--prob", 1.5]) == 2
     assert calls == []
@@ -311,9 +315,9 @@ def test_light_constants_equal_the_library():
 
 def test_lazy_package_keeps_the_public_api():
     import uq
-    import uq._models.cubic
+    import uq._models.cubic_fit
 
-    assert uq.fit_campaign is uq._models.cubic.fit_campaign
+    assert uq.fit_campaign is uq._models.cubic_fit.fit_campaign
     assert {"fit_campaign", "read_recordings", "simulate", "InputError"} <= set(dir(uq))
     with pytest.raises(AttributeError):
         uq.no_such_thing  # noqa: B018
@@ -453,10 +457,10 @@ def test_progress_only_on_a_terminal_and_not_quiet(monkeypatch, restore_progress
     assert list(_progress.progress(range(3), desc="fits")) == [0, 1, 2]
     assert "fits" in tty.getvalue()
     _progress.set_enabled(False)  # --quiet
-    assert isinstance(_progress.progress(range(3)), _progress._Silent)
+    assert isinstance(_progress.progress(range(3)), _progress.Silent)
     _progress.set_enabled(True)
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # a pipe or a log file
-    assert isinstance(_progress.progress(range(3)), _progress._Silent)
+    assert isinstance(_progress.progress(range(3)), _progress.Silent)
 
 
 @pytest.mark.parametrize("quiet, shown", [([], True), (["--quiet"], False)])
@@ -472,7 +476,7 @@ def test_cli_quiet_switches_progress_off(monkeypatch, restore_progress, quiet, s
 
 def test_campaign_fit_shows_a_step_bar(monkeypatch, restore_progress):
     """fit_campaign samples all tests in one emcee run: one bar over its steps."""
-    import uq._models.cubic as cubic
+    import uq._models.cubic_fit as cubic
 
     seen = {}
 
@@ -481,11 +485,10 @@ def test_campaign_fit_shows_a_step_bar(monkeypatch, restore_progress):
         return list(tests)
 
     class Rec:
-        tests = ["t1", "t2", "t3"]
-        x0_m = 0.112
+        path, tests, x0_m, piston_area_m2 = "r.csv", ["t1", "t2", "t3"], 0.112, 54.82e-4
 
     monkeypatch.setattr(cubic, "fit_tests", fake_fit_tests)
-    monkeypatch.setattr(cubic, "CampaignFit", lambda rec, fits, seed, stand: fits)
+    monkeypatch.setattr(cubic, "CampaignFit", lambda rec, fits, seed, stand, prov: fits)
     assert cubic.fit_campaign(Rec(), seed=1) == ["t1", "t2", "t3"]
     assert seen["desc"] == "sampling all tests"
 

@@ -38,7 +38,8 @@ def thermo_campaign(tmp_path_factory):
     """(folder, CSV, the surface fit of it, the spring's true volume at 112 mm and 5 bar, litres)."""
     from uq._data.recordings import read_recordings
     from uq._inference.sampler import Settings
-    from uq._models.surface import Orders, fit_surface
+    from uq._models.surface import Orders
+    from uq._models.surface_likelihood import fit_surface
     from uq._stand.sealed_test import sealed_truth
 
     d = tmp_path_factory.mktemp("design")
@@ -59,23 +60,26 @@ def thermo_campaign(tmp_path_factory):
 @pytest.fixture
 def given_fit(thermo_campaign, monkeypatch):
     """The command's surface fit is the fixture's (no sampler run)."""
-    import uq._derived.comparison as comparison
+    import uq._models.surface_likelihood as likelihood
 
     fit = thermo_campaign[2]
-    monkeypatch.setitem(comparison.FITTERS, "surface", lambda rec, **k: fit)
+    monkeypatch.setattr(likelihood, "fit_surface", lambda rec, **k: fit)
     return fit
 
 
 @pytest.fixture
 def no_fitting(monkeypatch):
     """Every fit fails the test: bad input must be refused before any fitting."""
-    import uq._derived.comparison as comparison
+    import uq._models.cubic_fit
+    import uq._models.surface_likelihood
+    import uq._models.thermo_likelihood
 
     def forbidden(*a, **k):
         raise AssertionError("a fit started before the options were validated")
 
-    for name in ("surface", "thermodynamic"):
-        monkeypatch.setitem(comparison.FITTERS, name, forbidden)
+    monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
+    monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
 
 
 def _truth(x_m, **kw):
@@ -87,12 +91,12 @@ def _truth(x_m, **kw):
 @pytest.fixture(scope="module")
 def sheet(thermo_campaign, tmp_path_factory):
     """One ``uq design --json --out`` run on the campaign: (its JSON, the sheet folder, stdout)."""
-    import uq._derived.comparison as comparison
+    import uq._models.surface_likelihood as likelihood
 
     d, path, fit, v_c = thermo_campaign
     out = tmp_path_factory.mktemp("sheet")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setitem(comparison.FITTERS, "surface", lambda rec, **k: fit)
+        mp.setattr(likelihood, "fit_surface", lambda rec, **k: fit)
         import contextlib
         import io
 
@@ -294,12 +298,14 @@ def test_outside_the_tested_ranges_refused(
     assert option in line and "does not extrapolate" in line
 
 
-def test_force_only_campaign_gives_isobaric_loads_and_says_why(tmp_path, no_fitting, capsys):
-    """data/n50-force-only: no piston, so no volume: the isobaric loads (exact Student-t cubics per
-    test, no sampler), the sealed keys null and one line saying why. The loads are checked against
-    the spring's truth (Table 1's cubics, from which the stand made the file)."""
+def test_force_only_campaign_gives_isobaric_loads_and_says_why(tmp_path, capsys):
+    """data/n50-force-only: no piston, so no volume: the isobaric loads (the per-pressure cubics of
+    ``uq fit``, its force-only cubic per test, interpolated in pressure), the sealed keys null and
+    one line saying why. The loads are checked against the spring's truth (Table 1's cubics, from
+    which the stand made the file)."""
     out = tmp_path / "f.json"
     argv = ["design", FORCE_ONLY, "--height-mm", 112, "--charge-bar", 5, "--json", out]
+    argv += ["--max-steps", 600, "--quiet"]  # short chains: the wiring, not the sampler
     assert run([*argv, "--out", tmp_path / "sheet"]) == 0
     text = capsys.readouterr().out
     assert sum("omitted" in ln for ln in text.splitlines()) == 1

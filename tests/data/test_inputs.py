@@ -939,7 +939,7 @@ def test_remove_stale_keeps_the_users_files(tmp_path):
 def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
     from uq._derived.bands import campaign_bands
     from uq._inference.sampler import Settings
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
     from uq._report.campaign import write_report
 
     csv = tmp_path / "r.csv"

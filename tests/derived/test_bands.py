@@ -214,10 +214,10 @@ def _plugin_draws(test, x0_m, n, rng):
     from uq._inference.collapsed import find_map
     from uq._inference.float64 import jnp
     from uq._inference.linear import posterior_cov
-    from uq._models.cubic import MODEL, _prepare, conditional_posteriors
+    from uq._models.cubic import MODEL, conditional_posteriors, prepare
     from uq._physics.quantities import BASIS_SCALE_M
 
-    data = _prepare(test, x0_m, "budget", PAPER_STAND)[0]
+    data = prepare(test, x0_m, "budget", PAPER_STAND)[0]
     theta = jnp.asarray(find_map(MODEL, data).theta)
     D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))
     return [

@@ -361,7 +361,7 @@ def _check_fit(cf, tmp_path: Path, tag: str) -> bool:
 def test_correct_fits_pass_on_seeded_simulations(tmp_path):
     """6 seeded 3-pressure campaigns fitted with reduced settings: at most 1 failure (P <= 0.0015)."""
     from uq._inference.sampler import Settings
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     settings = Settings(tau_multiple=25.0, min_steps=250, chunk=50)
     passed, ess = [], []
@@ -382,13 +382,13 @@ def _plugin_result(rec) -> dict:
     from uq._inference.collapsed import find_map
     from uq._inference.float64 import jnp
     from uq._inference.linear import posterior_cov
-    from uq._models.cubic import MODEL, _prepare, conditional_posteriors
+    from uq._models.cubic import MODEL, conditional_posteriors, prepare
     from uq._physics.quantities import BASIS_SCALE_M
 
     tests = []
     D = np.diag(1.0 / BASIS_SCALE_M ** np.arange(4))
     for t in rec.tests:
-        data = _prepare(t, rec.x0_m, "budget", PAPER_STAND)[0]
+        data = prepare(t, rec.x0_m, "budget", PAPER_STAND)[0]
         theta = jnp.asarray(find_map(MODEL, data).theta)
         pf, pl = conditional_posteriors(theta, data)
         cf, cl = posterior_cov(pf), posterior_cov(pl)
@@ -419,7 +419,7 @@ def test_false_failure_rate_over_100_plugin_replications():
 @pytest.mark.slow
 def test_false_failure_rate_over_30_full_fits(tmp_path):
     """30 full default-settings fits: P(>= 3 failures of 30 | p = 0.01) = 0.0033."""
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     fails = sum(
         not _check_fit(fit_campaign(_simulated(9000 + s), seed=s), tmp_path, str(s))
@@ -521,7 +521,7 @@ def test_false_failure_rate_with_sampled_posteriors_from_an_independent_campaign
     alpha 0.1 (at most 15 failures, P(> 15) = 0.00064), and 20 closed-form pairs = 220
     checks (at most 37, P(> 37) = 0.00063)."""
     from uq._inference.sampler import Settings
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     alpha, settings = 0.1, Settings(tau_multiple=25.0, min_steps=250, chunk=50)
     sampled = [

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from model_doubles import ForceOnlyDouble, ModelDouble
 
 from uq._derived.design import (
     DesignGrid,
@@ -13,6 +14,7 @@ from uq._derived.design import (
     design_document,
     design_point,
     frequency_chart,
+    isobaric_table,
     sealed_curve,
     sealed_draws,
 )
@@ -23,7 +25,7 @@ from uq._stand.simulator import ThermoSpring
 BAR = 1e5
 
 
-class SpringModel:
+class SpringModel(ModelDouble):
     """A design model whose every draw is the stand's spring itself (S identical draws)."""
 
     label = "the stand's spring"
@@ -31,6 +33,7 @@ class SpringModel:
     def __init__(self, spring, n_draws=3, own_dvdp=False, p_range=(0.5, 10.0)):
         self.s, self.S = spring, n_draws
         self.height_range_m, self.pressure_range_bar = (0.065, 0.155), p_range
+        self.has_dvdp = own_dvdp
         if own_dvdp:
             self.volume_pressure_draws = lambda x, p: self._draws(
                 self.s.compliance_m3_per_pa(np.asarray(x, float)) + 0 * np.asarray(p, float)
@@ -112,7 +115,7 @@ def test_grid_discretisation_of_a_model_quintic_in_pressure():
     height's rate against the closed form -P_x + n p_abs P_p dV/dx / (V_c + V_r), to 1e-5."""
     a, b = 0.027, -0.22
 
-    class Quintic:
+    class Quintic(ModelDouble):
         label, height_range_m, pressure_range_bar = "quintic", (0.065, 0.155), (0.1, 10.0)
 
         def _g(self, p):
@@ -213,7 +216,7 @@ def test_refusals_name_the_option():
         # the library names its parameter, the command line (for_cli) the option
         assert "--" not in str(exc.value) and opt in str(exc.value.for_cli(PARAM_OPTIONS))
 
-    class ForceOnly:
+    class ForceOnly(ForceOnlyDouble):
         label, height_range_m, pressure_range_bar = "cubics", (0.065, 0.155), (1.0, 10.0)
 
     with pytest.raises(InputError, match="force-only"):
@@ -242,8 +245,7 @@ def test_design_on_a_fitted_surface_of_a_simulated_campaign():
     """n50-thermo recorded at 5 pressures every 10 mm, the surface model fitted with 200 sampler
     steps (the script's tiny settings): the design answers are near the stand's truth (loose: load
     1 %, rate 3 %, frequency 2 %, sealed force 2 % along the curve) with informative intervals."""
-    from uq._derived.design import SurfaceDesignModel
-    from uq._models.surface import fit_surface
+    from uq._models.surface_likelihood import fit_surface
     from uq._stand.simulator import simulate_recordings
 
     cfg = _coverage_script().TINY
@@ -251,7 +253,7 @@ def test_design_on_a_fitted_surface_of_a_simulated_campaign():
     fit = fit_surface(
         rec, cfg["orders"], seed=11, settings=cfg["settings"], max_draws=cfg["max_draws"]
     )
-    model = SurfaceDesignModel(fit, cfg["max_draws"])
+    model = fit.on_draws(cfg["max_draws"])
     s = ThermoSpring()
     tr = _truth(s, [0.112], charge_bar=5.0)
     doc = design_document(model, SealedDesign(0.112, 5.0, tr.volume_c_m3 * 1e3, forcing_Hz=4.0))
@@ -305,3 +307,32 @@ def test_docs_example_runs():
     # the page's comment shows these to three decimals; the sampler's Monte Carlo moves the last one
     assert abs(float(f["mean"]) - 2.223) < 0.003
     assert abs(float(f["q05"]) - 2.218) < 0.003 and abs(float(f["q95"]) - 2.229) < 0.003
+
+
+def test_isobaric_volume_increment_is_the_closed_form_at_every_table_height():
+    """dV/dx = a (1 + 2 u) per draw: the table's volume increment from 112 mm is a (u + u^2) at
+    every height, mean and sd to 1e-12 (the table's heights, every 10 mm, and the integration grid's
+    every 1 mm once met as knots 1e-17 m apart, and the spline's integral lost five digits)."""
+    rng = np.random.default_rng(0)
+
+    class Quadratic(ModelDouble):
+        label, height_range_m, pressure_range_bar = "quadratic", (0.065, 0.155), (1.0, 10.0)
+        a = 0.025 * (1 + 0.01 * rng.standard_normal(300))
+
+        def _b(self, values, x):
+            return self.a[:, None] * np.broadcast_to(values, np.shape(x))[None]
+
+        def force_draws(self, x, p):
+            return self._b(np.asarray(p, float) * BAR, x)
+
+        def volume_area_draws(self, x, p):
+            return self._b(1 + 2 * (np.asarray(x, float) - 0.112), x)
+
+    xs = np.unique(np.round(np.concatenate([[0.065, 0.155, 0.112], np.arange(7, 16) / 100]), 6))
+    m = Quadratic()
+    for r in isobaric_table(m, [5.0], xs, 0.112):
+        u = r["height_m"] - 0.112
+        exact = m.a * (u + u**2) * 1e3
+        got = r["volume_increment_l"]
+        assert got["mean"] == pytest.approx(exact.mean(), rel=1e-12, abs=1e-15)
+        assert got["sd"] == pytest.approx(exact.std(ddof=1), rel=1e-12, abs=1e-15)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from model_doubles import ForceOnlyDouble, ModelDouble
 
 from uq._derived.design import SealedDesign, design_margin
 from uq._io.errors import InputError
@@ -20,7 +21,7 @@ BAR, P_ATM, G = 1e5, 101325.0, 9.80665
 X_C, W = 0.112, 12000.0
 
 
-class Cylinders:
+class Cylinders(ModelDouble):
     """S cylinders, one per draw, areas spread like a posterior."""
 
     label = "cylinders"
@@ -130,7 +131,7 @@ def test_refusals():
     with pytest.raises(InputError, match="load_N"):
         design_margin(m, X_C, 1e7, d, 0.95)  # not carried within the tested pressures
 
-    class ForceOnly:
+    class ForceOnly(ForceOnlyDouble):
         label = "force only"
         height_range_m, pressure_range_bar = Cylinders.height_range_m, Cylinders.pressure_range_bar
         force_draws = Cylinders().force_draws

@@ -62,7 +62,7 @@ def campaign(tmp_path_factory):
 
 def _fit_and_save(d: Path, csv: Path, model: str, walkers: int):
     """``uq margin --model MODEL --save-fit``; returns (saved file, the run's JSON, the SurfaceFit it made or None)."""
-    import uq._models.surface
+    import uq._models.surface_likelihood
 
     fit, out = d / f"{model}.nc", d / f"{model}.json"
     argv = [
@@ -80,10 +80,10 @@ def _fit_and_save(d: Path, csv: Path, model: str, walkers: int):
         out,
     ]
     made = []
-    real = uq._models.surface.fit_surface
+    real = uq._models.surface_likelihood.fit_surface
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(
-            uq._models.surface,
+            uq._models.surface_likelihood,
             "fit_surface",
             lambda *a, **k: made.append(real(*a, **k)) or made[-1],
         )
@@ -111,34 +111,32 @@ def test_saved_fit_gives_the_same_answer(which, request, tmp_path, capsys):
     assert_same(json.loads(out.read_text()), original)
     text = capsys.readouterr().out
     assert "no refit" in text and "answered by the" in text
-    assert original["model"]["name"] == (
-        "surface" if which == "surface_saved" else "per-pressure cubics"
-    )
+    assert original["model"]["name"] == ("surface" if which == "surface_saved" else "cubics")
     assert "usable_stroke" in original and "force_at_pressure" in original
 
 
 def test_saved_file_is_netcdf_inference_data(surface_saved, cubics_saved, campaign):
     import arviz as az
 
-    from uq._derived.margin import ANSWER_KIND, sha256_of
+    from uq._io.files import sha256_of
+    from uq._models.saved import FILE_KIND, FORMAT_VERSION
 
     d, csv = campaign
     for fit, kind in ((surface_saved[0], "surface"), (cubics_saved[0], "cubics")):
         idata = az.from_netcdf(fit)
         a = idata.attrs
-        assert a["uq_file_kind"] == ANSWER_KIND and a["answer"] == kind and a["seed"] == 20201
+        assert a["uq_file_kind"] == FILE_KIND and a["uq_format_version"] == FORMAT_VERSION
+        assert a["model"] == kind and a["seed"] == 20201
         assert (
             a["recordings_sha256"] == sha256_of(csv) and Path(a["recordings_path"]) == csv.resolve()
         )
-        assert json.loads(a["model_info_json"])["name"] == (
-            "surface" if kind == "surface" else "per-pressure cubics"
-        )
+        assert json.loads(a["model_info_json"])["name"] == kind
         c = idata.constant_data
         assert list(c["tested_pressure_range_bar"].values) == [1.0, 10.0]
         lo, hi = c["tested_height_range_m"].values
         assert 0.05 < lo < hi < 0.2
-        var = "surface_coefficient" if kind == "surface" else "force_coefficient"
-        assert var in idata.posterior
+        names = {"pressure_area_m2", "casing_N", "volume_excess_m2", "piston_reference_m"}
+        assert (names if kind == "surface" else {"force", "piston"}) <= set(idata.posterior)
         assert oct(os.stat(fit).st_mode & 0o777) == oct(0o666 & ~_umask())
     assert not list(d.glob(".*.tmp"))  # the atomic writer left no temporary file
 
@@ -149,23 +147,37 @@ def _umask() -> int:
     return m
 
 
-def test_surface_answer_is_the_fits_force(surface_saved, tmp_path):
-    """SurfaceAnswer computes the SurfaceFit's own force (same draws, same arithmetic: identical), before and after saving."""
-    from uq._derived.margin import SurfaceAnswer, load_answer, save_surface_answer
+def test_a_loaded_model_is_the_fits_own(surface_saved, tmp_path):
+    """A saved and loaded surface computes the fit's own force and volume-derived area (the same
+    draws, the same arithmetic: identical) and keeps its JSON document."""
+    from uq._derived.margin import load_answer
 
     fit = surface_saved[2]
-    ans = SurfaceAnswer(fit)
     h, p = np.linspace(0.08, 0.15, 7)[:, None], np.array([1.0, 3.3, 10.0])[None, :]
-    want = fit.force_draws(h, p, beta=fit.flat_beta(4000))
-    np.testing.assert_array_equal(ans.force_draws(h, p), want)
-    save_surface_answer(fit, None, tmp_path / "lib", seed=7)
+    fit.save(tmp_path / "lib" / "surface.nc", seed=7)
     back, info, meta = load_answer(tmp_path / "lib" / "surface.nc")
-    np.testing.assert_array_equal(back.force_draws(h, p), want)
-    assert (
-        back.height_range_m == ans.height_range_m
-        and back.pressure_range_bar == ans.pressure_range_bar
-    )
-    assert meta["seed"] == 7 and info["orders"] == fit.orders.label
+    np.testing.assert_array_equal(back.force_draws(h, p), fit.force_draws(h, p))
+    np.testing.assert_array_equal(back.volume_area_draws(h, p), fit.volume_area_draws(h, p))
+    for name, block in fit.blocks().items():
+        np.testing.assert_array_equal(back.blocks()[name].draws, block.draws)
+    assert back.height_range_m == fit.height_range_m
+    assert back.pressure_range_bar == fit.pressure_range_bar
+    assert meta["seed"] == 7 and info["orders"] == fit.orders_label
+    assert json.dumps(back.to_json(), default=float) == json.dumps(fit.to_json(), default=float)
+
+
+def test_the_previous_format_is_refused_with_how_to_resave(tmp_path, capsys):
+    """A saved answer of format version 1 (uq margin --save-fit, uq surface --out up to round 6)
+    is refused in one line saying how to save it again."""
+    import xarray as xr
+
+    old = tmp_path / "old.nc"
+    attrs = {"uq_file_kind": "uq margin answer", "uq_format_version": 1, "uq_version": "0.1.0"}
+    attrs["recordings_path"] = "/data/r.csv"
+    xr.Dataset(attrs=attrs).to_netcdf(old, engine="h5netcdf")
+    assert run(["margin", "--fit", old, "--height-mm", 110, "--load-N", 8000]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "format version 1" in line and "/data/r.csv again and save it" in line, line
 
 
 def test_uq_surface_out_writes_a_saved_answer(
@@ -173,9 +185,11 @@ def test_uq_surface_out_writes_a_saved_answer(
 ):
     """``uq surface --out DIR`` writes DIR/surface.nc, which ``uq margin --fit`` answers from (the fit is the
     margin run's, handed in, so this checks the wiring, not the sampler)."""
-    import uq._models.surface
+    import uq._models.surface_likelihood
 
-    monkeypatch.setattr(uq._models.surface, "fit_surface", lambda *a, **k: surface_saved[2])
+    monkeypatch.setattr(
+        uq._models.surface_likelihood, "fit_surface", lambda *a, **k: surface_saved[2]
+    )
     assert (
         run(
             [
@@ -354,15 +368,15 @@ def test_saved_fit_refuses_what_a_fit_refuses(extra, words, surface_saved, capsy
 @pytest.fixture
 def no_fitting(monkeypatch):
     import uq._cli.common
-    import uq._models.cubic
-    import uq._models.surface
+    import uq._models.cubic_fit
+    import uq._models.surface_likelihood
 
     def forbidden(*a, **k):
         raise AssertionError("read or fitted before the options were checked")
 
     for mod, name in (
-        (uq._models.cubic, "fit_campaign"),
-        (uq._models.surface, "fit_surface"),
+        (uq._models.cubic_fit, "fit_campaign"),
+        (uq._models.surface_likelihood, "fit_surface"),
         (uq._cli.common, "load"),
     ):
         monkeypatch.setattr(mod, name, forbidden)
@@ -459,7 +473,7 @@ def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
     assert_same(res, original)  # every existing key and number unchanged
     assert "natural frequency below 2.3 Hz with probability" in text and "stroke to 12000 N" in text
     full, _, _ = load_answer(fit)
-    ans = full.thinned(1000)  # the design margin's draws (at most 1000 of the saved ones)
+    ans = full.on_draws(1000)  # the design margin's draws (at most 1000 of the saved ones)
     p = pressure_needed(ans, 0.110, 8000.0)
     h, dp = 1e-5, 1e-4
     idx = np.arange(p.size)

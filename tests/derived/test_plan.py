@@ -371,6 +371,7 @@ def test_planned_precision_of_the_other_models(pilot, kind):
     from plan_helpers import model_precision, pair_builder
 
     from uq._data.recordings import recordings_from_text, write_recordings_csv
+    from uq._models.thermo import ThermoFit
     from uq._stand.simulator import Layout, simulate
 
     if kind == "force-only":
@@ -379,7 +380,7 @@ def test_planned_precision_of_the_other_models(pilot, kind):
         rec = recordings_from_text(text, "force-only pilot")
         builder = pair_builder(rec, n_draws=3)
     else:
-        builder = pair_builder(pilot, "thermodynamic", n_draws=3)
+        builder = pair_builder(pilot, ThermoFit, n_draws=3)
     new = np.array([3.5, 6.5])
     frame = builder.frame(new)
     assert (frame.area_rows is None) == (kind == "force-only")
@@ -514,3 +515,85 @@ def test_target_sd_stops_where_the_sd_is_reached():
     assert sorted(r.height_m for r in path.readings) == [1, 2, 2, 3, 3, 4, 4, 5, 5]
     assert path.n_readings == [0, 8, 9]
     assert path.sd[-1][0] == pytest.approx(tau) and path.sd[-2][0] > tau * 1.0001
+
+
+# ----------------------------------------------------------------------------- the discrepancy's frames
+
+
+@pytest.fixture(scope="module")
+def table1_four():
+    """A small campaign of Table 1's spring (not smooth in pressure): four tests every 15 mm."""
+    return uq.simulate(
+        "n50", seed=5, layout=uq.Layout(pressures_bar=(1.0, 4.0, 7.0, 10.0), step_m=0.015)
+    )
+
+
+def _first_tests(rec, n):
+    """``rec`` with its first ``n`` tests (the file), the rest planned."""
+    import dataclasses
+
+    return dataclasses.replace(rec, tests=tuple(rec.tests[:n]))
+
+
+def test_discrepancy_frame_is_the_models_posterior(table1_four):
+    """The frame's precision and mean given theta, from the file alone, are the discrepancy model's
+    own (uq._models.discrepancy.posterior: sum_i C_i' H_i C_i + I in the same coefficients)."""
+    from plan_helpers import discrepancy_builder
+
+    from uq._models import discrepancy as dev
+
+    b = discrepancy_builder(table1_four, n_draws=3)
+    frame = b.frame()
+    for s in range(frame.n_draws):
+        post = dev.posterior(jnp.asarray(b.theta[s]), b.data)
+        L = np.asarray(post.chol)
+        want = L @ L.T
+        np.testing.assert_allclose(
+            frame.precision[s], want, rtol=1e-8, atol=1e-8 * np.abs(want).max()
+        )
+        np.testing.assert_allclose(frame.mean[s], np.asarray(post.mean), rtol=1e-6, atol=1e-8)
+
+
+def test_discrepancy_planned_precision_is_the_models_on_the_combined_campaign(table1_four):
+    """A planned test's readings add to the frame's precision exactly what the model's posterior
+    of the combined campaign has (the planned readings' noise references the frame's)."""
+    from plan_helpers import discrepancy_builder
+
+    from uq._models import discrepancy as dev
+
+    file = _first_tests(table1_four, 3)
+    b = discrepancy_builder(file, n_draws=3)
+    new = np.array([table1_four.tests[3].pressure_bar])
+    frame = b.frame(new)
+    hs = table1_four.tests[3].height_m
+    readings = [E.Reading(0, float(h)) for h in hs]
+    A = frame.precision + E.added_precision(frame, readings)
+    o, _ = b.model(np.concatenate([b.tested, new]))
+    d = dev.dev_data(table1_four, o, PAPER_STAND)
+    force, lever = b.reference(hs, np.full(hs.shape, new[0]))
+    n0 = file.n_points
+    d = d._replace(  # the file's references are the file's fit's, the planned ones the frame's
+        phat=jnp.concatenate([b.data.phat, jnp.asarray(force)]),
+        feff_hat=jnp.concatenate([b.data.feff_hat, jnp.asarray(lever)]),
+    )
+    assert d.phat.shape[0] == n0 + hs.size
+    for s in range(frame.n_draws):
+        L = np.asarray(dev.posterior(jnp.asarray(b.theta[s]), d).chol)
+        want = L @ L.T
+        np.testing.assert_allclose(A[s], want, rtol=1e-8, atol=1e-8 * np.abs(want).max())
+
+
+def test_discrepancy_between_tests_is_the_process_given_its_nodes(table1_four):
+    """At an untested pressure the frame's force variance (kriging rows plus the conditional
+    variance) equals that of a frame holding a test there without readings: a node the data do not
+    touch changes nothing. And the conditional variance vanishes at a tested pressure."""
+    from plan_helpers import discrepancy_builder
+
+    b = discrepancy_builder(table1_four, n_draws=3, length_bar=1.0)
+    target = [parse_target("force@110mm,5.5bar")]
+    v_between = E.evaluate(b.frame(), target)
+    v_node = E.evaluate(b.frame([5.5], after_bar=b.tested), target)
+    np.testing.assert_allclose(v_between, v_node, rtol=1e-6)
+    frame = b.frame()
+    extra = frame.extra_force_var(np.array([0.110, 0.110]), np.array([4.0, 5.5]))
+    assert np.all(extra[:, 0] < 1e-6 * extra[:, 1]) and np.all(extra[:, 1] > 0)

@@ -35,7 +35,7 @@ def test_saved_posteriors_work_with_arviz(tmp_path):
     matplotlib.use("Agg")
     rec = uq.simulate("n50", seed=5, layout=LAYOUT)
     fit = uq.fit_campaign(rec, seed=5, settings=uq.Settings(max_steps=400))
-    (path,) = fit.save(tmp_path)
+    (path,) = fit.save_posteriors(tmp_path)
     idata = az.from_netcdf(path)
     assert {"posterior", "log_likelihood", "posterior_predictive", "observed_data"} <= set(
         idata.groups()

@@ -124,7 +124,7 @@ def _cubic_and_bands(problem: Problem, rec):
 
 def _surface_and_margin(problem: Problem, rec):
     surface = uq.fit_surface(rec, uq.Orders(3, 2, 2, 1, 1), seed=11, settings=QUICK, max_draws=1000)
-    answer = uq.SurfaceAnswer(surface)
+    answer = surface
     for x, p in ((0.112, 5.0), (0.090, 3.0), (0.135, 7.0)):
         truth = p * BAR * problem.area(x)
         draws = answer.force_draws(x, p)

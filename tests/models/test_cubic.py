@@ -13,7 +13,8 @@ from uq._data.recordings import write_recordings_csv
 from uq._data.reference import table1
 from uq._inference.linear import linear_posterior, posterior_cov
 from uq._inference.sampler import Settings
-from uq._models.cubic import FORCE_PRIOR_SD_N, basis, fit_test, least_squares, to_paper_basis
+from uq._models.cubic import FORCE_PRIOR_SD_N, basis, least_squares, to_paper_basis
+from uq._models.cubic_fit import fit_test
 from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
 FAST = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)

@@ -20,16 +20,14 @@ from uq._inference.float64 import jnp
 from uq._inference.linear import posterior_cov
 from uq._inference.sampler import Settings
 from uq._models.cubic import (
-    FORCE_ONLY,
     MODEL,
     NOISE_PRIOR_SD,
-    _force_post,
-    _prepare,
     conditional_posteriors,
-    fit_tests,
-    force_data,
     piston_coordinate,
+    prepare,
 )
+from uq._models.cubic_fit import fit_tests
+from uq._models.cubic_force import FORCE_ONLY, _force_post, force_data
 from uq._stand.simulator import Layout, recordings_from_tests, simulate
 
 X0 = 0.112
@@ -44,7 +42,7 @@ def _test(pressure=5.0, seed=3) -> PressureTest:
 
 def test_force_only_density_is_the_force_block_of_the_full_model():
     test = _test()
-    full, *_ = _prepare(test, X0, "budget", PAPER_STAND)
+    full, *_ = prepare(test, X0, "budget", PAPER_STAND)
     force, *_ = force_data(dataclasses.replace(test, piston_m=None), X0, "budget", PAPER_STAND)
     rng = np.random.default_rng(0)
     for theta in np.array([7.0, 0.3, -8.0]) + rng.normal(0, 0.7, (5, 3)):

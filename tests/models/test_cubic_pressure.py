@@ -5,6 +5,7 @@ against dense numpy/scipy references; the exact draws against the closed-form po
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,11 +18,14 @@ from uq._drivers.calibrate import calibrate
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import ar1_precision
 from uq._inference.sampler import Settings
-from uq._models import cubic as CP
-from uq._models.cubic import FORCE_PRIOR_SD_N, PISTON_PRIOR_SD_M, fit_test, fit_tests
+from uq._models import cubic, cubic_ar1, cubic_measured
+from uq._models.cubic import FORCE_PRIOR_SD_N, PISTON_PRIOR_SD_M
+from uq._models.cubic_fit import fit_test, fit_tests
 from uq._stand.shapes import record_pressure
 from uq._stand.simulator import Layout, simulate
 
+#: the plain model and its pressure-holding variants, under one name
+CP = SimpleNamespace(**{**vars(cubic), **vars(cubic_measured), **vars(cubic_ar1)})
 AREA = 54.82e-4
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -187,7 +191,7 @@ def test_measured_log_density_equals_the_dense_reference():
     sigma_f, sigma_L, _ = CP._measured_noise(theta, d)
     D = np.diag(np.r_[np.asarray(sigma_f) ** 2, np.full(d.force.shape, float(sigma_L) ** 2)])
     dense = _dense_log_marginal(Z, yc, D, prior_sd**2)
-    prior = float(CP._log_prior_cubic_noise(CP._measured_noise(theta, d)[2], d.prior_mean))
+    prior = float(CP.log_prior_noise(CP._measured_noise(theta, d)[2], d.prior_mean))
     assert float(CP.measured_log_prob(theta, d)) - prior == pytest.approx(dense, abs=1e-6)
     # the corrected readings take the holding error out: the force moves by lever * dp, the
     # piston by V dp / (p_abs S), with the stand's lever and gas volume
@@ -219,9 +223,9 @@ def test_whitened_form_equals_the_dense_woodbury(theta, short_ar_data):
 
     d = short_ar_data
     v, U, Q, ldQ, _, _ = CP.ar1_parts(jnp.asarray(theta), d)
-    Z = CP._stack_design(d.X)
+    Z = CP.stack_design(d.X)
     y = jnp.concatenate([d.force, d.piston])
-    dense = latent_posterior(Z, y, v, U, Q, ldQ, CP._coefficient_prior_sd())
+    dense = latent_posterior(Z, y, v, U, Q, ldQ, CP.coefficient_prior_sd())
     fast = CP._ar1_post(jnp.asarray(theta), d)[0]
     assert float(fast.log_marginal) == pytest.approx(float(dense.log_marginal), abs=1e-5)
     assert np.allclose(fast.mean, dense.mean, rtol=1e-6, atol=1e-9)
@@ -441,7 +445,7 @@ def test_surface_model_uses_the_measured_pressure(tmp_path):
     from uq._cli.main import main
     from uq._data.recordings import read_recordings
     from uq._models import pair
-    from uq._models.surface import fit_surface
+    from uq._models.surface_likelihood import fit_surface
 
     common = ["simulate", "--seed", "4", "--pressures", "1,2,4,6,8,10", "--step-mm", "10"]
     main([*common, "--out", str(tmp_path / "set.csv")])
@@ -454,10 +458,10 @@ def test_surface_model_uses_the_measured_pressure(tmp_path):
     settings = Settings(n_walkers=16, min_steps=300, chunk=150, max_steps=3000)
     plain = fit_surface(rec_set, seed=1, settings=settings)
     meas = fit_surface(rec_meas, seed=1, settings=settings)
-    sd_plain = plain.flat_beta().std(0)
-    sd_meas = meas.flat_beta().std(0)
+    sd_plain = plain.coef.std(0)
+    sd_meas = meas.coef.std(0)
     assert np.median(sd_meas / sd_plain) < 0.7
-    V0 = np.exp(meas.theta.reshape(-1, meas.theta.shape[-1])[:, 4])
+    V0 = np.exp(meas.posterior.theta.reshape(-1, meas.posterior.theta.shape[-1])[:, 4])
     assert abs(np.median(V0) / PAPER_STAND.gas_volume_at_xmax_m3 - 1) < 0.1
 
 

@@ -17,7 +17,8 @@ from uq._inference.loo import Loo
 from uq._inference.loo import verdict as loo_verdict
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
-from uq._models.surface import DEFAULT_ORDERS, Orders, fit_surface, summary
+from uq._models.surface import DEFAULT_ORDERS, Orders, summary
+from uq._models.surface_likelihood import fit_surface
 from uq._report.surface import figure_pressure_area, figure_spread
 from uq._stand.simulator import Layout, SmoothSurfaceSpring, simulate
 
@@ -29,6 +30,7 @@ FAST_LAYOUT = Layout(pressures_bar=(1.0, 2.5, 4.0, 5.5, 7.0, 8.5, 10.0), step_m=
 PAPER_LAYOUT = Layout()
 X_CHECK, P_CHECK = 0.100, 4.5  # between the tested pressures of both layouts
 TRUTH_ORDERS = Orders(3, 2, 2, 1, 1)  # the n50-smooth spring's own class, nested in DEFAULT_ORDERS
+NAMES = ("surface", "per-pressure cubics")
 ALPHA = 1.0e-3  # false-failure rate of each coverage test (Bonferroni over its assertions' tails)
 
 
@@ -157,7 +159,6 @@ def test_figures(n50_surface):
 
 
 def test_surface_report_section(n50_surface, tmp_path):
-    from uq._models.surface import summary
     from uq._report.surface import write_surface_report
 
     path = write_surface_report(n50_surface, summary(n50_surface), tmp_path)
@@ -179,6 +180,21 @@ def test_compare_with_cubics(n50_surface, n50_fit):
         assert 0 <= c[part]["n_pareto_k_above_0.7"] and np.isfinite(c[part]["max_pareto_k"])
     if c["better"] not in ("indistinguishable", "refused"):
         assert abs(c["elpd_diff"]) > 2 * c["elpd_diff_se"]
+
+
+@pytest.mark.slow  # minutes: 10 Laplace refits of the surface, 110 of the cubics; the policy itself
+# is carried by tests/inference/test_loo.py and the engine's K-fold by tests/diagnose/test_diagnose.py
+def test_comparison_beyond_the_refit_limit_is_kfold_of_both(n50_surface, n50_fit, monkeypatch):
+    """Every PSIS term made unreliable (Pareto k threshold 0): more than MAX_REFITS of them, so
+    both models are scored by 10-fold cross-validation on the same folds, and the verdict agrees
+    with PSIS-LOO's on n50 (the cubics, by far)."""
+    from uq._inference import loo
+
+    psis_verdict = compare_with_cubics(n50_surface, n50_fit)["better"]
+    monkeypatch.setattr(loo, "PARETO_K_MAX", 0.0)
+    c = compare_with_cubics(n50_surface, n50_fit, seed=1)
+    assert "here: 10-fold cross-validation" in c["method"]
+    assert c["cubics"]["n_pareto_k_above_0.7"] == 0 and c["better"] == psis_verdict
 
 
 def test_exact_refit_agrees_with_integrated_psis_where_k_is_low(n50_fit):
@@ -207,14 +223,14 @@ def test_loo_verdict_uses_the_se_and_pareto_k():
     base = rng.normal(-1.0, 0.5, 400)
     noisy = rng.normal(0.0, 1.0, 400)  # a difference of about 0 +- 20: no verdict
     small = base + 0.03 + noisy  # total +12, SE about 20: within 2 SE
-    v = loo_verdict(_Loo(small), _Loo(base))
+    v = loo_verdict(_Loo(small), _Loo(base), NAMES)
     assert abs(v["elpd_diff"]) < 2 * v["elpd_diff_se"] and v["better"] == "indistinguishable", v
     clear = base + 0.5 + 0.1 * noisy  # +200 +- 2
-    assert loo_verdict(_Loo(clear), _Loo(base))["better"] == "surface"
-    assert loo_verdict(_Loo(base), _Loo(clear))["better"] == "per-pressure cubics"
+    assert loo_verdict(_Loo(clear), _Loo(base), NAMES)["better"] == "surface"
+    assert loo_verdict(_Loo(base), _Loo(clear), NAMES)["better"] == "per-pressure cubics"
     k = np.zeros(400)
     k[7] = 0.9
-    v = loo_verdict(_Loo(clear), _Loo(base, k))
+    v = loo_verdict(_Loo(clear), _Loo(base, k), NAMES)
     assert (
         v["better"] == "refused"
         and "Pareto k > 0.7" in v["reason"]
@@ -335,7 +351,7 @@ NOISY_STAND = PAPER_STAND.replace(load_cell_rel_sd=0.008, pressure_holding_bar=0
 
 def test_stand_description_reaches_the_likelihood_and_priors():
     """fit_surface(stand=...) takes dp, p_atm and the prior centres from the stand, not constants."""
-    from uq._models.surface import noise_prior_mean, surface_data
+    from uq._models.surface_likelihood import noise_prior_mean, surface_data
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     stand = NOISY_STAND.replace(p_atm_bar=0.9)
@@ -400,7 +416,7 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
 
     from uq._inference.linear import linear_posterior
     from uq._models import pair
-    from uq._models import surface as S
+    from uq._models import surface_likelihood as S
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)

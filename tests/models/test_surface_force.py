@@ -9,16 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uq._derived.margin import SurfaceAnswer, margin, pressure_needed
+from uq._derived.margin import margin, pressure_needed
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
-from uq._models.surface import (
-    DEFAULT_ORDERS,
-    Orders,
-    default_orders,
-    fit_surface,
-    orders_for,
-)
+from uq._models.surface import DEFAULT_ORDERS, Orders, default_orders, orders_for
+from uq._models.surface_likelihood import fit_surface
 from uq._stand.shapes import catalogue_recordings
 from uq._stand.simulator import SPRINGS, Layout
 
@@ -97,7 +92,7 @@ def test_catalogue_surface_json_and_volume_omitted(catalogue_fit):
     assert len(reasons) == 1 and "volume_* column (at 5 bar only)" in reasons.pop()
     with pytest.raises(InputError, match="volume results omitted"):
         fit.volume_area_draws(0.112, 5.0)
-    assert not hasattr(SurfaceAnswer(fit), "volume_area_draws")
+    assert not fit.has_volume and "volume_* column" in fit.omitted_reason
 
 
 def test_catalogue_margin_covers_the_stand_between_tabulated_points(catalogue_fit):
@@ -106,7 +101,7 @@ def test_catalogue_margin_covers_the_stand_between_tabulated_points(catalogue_fi
     99 % interval (one replication; scripts/margin_coverage.py --grids catalogue counts coverage
     over many)."""
     truth = SPRINGS["n50"]()
-    ans = SurfaceAnswer(catalogue_fit)
+    ans = catalogue_fit
     for h, p in BETWEEN:
         load = float(truth.force_N(np.array(h), p))
         need = pressure_needed(ans, h, load)

@@ -36,27 +36,23 @@ def _covered(draws, truth, level=0.999) -> bool:
 def test_identities_of_the_potential(thermo_fit):
     """P = -dG/dx and dV/dx = -d2G/dx dp_u = dP/dp_u (Maxwell) hold draw by draw, by finite
     differences of the model's own draws (to 1e-5 relative)."""
-    fit, beta = thermo_fit, thermo_fit.flat_beta(50)
+    fit = thermo_fit.on_draws(50)
     for x, p in POINTS:
         h, dp = 1e-5, 1e-4  # m, bar
-        G = lambda xx, pp: fit.potential_draws(xx, pp, beta=beta)  # noqa: E731
+        G = fit.potential_draws
         dGdx = (G(x + h, p) - G(x - h, p)) / (2 * h)
-        np.testing.assert_allclose(fit.force_draws(x, p, beta=beta), -dGdx, rtol=1e-5)
-        dPdp = (fit.force_draws(x, p + dp, beta=beta) - fit.force_draws(x, p - dp, beta=beta)) / (
-            2 * dp * 1e5
-        )
-        np.testing.assert_allclose(fit.volume_area_draws(x, p, beta=beta), dPdp, rtol=1e-5)
-        dV = fit.volume_change_draws(x + h, p, beta=beta) - fit.volume_change_draws(
-            x - h, p, beta=beta
-        )
-        np.testing.assert_allclose(fit.volume_area_draws(x, p, beta=beta), dV / (2 * h), rtol=1e-5)
+        np.testing.assert_allclose(fit.force_draws(x, p), -dGdx, rtol=1e-5)
+        dPdp = (fit.force_draws(x, p + dp) - fit.force_draws(x, p - dp)) / (2 * dp * 1e5)
+        np.testing.assert_allclose(fit.volume_area_draws(x, p), dPdp, rtol=1e-5)
+        dV = fit.volume_change_draws(x + h, p) - fit.volume_change_draws(x - h, p)
+        np.testing.assert_allclose(fit.volume_area_draws(x, p), dV / (2 * h), rtol=1e-5)
 
 
 def test_draws_on_a_grid_are_the_draws_point_by_point(thermo_fit):
     """Every quantity evaluated on a (2, 3) grid of heights and pressures gives, draw by draw,
     what it gives at each point alone (volume_area_draws, and so the Maxwell ratio, once
     returned the draws and the points transposed)."""
-    fit, beta = thermo_fit, thermo_fit.flat_beta(50)
+    fit = thermo_fit.on_draws(50)
     x = np.array([[0.08, 0.10, 0.12], [0.09, 0.11, 0.13]])
     p = np.array([[2.0, 5.0, 8.0], [3.0, 4.0, 6.0]])
     for fn in (
@@ -68,8 +64,8 @@ def test_draws_on_a_grid_are_the_draws_point_by_point(thermo_fit):
         fit.volume_pressure_draws,
         fit.maxwell_ratio_draws,
     ):
-        grid = fn(x, p, beta=beta)
-        alone = [fn(xi, pi, beta=beta) for xi, pi in zip(x.ravel(), p.ravel(), strict=True)]
+        grid = fn(x, p)
+        alone = [fn(xi, pi) for xi, pi in zip(x.ravel(), p.ravel(), strict=True)]
         assert grid.shape == (50, 2, 3), fn.__name__
         np.testing.assert_allclose(grid, np.stack(alone, axis=-1).reshape(grid.shape), rtol=1e-12)
 
@@ -90,7 +86,9 @@ def test_recovers_the_stands_potential_spring(thermo_fit):
     assert _covered(fit.piston_area_draws(), 54.82e-4)
     doc = fit.to_json()
     assert {"implied_piston_area_m2", "at_x0", "noise", "convergence"} <= set(doc)
-    assert doc["model"] == "thermodynamic" and repr(fit).startswith("ThermoFit(G 4x3")
+    assert doc["model"] == "thermodynamic" and repr(fit).startswith(
+        "ThermoFit(thermodynamic model (G 4x3)"
+    )
 
 
 def test_a_wrong_piston_area_is_found():
@@ -114,10 +112,10 @@ def test_margins_answered_by_the_thermodynamic_model(thermo_fit):
     """``uq margin --model thermodynamic``: the pressure that carries the spring's true force at a
     height between the tested pressures, its force band and stroke, from the potential's draws;
     the truth (the stand's potential spring) inside the 99.9 % interval."""
-    from uq._derived.margin import ThermoAnswer, choose_model, margin
+    from uq._derived.margin import choose, margin
 
-    ans, info = choose_model(thermo_fit, forced="thermodynamic")
-    assert isinstance(ans, ThermoAnswer) and info["name"] == "thermodynamic"
+    ans, info = choose(thermo_fit, None, None, forced="thermodynamic")
+    assert ans is thermo_fit and info["name"] == "thermodynamic"
     spring = SPRINGS["n50-thermo"]()
     x, p = 0.100, 4.0
     load = float(spring.force_N(np.array(x), p))
@@ -127,4 +125,4 @@ def test_margins_answered_by_the_thermodynamic_model(thermo_fit):
     assert res["model"]["name"] == "thermodynamic" and "usable_stroke" in res
     assert abs(res["force_at_pressure"]["force_N"]["mean"] - load) < 0.01 * load
     area = ans.volume_area_draws(np.array(x), p)
-    assert area.shape[0] == ans.beta.shape[0] and np.all(area > 0)
+    assert area.shape[0] == ans.n_draws and np.all(area > 0)

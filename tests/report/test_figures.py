@@ -15,7 +15,7 @@ from figure_text import overlaps
 import uq
 from uq._derived.bands import campaign_bands
 from uq._report import campaign
-from uq._report.html import _plt, encode
+from uq._report.html import encode, pyplot
 
 SMALL = uq.Layout(pressures_bar=(1.0, 3.0, 5.0, 8.0), step_m=0.01)
 QUICK = uq.Settings(max_steps=200)
@@ -28,7 +28,7 @@ def small_fit():
 
 
 def test_the_overlap_check_finds_two_long_titles_side_by_side():
-    plt = _plt()
+    plt = pyplot()
     fig, (a, b) = plt.subplots(1, 2, figsize=(6, 3))
     a.set_title("a long title that runs well over into the neighbouring panel")
     b.set_title("and a second long title that starts under it")
@@ -54,12 +54,12 @@ def test_no_text_overlaps_in_a_figure(small_fit, name):
     try:
         assert overlaps(fig) == []
     finally:
-        _plt().close(fig)
+        pyplot().close(fig)
 
 
 def test_widest_band_in_points_is_the_axes_scale():
     """An axes 4 in tall showing 0..10: a band 1 unit wide is 4 * 72 / 10 = 28.8 pt."""
-    plt = _plt()
+    plt = pyplot()
     fig = plt.figure(figsize=(4, 4), dpi=100)
     ax = fig.add_axes((0, 0, 1, 1))
     ax.set_ylim(0, 10)
@@ -78,11 +78,11 @@ def test_figures_2_and_3_say_how_wide_the_bands_are_and_show_residual_panels(sma
         # one residual panel per test, titled by its pressure, centred on the mean curve
         panels = [ax for ax in fig.axes if ax.get_title().endswith(" bar")]
         assert [ax.get_title() for ax in panels] == [f"{t.pressure_bar:g} bar" for t in cb.tests]
-        _plt().close(fig)
+        pyplot().close(fig)
     force_widest = max(np.max(t.force.hi - t.force.lo) for t in cb.tests)
     fig = campaign.figure_force(cf, cb)
     assert f"at most {force_widest:.3g} N" in fig.axes[0].get_title()
-    _plt().close(fig)
+    pyplot().close(fig)
 
 
 def test_figures_4_and_5_use_a_colour_bar_not_dashed_bounds(small_fit):
@@ -97,7 +97,7 @@ def test_figures_4_and_5_use_a_colour_bar_not_dashed_bounds(small_fit):
         dashed = [ln for ax in plots for ln in ax.lines if ln.get_linestyle() == "--"]
         # Figure 5 draws the traditional force dashed (one line per test), no dashed bounds
         assert len(dashed) == (n if fn is campaign.figure_traditional else 0)
-        _plt().close(fig)
+        pyplot().close(fig)
 
 
 def test_svg_figures_are_vector_and_reproducible(small_fit):

@@ -9,7 +9,8 @@ from __future__ import annotations
 import pytest
 
 from uq._cli.main import main
-from uq._report.surface import NOISE_WORDS, noise_rows, preference
+from uq._report.model_page import NOISE_WORDS, noise_rows, preference
+from uq._report.thermo import PHYSICS_NOTES
 
 
 def _comparison(better: str, d: float, se: float, name: str = "surface") -> dict:
@@ -35,7 +36,7 @@ def _comparison(better: str, d: float, se: float, name: str = "surface") -> dict
     ],
 )
 def test_the_page_says_which_description_to_use(better, d, prefers, first_words):
-    p = preference(_comparison(better, d, 5.0), "surface")
+    p = preference(_comparison(better, d, 5.0), "surface", "the surface model")
     assert p["prefers"] == prefers and p["headline"].startswith(first_words)
     assert f"{d:+.1f} ± 5.0" in p["headline"] or prefers == "no verdict"
     if prefers == "cubics":  # the reader is told to read the cubics and what the surface is for
@@ -45,16 +46,15 @@ def test_the_page_says_which_description_to_use(better, d, prefers, first_words)
 
 
 def test_the_thermodynamic_page_says_what_a_preference_means_for_the_physics():
-    cubics = preference(
-        _comparison("per-pressure cubics", -9.0, 2.0, "thermodynamic"), "thermodynamic"
-    )
+    words = ("thermodynamic", "the thermodynamic model", PHYSICS_NOTES)
+    cubics = preference(_comparison("per-pressure cubics", -9.0, 2.0, "thermodynamic"), *words)
     assert "Maxwell" in cubics["meaning"] and "thermodynamic model" in cubics["headline"]
-    model = preference(_comparison("thermodynamic", 9.0, 2.0, "thermodynamic"), "thermodynamic")
+    model = preference(_comparison("thermodynamic", 9.0, 2.0, "thermodynamic"), *words)
     assert model["prefers"] == "model" and "one potential" in model["meaning"]
 
 
 def test_without_a_comparison_the_page_says_so():
-    p = preference(None, "surface")
+    p = preference(None, "surface", "the surface model")
     assert p["prefers"] == "not compared" and "--no-compare" in p["headline"]
 
 
@@ -94,13 +94,20 @@ def six_pressures_csv(tmp_path_factory):
     return csv
 
 
-def test_thermodynamic_out_is_still_refused_before_fitting(six_pressures_csv, tmp_path, capsys):
-    rc = main(
-        ["surface", str(six_pressures_csv), "--model", "thermodynamic", "--out", str(tmp_path)]
-    )
-    assert rc == 2
-    err = capsys.readouterr().err
-    assert "option --out: not yet with --model thermodynamic" in err and "--report" in err
+def test_thermodynamic_out_saves_a_model_margin_answers_from(six_pressures_csv, tmp_path, capsys):
+    """``uq surface --model thermodynamic --out DIR`` writes DIR/thermodynamic.nc; ``uq margin
+    --fit`` answers from it (short chains: this checks the saved format, not the sampler)."""
+    import json
+
+    quick = ["--no-compare", "--max-steps", "200", "--ensembles", "2", "--quiet"]
+    argv = ["surface", str(six_pressures_csv), "--model", "thermodynamic", *quick]
+    assert main([*argv, "--out", str(tmp_path), "--json", str(tmp_path / "t.json")]) == 0
+    saved = tmp_path / "thermodynamic.nc"
+    assert f"saved fit: {saved}" in capsys.readouterr().out
+    query = ["--height-mm", "110", "--load-N", "9000", "--json", str(tmp_path / "m.json")]
+    assert main(["margin", "--fit", str(saved), *query]) == 0
+    res = json.loads((tmp_path / "m.json").read_text())
+    assert res["model"]["name"] == "thermodynamic" and 1.0 < res["pressure_bar_for_prob"] < 10.0
 
 
 @pytest.mark.slow

@@ -74,13 +74,13 @@ def test_report_page(small_cubics, tmp_path, figure_format):
 
 def _readable(*figures) -> None:
     """No title or label of these figures on another (tests/figure_text.py)."""
-    from uq._report.html import _plt
+    from uq._report.html import pyplot
 
     for fig in figures:
         try:
             assert overlaps(fig) == [], fig.axes[0].get_title()
         finally:
-            _plt().close(fig)
+            pyplot().close(fig)
 
 
 def _comparison_checks(text: str, comparison: dict, name: str) -> None:
@@ -105,7 +105,7 @@ def _comparison_checks(text: str, comparison: dict, name: str) -> None:
 @pytest.mark.slow  # fast: the report and diagnose pages here, the design sheet in test_design_command
 def test_thermodynamic_page(small_campaign, small_cubics, tmp_path):
     from uq._models.thermo import ThermoOrders
-    from uq._report import surface, thermo
+    from uq._report import model_page, thermo
     from uq._report.thermo import write_thermo_report
 
     fit = uq.fit_thermo(small_campaign, ThermoOrders(4, 3), seed=4, settings=QUICK)
@@ -124,7 +124,7 @@ def test_thermodynamic_page(small_campaign, small_cubics, tmp_path):
         assert f"<tr><th>{p}</th>" in text and f"{r['maxwell_ratio']['mean']:.3f}" in text
     _words_not_code(text)
     _readable(
-        surface.figure_residual_overlay(fit, "thermodynamic"),
+        model_page.figure_residual_overlay(fit),
         thermo.figure_areas(fit),
         thermo.figure_maxwell(fit),
         thermo.figure_piston_area(fit),
@@ -134,7 +134,7 @@ def test_thermodynamic_page(small_campaign, small_cubics, tmp_path):
 @pytest.mark.slow
 def test_surface_page(small_campaign, small_cubics, tmp_path):
     from uq._models.surface import summary
-    from uq._report import surface
+    from uq._report import model_page, surface
     from uq._report.surface import write_surface_report
 
     fit = uq.fit_surface(small_campaign, uq.Orders(3, 2, 2, 1, 1), seed=4, settings=QUICK)
@@ -147,7 +147,7 @@ def test_surface_page(small_campaign, small_cubics, tmp_path):
     _readable(
         surface.figure_pressure_area(fit),
         surface.figure_spread(fit),
-        surface.figure_residual_overlay(fit),
+        model_page.figure_residual_overlay(fit),
     )
 
 

@@ -159,7 +159,7 @@ def test_page_escapes_what_the_recordings_say(n50_fit, tmp_path, monkeypatch):
     import dataclasses
 
     from uq._report import campaign
-    from uq._report.html import _plt
+    from uq._report.html import pyplot
 
     # the figures are not under test here: draw empty ones
     for name in (
@@ -169,7 +169,7 @@ def test_page_escapes_what_the_recordings_say(n50_fit, tmp_path, monkeypatch):
         "figure_traditional",
         "figure_scatter",
     ):
-        monkeypatch.setattr(campaign, name, lambda *a, **k: _plt().figure(figsize=(1, 1)))
+        monkeypatch.setattr(campaign, name, lambda *a, **k: pyplot().figure(figsize=(1, 1)))
     monkeypatch.setattr(campaign, "encoded_test_figure", lambda *a, **k: b"\x89PNG\r\n\x1a\n")
     evil = "<script>alert('x&y')</script>"
     rec = dataclasses.replace(n50_fit.recordings, path=str(tmp_path / "<script>r.csv"))
@@ -255,7 +255,7 @@ def test_footer_names_version_date_file_hash_and_stand(n50_fit, monkeypatch):
 def test_reference_option_refused_before_fitting(tmp_path, capsys, monkeypatch):
     from pathlib import Path
 
-    import uq._models.cubic as cubic
+    import uq._models.cubic_fit as cubic
 
     monkeypatch.setattr(cubic, "fit_campaign", lambda *a, **k: pytest.fail("fitted"))
     rc = main(

@@ -35,6 +35,9 @@ SPRING_NAMES = (
     "n50-traditional",
     "n50-smooth",
     "n50-thermo",
+    "n50-kink",
+    "n50-knee",
+    "n50-ripple",
 )  # uq._stand.simulator.SPRINGS (tested equal)
 
 
@@ -46,7 +49,8 @@ def configure_simulate(p) -> None:
         "--spring",
         default="n50",
         choices=SPRING_NAMES,
-        help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth; n50-thermo: one potential)",
+        help="true element (n50: Table 1's cubics; n50-traditional; n50-smooth; n50-thermo: one potential; "
+        "n50-kink, n50-knee, n50-ripple: one potential, not smooth in pressure)",
     )
     p.add_argument("--seed", type=seed, default=DEFAULT_SEED, help="random seed")
     p.add_argument(
@@ -185,7 +189,7 @@ def command_simulate(args) -> int:
         stand=stand,
     )
     if args.record_pressure:
-        tests = shapes.record_pressure(tests, args.seed)
+        tests = shapes.record_pressure(tests, args.seed, stand)
     if args.catalogue:
         tests = shapes.catalogue(
             tests,
@@ -312,9 +316,9 @@ def _shape_comment(args, volume_at, stand) -> str:
         lines.append("Shape: force only (no piston column).")
     if args.record_pressure:
         lines.append(
-            f"Pressure: measured by a sensor of {shapes.SENSOR_RESOLUTION_PA:g} Pa resolution with a gain error "
-            f"drawn once per campaign (sd {shapes.SENSOR_GAIN_SD:.1%}; this campaign's "
-            f"{shapes.sensor_gain(args.seed):+.4%}) on the held pressure p + dp."
+            f"Pressure: measured by a sensor of {stand.pressure_sensor_resolution_pa:g} Pa resolution with a "
+            f"gain error drawn once per campaign (sd {stand.pressure_sensor_gain_sd:.1%}; this campaign's "
+            f"{shapes.sensor_gain(args.seed, stand):+.4%}) on the held pressure p + dp."
         )
     if args.compression_negative:
         lines.append("Force: compression written negative (read with --compression negative).")
@@ -433,7 +437,7 @@ def command_fit(args) -> int:
             "give the recordings CSV (uq fit FILE.csv) or a fit definition (uq fit --config FILE.toml)"
         )
     from uq._io.files import emit_json, staged_folder
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     stand = stand_from(args)
     rec = load(args)
@@ -487,7 +491,7 @@ def command_fit(args) -> int:
         print(f"WARNING (model): {w}", file=sys.stderr)
     if args.out:  # the posteriors and fit.json whole or not at all (a full disk leaves none)
         with staged_folder(args.out, last=("fit.json",)) as stage:
-            paths = cf.save(stage)
+            paths = cf.save_posteriors(stage)
             emit_json(result, str(stage / "fit.json"))
         print(f"posteriors: {len(paths)} NetCDF files and fit.json in {args.out}")
     emit_json(result, args.json)

@@ -2,17 +2,21 @@
 and natural frequency at the design height with credible intervals, the catalogue's isobaric table,
 and with ``--out DIR`` the data sheet (:mod:`uq._report.design`: HTML + CSV + JSON + figures).
 
-A force-only campaign (no piston column) has no volume: the isobaric loads are given and one line
-says why the sealed outputs are omitted. Without ``--volume-l`` the sealed outputs are refused
-with one line saying what to measure.
+The model is the registry's (``--model``, default ``uq._models.registry.default("design")``),
+any fitted model with a volume-derived area. A force-only campaign (no piston column) has no
+volume: it is fitted by the per-pressure cubics (the force-only cubic of ``uq fit``), the isobaric
+loads are given and one line says why the sealed outputs are omitted. Without ``--volume-l`` the
+sealed outputs are refused with one line saying what to measure.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from types import SimpleNamespace
 
-from uq._cli.common import _option_type
+from uq._cli.common import option_type
+from uq._models import registry
 
 POLYTROPIC_HELP = (
     "polytropic exponent n: 1 isothermal (slow strokes) .. 1.4 adiabatic (fast strokes), or a range "
@@ -64,9 +68,9 @@ def _number_list(text: str) -> tuple[float, ...]:
     return vals
 
 
-polytropic = _option_type(_polytropic)
-dvdp = _option_type(_dvdp)
-number_list = _option_type(_number_list)
+polytropic = option_type(_polytropic)
+dvdp = option_type(_dvdp)
+number_list = option_type(_number_list)
 polytropic.__name__, dvdp.__name__, number_list.__name__ = "value or range", "L/bar", "list"
 
 
@@ -131,10 +135,10 @@ def configure_design(p) -> None:
     )
     g.add_argument(
         "--model",
-        choices=("surface", "thermodynamic"),
-        default="surface",
-        help="surface: force and volume surfaces (no dV/dp_u of its own); thermodynamic: force and "
-        "volume from one potential (offers --dvdp-l-per-bar model)",
+        choices=registry.names(),
+        default=registry.default("design"),
+        help=f"the model of the element ({registry.help_words()}); a model with its own dV/dp_u "
+        "offers --dvdp-l-per-bar model",
     )
     s = p.add_argument_group("the data sheet")
     s.add_argument(
@@ -169,17 +173,18 @@ def configure_design(p) -> None:
     add_stand(p)
 
 
-class _Ranges:
-    """What the options are checked against before the fit: the campaign's tested ranges."""
-
-    def __init__(self, rec, model: str):
-        p = [t.pressure_bar for t in rec.tests]
-        self.height_range_m = tuple(float(v) for v in rec.height_range_m)
-        self.pressure_range_bar = (float(min(p)), float(max(p)))
-        self.label = "the surface model" if model == "surface" else "the thermodynamic model"
-        self.volume_area_draws = None
-        if model == "thermodynamic":
-            self.volume_pressure_draws = None
+def _planned(rec, model: str):
+    """What the options are checked against before the fit: the campaign's tested ranges and
+    what the model will offer (the registry's class of it)."""
+    kind = registry.entry(model).model_class()
+    p = [t.pressure_bar for t in rec.tests]
+    return SimpleNamespace(
+        height_range_m=tuple(float(v) for v in rec.height_range_m),
+        pressure_range_bar=(float(min(p)), float(max(p))),
+        label=kind.words,
+        has_volume=True,
+        has_dvdp=bool(kind.has_dvdp),
+    )
 
 
 def sealed_design(args, height_m: float, charge_bar: float, forcing_Hz: float | None = None):
@@ -211,7 +216,7 @@ def _check_before_fit(args, rec) -> None:
     from uq._derived.design import check_design
     from uq._io.errors import InputError
 
-    ranges = _Ranges(rec, args.model)
+    ranges = _planned(rec, args.model)
     lo, hi = ranges.height_range_m
     if not lo - 1e-9 <= args.height_mm * 1e-3 <= hi + 1e-9:
         raise InputError(
@@ -247,10 +252,11 @@ def _check_before_fit(args, rec) -> None:
             f"option --volume-sd-l: {args.volume_sd_l:g} L is more than a quarter of the volume {args.volume_l:g} L; "
             "a normal uncertainty would give non-positive volumes: measure V more closely"
         )
-    if args.dvdp_l_per_bar == "model" and args.model != "thermodynamic":
+    if args.dvdp_l_per_bar == "model" and not ranges.has_dvdp:
+        with_own = [e.name for e in registry.entries() if e.model_class().has_dvdp]
         raise InputError(
-            "option --dvdp-l-per-bar: 'model' needs --model thermodynamic (the surface model has no dV/dp_u "
-            "of its own); give a number of litres per bar"
+            f"option --dvdp-l-per-bar: 'model' needs a model with its own dV/dp_u (--model "
+            f"{' or '.join(with_own)}; {ranges.label} has none); give a number of litres per bar"
         )
     check_design(ranges, _design_from(args))
 
@@ -276,12 +282,11 @@ def command_design(args) -> int:
     from uq._derived import design as D
 
     t0 = time.perf_counter()
-    from uq._models.thermo import THETA_NAMES
-
+    entry = registry.entry(args.model)
     stand = stand_from(args)
     settings = settings_from(args)
-    settings.require_walkers(len(THETA_NAMES))  # as uq surface, before the recordings are read
-    rec = load(args, needs=("order",) if args.model == "surface" else ("piston", "order"))
+    settings.require_walkers(entry.n_sampled)  # before the recordings are read
+    rec = load(args, needs=("piston", "order") if entry.needs_volume else ("order",))
     _check_before_fit(args, rec)
     x_c = args.height_mm * 1e-3
     heights = (
@@ -292,25 +297,14 @@ def command_design(args) -> int:
     pressures = sorted({t.pressure_bar for t in rec.tests})
     charges = args.charges_bar or _default_charges(rec)
     if not rec.has_piston:
-        return _force_only(args, rec, stand, heights, pressures, t0)
-    from uq._derived.comparison import FITTERS
-
-    fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
-    model = (D.ThermoDesignModel if args.model == "thermodynamic" else D.SurfaceDesignModel)(
-        fit, args.draws
-    )
+        return _force_only(args, rec, stand, settings, heights, pressures, t0)
+    fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+    model = fit.on_draws(args.draws)
     design = _design_from(args)
     grid = D.DesignGrid(model, x_c)
     doc = D.design_document(model, design, charges, grid)
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
-    doc["source"] = {
-        "recordings": str(rec.path),
-        "n_tests": len(rec.tests),
-        "n_readings": int(rec.n_points),
-        "seed": args.seed,
-        "converged": bool(fit.convergence.converged),
-        "warnings": fit.convergence.messages(_advice()),
-    }
+    doc["source"] = _source(args, rec, fit)
     curves = None
     if args.out:
         curves = {
@@ -322,6 +316,18 @@ def command_design(args) -> int:
         args, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
     )
     return 1 if (args.strict and not fit.convergence.converged) else 0
+
+
+def _source(args, rec, fit) -> dict:
+    """The JSON's ``source``: the recordings, the seed and the sampler's verdict."""
+    return {
+        "recordings": str(rec.path),
+        "n_tests": len(rec.tests),
+        "n_readings": int(rec.n_points),
+        "seed": args.seed,
+        "converged": bool(fit.convergence.converged),
+        "warnings": fit.convergence.messages(_advice()),
+    }
 
 
 def _advice():
@@ -342,11 +348,14 @@ FORCE_ONLY_WHY = (
 )
 
 
-def _force_only(args, rec, stand, heights, pressures, t0) -> int:
+def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
+    """A campaign without piston readings: the per-pressure cubics (``uq fit``'s force-only
+    cubic per test), interpolated in pressure, give the isobaric loads."""
     from uq._derived import design as D
     from uq._inference.summary import estimate
 
-    model = D.force_only_cubics(rec, seed=args.seed, stand=stand, n_draws=args.draws)
+    fit = registry.fit(registry.CUBICS, rec, seed=args.seed, settings=settings, stand=stand)
+    model = fit.on_draws(args.draws)
     x_c = args.height_mm * 1e-3
     load = model.force_draws([x_c], [args.charge_bar])[:, 0]
     doc = {
@@ -369,14 +378,7 @@ def _force_only(args, rec, stand, heights, pressures, t0) -> int:
             model.label,
         ],
         "isobaric": D.isobaric_table(model, pressures, heights, x_c),
-        "source": {
-            "recordings": str(rec.path),
-            "n_tests": len(rec.tests),
-            "n_readings": int(rec.n_points),
-            "seed": args.seed,
-            "converged": True,
-            "warnings": [],
-        },
+        "source": _source(args, rec, fit),
     }
     e = doc["load_N"]
     print(
@@ -387,8 +389,8 @@ def _force_only(args, rec, stand, heights, pressures, t0) -> int:
         f"[{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
     )
     print(f"  {FORCE_ONLY_WHY}")
-    _sheet_and_json(args, doc, None, f"{time.perf_counter() - t0:.1f} s")
-    return 0
+    _sheet_and_json(args, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    return 1 if (args.strict and not fit.convergence.converged) else 0
 
 
 def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:

@@ -9,16 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from uq._cli.common import add_stand, stand_from
-from uq._derived.margin import (
-    _ANSWER_NAMES,
-    MODEL_CHOICES,
-    fit_and_choose,
-    load_answer,
-    margin,
-    save_answer,
-    sha256_of,
-)
+from uq._derived.margin import AUTO, load_answer, margin, model_choices
 from uq._io.errors import InputError
+from uq._io.files import sha256_of
+from uq._models import registry
 
 
 def configure_margin(p) -> None:
@@ -45,12 +39,12 @@ def configure_margin(p) -> None:
     )
     p.add_argument(
         "--model",
-        choices=MODEL_CHOICES,
+        choices=model_choices(),
         default=None,
-        help="which model answers: auto (default) fits the surface model and the per-pressure cubics and "
-        "takes the one PSIS-LOO prefers by more than 2 SE (the surface when indistinguishable); "
-        "surface, thermodynamic (one potential for force and volume: docs/thermo.md) or cubics "
-        "skip the comparison",
+        help=f"which model answers: {AUTO} (default) fits the {registry.default('margin')} model "
+        "and the per-pressure cubics and takes the one PSIS-LOO prefers by more than 2 SE (the "
+        f"{registry.default('margin')} model when indistinguishable); a model's name skips the "
+        f"comparison ({registry.help_words()})",
     )
     p.add_argument(
         "--save-fit",
@@ -152,11 +146,6 @@ def _check_design_usage(args) -> None:
         raise InputError(
             "option --dvdp-l-per-bar: 'model' is not offered for design margins (the charge moves "
             "with each draw's required pressure); give a number of litres per bar"
-        )
-    if args.model == "cubics":
-        raise InputError(
-            "option --model cubics: the design margins need the volume-derived area, which the "
-            "per-pressure cubics do not interpolate; use --model surface"
         )
 
 
@@ -397,11 +386,6 @@ def _check_usage(args) -> None:
             raise InputError(
                 "option --save-fit: not with --fit (the saved fit is already saved); give FILE.csv to fit and save"
             )
-        if args.model == "thermodynamic":
-            raise InputError(
-                "option --save-fit: not with --model thermodynamic (a saved answer holds the surface "
-                "model or the per-pressure cubics)"
-            )
         if args.save_fit == "-":
             raise InputError(
                 "option --save-fit: needs a file name (NetCDF is not written to stdout)"
@@ -423,7 +407,7 @@ def command_margin(args) -> int:
     queries = _queries_from(args)  # checked before the fit, not after
     if args.fit is not None:
         ans, info, meta = load_answer(args.fit)
-        if args.model not in (None, "auto") and _ANSWER_NAMES[ans.name] != args.model:
+        if args.model not in (None, AUTO) and ans.name != args.model:
             raise InputError(
                 f"option --model {args.model}: {args.fit} holds the {ans.label}; "
                 f"fit again with FILE.csv --model {args.model} --save-fit"
@@ -433,18 +417,14 @@ def command_margin(args) -> int:
         diagnostics = {"warnings": meta["warnings"], "converged": meta["converged"]}
         source, rec = args.fit, None
     else:
-        args.model = args.model or "auto"
-        stand = stand_from(
-            args
-        )  # a bad --stand file or --walkers is refused before the recordings are read
-        if args.model in ("auto", "surface", "thermodynamic"):
-            from uq._cli.common import settings_from
-            from uq._models.surface import NOISE_NAMES
-            from uq._models.thermo import THETA_NAMES
+        from uq._cli.common import settings_from
 
-            settings_from(args).require_walkers(
-                len(THETA_NAMES) if args.model == "thermodynamic" else len(NOISE_NAMES)
-            )
+        args.model = args.model or AUTO
+        stand = stand_from(args)  # a bad --stand file is refused before the recordings are read
+        fitted = (
+            (registry.default("margin"), registry.CUBICS) if args.model == AUTO else (args.model,)
+        )
+        settings_from(args).require_walkers(max(registry.entry(m).n_sampled for m in fitted))
         rec = load(args)
         _check_design_volume(args, rec)
         tested = [t.pressure_bar for t in rec.tests]
@@ -466,18 +446,12 @@ def command_margin(args) -> int:
         )
         _warn_if_recordings_changed(meta)
     if args.save_fit is not None:
-        from uq._cli.common import settings_from
-
-        save_answer(
+        ans.save(
             args.save_fit,
-            ans,
-            info,
-            recordings=rec,
-            seed=args.seed,
             written_by="uq margin --save-fit",
-            settings=settings_from(args),
-            stand=stand,
-            diagnostics=diagnostics,
+            model_info=info,
+            converged=diagnostics["converged"],
+            warnings=diagnostics["warnings"],
         )
         print(
             f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"
@@ -520,9 +494,10 @@ def _print_one(source, ans, info, q, res) -> None:
         print(f"  {info['omitted']}")
     c = info.get("comparison")
     if c:
+        m, cub = c[c["model"]], c[registry.CUBICS]
         print(
-            f"  PSIS-LOO: surface {c['surface']['elpd_loo']:.1f} (max Pareto k {c['surface']['max_pareto_k']:.2f}), "
-            f"cubics {c['cubics']['elpd_loo']:.1f} (max Pareto k {c['cubics']['max_pareto_k']:.2f}), "
+            f"  PSIS-LOO: {c['model']} {m['elpd_loo']:.1f} (max Pareto k {m['max_pareto_k']:.2f}), "
+            f"cubics {cub['elpd_loo']:.1f} (max Pareto k {cub['max_pareto_k']:.2f}), "
             f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f}"
         )
     print(
@@ -583,8 +558,9 @@ def _print_table(source, ans, info, queries, results) -> None:
 
 
 def _fit_and_choose(args, rec, stand):
-    """Fit what ``--model`` needs (``uq._derived.margin.fit_and_choose``)."""
+    """Fit what ``--model`` needs (``uq._derived.comparison.fit_and_choose``)."""
     from uq._cli.common import settings_from
+    from uq._derived.comparison import fit_and_choose
 
     return fit_and_choose(
         rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand

@@ -11,9 +11,9 @@ from __future__ import annotations
 import sys
 import time
 
-from uq._cli.common import _option_type
-
-MODEL_CHOICES = ("auto", "surface", "thermodynamic", "cubics")
+from uq._cli.common import option_type
+from uq._derived.margin import AUTO
+from uq._models import registry
 
 
 def _grid(text: str, what: str):
@@ -60,8 +60,8 @@ def _nonnegative_number(text: str) -> float:
     return nonnegative_float(text)
 
 
-pressures_grid = _option_type(_pressures)
-heights_grid = _option_type(_heights)
+pressures_grid = option_type(_pressures)
+heights_grid = option_type(_heights)
 pressures_grid.__name__, heights_grid.__name__ = "list or range", "list or range"
 
 
@@ -121,10 +121,11 @@ def configure_plan(p) -> None:
     )
     g.add_argument(
         "--model",
-        choices=MODEL_CHOICES,
-        default="auto",
-        help="the model to plan with: auto (default) the one uq margin would choose (the surface model "
-        "or the per-pressure cubics by PSIS-LOO), or surface, thermodynamic, cubics",
+        choices=(AUTO, *registry.names()),
+        default=registry.default("plan"),
+        help=f"the model to plan with (default {registry.default('plan')}): a registered model "
+        f"({registry.help_words()}), or {AUTO}: the one uq margin would choose (the "
+        f"{registry.default('margin')} model or the per-pressure cubics by PSIS-LOO)",
     )
     g.add_argument(
         "--draws",
@@ -161,7 +162,7 @@ def configure_plan(p) -> None:
     )
     d.add_argument(
         "--dvdp-l-per-bar",
-        type=_option_type(_dvdp_number),
+        type=option_type(_dvdp_number),
         default=0.0,
         help="how the volume at the design height changes with pressure, L/bar (default 0, an "
         "assumption the answer states)",
@@ -261,21 +262,22 @@ def _check_model(args, rec, targets) -> None:
             f"option --target {volume[0]}: {rec.path} has no piston readings (force-only campaign or "
             "catalogue table), so the volume-derived area it needs is not known"
         )
-    if volume and args.model == "cubics":
+    if volume and args.model == registry.CUBICS:
         raise InputError(
             f"option --target {volume[0]}: the per-pressure cubics do not interpolate the volume-derived "
             "area between tested pressures; plan with --model surface or thermodynamic"
         )
-    if args.model == "cubics" and rec.pressure_measured:
+    if args.model == registry.CUBICS and rec.pressure_measured:
         raise InputError(
             f"option --model cubics: {rec.path} gives measured pressures, which the per-pressure cubics "
             "take as a covariate with a sensor offset per test; uq plan plans with the plain cubics "
             "only: plan with --model surface"
         )
-    if args.model == "thermodynamic" and len(rec.tests) < 2:
+    if args.model in (registry.THERMODYNAMIC, registry.DISCREPANCY) and len(rec.tests) < 2:
         raise InputError(
-            f"option --model thermodynamic: {rec.path} holds one test; the thermodynamic model needs "
-            "tests at two pressures or more"
+            f"option --model {args.model}: {rec.path} holds one test; the {args.model} model needs "
+            f"tests at two pressures or more (plan with --model {registry.SURFACE} or "
+            f"{registry.CUBICS})"
         )
 
 
@@ -292,32 +294,33 @@ def _fit(args, rec, targets, stand, settings):
 
 
 def _choose(args, rec, targets, stand, settings):
-    from uq._derived.comparison import FITTERS, fit_both, force_side
-    from uq._derived.margin import CubicInterpolation, choose_model
-    from uq._models.cubic import fit_campaign
+    from uq._derived.comparison import fit_both, force_side
+    from uq._derived.margin import choose
 
-    if args.model in FITTERS:
-        fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
-        return fit, {"name": args.model, "why": f"chosen by the user (--model {args.model})"}
-    if args.model == "cubics":
-        cub = fit_campaign(force_side(rec), seed=args.seed, settings=settings, stand=stand)
-        return cub, {"name": "cubics", "why": "chosen by the user (--model cubics)"}
+    if args.model == registry.CUBICS:
+        cub = registry.fit(
+            args.model, force_side(rec), seed=args.seed, settings=settings, stand=stand
+        )
+        return cub, {"name": cub.name, "why": f"chosen by the user (--model {args.model})"}
+    if args.model != AUTO:
+        fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+        return fit, {"name": fit.name, "why": f"chosen by the user (--model {args.model})"}
     fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand)
-    ans, info = choose_model(fit, cub, comparison)
+    ans, info = choose(fit, cub, comparison)
     info = {k: v for k, v in info.items() if k in ("why", "comparison")}
-    if isinstance(ans, CubicInterpolation):
+    if ans is cub:
         reason = None
         if any(t.needs_volume for t in targets):
             reason = "the targets need the volume-derived area between tested pressures, which the cubics do not interpolate"
         elif rec.pressure_measured:
             reason = "uq plan plans with the plain cubics, and these take the measured pressures as a covariate"
         if reason:
-            info["name"] = "surface"
-            info["why"] += f"; but {reason}: planned with the surface model"
+            info["name"] = fit.name
+            info["why"] += f"; but {reason}: planned with the {fit.name} model"
             return fit, info
-        info["name"] = "cubics"
+        info["name"] = cub.name
         return cub, info
-    info["name"] = "surface"
+    info["name"] = fit.name
     return fit, info
 
 
@@ -519,7 +522,8 @@ def command_plan(args) -> int:
     targets = _targets(args)
     args.target_specs = [f"--target {s}" for s in args.target]
     settings = settings_from(args)
-    settings.require_walkers({"thermodynamic": 6, "cubics": 3}.get(args.model, 5))
+    fitted = (registry.default("margin"), registry.CUBICS) if args.model == AUTO else (args.model,)
+    settings.require_walkers(max(registry.entry(m).n_sampled for m in fitted))
     stand = stand_from(args)
     rec = load(args)
     targets = [t.with_range([x.pressure_bar for x in rec.tests]) for t in targets]

@@ -76,7 +76,7 @@ def _reference(value: str):
 
 def command_report(args) -> int:
     from uq._io.errors import InputError
-    from uq._models.cubic import fit_campaign
+    from uq._models.cubic_fit import fit_campaign
 
     if args.draws < MIN_DRAWS:
         raise InputError(f"option --draws: at least {MIN_DRAWS} draws, got {args.draws}")

@@ -1,17 +1,16 @@
-"""``uq surface``: the command line of the models over all tests at once: the pressure-coupled
-surface (:mod:`uq._models.surface`, the default) and the thermodynamic potential
-(:mod:`uq._models.thermo`, ``--model thermodynamic``)."""
+"""``uq surface``: the command line of the models over all tests at once (the registry's,
+``uq._models.registry``: the pressure-coupled surface by default, the thermodynamic potential, a
+model plugged in from outside): fit, compare with the per-pressure cubics, print, and write the
+JSON, the model's page (``uq._report.pages``) and the saved model (``--out``)."""
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 from uq._cli.common import add_stand, stand_from
-from uq._derived.comparison import FITTERS
-from uq._derived.comparison import words as comparison_words
-from uq._models import surface as _surface
-from uq._models import thermo as _thermo
-from uq._models.thermo import THETA_NAMES
+from uq._io.errors import InputError
+from uq._models import registry
 
 
 def configure_surface(p) -> None:
@@ -22,10 +21,9 @@ def configure_surface(p) -> None:
     add_json(p)
     p.add_argument(
         "--model",
-        choices=("surface", "thermodynamic"),
-        default="surface",
-        help="surface: force and volume surfaces smooth in pressure (no link between them); "
-        "thermodynamic: force and volume from one potential G(x, p_u) (the Maxwell relation holds)",
+        choices=registry.names(over_all_tests=True),
+        default=registry.default("surface"),
+        help=registry.help_words(over_all_tests=True),
     )
     p.add_argument(
         "--select",
@@ -40,14 +38,15 @@ def configure_surface(p) -> None:
     p.add_argument(
         "--report",
         metavar="DIR",
-        help="write the model's page and its PNGs to DIR: surface.html (heat maps, each test "
-        "against the surface, comparison), or thermodynamic.html with --model thermodynamic "
-        "(force and dV/dx by test, Maxwell ratio, implied piston area, comparison)",
+        help="write the model's page and its PNGs to DIR: MODEL.html (surface.html: heat maps, "
+        "each test against the surface, comparison; thermodynamic.html: force and dV/dx by test, "
+        "Maxwell ratio, implied piston area, comparison)",
     )
     p.add_argument(
         "--out",
         metavar="DIR",
-        help="the folder to write: surface.nc, the surface posterior as a saved answer for uq margin --fit (docs/formats.md)",
+        help="the folder to write: MODEL.nc (surface.nc, thermodynamic.nc), the fitted model "
+        "saved for uq margin --fit and uq design --fit (docs/formats.md)",
     )
     add_stand(p)
 
@@ -55,53 +54,51 @@ def configure_surface(p) -> None:
 def command_surface(args) -> int:
     from uq._cli.common import load, settings_from
     from uq._derived.comparison import fit_both
+    from uq._derived.margin import describe
+    from uq._inference.convergence import CLI_ADVICE
     from uq._io.files import emit_json
+    from uq._report.pages import write_model_page
 
     t0 = time.perf_counter()
+    entry = registry.entry(args.model)
     stand = stand_from(
         args
     )  # a bad --stand file or --walkers is refused before the recordings are read
     settings = settings_from(args)
-    settings.require_walkers(len(THETA_NAMES))
-    if args.model == "thermodynamic" and args.out is not None:
-        from uq._io.errors import InputError
-
-        raise InputError(
-            "option --out: not yet with --model thermodynamic (the saved answer is the surface "
-            "model's); use --json or --report"
-        )
+    settings.require_walkers(entry.n_sampled)
+    if args.select and entry.select_orders is None:
+        raise InputError(f"option --select: the {entry.name} model has no candidate orders to rank")
     rec = load(args)
-    module = _thermo if args.model == "thermodynamic" else _surface
     if args.select:
-        fit, _ = module.select_orders(rec, seed=args.seed, settings=settings, stand=stand)
+        fit, _ = entry.order_selection()(rec, seed=args.seed, settings=settings, stand=stand)
     else:
-        fit = FITTERS[args.model](rec, seed=args.seed, settings=settings, stand=stand)
+        fit = entry.fit_function()(rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
     if not args.no_compare:
         _, _, comparison = fit_both(
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     res = fit.to_json(comparison)
-    if args.model == "thermodynamic":
-        _print_thermo(rec, fit, res, comparison)
-    else:
-        _print_surface(rec, fit, res, comparison)
+    PRINTERS.get(fit.name, _print_model)(rec, fit, res, comparison)
     for w in res["warnings"]:
         print(f"  warning: {w}")
     if args.report:
-        if args.model == "thermodynamic":
-            from uq._report.thermo import write_thermo_report as write_page
-        else:
-            from uq._report.surface import write_surface_report as write_page
-
-        print(f"  report: {write_page(fit, res, args.report)}")
+        print(f"  report: {write_model_page(fit, res, args.report)}")
     if args.out:
-        from uq._derived.margin import save_surface_answer
-
-        print(
-            f"  saved fit: {save_surface_answer(fit, comparison, args.out, seed=args.seed, settings=settings, stand=stand)} "
-            "(uq margin --fit answers from it)"
+        why = (
+            f"saved by uq surface --out: {fit.words} answers (uq margin FILE.csv --save-fit "
+            "chooses between the models)"
         )
+        if comparison is not None:
+            why += f"; PSIS-LOO verdict '{comparison['better']}': {comparison['reason']}"
+        path = fit.save(
+            Path(args.out) / f"{fit.name}.nc",
+            written_by="uq surface --out",
+            model_info=describe(fit, comparison, why),
+            comparison=comparison,
+            warnings=fit.convergence.messages(CLI_ADVICE),
+        )
+        print(f"  saved fit: {path} (uq margin --fit answers from it)")
     # printed, not in the JSON: reruns give identical bytes
     print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(res, args.json)
@@ -109,10 +106,13 @@ def command_surface(args) -> int:
 
 
 def _print_comparison(name: str, c: dict) -> None:
+    from uq._derived.comparison import words as comparison_words
+
     print(
         f"  PSIS-LOO: {name} {c[name]['elpd_loo']:.1f} ({c[name]['n_coefficients']} coef., "
-        f"max Pareto k {c[name]['max_pareto_k']:.2f}), cubics {c['cubics']['elpd_loo']:.1f} "
-        f"({c['cubics']['n_coefficients']} coef., max Pareto k {c['cubics']['max_pareto_k']:.2f}): "
+        f"max Pareto k {c[name]['max_pareto_k']:.2f}), cubics {c[registry.CUBICS]['elpd_loo']:.1f} "
+        f"({c[registry.CUBICS]['n_coefficients']} coef., max Pareto k "
+        f"{c[registry.CUBICS]['max_pareto_k']:.2f}): "
         f"{comparison_words(c)}"
     )
 
@@ -120,7 +120,7 @@ def _print_comparison(name: str, c: dict) -> None:
 def _print_thermo(rec, fit, res, comparison) -> None:
     print(
         f"{rec.path}: thermodynamic model over {len(rec.tests)} tests, {rec.n_points} readings "
-        f"({fit.orders.label}; {fit.beta.shape[-1]} coefficients)"
+        f"({fit.orders_label}; {fit.n_coefficients} coefficients)"
     )
     for row in fit.selection:
         print(
@@ -144,13 +144,13 @@ def _print_thermo(rec, fit, res, comparison) -> None:
         f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
     )
     if comparison:
-        _print_comparison("thermodynamic", comparison)
+        _print_comparison(fit.name, comparison)
 
 
-def _print_surface(rec, fit, res, comparison) -> None:
+def _print_surface(rec, fit, res, comparison, what: str = "surface model") -> None:
     print(
-        f"{rec.path}: surface model over {len(rec.tests)} tests, {rec.n_points} readings "
-        f"({fit.label}; {fit.beta.shape[-1]} coefficients)"
+        f"{rec.path}: {what} over {len(rec.tests)} tests, {rec.n_points} readings "
+        f"({fit.orders_label}; {fit.n_coefficients} coefficients)"
     )
     for row in fit.selection:
         print(
@@ -173,7 +173,7 @@ def _print_surface(rec, fit, res, comparison) -> None:
             f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
             f"pressure holding x{nz['k_p']['mean']:.2f}"
         )
-        print(f"  {_surface.volume_omitted_reason(rec)}")
+        print(f"  {fit.omitted_reason}")
     else:
         print(
             f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
@@ -183,4 +183,42 @@ def _print_surface(rec, fit, res, comparison) -> None:
             f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range"
         )
     if comparison:
-        _print_comparison("surface", comparison)
+        _print_comparison(fit.name, comparison)
+
+
+def _print_discrepancy(rec, fit, res, comparison) -> None:
+    """The surface's summary, then the discrepancy's amplitudes and length scale."""
+    _print_surface(rec, fit, res, None, what=fit.words.removeprefix("the "))
+    d = res["discrepancy"]
+
+    def cm2(e):
+        return f"{e['mean'] * 1e4:.2f} cm^2 [{e['q05'] * 1e4:.2f}, {e['q95'] * 1e4:.2f}]"
+
+    vol = f", of the volume-derived area {cm2(d['a_V_m2'])}" if "a_V_m2" in d else ""
+    ell = d["length_bar"]
+    print(
+        f"  discrepancy ({d['kernel']}): amplitude of the pressure-area deviation {cm2(d['a_F_m2'])}"
+        f"{vol}, length scale {ell['mean']:.2f} bar [{ell['q05']:.2f}, {ell['q95']:.2f}]"
+    )
+    if comparison:
+        _print_comparison(fit.name, comparison)
+
+
+def _print_model(rec, fit, res, comparison) -> None:
+    """Any model without a summary of its own: what it is, its sampled parameters, the comparison."""
+    print(
+        f"{rec.path}: {fit.label} over {len(rec.tests)} tests, {rec.n_points} readings "
+        f"({fit.n_coefficients} coefficients)"
+    )
+    for name, e in (res.get("noise") or {}).items():
+        print(f"  {name}: {e['mean']:.4g} [{e['q05']:.4g}, {e['q95']:.4g}]")
+    if comparison:
+        _print_comparison(fit.name, comparison)
+
+
+#: the summaries of the models that have their own, by registry name
+PRINTERS = {
+    registry.SURFACE: _print_surface,
+    registry.THERMODYNAMIC: _print_thermo,
+    registry.DISCREPANCY: _print_discrepancy,
+}

@@ -32,7 +32,7 @@ DEFAULT_MAX_STEPS = 20000
 # ----------------------------------------------------------------------------- option types
 
 
-def _option_type(check):
+def option_type(check):
     """``check`` as an argparse ``type=``: its ValueError becomes a usage error with the same message."""
 
     def parse(text: str):
@@ -45,14 +45,14 @@ def _option_type(check):
     return parse
 
 
-positive_float = _option_type(values.positive_float)
-nonnegative_float = _option_type(values.nonnegative_float)
-finite_float = _option_type(values.finite_float)
-positive_int = _option_type(values.positive_int)
-compression = _option_type(values.compression)
-boolean = _option_type(values.boolean)
-walkers = _option_type(values.walkers)
-seed = _option_type(values.seed)
+positive_float = option_type(values.positive_float)
+nonnegative_float = option_type(values.nonnegative_float)
+finite_float = option_type(values.finite_float)
+positive_int = option_type(values.positive_int)
+compression = option_type(values.compression)
+boolean = option_type(values.boolean)
+walkers = option_type(values.walkers)
+seed = option_type(values.seed)
 
 
 def probability(text: str) -> float:

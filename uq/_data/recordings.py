@@ -97,6 +97,11 @@ class PressureTest:
     def label(self) -> str:
         return f"{self.pressure_bar:g} bar"
 
+    def __repr__(self) -> str:
+        lo, hi = float(self.height_m.min()) * 1e3, float(self.height_m.max()) * 1e3
+        kind = "force only" if self.piston_m is None and self.volume_m3 is None else "force, volume"
+        return f"PressureTest({self.label}, {self.n_points} readings, {lo:g}..{hi:g} mm, {kind})"
+
 
 @dataclass(frozen=True, eq=False)
 class Recordings:
@@ -124,6 +129,15 @@ class Recordings:
     conventions: dict = field(
         default_factory=lambda: {"compression": "positive", "pressure": "gauge"}
     )
+
+    def __repr__(self) -> str:
+        p = ", ".join(f"{t.pressure_bar:g}" for t in self.tests)
+        lo, hi = (v * 1e3 for v in self.height_range_m) if self.tests else (0.0, 0.0)
+        kind = "with piston" if self.has_piston else "force only"
+        return (
+            f"Recordings({self.path}: {len(self.tests)} tests at {p} bar, {self.n_points} "
+            f"readings, {lo:g}..{hi:g} mm, {kind})"
+        )
 
     @property
     def pressures_bar(self) -> np.ndarray:

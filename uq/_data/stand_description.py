@@ -48,6 +48,14 @@ class StandDescription:
                                     independent (the models' assumption); in (0, 1): their lag-one
                                     correlation in recording order (AR(1), same sd), as a slow
                                     pressure controller leaves them
+        pressure_sensor_gain_sd     the pressure sensor's relative accuracy, read as a gain error
+                                    common to a test (0.1 %, the paper's sensor, section 3.2)
+        pressure_sensor_resolution_pa  its resolution, Pa (1 Pa assumed: the paper's sensor
+                                    resolves far below the holding error)
+
+    The sensor matters only for recordings with measured pressures (a ``set_pressure_*`` column):
+    the models correct each reading by its measured deviation, whose common offset the gain error
+    leaves unknown (uq._inference.latent.common_offset) and whose rounding is the resolution.
 
     The last two describe stands whose noise differs in *form* from what every model's likelihood
     assumes (independent Gaussian errors): the stand uses them, the models ignore them, so the
@@ -73,6 +81,8 @@ class StandDescription:
     p_atm_bar: float = 1.01325
     error_df: float = 0.0
     pressure_error_corr: float = 0.0
+    pressure_sensor_gain_sd: float = 0.001
+    pressure_sensor_resolution_pa: float = 1.0
 
     def __post_init__(self):
         if self.error_df != 0 and not self.error_df > 2:
@@ -98,6 +108,10 @@ class StandDescription:
         return np.maximum(
             self.pressure_holding_bar * np.minimum(1.0, p), self.pressure_holding_floor_bar
         )
+
+    def __repr__(self) -> str:
+        changed = ", ".join(f"{k}={v:g}" for k, v in self.changes().items())
+        return f"StandDescription(the paper's stand{' except ' + changed if changed else ''})"
 
     def replace(self, **changes) -> StandDescription:
         return dataclasses.replace(self, **changes)
@@ -128,6 +142,7 @@ _ALLOW_ZERO = {
     "receiver_air_m3",
     "error_df",
     "pressure_error_corr",
+    "pressure_sensor_gain_sd",
 }
 
 

@@ -187,7 +187,7 @@ class CampaignBands:
     def summary(self):
         """The values at x0 of every test (mean, sd, q05, q95 of each banded quantity), a pandas
         DataFrame indexed by (pressure, quantity)."""
-        import pandas as pd
+        import pandas as pd  # reason: optional and heavy, loaded only where used
 
         rows = {(t.pressure_bar, name): est for t in self.tests for name, est in t.at_x0.items()}
         return pd.DataFrame.from_dict(rows, orient="index").rename_axis(
@@ -520,7 +520,7 @@ def campaign_bands(
     x_grid=None,
     reference_bar: float = REFERENCE_BAR,
 ) -> CampaignBands:
-    """Bands of a fitted campaign (:class:`uq._models.cubic.CampaignFit`, or anything with ``.recordings``
+    """Bands of a fitted campaign (:class:`uq._models.cubic_results.CampaignFit`, or anything with ``.recordings``
     and ``.tests`` holding ``pressure_bar``, ``test.height_m`` and ``flat(name)``).
 
     Subsamples ``n_draws`` draws per test (seeded), evaluates on ``x_grid`` (default: the data's

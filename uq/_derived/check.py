@@ -51,6 +51,7 @@ from scipy.stats import chi2
 
 from uq._data.reference import FORCE_NAMES, PISTON_NAMES, Reference
 from uq._io.errors import InputError
+from uq._io.files import plain
 
 BLOCKS = {"force": FORCE_NAMES, "piston": PISTON_NAMES}
 DEFAULT_ALPHA = 0.01
@@ -410,17 +411,18 @@ def lsq_covariance(u_m, sd) -> np.ndarray:
 
 
 def check_documents(
-    result: dict,
-    points: dict,
+    result,
+    points,
     *,
     alpha: float = DEFAULT_ALPHA,
     result_name: str = "RESULT",
     points_name: str = "POINTS",
 ) -> dict:
-    """``uq check`` on documents in memory: the verdict of the module docstring's rule, as a dict.
+    """``uq check`` in memory: the verdict of the module docstring's rule, as a dict.
 
-    ``result``: ``fit.to_json()`` of a fit (or that JSON read back); ``points``: point estimates
-    in the POINTS format (docs/check.md; e.g. ``json.load`` of fits/n50/table1_points.json). The
+    ``result``: a cubic fit (:func:`uq.fit_campaign`), its ``to_json()``, or that JSON read back;
+    ``points``: point estimates in the POINTS format (docs/check.md), as a dict or the path of a
+    file holding them (e.g. fits/n50/table1_points.json). The
     verdict is what ``uq check --json`` writes: ``agree``, ``n_disagree``, ``threshold2`` and one
     entry per test and block in ``blocks``. ``result_name``/``points_name`` name them in messages.
 
@@ -434,11 +436,14 @@ def check_documents(
     >>> verdict["agree"], verdict["n_blocks"]
     (True, 4)
     """
-    from uq._io.files import _plain  # the values a JSON file of the same documents would hold
-
+    if hasattr(result, "to_json"):
+        result = result.to_json()
+    if isinstance(points, str | Path):
+        points_name = str(points)
+        points = load_json(points, "POINTS")
     return check(
-        read_result(_plain(result), result_name),
-        read_points(_plain(points), points_name),
+        read_result(plain(result), result_name),
+        read_points(plain(points), points_name),
         alpha=alpha,
         result_path=result_name,
         points_path=points_name,

@@ -1,7 +1,8 @@
-"""The surface model against the per-pressure cubics: one workflow, one set of cubic settings.
+"""A model over all tests against the per-pressure cubics: one workflow, one set of cubic settings.
 
 ``uq surface``, ``uq report --surface`` and ``uq margin`` all ask the same question: do the
-recordings prefer one smooth model over height and pressure (``uq._models.surface``) or an
+recordings prefer one smooth model over height and pressure (a model of the registry over all
+tests, ``uq._models.registry``: the surface, the thermodynamic potential, one plugged in) or an
 independent cubic per tested pressure (``uq._models.cubic``, eqs. 8, 9)? :func:`compare` answers
 it the same way for all of them:
 
@@ -9,24 +10,43 @@ it the same way for all of them:
   density given the noise is exact (the models' ``pointwise_loo``) and PSIS only reweights the
   noise draws (``uq._inference.loo.psis``); the plain PSIS-LOO at drawn coefficients is reported
   beside it.
-* Cubic readings still at Pareto k > 0.7 (up to ``RELOO_MAX``) are replaced by exact refits of
-  their test without the reading (``uq._inference.loo.reloo``).
+* Readings still at Pareto k > 0.7 are dealt with by the one remedy (``uq._inference.loo.remedy``):
+  up to ``MAX_REFITS`` of them in a model, the cubics' are replaced by exact refits of their test
+  without the reading (a refit of the model over all tests takes minutes: its unreliable readings
+  stay so and refuse a verdict); more, both models are scored by 10-fold cross-validation on the
+  same folds of readings, each refitted by its Laplace approximation.
 * The verdict (``uq._inference.loo.verdict``): a model is named only beyond 2 SE and 4 nats with
   every Pareto k <= 0.7; otherwise "indistinguishable" or "refused".
 
-:func:`fit_both` fits what a comparison needs with one set of sampler settings, the caller's.
+:func:`fit_both` fits what a comparison needs with one set of sampler settings, the caller's;
+:func:`fit_and_choose` is ``uq margin``'s: fit, compare, and choose the answering model
+(``uq._derived.margin.choose``).
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+from scipy.special import logsumexp
 
+from uq._data.stand_description import PAPER_STAND
+from uq._derived.margin import AUTO, choose
 from uq._inference.collapsed import fit_collapsed
-from uq._inference.loo import PARETO_K_MAX, Loo, held_out_density, psis, reloo, verdict
+from uq._inference.convergence import CLI_ADVICE
+from uq._inference.loo import (
+    MAX_REFITS,
+    PARETO_K_MAX,
+    Loo,
+    held_out_density,
+    kfold,
+    psis,
+    remedy,
+    verdict,
+)
 from uq._inference.sampler import Settings
-
-#: at most this many exact refits for cubic readings whose Pareto k stays > 0.7
-RELOO_MAX = 12
+from uq._models import registry
+from uq._models.cubic_fit import collapsed_model, fit_campaign
 
 
 def _concat(parts) -> np.ndarray:
@@ -38,8 +58,6 @@ def _concat(parts) -> np.ndarray:
 
 def _part(loo: Loo, n_coefficients: int, loglik) -> dict:
     """One model's LOO in the JSON; p_loo = lppd (at the drawn coefficients) - elpd_loo."""
-    from scipy.special import logsumexp
-
     ll = np.asarray(loglik).reshape(-1, np.shape(loglik)[-1])
     lppd = float(np.sum(logsumexp(ll, axis=0) - np.log(ll.shape[0])))
     return {
@@ -55,8 +73,6 @@ def _part(loo: Loo, n_coefficients: int, loglik) -> dict:
 def _cubic_refit(cubic_fit, settings: Settings, seed: int):
     """``refit(j)``: log p(reading j | its test's other readings), the test refitted without it
     (with the test's own variant of the cubics: the force-only one for a test without piston)."""
-    from uq._models.cubic import collapsed_model
-
     offsets = np.cumsum([0] + [t.test.n_points for t in cubic_fit.tests])
 
     def refit(j: int) -> float:
@@ -73,13 +89,44 @@ def _cubic_refit(cubic_fit, settings: Settings, seed: int):
     return refit
 
 
+def _kfold_both(model_fit, cubic_fit, *, seed: int):
+    """``kfold_both()`` of :func:`uq._inference.loo.remedy`: 10-fold cross-validation of both
+    models on the same folds of readings, each fold held out of both and every model refitted by
+    its Laplace approximation (MAP, Laplace draws of the sampled parameters, exact coefficient
+    draws), the held-out readings scored by their log predictive density."""
+    offsets = np.cumsum([0] + [t.test.n_points for t in cubic_fit.tests])
+    n = int(offsets[-1])
+
+    def refit(model, data, held, s):
+        post = fit_collapsed(
+            model, model.hold_out(data, held), seed=s, method="laplace", predictive=False
+        )
+        return held_out_density(post.loglik_total(), np.flatnonzero(held))
+
+    def score_model(held):
+        out = np.full(n, np.nan)
+        out[held] = refit(model_fit.collapsed(), model_fit.posterior.data, held, seed)
+        return out
+
+    def score_cubics(held):
+        out = np.full(n, np.nan)
+        for i, t in enumerate(cubic_fit.tests):
+            h = held[offsets[i] : offsets[i + 1]]
+            if h.any():
+                data = t.posterior.data
+                out[offsets[i] : offsets[i + 1]][h] = refit(
+                    collapsed_model(data), data, h, seed + i
+                )
+        return out
+
+    return lambda: (kfold(n, score_model, seed=seed), kfold(n, score_cubics, seed=seed))
+
+
 def force_side(rec):
     """The recordings the per-pressure cubics are fitted to for a comparison: ``rec`` itself, or,
     for a campaign with a volume column but no piston (a catalogue table), ``rec`` without its
     volume column: the force surface leaves the volume out, so both models are compared on the
     force readings alone."""
-    import dataclasses
-
     if rec.has_piston or not rec.has_volume:
         return rec
     return dataclasses.replace(
@@ -88,10 +135,10 @@ def force_side(rec):
 
 
 def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
-    """PSIS-LOO of a model over all tests (the surface model, or the thermodynamic one: its
-    ``short_name`` keys the document) against the per-pressure cubics, per (force, piston) reading
-    (module docstring); the ``comparison`` document of the JSON results."""
-    name = surface_fit.short_name
+    """PSIS-LOO of a model over all tests (its registry ``name`` keys the document) against the
+    per-pressure cubics, per (force, piston) reading (module docstring); the ``comparison``
+    document of the JSON results."""
+    name = surface_fit.name
     force_only = not surface_fit.recordings.has_piston  # the force surface: per force reading
     if force_only and any(t.has_piston for t in cubic_fit.tests):
         raise ValueError(
@@ -99,28 +146,34 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
         )
     cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
-    n_s, n_c = surface_fit.beta.shape[-1], 8 * len(cubic_fit.tests)
+    n_s, n_c = surface_fit.n_coefficients, 8 * len(cubic_fit.tests)
     if force_only:
         n_c = sum(t.posterior.beta.shape[-1] for t in cubic_fit.tests)
     loo_s = psis(surface_fit.loglik_loo)
     loo_c = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
     k_psis = float(np.max(loo_c.pareto_k))
-    loo_c = reloo(loo_c, _cubic_refit(cubic_fit, settings, seed), max_refits=RELOO_MAX)
+    loo_s, loo_c, how = remedy(
+        loo_s,
+        loo_c,
+        refit=(None, _cubic_refit(cubic_fit, settings, seed)),
+        kfold_both=_kfold_both(surface_fit, cubic_fit, seed=seed),
+    )
     plain_s, plain_c = psis(sur_plain), psis(cub_plain)
     names = (name, "per-pressure cubics")
     return {
+        "model": name,
         name: _part(loo_s, n_s, sur_plain),
-        "cubics": _part(loo_c, n_c, cub_plain)
+        registry.CUBICS: _part(loo_c, n_c, cub_plain)
         | {"max_pareto_k_psis": k_psis, "n_exact_refits": loo_c.n_refits},
         **verdict(loo_s, loo_c, names),
         "method": (
             "PSIS-LOO over the noise draws with the coefficients integrated out exactly per left-out reading; "
-            f"cubic readings still at Pareto k > {PARETO_K_MAX:g} (up to {RELOO_MAX}) replaced by exact refits "
-            "of their test without the reading"
+            f"cubic readings still at Pareto k > {PARETO_K_MAX:g} (up to {MAX_REFITS}) replaced by exact refits "
+            f"of their test without the reading; more, both models by 10-fold cross-validation (here: {how})"
         ),
         "plain_psis_loo": {
             name: _part(plain_s, n_s, sur_plain),
-            "cubics": _part(plain_c, n_c, cub_plain),
+            registry.CUBICS: _part(plain_c, n_c, cub_plain),
             **verdict(plain_s, plain_c, names),
         },
         "unit": f"log density per {'force' if force_only else '(force, piston)'} reading, summed over readings",
@@ -135,36 +188,19 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
 
 
 def fit_both(
-    rec, *, seed: int, settings: Settings, stand, surface_fit=None, cubic_fit=None, model="surface"
+    rec, *, seed: int, settings: Settings, stand, surface_fit=None, cubic_fit=None, model=None
 ):
-    """A model over all tests (``model``: "surface" or "thermodynamic") and the per-pressure
-    cubics of ``rec`` with the same settings (either fit may be given already) and their
-    :func:`compare` document: (model fit, cubics, comparison). The cubics compared are fitted to
-    :func:`force_side` of ``rec``: a catalogue's own cubic fit (its volume column fitted as L) is
-    not the comparison's, and a given one is then replaced."""
-    from uq._models.cubic import fit_campaign
-
+    """A model over all tests (``model``: a registry name, default the registry's default model)
+    and the per-pressure cubics of ``rec`` with the same settings (either fit may be given already)
+    and their :func:`compare` document: (model fit, cubics, comparison). The cubics compared are
+    fitted to :func:`force_side` of ``rec``: a catalogue's own cubic fit (its volume column fitted
+    as L) is not the comparison's, and a given one is then replaced."""
     if surface_fit is None:
-        surface_fit = FITTERS[model](rec, seed=seed, settings=settings, stand=stand)
+        name = registry.default("margin") if model is None else model
+        surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
     if cubic_fit is None or force_side(rec) is not rec:
         cubic_fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
-
-
-def _fit_surface(rec, **kw):
-    from uq._models.surface import fit_surface
-
-    return fit_surface(rec, **kw)
-
-
-def _fit_thermo(rec, **kw):
-    from uq._models.thermo import fit_thermo
-
-    return fit_thermo(rec, **kw)
-
-
-#: the models over all tests, by the name ``uq surface --model`` takes
-FITTERS = {"surface": _fit_surface, "thermodynamic": _fit_thermo}
 
 
 def words(c: dict) -> str:
@@ -174,3 +210,28 @@ def words(c: dict) -> str:
     return (
         f"difference {c['elpd_diff']:.1f} +- {c['elpd_diff_se']:.1f} in favour of the {c['better']}"
     )
+
+
+def fit_and_choose(rec, *, model: str = AUTO, seed: int = 0, settings=None, stand=None):
+    """Fit what ``model`` needs (``auto``: the registry's default model over all tests and the
+    per-pressure cubics, compared by PSIS-LOO with the same settings, ``uq._derived.comparison``;
+    a registry name: that model alone) and choose the answering model (:func:`choose`); returns
+    (answering model, model description, merged sampler diagnostics)."""
+    settings = Settings() if settings is None else settings
+    stand = PAPER_STAND if stand is None else stand
+    fit = cub = comparison = None
+    if model == AUTO:
+        fit, cub, comparison = fit_both(
+            rec, seed=seed, settings=settings, stand=stand, model=registry.default("margin")
+        )
+    elif registry.entry(model).over_all_tests:
+        fit = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)
+    else:
+        cub = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)
+    fitted = [f for f in (fit, cub) if f is not None]
+    warnings = [w for f in fitted for w in f.convergence.messages(CLI_ADVICE)]
+    converged = all(f.convergence.converged for f in fitted)
+    ans, info = choose(fit, cub, comparison, forced=model)
+    if ans.omitted_reason:  # a campaign without piston readings
+        info["omitted"] = ans.omitted_reason
+    return ans, info, {"warnings": warnings, "converged": bool(converged)}

@@ -19,12 +19,11 @@ rate and natural frequency. Per posterior draw of the model:
 The sealed curve is given only where every draw's path pressure stays within the tested
 pressures (the model does not extrapolate); beyond, the heights are listed with the reason.
 
-A model here is any object with ``force_draws(x_m, p_bar)`` (N) and ``volume_area_draws(x_m,
-p_bar)`` (dV/dx, m^2; the volume-derived area -S dL/dx), each returning draws of shape
-(S, *broadcast shape) on one fixed set of S posterior draws, ``height_range_m``,
-``pressure_range_bar`` and ``label``; optionally ``volume_pressure_draws(x_m, p_bar)`` (dV/dp_u,
-m^3/Pa). ``SurfaceDesignModel`` adapts today's surface model; a thermodynamic model offers the
-same methods.
+A model here is any fitted model (:class:`uq._models.fitted.FittedModel`) with a volume
+(``has_volume``): ``force_draws`` (N) and ``volume_area_draws`` (dV/dx, m^2; the volume-derived
+area -S dL/dx) on its fixed posterior draws, and, where it has its own (``has_dvdp``: the
+thermodynamic model), ``volume_pressure_draws`` (dV/dp_u, m^3/Pa). ``uq design`` gives it on
+``--draws`` of its draws (``on_draws``).
 """
 
 from __future__ import annotations
@@ -35,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from uq._derived.margin import pressure_needed
 from uq._inference.summary import estimate
 from uq._io.errors import InputError
 from uq._physics.quantities import BAR_PA
@@ -60,27 +60,6 @@ MARGIN_SPAN_M = 0.008  # heights each side of the design height a design margin 
 MARGIN_PRESSURES = (
     21  # its pressure grid: the answer within 1e-4 of the 41-pressure grid's (tested), in < 2 s
 )
-
-
-class SurfaceDesignModel:
-    """The surface model (uq._models.surface.SurfaceFit) as a design model: force P = p_u F_p + E and
-    volume-derived area dV/dx = F_p + D on one fixed set of at most ``max_draws`` posterior draws.
-    It has no dV/dp_u of its own (isobaric tests do not give it)."""
-
-    def __init__(self, fit, max_draws: int = DEFAULT_DRAWS):
-        self.fit = fit
-        self.beta = fit.flat_beta(max_draws)
-        self.height_range_m = tuple(float(v) for v in fit.height_range_m)
-        self.pressure_range_bar = tuple(float(v) for v in fit.pressure_range_bar)
-        self.label = f"surface model ({fit.orders.label})"
-
-    def force_draws(self, height_m, p_bar):
-        return self.fit.force_draws(height_m, p_bar, beta=self.beta)
-
-    def volume_area_draws(self, height_m, p_bar):
-        return self.fit.pressure_area_draws(
-            height_m, p_bar, beta=self.beta
-        ) + self.fit.volume_excess_draws(height_m, p_bar, beta=self.beta)
 
 
 @dataclass(frozen=True)
@@ -116,7 +95,7 @@ class SealedDesign:
 
 def check_design(model, design: SealedDesign) -> None:
     """One-line refusals naming the option, before anything is computed."""
-    if not hasattr(model, "volume_area_draws"):
+    if not model.has_volume:
         raise InputError(
             "the sealed rate and natural frequency need the volume-derived area dV/dx: this campaign is "
             "force-only (no piston_mm column); only isobaric loads can be given"
@@ -155,7 +134,7 @@ def check_design(model, design: SealedDesign) -> None:
         )
     d = design.dvdp_l_per_bar
     if isinstance(d, str):
-        if d != "model" or not hasattr(model, "volume_pressure_draws"):
+        if d != "model" or not model.has_dvdp:
             raise InputError(
                 f"dvdp_l_per_bar: '{d}': expected a number (L/bar), or 'model' for a model with its "
                 f"own dV/dp_u ({model.label} has none)",
@@ -223,7 +202,7 @@ class DesignGrid:
         self.n_draws = self.force.shape[0]
         self._volumes = {}
         self.dvdp_at_c = None
-        if hasattr(model, "volume_pressure_draws"):
+        if model.has_dvdp:
             self.dvdp_at_c = np.asarray(
                 model.volume_pressure_draws(
                     np.full(n_pressures, self.height_m), self.pressures_bar
@@ -254,7 +233,7 @@ class DesignGrid:
     def _volume(self, design: SealedDesign, v_c: np.ndarray):
         d = design.dvdp_l_per_bar
         dvdp, words = (
-            (self.dvdp_at_c, getattr(self.model, "dvdp_words", f"{self.model.label}'s own"))
+            (self.dvdp_at_c, self.model.dvdp_words)
             if d == "model"
             else (float(d) / L_PER_M3 / BAR_PA, "")
         )
@@ -469,91 +448,6 @@ def design_document(
     return out
 
 
-# ----------------------------------------------------------------------------- other models
-
-
-class ThermoDesignModel:
-    """The thermodynamic model (uq._models.thermo.ThermoFit) as a design model: force P = -dG/dx,
-    volume-derived area dV/dx = -d2G/dx dp_u and its own dV/dp_u on one fixed set of at most
-    ``max_draws`` posterior draws. Its dV/dp_u is fixed up to a function of p_u alone (isobaric
-    tests compare heights, not pressures): the potential's gauge makes it 0 at x0, so
-    ``dvdp="model"`` assumes the volume at x0 does not change with pressure and takes the
-    differences between heights from the recordings (``dvdp_words``)."""
-
-    def __init__(self, fit, max_draws: int = DEFAULT_DRAWS):
-        self.fit = fit
-        self.beta = fit.flat_beta(max_draws)
-        self.height_range_m = tuple(float(v) for v in fit.height_range_m)
-        self.pressure_range_bar = tuple(float(v) for v in fit.pressure_range_bar)
-        self.label = f"thermodynamic model ({fit.orders.label})"
-        self.dvdp_words = (
-            f"{self.label}'s own, ASSUMED 0 at x0 = {fit.geometry.x0_m * 1e3:g} mm (the potential's "
-            "gauge: isobaric tests fix only how it differs between heights)"
-        )
-
-    def force_draws(self, height_m, p_bar):
-        return self.fit.force_draws(height_m, p_bar, beta=self.beta)
-
-    def volume_area_draws(self, height_m, p_bar):
-        return self.fit.volume_area_draws(height_m, p_bar, beta=self.beta)
-
-    def volume_pressure_draws(self, height_m, p_bar):
-        return self.fit.volume_pressure_draws(height_m, p_bar, beta=self.beta)
-
-
-def force_only_cubics(rec, *, seed: int = 0, stand=None, n_draws: int = DEFAULT_DRAWS):
-    """Isobaric force of a force-only campaign (no piston: no volume, so no sealed spring), as a
-    ``uq._derived.margin.CubicInterpolation`` (F_eff = P/p_u linear in p_u between tested pressures).
-
-    Per test, the force is a cubic in u = x - x0 (eq. 8) with the stand's error budget's shape, sd_k
-    proportional to sqrt(s0^2 + (r P_k)^2) (s0 = 10 N, r the load cell's relative error, P_k the
-    least-squares force), the common scale unknown (prior 1/sigma^2) and a flat prior on the
-    coefficients: the posterior is exactly Student-t and is drawn exactly (sigma^2 from its scaled
-    inverse chi-square, the coefficients from their Gaussian given it). No sampler: the design
-    sheet of a force-only campaign needs only these loads."""
-    from uq._data.stand_description import PAPER_STAND
-    from uq._derived.margin import CubicInterpolation
-    from uq._models.cubic import basis
-    from uq._physics.quantities import to_paper_basis
-
-    stand = PAPER_STAND if stand is None else stand
-    rng = np.random.default_rng(seed)
-    tests = sorted(rec.tests, key=lambda t: t.pressure_bar)
-    coefs = []
-    for t in tests:
-        u = t.height_m - rec.x0_m
-        X, y = np.asarray(basis(u)), np.asarray(t.force_N, float)
-        n, k = X.shape
-        if n <= k:
-            raise InputError(
-                f"{rec.path}: the test at {t.pressure_bar:g} bar has {n} points; a cubic needs at least 5"
-            )
-        P_ls = X @ np.linalg.lstsq(X, y, rcond=None)[0]  # the paper's least-squares cubic
-        w = 1.0 / (10.0**2 + (max(stand.load_cell_rel_sd, 1e-4) * np.abs(P_ls)) ** 2)
-        A = X.T @ (w[:, None] * X)
-        b_hat = np.linalg.solve(A, X.T @ (w * y))
-        r = y - X @ b_hat
-        s2 = float(np.sum(w * r**2) / (n - k))
-        sigma2 = s2 * (n - k) / rng.chisquare(n - k, n_draws)
-        L = np.linalg.cholesky(np.linalg.inv(A))
-        z = rng.standard_normal((n_draws, k))
-        draws = b_hat + np.sqrt(sigma2)[:, None] * (z @ L.T)
-        coefs.append(to_paper_basis(draws))
-    coef = np.stack(coefs, axis=1)
-    zi = rng.standard_normal((n_draws, max(len(tests) - 1, 1)))
-    p = np.array([t.pressure_bar for t in tests])
-    ans = CubicInterpolation.from_draws(
-        coef,
-        zi,
-        p,
-        rec.x0_m,
-        height_range_m=rec.height_range_m,
-        pressure_range_bar=(float(p.min()), float(p.max())),
-    )
-    ans.label = "per-test force cubics (force-only campaign; exact Student-t posterior)"
-    return ans
-
-
 # ----------------------------------------------------------------------------- the data sheet's tables
 
 
@@ -564,9 +458,13 @@ def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -
     measures: a change at one pressure), each {mean, sd, q05, q95}."""
     xs = np.asarray(heights_m, float)
     lo, hi = model.height_range_m
-    has_volume = hasattr(model, "volume_area_draws")
-    if has_volume:  # a fine grid through the table's heights and the reference, for the integral
-        fine = np.unique(np.concatenate([np.linspace(lo, hi, 91), xs, [reference_height_m]]))
+    has_volume = model.has_volume
+    if has_volume:  # a fine grid through the table's heights and the reference, for the integral;
+        # heights equal to 1 nm are one knot (0.07 and 0.07000000000000001 as two knots 1e-17 m
+        # apart made the spline's integral lose five digits)
+        fine = np.unique(
+            np.round(np.concatenate([np.linspace(lo, hi, 91), xs, [reference_height_m]]), 9)
+        )
     rows = []
     for p in np.asarray(pressures_bar, float):
         P = np.asarray(model.force_draws(xs, np.full(xs.shape, p)), float)
@@ -574,7 +472,7 @@ def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -
             A = np.asarray(model.volume_area_draws(fine, np.full(fine.shape, p)), float)
             anti = CubicSpline(fine, A, axis=1).antiderivative()
             dV = anti(xs) - anti(np.array([reference_height_m]))
-            A_at = A[:, np.searchsorted(fine, xs)]
+            A_at = A[:, np.searchsorted(fine, np.round(xs, 9))]
         for j, x in enumerate(xs):
             row = {
                 "pressure_bar": float(p),
@@ -600,15 +498,10 @@ def _check_margin_args(
         raise InputError(
             f"prob: expected a probability between 0 and 1, got {prob:g}", param="prob"
         )
-    if getattr(model, "force_only", False):
+    if not model.has_volume:
         raise InputError(
-            f"design margins need the volume-derived area dV/dx; the {model.label} was fitted to the "
-            "force alone (no piston readings): only the pressure needed and the force band can be given"
-        )
-    if not hasattr(model, "volume_area_draws"):
-        raise InputError(
-            f"design margins need a model with the volume-derived area dV/dx; the {model.label} has none "
-            "(answer with the surface model, or a fit of it that uq surface saved)"
+            f"design margins need the volume-derived area dV/dx; the {model.label} has none "
+            f"({model.omitted_reason}): only the pressure needed and the force band can be given"
         )
     for name, v in (
         ("max_frequency_Hz", max_frequency_Hz),
@@ -645,13 +538,11 @@ def design_margin(
     frequency there, and the stroke to ``force_limit_N`` along the sealed curve (compression when
     the limit exceeds the load, rebound when below). Probabilities are over the posterior of the
     mean characteristic and the design's drawn inputs (``design.seed``)."""
-    from uq._derived.margin import pressure_needed
-
     _check_margin_args(
         model, prob, max_frequency_Hz, rate_target_N_per_m, rate_tolerance_pct, force_limit_N
     )
-    if hasattr(model, "thinned") and grid is None:  # a saved answer's draws: at most DEFAULT_DRAWS
-        model = model.thinned(DEFAULT_DRAWS)
+    if grid is None:  # the model's draws: at most DEFAULT_DRAWS
+        model = model.on_draws(DEFAULT_DRAWS)
     p_need = pressure_needed(model, height_m, load_N)
     if not np.all(np.isfinite(p_need)):
         raise InputError(

@@ -1,21 +1,34 @@
 """Planning frames of the fitted models (``uq._derived.plan.Frame``): what the planner needs of a
 model, built from its fit.
 
-A frame is the model as it will be fitted after the plan: the same noise draws theta, the
-coefficients of the campaign with the planned tests in it (for the models over all tests the
-orders and pressure scaling :func:`uq._models.surface.default_orders` gives that campaign, a piston
-reference per new test; for the per-pressure cubics a new cubic per new test, from its prior), the
-file's readings in that basis. Two kinds of model:
+A frame is the model as it will be fitted after the plan: the same draws of the sampled
+parameters theta, the coefficients of the campaign with the planned tests in it (for the models over
+all tests the orders and pressure scaling :func:`uq._models.surface.default_orders` gives that
+campaign, a piston reference per new test; for the per-pressure cubics a new cubic per new test, from
+its prior), the file's readings in that basis. Three kinds of model, told apart by the fit's class
+(never by a name):
 
 * over all tests, with the (force, piston) pair likelihood (the surface and the thermodynamic
   model, ``uq._models.pair``) or the force alone (the force surface of a campaign without piston
   readings): :class:`PairFrames`. A planned reading's noise is the stand's error budget at its
   point, with the pilot's posterior-mean force and pressure lever as the budget's references.
+* the surface with a discrepancy in pressure (``uq._models.discrepancy``): :class:`DiscrepancyFrames`,
+  the surface's frame plus each test's deviation, a Gaussian process in p_u over the file's and the
+  planned pressures. Given theta (its amplitudes and length scale among it) the deviations are
+  linear in standard normals z, so the design rows depend on the draw; at a pressure without a test
+  the deviation is the process's prediction from the tests (kriging) and its conditional variance
+  is variance no reading elsewhere reduces (``extra_force_var``).
 * the per-pressure cubics (eqs. 8, 9) with F_eff = P / p_u linear in p_u between tests
-  (``uq._derived.margin.CubicInterpolation``): :class:`CubicFrames`. A new test's noise is that of
-  the tested pressure nearest to it (draw by draw), at its own force level; the interpolation
-  error between tests uses the curvature in pressure the file's tests show (pooled over its
-  interior tests).
+  (``uq._models.cubic_interpolation``): :class:`CubicFrames`. A new test's noise is that of the
+  tested pressure nearest to it (draw by draw), at its own force level; the interpolation error
+  between tests uses the curvature in pressure the file's tests show (pooled over its interior
+  tests).
+
+What the frames read of a fit beyond the FittedModel protocol: the sampled parameters' draws and the
+likelihood's data of its posterior (``fit.posterior.theta``, ``fit.posterior.data``), its orders,
+geometry, stand and recordings (public attributes of ``uq._models.linear_fit.LinearFit`` and
+``uq._models.cubic_results.CampaignFit``). A model plugged in from outside is refused by
+:func:`frames_of` in one line: the planner needs the model's design for a campaign it has not seen.
 """
 
 from __future__ import annotations
@@ -25,12 +38,19 @@ import numpy as np
 from uq._derived.plan_search import MIN_TEST_READINGS, Frame
 from uq._inference.float64 import jax, jnp
 from uq._io.errors import InputError
-from uq._models import cubic, pair, surface, thermo
-from uq._physics.quantities import BAR_PA, force_noise_var
+from uq._models import cubic, pair, registry, surface, surface_likelihood, thermo
+from uq._models import discrepancy as dev
+from uq._models import discrepancy_gp as gp
+from uq._models.cubic_results import CampaignFit
+from uq._models.discrepancy_fit import DiscrepancyFit
+from uq._models.surface import SurfaceFit
+from uq._models.thermo import ThermoFit
+from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
 
 DRAWS = 200  # draws of theta behind every frame
 CHUNK = 25  # draws per block when the file's readings are whitened (memory)
 STEP_X_M = 1.0e-5  # dV/dx = -S dL/dx by central differences of the (polynomial) piston design
+REFERENCE_DRAWS = 400  # draws of the fit behind the error budget's references at new points
 
 
 def _thin(a: np.ndarray, n: int) -> np.ndarray:
@@ -47,6 +67,26 @@ def _new_index(new_bar, tested_bar) -> None:
             raise ValueError(f"{p:g} bar is tested already: a campaign holds one test per pressure")
 
 
+def _draws(X, S: int) -> np.ndarray:
+    """Design rows per draw, (S, n, k): rows that do not depend on the draw are broadcast."""
+    X = np.asarray(X)
+    return np.broadcast_to(X, (S, *X.shape)) if X.ndim == 2 else X
+
+
+def fit_reference(fit):
+    """The error budget's references at new points from a fitted model (the protocol's draws):
+    ``reference(x_m, p_bar) -> (|mean force| N, |pressure lever| m^2)``, the lever the model's
+    pressure area where it has one, else its volume-derived area."""
+    few = fit.on_draws(REFERENCE_DRAWS)
+    lever = getattr(few, "pressure_area_draws", None) or few.volume_area_draws
+
+    def reference(x, p):
+        force = np.abs(few.force_draws(x, p, check=False).mean(0))
+        return force, np.abs(lever(x, p, check=False).mean(0))
+
+    return reference
+
+
 # ----------------------------------------------------------------------------- over all tests
 
 
@@ -55,22 +95,25 @@ class PairFrames:
 
     Built from its parts (:meth:`of_fit` takes them from a fit): the recordings, the model's data
     (``PairData``, or the force surface's ``ForceData``), draws of theta (S, n_theta), the stand,
-    the orders and scaling of the fit as it is, and ``reference(x_m, p_bar) -> (|force| N, lever
+    the orders and scaling of the fit as it is, ``reference(x_m, p_bar) -> (|force| N, lever
     m^2)``: the error budget's references at a new point (the pilot's posterior-mean force and
-    pressure lever)."""
+    pressure lever), and ``model``: the fit's class (``SurfaceFit`` or ``ThermoFit``; its
+    ``name`` names the frame)."""
 
-    def __init__(self, rec, data, theta, stand, orders, geometry, reference, kind="surface"):
-        if kind not in ("surface", "thermodynamic"):
-            raise ValueError(f"kind must be 'surface' or 'thermodynamic', got {kind!r}")
+    def __init__(self, rec, data, theta, stand, orders, geometry, reference, model=SurfaceFit):
+        if not issubclass(model, SurfaceFit | ThermoFit):
+            raise ValueError(f"model must be a SurfaceFit or ThermoFit class, got {model!r}")
         self.rec, self.data, self.stand = rec, data, stand
         self.theta = np.asarray(theta, float)
         self.orders_now, self.geometry_now = orders, geometry
         self.reference = reference
-        self.kind = self.name = kind
+        self.model_class = model
+        self.thermo = issubclass(model, ThermoFit)
+        self.name = model.name
         self.force_only = not rec.has_piston
         self.tested = np.array([t.pressure_bar for t in rec.tests], float)
         if self.force_only:
-            self.x, self.p, _ = surface.force_arrays(rec)
+            self.x, self.p, _ = surface_likelihood.force_arrays(rec)
             self.test_index = np.concatenate(
                 [np.full(t.n_points, i) for i, t in enumerate(rec.tests)]
             )
@@ -79,29 +122,18 @@ class PairFrames:
         self.fixed_frame = False  # the orders and pressure scaling follow the campaign's tests
 
     @classmethod
-    def of_fit(cls, fit, draws: int = DRAWS) -> PairFrames:
-        """The builder of a SurfaceFit or ThermoFit, on ``draws`` of its draws of theta."""
-        kind = "thermodynamic" if isinstance(fit, thermo.ThermoFit) else "surface"
-        beta = fit.flat_beta(400)
-
-        def reference(x, p):
-            force = np.abs(fit.force_draws(x, p, check=False, beta=beta).mean(0))
-            if kind == "thermodynamic":
-                lever = fit.volume_area_draws(x, p, check=False, beta=beta).mean(0)
-            else:
-                lever = fit.pressure_area_draws(x, p, check=False, beta=beta).mean(0)
-            return force, np.abs(lever)
-
-        theta = _thin(fit.theta.reshape(-1, fit.theta.shape[-1]), draws)
+    def of_fit(cls, fit, draws: int = DRAWS):
+        """The builder of a fit of this kind, on ``draws`` of its draws of theta."""
+        th = np.asarray(fit.posterior.theta)
         return cls(
             fit.recordings,
             fit.posterior.data,
-            theta,
+            _thin(th.reshape(-1, th.shape[-1]), draws),
             fit.stand,
             fit.orders,
             fit.geometry,
-            reference,
-            kind,
+            fit_reference(fit),
+            type(fit),
         )
 
     # ---- the model after the plan
@@ -112,7 +144,7 @@ class PairFrames:
         if after.size == self.tested.size and np.allclose(np.sort(self.tested), after):
             return self.orders_now, self.geometry_now
         rec = self.rec
-        if self.kind == "thermodynamic":
+        if self.thermo:
             g = thermo.ThermoGeometry(rec.x0_m, rec.piston_area_m2, float(after.max()))
             return thermo.default_orders(after.size), g
         heights = min(np.unique(np.round(t.height_m, 9)).size for t in rec.tests)
@@ -127,17 +159,23 @@ class PairFrames:
         return o, surface.Geometry(rec.x0_m, rec.piston_area_m2, float(mid), float(half))
 
     def label(self, orders) -> str:
-        if self.kind == "thermodynamic":
-            return f"thermodynamic model ({orders.label})"
-        return f"surface model ({surface.force_label(orders) if self.force_only else orders.label})"
+        words = self.model_class.words.removeprefix("the ")
+        if self.force_only and not self.thermo:
+            return f"{words} ({surface.force_label(orders)})"
+        return f"{words} ({orders.label})"
 
-    def _designs(self, o, g, x, p, index, n_tests):
+    def _designs(self, o, g, x, p, index, n_tests, rows=None):
+        """Force and piston design rows (n, k), or (s, n, k) for rows that depend on the draws
+        ``rows`` (indices into ``theta``; None: all); the piston's None for a force-only model."""
         if self.force_only:
-            X = surface.force_design(o, g, x, p)
-            return X, None
-        if self.kind == "thermodynamic":
+            return surface.force_design(o, g, x, p), None
+        if self.thermo:
             return thermo.designs(o, g, x, p, index, n_tests)
         return surface.designs(o, g, x, p, index, n_tests)
+
+    def min_test_heights(self, orders) -> int:
+        """Distinct heights a new test needs for the model after the plan to be fitted (0: any)."""
+        return 0
 
     # ---- noise: whitening of readings given theta
     def _noise_data(self, x, p):
@@ -150,12 +188,18 @@ class PairFrames:
         p_abs = (np.asarray(p, float) + self.stand.p_atm_bar) * BAR_PA
         return force, lever, hold, p_abs
 
+    def _scale(self, theta) -> np.ndarray:
+        """The piston design's factor per draw (the thermodynamic model's travel factor)."""
+        return np.exp(theta[:, 5]) if self.thermo else np.ones(theta.shape[0])
+
     def _whiten(self, theta, Xf, Xl, force, lever, hold, p_abs):
         """Whitened rows (S, n, r, k) of readings with these budget references, per draw."""
+        S = theta.shape[0]
+        Xf = _draws(Xf, S)
         if self.force_only:
             s0, rel, kp = (np.exp(theta[:, i])[:, None] for i in range(3))
             sd = np.sqrt(force_noise_var(s0, rel, force[None]) + (kp * hold * lever) ** 2)
-            return (Xf[None] / sd[..., None])[:, :, None, :]
+            return (Xf / sd[..., None])[:, :, None, :]
         d = self.data._replace(
             phat=jnp.asarray(force),
             feff_hat=jnp.asarray(lever),
@@ -165,40 +209,47 @@ class PairFrames:
         L11, L21, L22 = (
             np.asarray(a) for a in jax.vmap(lambda th: pair.cov_factors(th[:5], d))(theta)
         )
-        scale = np.exp(theta[:, 5]) if self.kind == "thermodynamic" else np.ones(theta.shape[0])
-        zf = Xf[None] / L11[..., None]
-        zl = (scale[:, None, None] * Xl[None] - L21[..., None] * zf) / L22[..., None]
+        zf = Xf / L11[..., None]
+        zl = (self._scale(theta)[:, None, None] * _draws(Xl, S) - L21[..., None] * zf) / L22[
+            ..., None
+        ]
         return np.stack([zf, zl], axis=2)
 
-    def _pilot(self, theta, Xf, Xl):
+    def _pilot_block(self, rows, o, g, n_tests):
+        """Whitened design (s, n, k) and readings (s, n) of the file's readings for the draws
+        ``rows`` (indices into ``theta``)."""
+        d = self.data
+        Xf, Xl = self._designs(o, g, self.x, self.p, self.test_index, n_tests, rows)
+        th = self.theta[rows]
+        Xf = _draws(Xf, th.shape[0])
+        if self.force_only:
+            s0, rel, kp = (np.exp(th[:, i])[:, None] for i in range(3))
+            sd = np.sqrt(
+                force_noise_var(s0, rel, np.asarray(d.phat)[None])
+                + (kp * np.asarray(d.dp_pa) * np.asarray(d.feff_hat)) ** 2
+            )
+            y = np.asarray(d.F) - np.asarray(d.feff_hat) * np.asarray(d.dp_meas)
+            return Xf / sd[..., None], y[None] / sd
+        L11, L21, L22 = (np.asarray(a) for a in jax.vmap(lambda t: pair.cov_factors(t[:5], d))(th))
+        F, L = (np.asarray(a) for a in jax.vmap(lambda t: pair.readings(t[:5], d))(th))
+        zf = Xf / L11[..., None]
+        zl = (self._scale(th)[:, None, None] * _draws(Xl, th.shape[0]) - L21[..., None] * zf) / L22[
+            ..., None
+        ]
+        Z = np.concatenate([zf, zl], axis=1)
+        yw = np.concatenate([F / L11, (L - L21 * F / L11) / L22], axis=1)
+        return Z, yw
+
+    def _pilot(self, o, g, n_tests):
         """Precision and mean per draw from the file's readings (prior N(0, I) in the standardised
         coefficients), in blocks of ``CHUNK`` draws."""
-        d = self.data
-        k = Xf.shape[1]
-        P, m = np.empty((theta.shape[0], k, k)), np.empty((theta.shape[0], k))
-        for lo in range(0, theta.shape[0], CHUNK):
-            th = theta[lo : lo + CHUNK]
-            if self.force_only:
-                s0, rel, kp = (np.exp(th[:, i])[:, None] for i in range(3))
-                sd = np.sqrt(
-                    force_noise_var(s0, rel, np.asarray(d.phat)[None])
-                    + (kp * np.asarray(d.dp_pa) * np.asarray(d.feff_hat)) ** 2
-                )
-                y = np.asarray(d.F) - np.asarray(d.feff_hat) * np.asarray(d.dp_meas)
-                Z = Xf[None] / sd[..., None]
-                yw = y[None] / sd
-            else:
-                L11, L21, L22 = (
-                    np.asarray(a) for a in jax.vmap(lambda t: pair.cov_factors(t[:5], d))(th)
-                )
-                F, L = (np.asarray(a) for a in jax.vmap(lambda t: pair.readings(t[:5], d))(th))
-                scale = np.exp(th[:, 5]) if self.kind == "thermodynamic" else np.ones(th.shape[0])
-                zf = Xf[None] / L11[..., None]
-                zl = (scale[:, None, None] * Xl[None] - L21[..., None] * zf) / L22[..., None]
-                yf = F / L11
-                yl = (L - L21 * yf) / L22
-                Z = np.concatenate([zf, zl], axis=1)
-                yw = np.concatenate([yf, yl], axis=1)
+        S = self.theta.shape[0]
+        P = m = None
+        for lo in range(0, S, CHUNK):
+            Z, yw = self._pilot_block(np.arange(lo, min(lo + CHUNK, S)), o, g, n_tests)
+            k = Z.shape[-1]
+            if P is None:
+                P, m = np.empty((S, k, k)), np.empty((S, k))
             A = np.einsum("snk,snl->skl", Z, Z) + np.eye(k)
             P[lo : lo + CHUNK] = A
             m[lo : lo + CHUNK] = np.linalg.solve(A, np.einsum("snk,sn->sk", Z, yw)[..., None])[
@@ -215,9 +266,8 @@ class PairFrames:
         after = np.concatenate([self.tested, new]) if after_bar is None else after_bar
         o, g = self.model(after)
         T0, J = self.tested.size, new.size
-        Xf, Xl = self._designs(o, g, self.x, self.p, self.test_index, T0 + J)
-        k = Xf.shape[1]
-        P, m = self._pilot(self.theta, Xf, Xl)
+        self.prepare(new)
+        P, m = self._pilot(o, g, T0 + J)
         area = self.rec.piston_area_m2
 
         def reading_rows(j, heights_m):
@@ -228,8 +278,8 @@ class PairFrames:
 
         def force_rows(x, p, open_=None):
             x, p = np.broadcast_arrays(np.asarray(x, float), np.asarray(p, float))
-            Xf_, _ = self._designs(o, g, x.ravel(), p.ravel(), np.zeros(x.size, int), T0 + J)
-            return Xf_
+            idx = np.zeros(x.size, int)
+            return self._designs(o, g, x.ravel(), p.ravel(), idx, T0 + J)[0]
 
         def area_rows(x, p, open_=None):
             """dV/dx = -S dL/dx, from the piston design by central differences (exact to
@@ -238,9 +288,8 @@ class PairFrames:
             idx = np.zeros(x.size, int)
             up = self._designs(o, g, x + STEP_X_M, p, idx, T0 + J)[1]
             down = self._designs(o, g, x - STEP_X_M, p, idx, T0 + J)[1]
-            return -area * (up - down) / (2 * STEP_X_M)
+            return -area * (np.asarray(up) - np.asarray(down)) / (2 * STEP_X_M)
 
-        assert k == P.shape[-1]
         return Frame(
             name=self.name,
             label=self.label(o),
@@ -252,13 +301,119 @@ class PairFrames:
             reading_rows=reading_rows,
             force_rows=force_rows,
             area_rows=None if self.force_only else area_rows,
+            extra_force_var=self.extra_force_var(o),
             volume_why=surface.volume_omitted_reason(self.rec) if self.force_only else "",
             key=(repr(o), repr(g)),
+            min_test_heights=self.min_test_heights(o),
         )
+
+    def prepare(self, new_bar) -> None:
+        """Set up what the designs of a frame with new tests at ``new_bar`` need (nothing here)."""
+
+    def extra_force_var(self, orders):
+        """The force's variance no reading reduces, as ``Frame.extra_force_var`` (None: none)."""
+        return None
 
     def key(self, after_bar) -> tuple:
         o, g = self.model(after_bar)
         return (repr(o), repr(g))
+
+
+class DiscrepancyFrames(PairFrames):
+    """Frames of the surface with a discrepancy in pressure (module docstring): the surface's
+    coefficients, then per deviation channel c (delta_k, then eps_k) and test j of the frame (the
+    file's, then the planned) a standard normal z_cj; a test i's deviation is a_c s_k (L z_c)_i,
+    L the Cholesky factor of the Matern 3/2 correlation of the frame's pressures at the draw's
+    length scale. Rows therefore depend on the draw: (S, n, k)."""
+
+    def __init__(self, rec, data, theta, stand, orders, geometry, reference):
+        super().__init__(rec, data, theta, stand, orders, geometry, reference, SurfaceFit)
+        self.model_class, self.name = DiscrepancyFit, DiscrepancyFit.name
+        n_noise = 3 if self.force_only else 5
+        n_blocks = 1 if self.force_only else 2
+        self.amplitudes = np.exp(self.theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
+        self.length = np.exp(self.theta[:, n_noise + n_blocks])  # (S,)
+        self.scales = np.asarray(data.s, float)  # s_k
+        self.nodes = self.tested
+
+    @classmethod
+    def of_fit(cls, fit, draws: int = DRAWS):
+        th = np.asarray(fit.posterior.theta)
+        return cls(
+            fit.recordings,
+            fit.posterior.data,
+            _thin(th.reshape(-1, th.shape[-1]), draws),
+            fit.stand,
+            fit.orders,
+            fit.geometry,
+            fit_reference(fit),
+        )
+
+    def label(self, orders) -> str:
+        base = surface.force_label(orders) if self.force_only else orders.label
+        return f"{DiscrepancyFit.words.removeprefix('the ')} ({base}; Matern 3/2 in p_u)"
+
+    def min_test_heights(self, orders) -> int:
+        return dev.min_heights_needed(orders, not self.force_only)
+
+    def prepare(self, new_bar) -> None:
+        """The frame's pressures (the file's tests, then ``new_bar``) and, per draw, the Cholesky
+        factor of their correlation."""
+        self.nodes = np.concatenate([self.tested, np.asarray(new_bar, float)])
+        d = np.abs(self.nodes[:, None] - self.nodes[None, :])
+        R = gp.matern32(d[None], self.length[:, None, None]) + gp.JITTER * np.eye(self.nodes.size)
+        self.chol = np.linalg.cholesky(R)  # (S, T, T)
+
+    def _weights(self, p_bar, rows):
+        """(L^-1 r(p)) (s, n, T) and the conditional variance 1 - |L^-1 r|^2 (s, n) of the
+        process at pressures ``p_bar`` given the frame's tests, for the draws ``rows``."""
+        ell = self.length[rows]
+        d = np.asarray(p_bar, float)[None, :, None] - self.nodes[None, None]
+        r = gp.matern32(d, ell[:, None, None])
+        w = np.linalg.solve(self.chol[rows], np.swapaxes(r, 1, 2))  # (s, T, n)
+        w = np.swapaxes(w, 1, 2)
+        return w, np.clip(1.0 - np.sum(w**2, axis=-1), 0.0, None)
+
+    def _channels(self, x, p):
+        """The deviations' rows per channel at points: force (n, n_c), piston (n, n_c) or None."""
+        t = (np.asarray(x, float) - self.rec.x0_m) / BASIS_SCALE_M
+        area = None if self.force_only else self.rec.piston_area_m2
+        f, dl, el = dev.deviation_rows(
+            t, np.asarray(p, float)[:, None] * BAR_PA, self.scales.size, area
+        )
+        if self.force_only:
+            return f, None
+        return np.concatenate([f, np.zeros_like(f)], axis=1), np.concatenate([dl, el], axis=1)
+
+    def _channel_scales(self, rows) -> np.ndarray:
+        """a s_k per channel and draw, (s, n_c)."""
+        a = self.amplitudes[rows]
+        return np.concatenate([a[:, b : b + 1] * self.scales for b in range(a.shape[1])], axis=1)
+
+    def _designs(self, o, g, x, p, index, n_tests, rows=None):
+        Xf, Xl = super()._designs(o, g, x, p, index, n_tests)
+        rows = np.arange(self.theta.shape[0]) if rows is None else rows
+        w, _ = self._weights(p, rows)  # (s, n, T)
+        gc = self._channel_scales(rows)  # (s, n_c)
+        cf, cl = self._channels(x, p)
+        S, n = rows.size, np.size(x)
+
+        def dense(X, c):
+            D = np.einsum("nc,sc,snj->sncj", c, gc, w).reshape(S, n, -1)
+            return np.concatenate([_draws(X, S), D], axis=-1)
+
+        return dense(Xf, cf), (None if cl is None else dense(Xl, cl))
+
+    def extra_force_var(self, orders):
+        def extra(x, p, open_=None):
+            x, p = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(x, p))
+            rows = np.arange(self.theta.shape[0])
+            _, cv = self._weights(p, rows)  # (S, n)
+            cf, _ = self._channels(x, p)
+            gc = self._channel_scales(rows)
+            return np.einsum("nc,sc->sn", cf**2, gc**2) * cv
+
+        return extra
 
 
 # ----------------------------------------------------------------------------- per-pressure cubics
@@ -267,7 +422,7 @@ class PairFrames:
 class CubicFrames:
     """Frames of the per-pressure cubics, interpolated linearly in F_eff = P / p_u between tests."""
 
-    name = "cubics"
+    name = registry.CUBICS
     fixed_frame = True  # independent tests: the frame does not change with the plan
     label_text = "per-pressure cubics, F_eff = P/p_u interpolated linearly in pressure"
 
@@ -459,8 +614,18 @@ class CubicFrames:
 
 
 def frames_of(fit, draws: int = DRAWS):
-    """The frame builder of a fit: :class:`CubicFrames` for the per-pressure cubics, else
-    :class:`PairFrames`."""
-    if hasattr(fit, "tests") and hasattr(fit, "at"):
+    """The frame builder of a fit, by its class: :class:`CubicFrames` for the per-pressure cubics,
+    :class:`DiscrepancyFrames` for the surface with a discrepancy, :class:`PairFrames` for the
+    surface and the thermodynamic model; InputError for a model the planner has no frame of."""
+    if isinstance(fit, CampaignFit):
         return CubicFrames.of_fit(fit, draws)
-    return PairFrames.of_fit(fit, draws)
+    if isinstance(fit, DiscrepancyFit):
+        return DiscrepancyFrames.of_fit(fit, draws)
+    if isinstance(fit, SurfaceFit | ThermoFit):
+        return PairFrames.of_fit(fit, draws)
+    raise InputError(
+        f"model: uq plan has no planning frame for the model '{fit.name}' (it plans with "
+        f"{', '.join(registry.names())} but a model plugged in from outside: the planner needs its "
+        "design for a campaign with tests it has not seen)",
+        param="model",
+    )

@@ -63,7 +63,8 @@ class Frame:
     ``rows_follow_tests``), or (S, n, k) for rows that depend on the draw; area_rows the same for
     dV/dx (None: the model has no volume, and ``volume_why`` says why); extra_force_var(x, p, open)
     -> (n,) or (S, n), N^2: the force's variance no reading at other pressures reduces (an
-    interpolation error), or None.
+    interpolation error), or None. min_test_heights: the distinct heights a new test needs for the
+    model after the plan to be fitted (the discrepancy's per-test span; 0: any).
     """
 
     name: str
@@ -80,6 +81,7 @@ class Frame:
     rows_follow_tests: bool = False
     volume_why: str = ""
     key: tuple = ()
+    min_test_heights: int = 0
 
     @property
     def n_draws(self) -> int:
@@ -271,7 +273,12 @@ class _Search:
         """Best new test: (gain per cost, j, heights chosen) by an inner greedy within each
         unopened test, vectorised over tests, looked ahead to ``budget`` readings."""
         js = np.flatnonzero(~self.open)
-        if js.size == 0 or budget < MIN_TEST_READINGS or self.open.sum() >= self.max_tests:
+        need = self.f.min_test_heights
+        if (
+            js.size == 0
+            or budget < max(MIN_TEST_READINGS, need)
+            or self.open.sum() >= self.max_tests
+        ):
             return None
         if self.required.any():  # tests the targets need come first
             js = js[self.required[js]]
@@ -299,6 +306,8 @@ class _Search:
             delta = np.einsum("sjhrt,sjhrt->sjht", b, sol)
             after = self.objective((v[:, :, None, :] - delta).mean(0))  # (Ju, H)
             after = np.where(counts >= MAX_PER_HEIGHT, np.inf, after)
+            short = (counts > 0).sum(axis=1) < need  # a new height until the test has enough
+            after = np.where(short[:, None] & (counts > 0), np.inf, after)
             h = np.argmin(after, axis=1)
             path[:, m], chosen[:, m] = after[lane, h], h
             counts[lane, h] += 1
@@ -314,7 +323,7 @@ class _Search:
             v -= delta[:, lane, h]
         m_all = np.arange(1, m_max + 1)
         ratio = (start - path) / (m_all[None, :] + self.cost)
-        ratio[:, : MIN_TEST_READINGS - 1] = -np.inf
+        ratio[:, : max(MIN_TEST_READINGS, need) - 1] = -np.inf
         i = np.unravel_index(np.argmax(ratio), ratio.shape)
         m = i[1] + 1
         return ratio[i], int(js[i[0]]), [int(c) for c in chosen[i[0], :m]]

@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._diagnose.maxwell import campaign_table
@@ -41,13 +42,15 @@ from uq._inference.collapsed import Posterior, find_map, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.linear import map_rows
 from uq._inference.loo import (
+    MAX_REFITS,
+    N_FOLDS,
     PARETO_K_MAX,
     Loo,
     difference,
     held_out_density,
     kfold,
     psis,
-    reloo,
+    remedy,
     z_required,
 )
 from uq._inference.sampler import Settings
@@ -57,9 +60,7 @@ from uq._models import diagnose as M
 from uq._physics.mechanisms import MECHANISMS
 
 N_DRAWS = 1000  # Laplace draws per candidate for PSIS-LOO
-N_FOLDS = 10  # K-fold cross-validation in place of an untrustworthy PSIS-LOO comparison
 KFOLD_DRAWS = 400
-MAX_RELOO = 20  # more unreliable PSIS terms than this in a model: K-fold instead of exact refits
 GAIN_SE = 4.0
 GAIN_MIN = 4.0
 FLAG_Z = 5.0  # |mean standardised residual| x sqrt(n) of a group beyond which it is flagged
@@ -145,8 +146,8 @@ class Scoring:
     """Exact leave-out scores for comparisons PSIS-LOO cannot be trusted with (k > 0.7), one
     campaign's worth, kept for the run (the same model's refits are asked for at several steps).
 
-    * ``exact(fit)``: the PSIS terms of ``fit`` with every term of Pareto k > 0.7 replaced by an
-      exact refit with that row held out (``uq._inference.loo.reloo``);
+    * ``refit(fit)``: the exact refit of ``fit``'s model with one row held out, for the terms of
+      Pareto k > 0.7 (``uq._inference.loo.reloo``);
     * ``kfold(names)``: exact K-fold cross-validation (``uq._inference.loo.kfold``): the recorded
       points are split at random (seeded) into folds; each fold's points (their z and L rows
       together) are held out, the model refitted on the rest (MAP, Laplace draws, exact
@@ -181,7 +182,7 @@ class Scoring:
             self._scores[key] = kfold(self.n, score, n_folds=self.n_folds, seed=self.seed)
         return self._scores[key]
 
-    def exact(self, fit: Fit) -> Loo:
+    def refit(self, fit: Fit):
         def refit(i: int) -> float:
             key = ("row", tuple(sorted(fit.names)), i)
             if key not in self._scores:
@@ -191,13 +192,13 @@ class Scoring:
                 self._scores[key] = float(held_out_density(f.ll, [i])[0])
             return self._scores[key]
 
-        return reloo(fit.loo, refit)
+        return refit
 
 
 def _compare(new: Fit, old: Fit, scoring: Scoring) -> dict:
-    """ELPD gain of ``new`` over ``old``: PSIS-LOO if every Pareto k of both is <= 0.7; else the
-    terms with k > 0.7 are refitted exactly (up to MAX_RELOO per model), or, with more of them,
-    both models are scored by exact K-fold cross-validation."""
+    """ELPD gain of ``new`` over ``old``: PSIS-LOO if every Pareto k of both is <= 0.7; else
+    ``uq._inference.loo.remedy``: the terms with k > 0.7 refitted exactly (up to MAX_REFITS per
+    model), or, with more of them, both models scored by exact K-fold cross-validation."""
     out = {"pareto_k": new.loo.pareto(), "pareto_k_from": old.loo.pareto()}
     g, se = difference(new.loo, old.loo)
     if new.loo.reliable and old.loo.reliable:
@@ -209,12 +210,12 @@ def _compare(new: Fit, old: Fit, scoring: Scoring) -> dict:
             "reason": f"Pareto k > {PARETO_K_MAX:g}: PSIS-LOO unreliable",
         }
     }
-    if max(new.loo.n_bad, old.loo.n_bad) <= MAX_RELOO:
-        a, b = scoring.exact(new), scoring.exact(old)
-        method = f"psis-loo, k > {PARETO_K_MAX:g} terms refitted exactly"
-    else:
-        a, b = scoring.kfold(new.names), scoring.kfold(old.names)
-        method = f"{scoring.n_folds}-fold cross-validation"
+    a, b, method = remedy(
+        new.loo,
+        old.loo,
+        refit=(scoring.refit(new), scoring.refit(old)),
+        kfold_both=lambda: (scoring.kfold(new.names), scoring.kfold(old.names)),
+    )
     g, se = difference(a, b)
     return out | {"delta_elpd": g, "delta_elpd_se": se, "method": method} | refused
 
@@ -222,7 +223,7 @@ def _compare(new: Fit, old: Fit, scoring: Scoring) -> dict:
 # ----------------------------------------------------------------------------- where
 
 
-def _residuals(fit: Fit, meta: dict, d) -> dict:
+def residuals_of(fit: Fit, meta: dict, d) -> dict:
     """Posterior-mean residuals and standardised residuals of force (N) and volume (m^3)."""
     S = meta["area"]
     n = meta["force_N"].size
@@ -246,7 +247,6 @@ def _group_stats(r, z, sel, unit_scale):
     if k == 0:
         return {"n": 0}  # dropped by ``where``
     zs = z[sel]
-    from scipy.stats import chi2
 
     mean_z = float(zs.mean()) if k else 0.0
     log_p = float(chi2.logsf(np.sum(zs**2), k)) if k else 0.0
@@ -263,7 +263,7 @@ def _group_stats(r, z, sel, unit_scale):
 
 def where(fit: Fit, meta: dict, d) -> dict:
     """Where the residuals of ``fit`` sit: by pressure, height, branch and recording order."""
-    res = _residuals(fit, meta, d)
+    res = residuals_of(fit, meta, d)
     p, x, comp, step = meta["pressure_bar"], meta["height_m"], meta["compression"], meta["step"]
     edges = np.linspace(x.min(), x.max() + 1e-12, 7)
     n_steps = np.array([step[meta["test"] == i].max() + 1 for i in meta["test"]])
@@ -588,7 +588,7 @@ class Diagnosis:
     def summary(self):
         """One row per mechanism found: magnitude (mean, sd, q05, q95), unit, ELPD gain and SE,
         status (a pandas DataFrame; empty when nothing was found)."""
-        import pandas as pd
+        import pandas as pd  # reason: optional and heavy, loaded only where used
 
         rows = {
             m["name"]: {
@@ -706,7 +706,7 @@ def diagnose(
                 f"each step the one whose absence costs least is removed (of those within {GAIN_MIN:g} nats of "
                 f"it, the one with most parameters); ELPD by PSIS-LOO when every Pareto k of both models is <= {PARETO_K_MAX:g}; otherwise "
                 f"the terms with k > {PARETO_K_MAX:g} are refitted exactly (leave that row out), or, with more than "
-                f"{MAX_RELOO} of them in a model, both models are scored by exact {N_FOLDS}-fold "
+                f"{MAX_REFITS} of them in a model, both models are scored by exact {N_FOLDS}-fold "
                 "cross-validation. Mechanisms are 'provisional' while the final model "
                 "fails its noise-scale check"
             ),

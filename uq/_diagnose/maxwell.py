@@ -31,6 +31,7 @@ What a pattern is consistent with, and what it is not (``interpret``):
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2
 
 from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA
@@ -163,7 +164,6 @@ def _pattern(rows: list[dict], region: str) -> dict:
         out["pattern"] = "holds"
         out["words"] = f"{where} the recordings obey the Maxwell relation at every tested pressure"
         return out
-    from scipy.stats import chi2
 
     w = 1.0 / sd**2
     common = float(np.sum(w * level) / np.sum(w))

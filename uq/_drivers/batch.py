@@ -24,6 +24,7 @@ import dataclasses
 import hashlib
 import io
 import json
+import logging
 import os
 import re
 import time
@@ -31,8 +32,22 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
+from uq._data.recordings import read_recordings, require_for
+from uq._data.stand_description import stand_or_paper
+from uq._derived.bands import campaign_bands
+from uq._diagnose.engine import diagnose
+from uq._inference.sampler import Settings
 from uq._io.errors import InputError, where
+from uq._io.files import dumps_json, emit_json, write_text_atomic
 from uq._io.values import boolean, compression, positive_float, positive_int, seed, walkers
+from uq._io.version import __version__
+from uq._models import registry
+from uq._models.cubic_fit import fit_campaign
+from uq._report.campaign import write_report
+from uq._report.diagnose import write_diagnose_report
+from uq._report.html import render
+from uq._report.pages import write_model_page
 
 TASKS = ("fit", "report", "surface", "diagnose")
 #: Per-campaign options: name -> parser (the same checks as the single-campaign commands' options).
@@ -233,8 +248,6 @@ def read_catalogue(path) -> list[Campaign]:
 
 
 def _version() -> str:
-    from uq._io.version import __version__
-
     return __version__
 
 
@@ -286,7 +299,6 @@ def run_job(job: dict) -> dict:
     """Run one (campaign, task) in this process (a Dask worker or the caller); never raises.
 
     Returns the summary row; on success the stamp is written last, so a crash leaves no stamp."""
-    import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
 
     out = Path(job["out"])
     row = {
@@ -311,8 +323,6 @@ def run_job(job: dict) -> dict:
         row["error"] = _one_line(exc)
     row["seconds"] = round(time.perf_counter() - t0, 2)
     if row["status"] == "done":
-        from uq._io.files import dumps_json, write_text_atomic
-
         write_text_atomic(
             out / STAMP,
             dumps_json(
@@ -344,8 +354,6 @@ READING_OPTIONS = (
 
 
 def _recordings(job: dict):
-    from uq._data.recordings import read_recordings, require_for
-
     o = job["options"]
     kw = {k: o[k] for k in READING_OPTIONS if k in o}
     # what each task needs (COMMAND_NEEDS of its command): a force-only campaign's surface task
@@ -354,8 +362,6 @@ def _recordings(job: dict):
 
 
 def _settings(job: dict):
-    from uq._inference.sampler import Settings
-
     o = job["options"]
     kw = {
         "n_walkers": o.get("walkers"),
@@ -368,8 +374,6 @@ def _settings(job: dict):
 
 
 def _stand(job: dict):
-    from uq._data.stand_description import stand_or_paper
-
     return stand_or_paper(job["options"].get("stand"))
 
 
@@ -378,12 +382,9 @@ def _seed(job: dict) -> int:
 
 
 def _task_fit(job: dict, out: Path) -> dict:
-    from uq._io.files import emit_json
-    from uq._models.cubic import fit_campaign
-
     rec = _recordings(job)
     cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
-    cf.save(out)
+    cf.save_posteriors(out)
     emit_json(cf.to_json(), str(out / "fit.json"))
     return {
         "converged": cf.converged,
@@ -393,11 +394,6 @@ def _task_fit(job: dict, out: Path) -> dict:
 
 
 def _task_report(job: dict, out: Path) -> dict:
-    from uq._derived.bands import campaign_bands
-    from uq._io.files import emit_json
-    from uq._models.cubic import fit_campaign
-    from uq._report.campaign import write_report
-
     rec = _recordings(job)
     cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
     cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
@@ -411,26 +407,24 @@ def _task_report(job: dict, out: Path) -> dict:
 
 
 def _task_surface(job: dict, out: Path) -> dict:
-    from uq._io.files import emit_json
-    from uq._models.surface import fit_surface, summary
-    from uq._report.surface import write_surface_report
-
-    fit = fit_surface(_recordings(job), seed=_seed(job), settings=_settings(job), stand=_stand(job))
-    res = summary(fit)
-    page = write_surface_report(fit, res, out)
+    fit = registry.fit(
+        registry.default("surface"),
+        _recordings(job),
+        seed=_seed(job),
+        settings=_settings(job),
+        stand=_stand(job),
+    )
+    res = fit.to_json()
+    page = write_model_page(fit, res, out)
     emit_json(res, str(out / "surface.json"))
     return {
         "converged": bool(res["converged"]),
         "output": page.name,
-        "result": f"{fit.orders.label}, {fit.beta.shape[-1]} coefficients",
+        "result": f"{fit.orders_label}, {fit.n_coefficients} coefficients",
     }
 
 
 def _task_diagnose(job: dict, out: Path) -> dict:
-    from uq._diagnose.engine import diagnose
-    from uq._io.files import emit_json
-    from uq._report.diagnose import write_diagnose_report
-
     # the same shorter sampling as `uq diagnose` (its command_diagnose)
     s = _settings(job)
     settings = dataclasses.replace(s, chunk=200, min_steps=min(300, s.max_steps))
@@ -473,9 +467,10 @@ def worker_env(threads: int = 1) -> dict:
 
 
 def _client(scheduler: str | None, workers: int):
-    import logging
-
-    from distributed import Client, LocalCluster
+    from distributed import (  # reason: optional and heavy, loaded only where used
+        Client,
+        LocalCluster,
+    )
 
     if scheduler:
         try:
@@ -499,7 +494,7 @@ def run_dask(
     jobs: list[dict], *, scheduler: str | None = None, workers: int = 2, on_row=None
 ) -> list[dict]:
     """Run ``jobs`` on Dask (a new LocalCluster, or the cluster at ``scheduler``); rows as they finish."""
-    from distributed import as_completed
+    from distributed import as_completed  # reason: optional and heavy, loaded only where used
 
     rows = []
     client = _client(scheduler, workers)
@@ -560,7 +555,6 @@ def _ordered(rows: list[dict], jobs: list[dict]) -> list[dict]:
 
 def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
     """summary.csv, summary.json and index.html in ``out_dir``, each written atomically."""
-    from uq._io.files import dumps_json, write_text_atomic
 
     out = Path(out_dir)
     counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "skipped", "failed")}
@@ -582,7 +576,6 @@ def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
 
 def _index_html(rows: list[dict], catalogue, counts: dict) -> str:
     """index.html: the template ``batch_index.html`` of ``uq._report`` (autoescaped)."""
-    from uq._report.html import render
 
     return render(
         "batch_index.html",

@@ -43,16 +43,17 @@ from uq._io.errors import InputError
 from uq._io.progress import progress
 from uq._models.cubic import (
     FORCE_PRIOR_SD_N,
-    NOISE_NAMES,
     NOISE_PRIOR_MEAN,
     NOISE_PRIOR_SD,
     PISTON_PRIOR_SD_M,
     basis,
-    fit_test,
     to_paper_basis,
 )
+from uq._models.cubic_fit import fit_test
+from uq._models.cubic_results import NOISE_NAMES
 from uq._physics.cubic import cubic
 from uq._physics.quantities import force_noise_var
+from uq._stand.shapes import record_pressure
 from uq._stand.simulator import Layout, simulate
 
 QUANTITIES = FORCE_NAMES + PISTON_NAMES
@@ -87,9 +88,7 @@ def _test_from_stand(
 ) -> tuple[PressureTest, np.ndarray]:
     tests = simulate("n50", seed=seed, layout=Layout(pressures_bar=(pressure_bar,)), stand=stand)
     if recorded:
-        from uq._stand.shapes import record_pressure
-
-        tests = record_pressure(tests, seed)
+        tests = record_pressure(tests, seed, stand)
     t = tests[0]
     t1 = table1()
     i = t1.index(pressure_bar)

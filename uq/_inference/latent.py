@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import LOG_2PI, LinearPosterior, posterior_from_moments
-from uq._stand.shapes import SENSOR_GAIN_SD, SENSOR_RESOLUTION_PA
 
 
 def _factor(U, v, Q, w):
@@ -171,15 +171,19 @@ def paired_ar1_posterior(Z, y, v, uf, ul, rho, prior_sd, weight=None) -> LinearP
     return post._replace(log_marginal=log_marginal)
 
 
-def common_offset(dp_hat_pa, p_pa: float, *, ordered: bool = True):
+def common_offset(
+    dp_hat_pa, p_pa: float, *, ordered: bool = True, stand: StandDescription = PAPER_STAND
+):
     """Prior mean and sd (Pa) of the common offset delta in dp_hat = dp + delta.
 
-    delta ~ N(0, (p_u SENSOR_GAIN_SD)^2) (the sensor's gain error); dp a stationary AR(1) series
-    with the sample variance and lag-one correlation of dp_hat (iid when the order is unknown).
-    Returns the Gaussian posterior of delta given dp_hat, (mean, sd)."""
+    delta ~ N(0, (p_u g)^2) with g the stand's pressure sensor's gain error
+    (``stand.pressure_sensor_gain_sd``); dp a stationary AR(1) series with the sample variance and
+    lag-one correlation of dp_hat (iid when the order is unknown), never below the sensor's
+    resolution. Returns the Gaussian posterior of delta given dp_hat, (mean, sd)."""
+    resolution = stand.pressure_sensor_resolution_pa
     dp_hat = np.asarray(dp_hat_pa, float)
     n = dp_hat.size
-    var = max(float(np.var(dp_hat, ddof=1)) if n > 1 else 0.0, SENSOR_RESOLUTION_PA**2)
+    var = max(float(np.var(dp_hat, ddof=1)) if n > 1 else 0.0, resolution**2)
     rho = 0.0
     if ordered and n > 2:
         c = dp_hat - dp_hat.mean()
@@ -187,6 +191,6 @@ def common_offset(dp_hat_pa, p_pa: float, *, ordered: bool = True):
         rho = float(np.clip(np.sum(c[1:] * c[:-1]) / den, -0.9, 0.95)) if den > 0 else 0.0
     Q = np.asarray(ar1_precision(rho, n)[0]) / var
     one = np.ones(n)
-    gain_var = max((p_pa * SENSOR_GAIN_SD) ** 2, SENSOR_RESOLUTION_PA**2)
+    gain_var = max((p_pa * stand.pressure_sensor_gain_sd) ** 2, resolution**2)
     post_var = 1.0 / (1.0 / gain_var + one @ Q @ one)
     return post_var * float(one @ Q @ dp_hat), float(np.sqrt(post_var))

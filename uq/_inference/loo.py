@@ -8,6 +8,10 @@
   the sibling remedy when too many terms are unreliable for refits one by one.
 * :func:`held_out_density` — the exact leave-out value from a refitted posterior whose data kept
   the held-out terms with zero weight (every model here can: ``CollapsedModel.hold_out``).
+* :func:`remedy` — the one policy for a comparison PSIS-LOO cannot be trusted with, used by the
+  model comparison (``uq._derived.comparison``) and the discrepancy engine: the unreliable terms
+  refitted exactly while there are at most ``MAX_REFITS`` of them in a model, K-fold of both
+  models beyond.
 * :func:`verdict` — which of two models the data prefer: a difference counts only beyond
   ``SE_MULTIPLE`` (2) standard errors and ``ELPD_MIN`` (4) nats, and no verdict is given while a
   Pareto k > 0.7 remains ("refused").
@@ -25,7 +29,9 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+import arviz as az
 import numpy as np
+from scipy.stats import norm
 
 #: a PSIS-LOO term is unreliable when its Pareto k exceeds this (Vehtari et al. 2017/2024)
 PARETO_K_MAX = 0.7
@@ -33,6 +39,10 @@ PARETO_K_MAX = 0.7
 SE_MULTIPLE = 2.0
 #: ... and beyond this many nats (Sivula, Magnusson, Vehtari 2020: smaller ones are unreliable)
 ELPD_MIN = 4.0
+#: exact refits for at most this many unreliable terms of a model; more: K-fold instead (:func:`remedy`)
+MAX_REFITS = 20
+#: the folds of the K-fold cross-validation that replaces the refits
+N_FOLDS = 10
 
 
 @dataclass(frozen=True)
@@ -78,8 +88,6 @@ class Loo:
 
 def loglik_idata(loglik):
     """ArviZ InferenceData holding pointwise log-likelihoods ``loglik`` (chains, draws, n) only."""
-    import arviz as az
-
     ll = np.asarray(loglik)
     return az.from_dict(posterior={"_": np.zeros(ll.shape[:2])}, log_likelihood={"reading": ll})
 
@@ -88,8 +96,6 @@ def psis(loglik, *, reff: float | None = None) -> Loo:
     """ArviZ's PSIS-LOO of log-likelihoods (chains, draws, n); ``reff`` the relative efficiency of
     the draws (None: ArviZ estimates it from the chains; 1.0 for independent draws). ArviZ's
     warning about high Pareto k is not raised: every caller reports the k values itself."""
-    import arviz as az
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         res = az.loo(loglik_idata(loglik), pointwise=True, reff=reff)
@@ -116,13 +122,11 @@ def held_out_density(loglik, terms) -> np.ndarray:
     return logmeanexp(ll.reshape(-1, ll.shape[-1])[:, terms], axis=0)
 
 
-def reloo(loo: Loo, refit: Callable[[int], float], *, max_refits: int | None = None) -> Loo:
-    """``loo`` with every term of Pareto k > 0.7 replaced by ``refit(i)`` (exact; its k set to 0).
-
-    With more such terms than ``max_refits`` nothing is refitted and ``loo`` is returned as it is
-    (still unreliable: the caller decides what to do, e.g. :func:`kfold`)."""
+def reloo(loo: Loo, refit: Callable[[int], float]) -> Loo:
+    """``loo`` with every term of Pareto k > 0.7 replaced by ``refit(i)`` (exact; its k set to 0);
+    how many terms to refit before K-fold is better is :func:`remedy`'s rule."""
     bad = np.flatnonzero(loo.pareto_k > PARETO_K_MAX)
-    if bad.size == 0 or (max_refits is not None and bad.size > max_refits):
+    if bad.size == 0:
         return loo
     loo_i, k = loo.loo_i.copy(), loo.pareto_k.copy()
     for i in bad:
@@ -137,7 +141,11 @@ def reloo(loo: Loo, refit: Callable[[int], float], *, max_refits: int | None = N
 
 
 def kfold(
-    n_units: int, score: Callable[[np.ndarray], np.ndarray], *, n_folds: int = 10, seed: int = 0
+    n_units: int,
+    score: Callable[[np.ndarray], np.ndarray],
+    *,
+    n_folds: int = N_FOLDS,
+    seed: int = 0,
 ) -> Loo:
     """Exact K-fold cross-validation: units split at random (seeded) into ``n_folds`` folds;
     ``score(held)`` refits without the units ``held`` (bool, (n_units,)) and returns the log
@@ -153,14 +161,47 @@ def kfold(
     return Loo(out, np.zeros_like(out), f"{n_folds}-fold cross-validation")
 
 
+def remedy(
+    a: Loo,
+    b: Loo,
+    *,
+    refit: tuple[Callable[[int], float] | None, Callable[[int], float] | None] = (None, None),
+    kfold_both: Callable[[], tuple[Loo, Loo]] | None = None,
+) -> tuple[Loo, Loo, str]:
+    """The one remedy for comparing two models whose PSIS-LOO terms are not all reliable:
+    (a, b, how they were scored).
+
+    Both reliable: as they are ("psis-loo"). At most ``MAX_REFITS`` terms of Pareto k > 0.7 in
+    each model: those terms replaced by exact refits (``refit``: one callable per model, ``None``
+    for a model that offers none, whose unreliable terms stay so and refuse a verdict). More:
+    both models scored by exact K-fold cross-validation on the same folds (``kfold_both()``;
+    without it the terms stay as they are)."""
+    if a.reliable and b.reliable:
+        return a, b, "psis-loo"
+    if max(a.n_bad, b.n_bad) <= MAX_REFITS:
+        a, b = (
+            loo if fn is None else reloo(loo, fn) for loo, fn in zip((a, b), refit, strict=True)
+        )
+        return a, b, f"psis-loo, k > {PARETO_K_MAX:g} terms refitted exactly"
+    if kfold_both is None:
+        return (
+            a,
+            b,
+            f"psis-loo (more than {MAX_REFITS} terms of k > {PARETO_K_MAX:g}: not refitted)",
+        )
+    ka, kb = kfold_both()
+    return ka, kb, ka.method
+
+
 def difference(a: Loo, b: Loo) -> tuple[float, float]:
     """ELPD difference a - b and its standard error."""
     diff = a.loo_i - b.loo_i
     return float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
 
 
-def verdict(a: Loo, b: Loo, names=("surface", "per-pressure cubics")) -> dict:
-    """Which model the data prefer (module docstring): a name, "indistinguishable" or "refused"."""
+def verdict(a: Loo, b: Loo, names: tuple[str, str] = ("first", "second")) -> dict:
+    """Which model the data prefer (module docstring): one of ``names``, "indistinguishable" or
+    "refused"."""
     d, se = difference(a, b)
     bad = {nm: lo.n_bad for nm, lo in zip(names, (a, b), strict=True)}
     if any(bad.values()):
@@ -191,6 +232,4 @@ def z_required(n_candidates: int, gain_se: float) -> float:
     ``gain_se`` is the one-sided threshold for a single candidate; its tail probability is
     shared out over the candidates, so the family of tests at a step keeps that error rate.
     """
-    from scipy.stats import norm
-
     return float(norm.isf(norm.sf(gain_se) / max(n_candidates, 1)))

@@ -385,11 +385,11 @@ def run_many(
     problem passes every rule, or ``max_steps``. Returns one :class:`Chains` per problem, with
     its own burn-in, tau and failed rules.
     """
-    from uq._io.progress import _Silent, progress
+    from uq._io.progress import Silent, progress
 
     # No total: the run stops when the rules pass, usually far below max_steps, so a bar to
     # max_steps would show an ETA many times too long. It counts steps and their rate instead.
-    with progress(desc=desc, unit="step") if desc else _Silent(None) as bar:
+    with progress(desc=desc, unit="step") if desc else Silent(None) as bar:
         return _run_many(log_prob, centers, covs, names, seed, settings, bar, mix)
 
 

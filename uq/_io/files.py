@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
+import io
 import json
 import math
 import os
@@ -159,56 +161,6 @@ def _replace_atomically(path: Path, fill) -> Path:
     return path
 
 
-def netcdf_bytes(idata) -> bytes:
-    """An ArviZ InferenceData as NetCDF-4 bytes, made in memory (what ArviZ 0.23's
-    ``idata.to_netcdf(path)`` writes: root attributes, every group, zlib compression of numbers;
-    ``arviz.from_netcdf`` reads the file back).
-
-    Why in memory: HDF5 writing straight to a full disk (or past a file-size limit) fails inside
-    h5py, which can crash the interpreter (a segmentation fault, exit 139); the bytes are
-    written afterwards like any other output, where a full disk is a one-line error."""
-    import io
-
-    import xarray as xr
-    from arviz.data.inference_data import _compressible_dtype
-
-    buf = io.BytesIO()
-    mode = "w"
-    with _local_dask_scheduler():
-        if idata._attrs:  # the InferenceData's own attributes, on the root group
-            xr.Dataset(attrs=idata._attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")
-            mode = "a"
-        for group in idata._groups_all:
-            data = getattr(idata, group)
-            encoding = {
-                name: {"zlib": True}
-                for name, values in data.variables.items()
-                if _compressible_dtype(values.dtype)
-            }
-            data.to_netcdf(buf, mode=mode, group=f"/{group}", engine="h5netcdf", encoding=encoding)
-            mode = "a"
-    return buf.getvalue()
-
-
-@contextlib.contextmanager
-def _local_dask_scheduler():
-    """In a Dask worker (``uq batch``), xarray would take a cluster-wide lock named after the
-    target, which a buffer in memory cannot name; the data here are in memory, so a local lock is right."""
-    if "dask" not in sys.modules:
-        yield
-        return
-    import dask
-
-    with dask.config.set(scheduler="synchronous"):
-        yield
-
-
-def write_netcdf_atomic(path: str | os.PathLike, idata) -> Path:
-    """Write an ArviZ InferenceData to ``path`` as NetCDF, atomically (:func:`netcdf_bytes`, then
-    :func:`write_bytes_atomic`): a full disk is an :class:`InputError` and leaves no file."""
-    return write_bytes_atomic(path, netcdf_bytes(idata))
-
-
 @contextlib.contextmanager
 def staged_folder(out: str | os.PathLike, *, last: tuple[str, ...] = ()):
     """Write a set of files (a report and its figures) whole or not at all.
@@ -269,23 +221,23 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     return write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def _plain(obj: Any) -> Any:
+def plain(obj: Any) -> Any:
     """Convert numpy/jax scalars and arrays to JSON-ready Python objects; NaN/inf become None."""
     if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
+        return {str(k): plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
+        return [plain(v) for v in obj]
     if hasattr(obj, "__array__") and not isinstance(obj, (str, bytes)):
         arr = np.asarray(obj)
         if arr.ndim == 0:
-            return _plain(arr.item())
-        return [_plain(v) for v in arr.tolist()]
+            return plain(arr.item())
+        return [plain(v) for v in arr.tolist()]
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
     if isinstance(obj, (np.integer,)):
         return int(obj)
     if isinstance(obj, (np.floating,)):
-        return _plain(float(obj))
+        return plain(float(obj))
     if isinstance(obj, np.bool_):
         return bool(obj)
     return obj
@@ -293,7 +245,7 @@ def _plain(obj: Any) -> Any:
 
 def dumps_json(result: Any) -> str:
     """Deterministic JSON text (sorted keys off: the contract's key order reads better)."""
-    return json.dumps(_plain(result), indent=1, allow_nan=False) + "\n"
+    return json.dumps(plain(result), indent=1, allow_nan=False) + "\n"
 
 
 def emit_json(result: Any, target: str | None) -> None:
@@ -310,8 +262,6 @@ def emit_json(result: Any, target: str | None) -> None:
 
 def write_figure_atomic(fig, path: str | os.PathLike, **kwargs) -> Path:
     """Save a matplotlib figure atomically as PNG and return the path."""
-    import io
-
     buf = io.BytesIO()
     kwargs.setdefault("dpi", 110)
     fig.savefig(buf, format="png", **kwargs)
@@ -320,8 +270,6 @@ def write_figure_atomic(fig, path: str | os.PathLike, **kwargs) -> Path:
 
 def sha256_of(path: str | os.PathLike) -> str:
     """The SHA-256 of a file's bytes, hex (the provenance of a result: which recordings it is of)."""
-    import hashlib
-
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):

@@ -24,6 +24,8 @@ from __future__ import annotations
 import sys
 from collections.abc import Iterable
 
+from tqdm import tqdm
+
 _enabled = False  # the CLI turns it on; a library user's loops stay silent by default
 
 
@@ -39,7 +41,7 @@ def active() -> bool:
     return _enabled and stream is not None and hasattr(stream, "isatty") and stream.isatty()
 
 
-class _Silent:
+class Silent:
     """Stands in for a bar when none is shown: same calls, no output, no tqdm import."""
 
     def __init__(self, iterable: Iterable | None):
@@ -69,8 +71,7 @@ def progress(
 ):
     """A tqdm bar on stderr over ``iterable`` (or a counter to ``total``), or a silent stand-in."""
     if not active():
-        return _Silent(iterable)
-    from tqdm import tqdm
+        return Silent(iterable)
 
     if total is None and iterable is not None and hasattr(iterable, "__len__"):
         total = len(iterable)

@@ -28,6 +28,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from uq._io.errors import InputError
+
 
 @dataclass(frozen=True)
 class Block:
@@ -106,5 +108,48 @@ class FittedModel(Protocol):
 
     def save(self, path, **provenance) -> Any:
         """Write the model atomically to ``path`` in the one saved format (NetCDF: named blocks,
-        constant data, ``uq_file_kind``, ``uq_format_version``, provenance); ``uq._models.registry.
-        load(path)`` reads it back without a refit."""
+        constant data, ``uq_file_kind``, ``uq_format_version``, provenance); ``uq._models.saved.
+        load(path)`` (``uq.load_model``) reads it back without a refit."""
+
+
+# ----------------------------------------------------------------------------- shared by the fits
+
+
+def thin_rows(draws: np.ndarray, max_draws: int | None) -> np.ndarray:
+    """Rows (draws) kept evenly, every ceil(N / max_draws)-th, so that at most ``max_draws`` remain
+    (all of them for None): the one rule behind every fit's fixed draws and ``on_draws``."""
+    if max_draws and draws.shape[0] > max_draws:
+        return draws[:: int(np.ceil(draws.shape[0] / max_draws))]
+    return draws
+
+
+def refuse_extrapolation(
+    height_m, p_bar, height_range_m, pressure_range_bar, param: str | None, model: str
+) -> None:
+    """InputError naming the first height or overpressure outside the tested ranges: models of the
+    stand's recordings answer only where it measured. ``param``: the caller's parameter the value
+    came from (the message starts with it), or None."""
+    for values, (lo, hi), scale, unit, name, tested in (
+        (height_m, height_range_m, 1e3, "mm", "height", "heights"),
+        (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures"),
+    ):
+        v = np.atleast_1d(np.asarray(values, float))
+        out = (v < lo - 1e-9) | (v > hi + 1e-9)
+        if np.any(out):
+            raise InputError(
+                f"{param + ': ' if param else ''}{name} {v[out][0] * scale:g} {unit} is outside the "
+                f"tested {tested} {lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate",
+                param=param,
+            )
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The sampler's verdict a saved model keeps (its ``convergence``): whether every rule passed
+    and the warnings the fit printed, in the words of the command that saved it."""
+
+    converged: bool
+    warnings: tuple[str, ...] = ()
+
+    def messages(self, advice: str | None = None) -> list[str]:
+        return list(self.warnings)

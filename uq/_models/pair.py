@@ -34,13 +34,16 @@ posterior costs a few weighted sums, not a (2n x k) product.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+import warnings
 from typing import NamedTuple
 
+import arviz as az
 import numpy as np
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.float64 import jax, jnp
+from uq._inference.latent import common_offset
 from uq._inference.linear import (
     LOG_2PI,
     GramPlan,
@@ -49,7 +52,8 @@ from uq._inference.linear import (
     posterior_from_moments,
     weighted_gram,
 )
-from uq._physics.quantities import force_noise_var
+from uq._inference.loo import loglik_idata
+from uq._physics.quantities import BAR_PA, force_noise_var
 
 NOISE_NAMES = ("log_s0_N", "log_rel_load", "log_k_p", "log_sL_m", "log_V0_m3")
 #: the natural noise parameters reported (exp of the sampled logs)
@@ -89,12 +93,10 @@ class PairData(NamedTuple):
 def holding_sd_Pa(p_bar, stand: StandDescription, *, measured: bool, shape) -> np.ndarray:
     """The sd (Pa) of each reading's pressure-holding error the likelihood carries: the stand's
     holding error at the set pressures ``p_bar``, or, where the readings are corrected by their
-    measured pressures, the sensor's rounding (uq._stand.shapes: 1 Pa, uniform, sd 1/sqrt(12) Pa)."""
-    from uq._physics.quantities import BAR_PA
-    from uq._stand.shapes import SENSOR_RESOLUTION_PA
-
+    measured pressures, the rounding of the stand's pressure sensor (uniform over its resolution,
+    1 Pa on the paper's stand: sd 1/sqrt(12) Pa)."""
     if measured:
-        return np.full(shape, SENSOR_RESOLUTION_PA / np.sqrt(12.0))
+        return np.full(shape, stand.pressure_sensor_resolution_pa / np.sqrt(12.0))
     return np.broadcast_to(stand.pressure_sd_bar(np.asarray(p_bar, float)) * BAR_PA, shape)
 
 
@@ -105,10 +107,7 @@ def pair_data(
 
     ``dp_meas`` (n,) Pa: each reading's measured pressure deviation (``measured_deviation``), or
     None. Where given, the readings are corrected by it and the pressure-holding term of the
-    covariance shrinks to the sensor's resolution (uq._stand.shapes: 1 Pa, a uniform rounding
-    error of sd 1/sqrt(12) Pa)."""
-    from uq._physics.quantities import BAR_PA
-
+    covariance shrinks to the sensor's resolution (:func:`holding_sd_Pa`)."""
     hold_pa = holding_sd_Pa(p_bar, stand, measured=dp_meas is not None, shape=np.shape(F))
     dp_meas = np.zeros(np.shape(F)) if dp_meas is None else np.asarray(dp_meas, float)
     return PairData(
@@ -128,7 +127,7 @@ def pair_data(
     )
 
 
-def measured_deviation(rec):
+def measured_deviation(rec, stand: StandDescription = PAPER_STAND):
     """Each reading's measured pressure deviation (Pa), in ``arrays`` order, or None when the
     recordings give set pressures only: measured - set less the test's common offset's prior mean
     (``uq._inference.latent.common_offset``: the sensor's gain error and the series' mean).
@@ -136,15 +135,13 @@ def measured_deviation(rec):
     5 bar up) is not modelled here, unlike in the per-pressure cubics."""
     if not rec.pressure_measured:
         return None
-    from uq._inference.latent import common_offset
-    from uq._physics.quantities import BAR_PA
-
     out = []
     for t in rec.tests:
         dp_hat = (np.asarray(t.measured_pressure_bar, float) - t.pressure_bar) * BAR_PA
-        out.append(
-            dp_hat - common_offset(dp_hat, t.pressure_bar * BAR_PA, ordered=t.step is not None)[0]
+        offset = common_offset(
+            dp_hat, t.pressure_bar * BAR_PA, ordered=t.step is not None, stand=stand
         )
+        out.append(dp_hat - offset[0])
     return np.concatenate(out)
 
 
@@ -265,102 +262,6 @@ def observed(d: PairData) -> dict:
     return {"force_N": np.asarray(d.F), "piston_m": np.asarray(d.L)}
 
 
-def refuse_extrapolation(
-    height_m, p_bar, height_range_m, pressure_range_bar, param: str | None, model: str
-) -> None:
-    """InputError naming the first height or overpressure outside the tested ranges: models of the
-    stand's recordings answer only where it measured. ``param``: the caller's parameter the value
-    came from (the message starts with it), or None."""
-    from uq._io.errors import InputError
-
-    for values, (lo, hi), scale, unit, name, tested in (
-        (height_m, height_range_m, 1e3, "mm", "height", "heights"),
-        (p_bar, pressure_range_bar, 1.0, "bar", "overpressure", "pressures"),
-    ):
-        v = np.atleast_1d(np.asarray(values, float))
-        out = (v < lo - 1e-9) | (v > hi + 1e-9)
-        if np.any(out):
-            raise InputError(
-                f"{param + ': ' if param else ''}{name} {v[out][0] * scale:g} {unit} is outside the "
-                f"tested {tested} {lo * scale:g}..{hi * scale:g} {unit}; {model} does not extrapolate",
-                param=param,
-            )
-
-
-@dataclass(eq=False, frozen=True, repr=False)
-class PairFit:
-    """What the fits of the models over all tests share: the recordings, the driver's
-    :class:`~uq._inference.collapsed.Posterior` (``beta`` (C, D, k) standardised coefficients,
-    ``theta`` (C, D, n_theta) the sampled parameters), the stand, the tested ranges."""
-
-    recordings: object
-    posterior: object
-    stand: StandDescription
-
-    #: the model's name in messages ("the surface model")
-    model_name = "the model"
-
-    @property
-    def beta(self) -> np.ndarray:
-        return self.posterior.beta
-
-    @property
-    def theta(self) -> np.ndarray:
-        return self.posterior.theta
-
-    @property
-    def idata(self):
-        return self.posterior.idata
-
-    @property
-    def convergence(self):
-        return self.posterior.convergence
-
-    @property
-    def chains(self):
-        return self.posterior.chains
-
-    @property
-    def seconds(self) -> float:
-        return self.posterior.seconds
-
-    @property
-    def loglik_loo(self) -> np.ndarray:
-        return self.posterior.loglik_loo
-
-    @property
-    def pressure_range_bar(self):
-        p = self.recordings.pressures_bar
-        return float(p.min()), float(p.max())
-
-    @property
-    def height_range_m(self):
-        return self.recordings.height_range_m
-
-    def check_range(self, height_m, p_bar, param: str | None = None) -> None:
-        """Refuse heights/pressures outside the tested ranges (no extrapolation)."""
-        refuse_extrapolation(
-            height_m, p_bar, self.height_range_m, self.pressure_range_bar, param, self.model_name
-        )
-
-    def flat_beta(self, max_draws: int | None = None) -> np.ndarray:
-        """The coefficient draws with chains flattened, thinned evenly to at most ``max_draws``."""
-        b = self.beta.reshape(-1, self.beta.shape[-1])
-        if max_draws and b.shape[0] > max_draws:
-            b = b[:: int(np.ceil(b.shape[0] / max_draws))]
-        return b
-
-    def summary(self):
-        """ArviZ-style table (pandas DataFrame) of the sampled parameters."""
-        return self.posterior.summary()
-
-    def loo(self):
-        """PSIS-LOO per (force, piston) reading, coefficients integrated out exactly."""
-        from uq._inference.loo import psis
-
-        return psis(self.loglik_loo)
-
-
 def arrays(rec):
     """Every reading of a campaign: height (m), set pressure (bar), force, piston, test index."""
     tests = rec.tests
@@ -375,13 +276,6 @@ def arrays(rec):
 def select_orders(fitter, rec, candidates, *, seed: int, settings, stand):
     """Fit ``fitter(rec, orders, seed=, settings=, stand=)`` for each candidate and rank them by
     PSIS-LOO per reading (ArviZ's compare); returns (the best fit with its ``selection``, rows)."""
-    import dataclasses
-    import warnings
-
-    import arviz as az
-
-    from uq._inference.loo import loglik_idata
-
     fits = {o.label: fitter(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)

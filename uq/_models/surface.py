@@ -45,21 +45,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from uq._data.recordings import Recordings
-from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.sampler import Settings
 from uq._inference.summary import band, estimate
-from uq._io.errors import InputError
-from uq._models import pair, surface_force
-from uq._models.pair import (
-    NATURAL_NAMES,
-    NOISE_NAMES,
-    PairData,
-    PairFit,
-    noise_prior_mean,
-    pair_data,
-)
+from uq._models.linear_fit import BlockSpec, LinearFit, Params
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 MAX_DRAWS = 4000
@@ -67,12 +55,14 @@ SCALE_C = 0.1  # m^2
 SCALE_E = 1.0e4  # N
 SCALE_D = 0.1  # m^2
 SCALE_R = 1.0  # m
-NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 LEVEL = 0.90
+#: the sampled noise parameters as reported (uq._models.pair.NATURAL_NAMES; the force surface has
+#: the first three)
+NATURAL_NAMES = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3")
 
 
 @dataclass(frozen=True)
-class Orders:
+class Orders(Params):
     """Polynomial orders: pressure area F_p degree K in t and Lp in q, casing degree Ke, D degrees (Dk, Dl).
 
     Dk = -1 means D = 0 (the traditional theory for the volume); Ke = -1 means no casing term;
@@ -154,7 +144,7 @@ CANDIDATES = (
 # ----------------------------------------------------------------------------- design
 
 
-def _tq(t, q, kmax, lmax, integrate=False):
+def tq_columns(t, q, kmax, lmax, integrate=False):
     t = np.asarray(t, float)[..., None, None]
     q = np.asarray(q, float)[..., None, None]
     k = np.arange(kmax + 1)[:, None]
@@ -167,13 +157,13 @@ def _tq(t, q, kmax, lmax, integrate=False):
     return cols.reshape(*cols.shape[:-2], -1)
 
 
-def _poly(t, m):
+def poly_columns(t, m):
     t = np.asarray(t, float)[..., None]
     return t ** np.arange(m + 1)
 
 
 @dataclass(frozen=True)
-class Geometry:
+class Geometry(Params):
     x0_m: float
     area_m2: float
     p_mid: float
@@ -186,7 +176,7 @@ class Geometry:
         return (np.asarray(p_bar, float) - self.p_mid) / self.p_half
 
 
-def _sizes(o: Orders, n_tests: int):
+def sizes(o: Orders, n_tests: int):
     nc = (o.K + 1) * (o.Lp + 1)
     ne = o.Ke + 1
     nd = 0 if o.Dk < 0 else (o.Dk + 1) * (o.Dl + 1)
@@ -200,9 +190,9 @@ def force_design(o: Orders, g: Geometry, x_m, p_bar, n_columns: int | None = Non
     p_pa = np.asarray(p_bar, float) * BAR_PA
     nc, ne = (o.K + 1) * (o.Lp + 1), o.Ke + 1
     Xf = np.zeros((t.size, nc + ne if n_columns is None else n_columns))
-    Xf[:, :nc] = p_pa[:, None] * _tq(t, q, o.K, o.Lp) * SCALE_C
+    Xf[:, :nc] = p_pa[:, None] * tq_columns(t, q, o.K, o.Lp) * SCALE_C
     if ne:
-        Xf[:, nc : nc + ne] = _poly(t, o.Ke) * SCALE_E
+        Xf[:, nc : nc + ne] = poly_columns(t, o.Ke) * SCALE_E
     return Xf
 
 
@@ -210,181 +200,136 @@ def designs(o: Orders, g: Geometry, x_m, p_bar, test_index, n_tests):
     """Force and piston design matrices in standardised coefficients, (n, k) each."""
     t, q = g.t(x_m), g.q(p_bar)
     n = t.size
-    nc, ne, nd, nr = _sizes(o, n_tests)
+    nc, ne, nd, nr = sizes(o, n_tests)
     Xf = force_design(o, g, x_m, p_bar, nc + ne + nd + nr)
     Xl = np.zeros_like(Xf)
     lever = -BASIS_SCALE_M / g.area_m2
-    Xl[:, :nc] = lever * _tq(t, q, o.K, o.Lp, integrate=True) * SCALE_C
+    Xl[:, :nc] = lever * tq_columns(t, q, o.K, o.Lp, integrate=True) * SCALE_C
     if nd:
-        Xl[:, nc + ne : nc + ne + nd] = lever * _tq(t, q, o.Dk, o.Dl, integrate=True) * SCALE_D
+        Xl[:, nc + ne : nc + ne + nd] = (
+            lever * tq_columns(t, q, o.Dk, o.Dl, integrate=True) * SCALE_D
+        )
     Xl[np.arange(n), nc + ne + nd + np.asarray(test_index)] = SCALE_R
     return Xf, Xl
-
-
-# ----------------------------------------------------------------------------- likelihood
-
-
-def log_prob(theta, d: PairData):
-    """Log posterior of the noise parameters (coefficients integrated out); theta (5,)."""
-    return pair.log_prior(theta, d) + pair.posterior(theta, d).log_marginal
-
-
-def draw_linear(theta, key, d: PairData):
-    """One exact coefficient draw given the noise theta."""
-    return pair.draw(theta, key, d)
-
-
-def pointwise(theta, beta, d: PairData):
-    return {"reading": pair.pointwise(theta, beta, d)}
-
-
-def predict(theta, beta, key, d: PairData):
-    return pair.predict(theta, beta, key, d)
-
-
-def pointwise_loo(theta, d: PairData):
-    return pair.pointwise_loo(theta, d)
-
-
-def start(d: PairData) -> np.ndarray:
-    return np.asarray(d.prior_mean)
-
-
-def report(theta, beta, d: PairData) -> dict:
-    noise = np.exp(np.asarray(theta))
-    return {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES)}
-
-
-MODEL = CollapsedModel(
-    name="pressure-coupled surface",
-    theta_names=NOISE_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
-    observed=pair.observed,
-    pointwise_loo=pointwise_loo,
-    hold_out=pair.hold_out,
-)
 
 
 # ----------------------------------------------------------------------------- fit
 
 
 @dataclass(eq=False, frozen=True, repr=False)
-class SurfaceFit(PairFit):
-    """Posterior of the surface model (``uq._models.pair.PairFit``) and the surfaces evaluated
-    from it."""
+class SurfaceFit(LinearFit):
+    """The surface model fitted to a campaign (or loaded from a saved file): force, pressure area,
+    casing force, volume excess and the volume-derived area on the fixed posterior draws
+    (:class:`uq._models.linear_fit.LinearFit`). Fitted by ``uq._models.surface_likelihood.
+    fit_surface``."""
 
-    orders: Orders = DEFAULT_ORDERS
-    geometry: Geometry | None = None
-    selection: tuple = ()
-
-    model_name = "the surface model"
-    short_name = "surface"
+    name = "surface"
+    words = "the surface model"
+    likelihood = "uq._models.surface_likelihood"
+    orders_type = Orders
+    geometry_type = Geometry
+    #: why it answers margins when the data do not prefer the cubics (uq._derived.margin.choose)
+    coverage_note = (
+        "the fallback when the data do not decide; its coverage for truths inside the default "
+        "orders' class is checked by tests/models/test_surface.py (reports/surface-coverage/"
+        "coverage.json: 100 replications on the paper's layout)"
+    )
 
     @property
     def force_only(self) -> bool:
         """Fitted to the force alone (no piston readings: uq._models.surface_force); the volume
-        methods then refuse with :func:`volume_omitted_reason`."""
-        return not self.recordings.has_piston
+        methods then refuse with :attr:`omitted_reason`."""
+        return self.orders.Dk < 0 and self.orders.Dl < 0
 
     @property
-    def label(self) -> str:
-        """The orders in words (``Orders.label``; "force only" in place of the volume block)."""
-        return force_label(self.orders) if self.force_only else self.orders.label
+    def has_volume(self) -> bool:
+        return not self.force_only
 
-    def _no_volume(self) -> None:
+    @property
+    def omitted_reason(self) -> str | None:
+        if not self.force_only:
+            return None
+        if self.recordings is not None:
+            return volume_omitted_reason(self.recordings)
+        return "volume results omitted: the surface was fitted to the force alone"
+
+    # ---- the coefficient blocks and their columns
+    def block_layout(self) -> tuple[BlockSpec, ...]:
+        o = self.orders
+        ckl = tuple(f"c_{k}{lq}" for k in range(o.K + 1) for lq in range(o.Lp + 1))
+        out = [
+            BlockSpec("pressure_area_m2", ckl, SCALE_C, "m^2", "F_p = sum c_kl t^k q^l"),
+            BlockSpec(
+                "casing_N",
+                tuple(f"e_{m}" for m in range(o.Ke + 1)),
+                SCALE_E,
+                "N",
+                "E = sum e_m t^m",
+            ),
+        ]
         if self.force_only:
-            raise InputError(volume_omitted_reason(self.recordings))
-
-    def __repr__(self) -> str:
-        state = "converged" if self.convergence.converged else "NOT converged"
+            return tuple(out)
+        dkl = (
+            tuple(f"d_{k}{lq}" for k in range(o.Dk + 1) for lq in range(o.Dl + 1))
+            if o.Dk >= 0
+            else ()
+        )
+        refs = tuple(f"r_{p:g}bar" for p in self.tested_pressures_bar)
         return (
-            f"SurfaceFit({self.label}; {len(self.recordings.tests)} tests, "
-            f"{self.recordings.n_points} readings, {self.beta.shape[-1]} coefficients, "
-            f"{self.beta.shape[0] * self.beta.shape[1]} draws, {state})"
+            *out,
+            BlockSpec("volume_excess_m2", dkl, SCALE_D, "m^2", "D = sum d_kl t^k q^l"),
+            BlockSpec("piston_reference_m", refs, SCALE_R, "m", "one piston reference per test"),
         )
 
-    # ---- coefficient blocks (physical units, flattened draws)
-    def blocks(self, beta=None):
-        beta = self.flat_beta() if beta is None else beta
-        nc, ne, nd, nr = _sizes(self.orders, 0 if self.force_only else len(self.recordings.tests))
-        c = beta[:, :nc] * SCALE_C
-        e = beta[:, nc : nc + ne] * SCALE_E
-        d = beta[:, nc + ne : nc + ne + nd] * SCALE_D
-        r = beta[:, nc + ne + nd :] * SCALE_R
-        return c, e, d, r
+    def _columns(self, x_m, p_bar, c=0.0, e=0.0, d=0.0) -> np.ndarray:
+        """[c x F_p's columns, e x E's, d x D's, zeros for the references], (n, k); c, d may be
+        arrays (n,) (p_u in Pa for the force)."""
+        o, g = self.orders, self.geometry
+        t, q = g.t(x_m), g.q(p_bar)
+        parts = [np.asarray(c)[..., None] * tq_columns(t, q, o.K, o.Lp), e * poly_columns(t, o.Ke)]
+        if not self.force_only:
+            nd = 0 if o.Dk < 0 else (o.Dk + 1) * (o.Dl + 1)
+            D = tq_columns(t, q, o.Dk, o.Dl) if nd else np.zeros((t.size, 0))
+            parts += [
+                np.asarray(d)[..., None] * D,
+                np.zeros((t.size, len(self.tested_pressures_bar))),
+            ]
+        return np.concatenate([np.broadcast_to(a, (t.size, a.shape[-1])) for a in parts], axis=1)
 
-    # ---- surfaces at arbitrary points: draws (S, n)
-    def _grid(self, height_m, p_bar, check):
-        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
-        if check:
-            self.check_range(h, p)
-        g = self.geometry
-        return h.shape, g.t(h.ravel()), g.q(p.ravel()), p.ravel()
+    def force_columns(self, x_m, p_bar):
+        """P = p_u F_p + E."""
+        return self._columns(x_m, p_bar, c=np.asarray(p_bar, float) * BAR_PA, e=1.0)
 
-    def pressure_area_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """Pressure area F_p(x, p_u) = (P - E) / p_u draws, m^2, shape (S, *broadcast shape)."""
-        shape, t, q, _ = self._grid(height_m, p_bar, check)
-        c = self.blocks(beta)[0]
-        o = self.orders
-        return (c @ _tq(t, q, o.K, o.Lp).T).reshape(-1, *shape)
+    def area_columns(self, x_m, p_bar):
+        """-dV/dx = F_p + D."""
+        return self._columns(x_m, p_bar, c=1.0, d=1.0)
 
-    def feff_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """The paper's effective area F_eff = P / p_u (eq. 1) of the mean force, m^2."""
-        p = np.broadcast_to(
-            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
-        )
-        return self.force_draws(height_m, p_bar, check=check, beta=beta) / (p * BAR_PA)
+    # ---- the surface's own quantities, draws (S, *broadcast shape)
+    def pressure_area_draws(self, height_m, p_bar, *, check=True):
+        """Pressure area F_p(x, p_u) = (P - E) / p_u draws, m^2."""
+        return self.evaluate(lambda x, p: self._columns(x, p, c=1.0), height_m, p_bar, check=check)
 
-    def _casing(self, shape, t, beta):
-        """E(x) draws on an evaluated grid (shape, t from ``_grid``), N."""
-        return (self.blocks(beta)[1] @ _poly(t, self.orders.Ke).T).reshape(-1, *shape)
+    def casing_draws(self, height_m, *, check=True):
+        """The casing's own force E(x), N (the same at every pressure)."""
+        p = self.pressure_range_bar[0]
+        return self.evaluate(lambda x, _: self._columns(x, p, e=1.0), height_m, p, check=check)
 
-    def casing_draws(self, height_m, *, check=True, beta=None):
-        shape, t, _, _ = self._grid(height_m, self.pressure_range_bar[0], check)
-        return self._casing(shape, t, beta)
-
-    def force_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """Force P(x, p_u) = p_u F_p + E draws (mean curve, no reading noise), N."""
-        p = np.broadcast_to(
-            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
-        )
-        fe = self.pressure_area_draws(height_m, p_bar, check=check, beta=beta)
-        shape, t, _, _ = self._grid(height_m, p_bar, False)
-        E = self._casing(shape, t, beta)
-        return p * BAR_PA * fe + E
-
-    def volume_excess_draws(self, height_m, p_bar, *, check=True, beta=None):
+    def volume_excess_draws(self, height_m, p_bar, *, check=True):
         """D(x, p_u) = -dV/dx - F_p draws, m^2 (0 in the traditional theory)."""
-        self._no_volume()
-        shape, t, q, _ = self._grid(height_m, p_bar, check)
-        d = self.blocks(beta)[2]
-        o = self.orders
-        if o.Dk < 0:
-            return np.zeros((self.blocks(beta)[0].shape[0], *shape))
-        return (d @ _tq(t, q, o.Dk, o.Dl).T).reshape(-1, *shape)
+        self.volume_area_draws(
+            self.x0_m, self.pressure_range_bar[0], check=False
+        )  # refuses force only
+        return self.evaluate(lambda x, p: self._columns(x, p, d=1.0), height_m, p_bar, check=check)
 
-    def volume_area_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """The volume-derived area -dV/dx = F_p + D draws, m^2 (the second formula of eq. 1)."""
-        self._no_volume()
-        return self.pressure_area_draws(
-            height_m, p_bar, check=check, beta=beta
-        ) + self.volume_excess_draws(height_m, p_bar, check=False, beta=beta)
-
-    def spread_draws(self, height_m, p_bar, *, check=True, beta=None):
+    def spread_draws(self, height_m, p_bar, *, check=True):
         """Traditional characteristic p_u (-dV/dx) minus the experimental force: p_u D - E, N."""
-        self._no_volume()
-        p = np.broadcast_to(
-            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
+        self.volume_area_draws(self.x0_m, self.pressure_range_bar[0], check=False)
+        return self.evaluate(
+            lambda x, p: self._columns(x, p, e=-1.0, d=np.asarray(p, float) * BAR_PA),
+            height_m,
+            p_bar,
+            check=check,
         )
-        D = self.volume_excess_draws(height_m, p_bar, check=check, beta=beta)
-        shape, t, _, _ = self._grid(height_m, p_bar, False)
-        E = self._casing(shape, t, beta)
-        return p * BAR_PA * D - E
 
     def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
         """Pointwise 90 % bands of F_p, the paper's F_eff, force and spread (refuses extrapolation;
@@ -396,33 +341,20 @@ class SurfaceFit(PairFit):
             ("force_N", self.force_draws),
             *(() if self.force_only else (("spread_N", self.spread_draws),)),
         ):
-            m, lo, hi = band(fn(height_m, p_bar), axis=0, level=level)
-            out[name] = {"mean": m, "lower": lo, "upper": hi}
+            out[name] = self.band(fn, height_m, p_bar, level)
         return out
 
-    def to_json(self, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
+    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
         """What ``uq surface --json`` writes (docs/formats.md)."""
-        return summary(self, comparison, advice)
+        if self.document is not None:
+            return super().to_json(comparison, advice)
+        return summary(self, comparison, CLI_ADVICE if advice is None else advice)
 
 
 def geometry_of(rec: Recordings) -> Geometry:
     p = rec.pressures_bar
     mid, half = (p.max() + p.min()) / 2, max((p.max() - p.min()) / 2, 1e-3)
     return Geometry(rec.x0_m, rec.piston_area_m2, float(mid), float(half))
-
-
-def _reference(o, g, x, p, F, L, idx, n_tests):
-    """Weighted least squares: the reference force and pressure area of the noise terms."""
-    Xf, Xl = designs(o, g, x, p, idx, n_tests)
-    wf = 1.0 / (0.005 * np.abs(F) + 20.0)
-    wl = np.full_like(L, 1.0 / 1e-3)
-    A = np.concatenate([Xf * wf[:, None], Xl * wl[:, None]])
-    y = np.concatenate([F * wf, L * wl])
-    beta, *_ = np.linalg.lstsq(A, y, rcond=None)
-    phat = np.abs(Xf @ beta)
-    nc = (o.K + 1) * (o.Lp + 1)
-    feff = _tq(g.t(x), g.q(p), o.K, o.Lp) @ (beta[:nc] * SCALE_C)
-    return beta, phat, np.abs(feff), Xf, Xl
 
 
 def force_label(o: Orders) -> str:
@@ -445,125 +377,6 @@ def volume_omitted_reason(rec: Recordings) -> str:
     )
 
 
-def force_arrays(rec: Recordings):
-    """Every force reading of a campaign: height (m), set pressure (bar), force (N)."""
-    x = np.concatenate([t.height_m for t in rec.tests])
-    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in rec.tests])
-    F = np.concatenate([t.force_N for t in rec.tests])
-    return x, p, F
-
-
-def surface_force_data(rec: Recordings, orders: Orders, stand: StandDescription):
-    """The force surface's arrays (uq._models.surface_force.ForceData): the design, the readings and
-    the noise references of a weighted least-squares fit of the force."""
-    g = geometry_of(rec)
-    x, p, F = force_arrays(rec)
-    X = force_design(orders, g, x, p)
-    w = 1.0 / (0.005 * np.abs(F) + 20.0)
-    beta, *_ = np.linalg.lstsq(X * w[:, None], F * w, rcond=None)
-    nc = (orders.K + 1) * (orders.Lp + 1)
-    feff = np.abs(_tq(g.t(x), g.q(p), orders.K, orders.Lp) @ (beta[:nc] * SCALE_C))
-    return surface_force.force_data(
-        X, F, np.abs(X @ beta), feff, p, stand, pair.measured_deviation(rec)
-    )
-
-
-def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> PairData:
-    """The model's arrays for a campaign: designs, readings, the noise references, the Gram plan."""
-    g = geometry_of(rec)
-    x, p, F, L, idx = pair.arrays(rec)
-    _, phat, feff, Xf, Xl = _reference(orders, g, x, p, F, L, idx, len(rec.tests))
-    return pair_data(Xf, Xl, F, L, phat, feff, p, g.area_m2, stand, pair.measured_deviation(rec))
-
-
-def fit_surface(
-    rec: Recordings,
-    orders: Orders | None = None,
-    *,
-    seed: int = 0,
-    settings: Settings = Settings(),
-    max_draws: int = MAX_DRAWS,
-    stand: StandDescription = PAPER_STAND,
-) -> SurfaceFit:
-    """The surface model's posterior: the one driver (optimistix MAP of the noise, emcee over it,
-    exact coefficient draws, ArviZ data and convergence verdict).
-
-    ``stand`` is the stand the recordings were taken on: its pressure holding and p_atm enter
-    the reading covariance, its load cell and gas volume centre the noise priors. ``orders``:
-    the polynomial orders, by default :func:`orders_for` the campaign.
-
-    A campaign without piston readings (force-only, or a catalogue table) is fitted by the force
-    surface alone (uq._models.surface_force; ``orders`` without a volume block, Dk = Dl = -1); its
-    volume results are omitted with :func:`volume_omitted_reason`."""
-    n_tests = len(rec.tests)
-    orders = orders_for(rec) if orders is None else orders
-    if n_tests < orders.Lp + 1:
-        raise InputError(
-            f"{rec.path}: {n_tests} tests at different pressures cannot fix an effective area of "
-            f"degree {orders.Lp} in pressure; the surface model needs at least {orders.Lp + 1}"
-        )
-    force_only = not rec.has_piston
-    if force_only and (orders.Dk >= 0 or orders.Dl >= 0):
-        raise InputError(
-            f"orders: {rec.path} has no piston readings; the force surface takes no volume block "
-            f"(Dk = Dl = -1), got {orders.label}",
-            param="orders",
-        )
-    if force_only:
-        data, model = surface_force_data(rec, orders, stand), surface_force.MODEL
-        k = data.X.shape[1]
-        if rec.n_points - k < len(surface_force.THETA_NAMES) + 2:
-            short = k + len(surface_force.THETA_NAMES) + 2
-            raise InputError(
-                f"{rec.path}: {rec.n_points} readings cannot fix the force surface's {k} coefficients "
-                f"({force_label(orders)}) and leave residuals for its noise: it needs at least {short} "
-                f"(more heights per test, or more tests)"
-            )
-    else:
-        data, model = surface_data(rec, orders, stand), MODEL
-    post = fit_collapsed(
-        model,
-        data,
-        seed=seed,
-        settings=settings,
-        max_draws=max_draws,
-        seeds=[seed],
-        predictive=False,  # 2 x 814 replicates per draw: made when asked for, not on every fit
-        desc="surface sampling",
-    )
-    return SurfaceFit(rec, post, stand, orders, geometry_of(rec))
-
-
-def select_orders(
-    rec: Recordings,
-    candidates=CANDIDATES,
-    *,
-    seed: int = 0,
-    settings: Settings | None = None,
-    stand: StandDescription = PAPER_STAND,
-):
-    """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows). For a campaign
-    without piston readings the candidates lose their volume block and their degrees are capped
-    as :func:`orders_for` caps them (duplicates fitted once)."""
-    if not rec.has_piston:
-        cap = orders_for(rec)
-        candidates = tuple(
-            dict.fromkeys(
-                Orders(
-                    min(o.K, cap.K),
-                    max(0, min(o.Lp, len(rec.tests) - 2)),
-                    min(o.Ke, cap.Ke),
-                    -1,
-                    -1,
-                )
-                for o in candidates
-            )
-        )
-    return pair.select_orders(
-        fit_surface, rec, candidates, seed=seed, settings=settings or Settings(), stand=stand
-    )
-
-
 # ----------------------------------------------------------------------------- summaries
 
 DEFINITIONS = {
@@ -577,32 +390,13 @@ DEFINITIONS = {
 
 
 def coefficient_summary(fit: SurfaceFit) -> dict:
-    c, e, d, r = fit.blocks()
-    o = fit.orders
-    out = {"pressure_area_m2": {}, "casing_N": {}, "volume_excess_m2": {}, "piston_reference_m": {}}
-    for i, (k, lq) in enumerate((k, lq) for k in range(o.K + 1) for lq in range(o.Lp + 1)):
-        out["pressure_area_m2"][f"c_{k}{lq}"] = estimate(c[:, i])
-    for m in range(o.Ke + 1):
-        out["casing_N"][f"e_{m}"] = estimate(e[:, m])
-    if o.Dk >= 0:
-        for i, (k, lq) in enumerate((k, lq) for k in range(o.Dk + 1) for lq in range(o.Dl + 1)):
-            out["volume_excess_m2"][f"d_{k}{lq}"] = estimate(d[:, i])
-    if fit.force_only:
-        del out["volume_excess_m2"], out["piston_reference_m"]
-        return out
-    for i, t in enumerate(fit.recordings.tests):
-        out["piston_reference_m"][f"{t.pressure_bar:g} bar"] = estimate(r[:, i])
-    return out
-
-
-def noise_summary(fit: SurfaceFit) -> dict:
-    diag = fit.convergence.variables
-    out = {}
-    for n in surface_force.NATURAL if fit.force_only else NATURAL_NAMES:
-        est = estimate(np.asarray(fit.idata.posterior[n]))
-        est["r_hat"] = diag[n]["r_hat"]
-        est["ess_bulk"] = diag[n]["ess_bulk"]
-        out[n] = est
+    """The coefficient blocks' estimates, the piston references keyed by their test's pressure."""
+    out = LinearFit.coefficient_summary(fit)
+    if "piston_reference_m" in out:
+        refs = out["piston_reference_m"].values()
+        out["piston_reference_m"] = {
+            f"{p:g} bar": e for p, e in zip(fit.tested_pressures_bar, refs, strict=True)
+        }
     return out
 
 
@@ -613,8 +407,7 @@ def spread_region(fit: SurfaceFit, n_x: int = 46, n_p: int = 41, level: float = 
     xs = np.linspace(lo, hi, n_x)
     ps = np.linspace(plo, phi, n_p)
     X, P = np.meshgrid(xs, ps, indexing="ij")
-    beta = fit.flat_beta(2000)
-    m, lo_b, hi_b = band(fit.spread_draws(X, P, beta=beta), axis=0, level=level)
+    m, lo_b, hi_b = band(fit.on_draws(2000).spread_draws(X, P), axis=0, level=level)
     nonzero = (lo_b > 0) | (hi_b < 0)
     return {
         "height_m": xs,
@@ -631,26 +424,25 @@ def summary(fit: SurfaceFit, comparison: dict | None = None, advice: str = CLI_A
     volume keys (volume excess, piston references, piston noise, spread) and an ``omitted`` object
     naming each with the one-line reason."""
     g = fit.geometry
-    conv = fit.convergence
-    r_hat_max, ess_bulk_min = conv.worst()
     plo, phi = fit.pressure_range_bar
     ref = {}
-    beta = fit.flat_beta(2000)
+    some = fit.on_draws(2000)
     x0 = np.array(g.x0_m)
     for pb in sorted({plo, (plo + phi) / 2, phi}):
         ref[f"{pb:g}"] = {
-            "pressure_area_m2": estimate(fit.pressure_area_draws(x0, pb, beta=beta)),
-            "feff_m2": estimate(fit.feff_draws(x0, pb, beta=beta)),
-            "force_N": estimate(fit.force_draws(x0, pb, beta=beta)),
+            "pressure_area_m2": estimate(some.pressure_area_draws(x0, pb)),
+            "feff_m2": estimate(some.feff_draws(x0, pb)),
+            "force_N": estimate(some.force_draws(x0, pb)),
         }
         if not fit.force_only:
-            ref[f"{pb:g}"]["spread_N"] = estimate(fit.spread_draws(x0, pb, beta=beta))
+            ref[f"{pb:g}"]["spread_N"] = estimate(some.spread_draws(x0, pb))
     basis = "t = (x - x0) / 0.05 m; F_p = sum c_kl t^k q^l; E = sum e_m t^m"
     out = {
+        "model": fit.name,
         "x0_m": g.x0_m,
         "piston_area_m2": g.area_m2,
         "orders": asdict(fit.orders),
-        "orders_label": fit.label,
+        "orders_label": fit.orders_label,
         "pressure_scaling": {
             "q": "(p_bar - p_mid) / p_half",
             "p_mid_bar": g.p_mid,
@@ -665,11 +457,11 @@ def summary(fit: SurfaceFit, comparison: dict | None = None, advice: str = CLI_A
         "stand": asdict(fit.stand),
         "valid_range": {"height_m": list(fit.height_range_m), "pressure_bar": [plo, phi]},
         "coefficients": coefficient_summary(fit),
-        "noise": noise_summary(fit),
+        "noise": fit.noise_summary(NATURAL_NAMES[:3] if fit.force_only else NATURAL_NAMES),
         "at_x0": ref,
     }
     if fit.force_only:
-        why = volume_omitted_reason(fit.recordings)
+        why = fit.omitted_reason
         out["omitted"] = {
             k: why
             for k in (
@@ -684,11 +476,4 @@ def summary(fit: SurfaceFit, comparison: dict | None = None, advice: str = CLI_A
     else:
         reg = spread_region(fit, 19, 21)
         out["spread_credibly_nonzero_fraction"] = float(reg["credibly_nonzero"].mean())
-    return out | {
-        "order_selection": list(fit.selection),
-        "comparison": comparison,
-        "converged": conv.converged,
-        "convergence": conv.to_json(advice, variables=False)
-        | {"r_hat_max": r_hat_max, "ess_bulk_min": ess_bulk_min},
-        "warnings": conv.messages(advice),
-    }
+    return out | fit.json_tail(comparison, advice)

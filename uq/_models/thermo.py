@@ -41,27 +41,23 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from uq._data.recordings import Recordings
-from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.float64 import jnp
-from uq._inference.sampler import Settings
-from uq._inference.summary import band, estimate
-from uq._io.errors import InputError
-from uq._models import pair
-from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, PairData, PairFit, pair_data
+from uq._inference.summary import estimate
+from uq._models.fitted import thin_rows
+from uq._models.linear_fit import BlockSpec, LinearFit, Params
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 MAX_DRAWS = 4000
 G_SCALE_J = 1.0e4  # prior scale of the potential's standardised coefficients
 R_SCALE_M = 1.0  # prior scale of the piston references
 TRAVEL_PRIOR_SD = 0.3  # log(1 + m): the piston area is known to about 30 % a priori
-THETA_NAMES = (*NOISE_NAMES, "log_travel_factor")
-LEVEL = 0.90
+#: what the likelihood reports besides the potential: the noise (uq._models.pair.NATURAL_NAMES),
+#: the travel factor and the piston area it implies
+NATURAL_NAMES = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3")
 
 
 @dataclass(frozen=True)
-class ThermoOrders:
+class ThermoOrders(Params):
     """Degrees of the potential: K in height (t^1..t^K; the force is of degree K - 1) and L in
     pressure (s^0..s^L; the force is of degree L, the volume of degree L - 1 in pressure)."""
 
@@ -97,7 +93,7 @@ def default_orders(n_tests: int) -> ThermoOrders:
 
 
 @dataclass(frozen=True)
-class ThermoGeometry:
+class ThermoGeometry(Params):
     x0_m: float
     area_m2: float  # the nominal piston area S the recordings were converted with
     p_ref_bar: float
@@ -109,7 +105,7 @@ class ThermoGeometry:
         return np.asarray(p_bar, float) / self.p_ref_bar
 
 
-def _powers(o: ThermoOrders):
+def powers(o: ThermoOrders):
     return [(k, l) for k in range(1, o.K + 1) for l in range(o.L + 1)]
 
 
@@ -118,8 +114,8 @@ def potential_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
     each (n, K (L + 1)): J, N and m^3."""
     t = np.asarray(g.t(x_m), float)[..., None]
     s = np.asarray(g.s(p_bar), float)[..., None]
-    k = np.array([k for k, _ in _powers(o)], float)
-    l = np.array([l for _, l in _powers(o)], float)
+    k = np.array([k for k, _ in powers(o)], float)
+    l = np.array([l for _, l in powers(o)], float)
     p_ref_pa = g.p_ref_bar * BAR_PA
     G = G_SCALE_J * t**k * s**l
     force = -G_SCALE_J / BASIS_SCALE_M * k * t ** (k - 1) * s**l
@@ -137,67 +133,6 @@ def designs(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, test_index, n_tests)
     return (np.hstack([force, np.zeros((n, n_tests))]), np.hstack([-volume / g.area_m2, R]))
 
 
-# ----------------------------------------------------------------------------- the model
-
-
-def _scale(theta):
-    return jnp.exp(theta[5])
-
-
-def log_prob(theta, d: PairData):
-    """Log posterior of the noise parameters and the travel factor, coefficients integrated out."""
-    prior_m = -0.5 * (theta[5] / TRAVEL_PRIOR_SD) ** 2
-    return (
-        pair.log_prior(theta[:5], d)
-        + prior_m
-        + pair.posterior(theta[:5], d, _scale(theta)).log_marginal
-    )
-
-
-def draw_linear(theta, key, d: PairData):
-    return pair.draw(theta[:5], key, d, _scale(theta))
-
-
-def pointwise(theta, beta, d: PairData):
-    return {"reading": pair.pointwise(theta[:5], beta, d, _scale(theta))}
-
-
-def predict(theta, beta, key, d: PairData):
-    return pair.predict(theta[:5], beta, key, d, _scale(theta))
-
-
-def pointwise_loo(theta, d: PairData):
-    return pair.pointwise_loo(theta[:5], d, _scale(theta))
-
-
-def start(d: PairData) -> np.ndarray:
-    return np.concatenate([np.asarray(d.prior_mean), [0.0]])
-
-
-def report(theta, beta, d: PairData) -> dict:
-    theta = np.asarray(theta)
-    noise = np.exp(theta[:, :5])
-    out = {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES)}
-    out["travel_factor"] = np.exp(theta[:, 5])
-    out["piston_area_m2"] = float(d.area) / np.exp(theta[:, 5])
-    return out
-
-
-MODEL = CollapsedModel(
-    name="thermodynamic potential G(x, p_u)",
-    theta_names=THETA_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
-    observed=pair.observed,
-    pointwise_loo=pointwise_loo,
-    hold_out=pair.hold_out,
-)
-
-
 # ----------------------------------------------------------------------------- fit
 
 
@@ -205,28 +140,18 @@ def geometry_of(rec: Recordings) -> ThermoGeometry:
     return ThermoGeometry(rec.x0_m, rec.piston_area_m2, float(rec.pressures_bar.max()))
 
 
-def thermo_data(rec: Recordings, orders: ThermoOrders, stand: StandDescription) -> PairData:
-    """The model's arrays: designs, readings, and the noise references from a weighted
-    least-squares fit of the same potential (force, and the force's pressure derivative as the
-    lever of a pressure-holding error)."""
-    g = geometry_of(rec)
-    x, p, F, L, idx = pair.arrays(rec)
-    Xf, Xl = designs(orders, g, x, p, idx, len(rec.tests))
-    wf = 1.0 / (0.005 * np.abs(F) + 20.0)
-    wl = np.full_like(L, 1.0 / 1e-3)
-    A = np.concatenate([Xf * wf[:, None], Xl * wl[:, None]])
-    beta, *_ = np.linalg.lstsq(A, np.concatenate([F * wf, L * wl]), rcond=None)
-    phat = np.abs(Xf @ beta)
-    lever = np.abs(_force_pressure_slope(orders, g, x, p, beta[: orders.n_potential]))
-    return pair_data(Xf, Xl, F, L, phat, lever, p, g.area_m2, stand, pair.measured_deviation(rec))
-
-
-def _force_pressure_slope(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, coef):
+def force_pressure_slope(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, coef):
     """dP/dp_u (m^2) of the potential with standardised coefficients ``coef`` (..., K (L + 1))."""
+    return slope_columns(o, g, x_m, p_bar) @ np.asarray(coef).T
+
+
+def slope_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
+    """The columns of dP/dp_u = dV/dx (Maxwell) for unit standardised coefficients, (n, K (L + 1)),
+    m^2."""
     t = np.asarray(g.t(x_m), float)[..., None]
     s = np.asarray(g.s(p_bar), float)[..., None]
-    k = np.array([k for k, _ in _powers(o)], float)
-    l = np.array([l for _, l in _powers(o)], float)
+    k = np.array([k for k, _ in powers(o)], float)
+    l = np.array([l for _, l in powers(o)], float)
     cols = (
         -G_SCALE_J
         / BASIS_SCALE_M
@@ -236,169 +161,90 @@ def _force_pressure_slope(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, coef):
         * s ** np.maximum(l - 1, 0)
         / (g.p_ref_bar * BAR_PA)
     )
-    return cols @ np.asarray(coef).T
+    return cols
 
 
 @dataclass(eq=False, frozen=True, repr=False)
-class ThermoFit(PairFit):
-    """Posterior of the thermodynamic model (``uq._models.pair.PairFit``): force, volume and
-    their derivatives from one potential, with posterior draws."""
+class ThermoFit(LinearFit):
+    """The thermodynamic model fitted to a campaign (or loaded): force, volume and their
+    derivatives from one potential on the fixed posterior draws (:class:`uq._models.linear_fit.
+    LinearFit`). Fitted by ``uq._models.thermo_likelihood.fit_thermo``."""
 
-    orders: ThermoOrders = DEFAULT_ORDERS
-    geometry: ThermoGeometry | None = None
-    selection: tuple = ()
+    name = "thermodynamic"
+    words = "the thermodynamic model"
+    likelihood = "uq._models.thermo_likelihood"
+    orders_type = ThermoOrders
+    geometry_type = ThermoGeometry
+    has_dvdp = True
 
-    model_name = "the thermodynamic model"
-    short_name = "thermodynamic"
-
-    def __repr__(self) -> str:
-        state = "converged" if self.convergence.converged else "NOT converged"
+    def block_layout(self) -> tuple[BlockSpec, ...]:
+        refs = tuple(f"r_{p:g}bar" for p in self.tested_pressures_bar)
+        gkl = tuple(f"g_{k}{l}" for k, l in powers(self.orders))
         return (
-            f"ThermoFit({self.orders.label}; {len(self.recordings.tests)} tests, "
-            f"{self.recordings.n_points} readings, {self.beta.shape[-1]} coefficients, "
-            f"{self.beta.shape[0] * self.beta.shape[1]} draws, {state})"
+            BlockSpec("potential", gkl, 1.0, "1e4 J", "G = 1e4 J sum g_kl t^k s^l"),
+            BlockSpec("piston_reference_m", refs, R_SCALE_M, "m", "one piston reference per test"),
         )
 
-    def _coef(self, beta):
-        beta = self.flat_beta() if beta is None else beta
-        return beta[:, : self.orders.n_potential]
+    def _padded(self, cols) -> np.ndarray:
+        """A potential's columns with zeros for the piston references."""
+        return np.concatenate([cols, np.zeros((cols.shape[0], len(self.tested_pressures_bar)))], 1)
 
-    def _columns(self, height_m, p_bar, check, which: int):
-        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
-        if check:
-            self.check_range(h, p)
-        cols = potential_columns(self.orders, self.geometry, h.ravel(), p.ravel())[which]
-        return h.shape, cols
+    def force_columns(self, x_m, p_bar):
+        """P = -dG/dx."""
+        return self._padded(potential_columns(self.orders, self.geometry, x_m, p_bar)[1])
 
-    def _evaluate(self, height_m, p_bar, check, beta, which):
-        shape, cols = self._columns(height_m, p_bar, check, which)
-        return (self._coef(beta) @ cols.T).reshape(-1, *shape)
+    def area_columns(self, x_m, p_bar):
+        """dV/dx = -d2G/dx dp_u (= dP/dp_u by the Maxwell relation)."""
+        return self._padded(slope_columns(self.orders, self.geometry, x_m, p_bar))
 
-    def potential_draws(self, height_m, p_bar, *, check=True, beta=None):
+    def dvdp_columns(self, x_m, p_bar):
+        """dV/dp_u = -d2G/dp_u^2 at fixed height, up to a function of p_u alone."""
+        o, g = self.orders, self.geometry
+        t = np.asarray(g.t(x_m), float)[..., None]
+        s = np.asarray(g.s(p_bar), float)[..., None]
+        k = np.array([k for k, _ in powers(o)], float)
+        l = np.array([l for _, l in powers(o)], float)
+        p_ref = g.p_ref_bar * BAR_PA
+        return self._padded(-G_SCALE_J / p_ref**2 * l * (l - 1) * t**k * s ** np.maximum(l - 2, 0))
+
+    @property
+    def dvdp_words(self) -> str:
+        """What the model's own dV/dp_u assumes (``uq design --dvdp-l-per-bar model``): the
+        potential's gauge makes it 0 at x0, so the volume at x0 is taken not to change with
+        pressure; the differences between heights are the recordings'."""
+        return (
+            f"{self.label}'s own, ASSUMED 0 at x0 = {self.x0_m * 1e3:g} mm (the potential's "
+            "gauge: isobaric tests fix only how it differs between heights)"
+        )
+
+    def potential_draws(self, height_m, p_bar, *, check=True):
         """G(x, p_u) draws, J (up to a function of p_u alone, which isobaric tests cannot see)."""
-        return self._evaluate(height_m, p_bar, check, beta, 0)
+        cols = lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[0])  # noqa: E731
+        return self.evaluate(cols, height_m, p_bar, check=check)
 
-    def force_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """Force P = -dG/dx draws (mean curve, no reading noise), N, (S, *shape)."""
-        return self._evaluate(height_m, p_bar, check, beta, 1)
-
-    def volume_change_draws(self, height_m, p_bar, *, check=True, beta=None):
+    def volume_change_draws(self, height_m, p_bar, *, check=True):
         """V(x, p_u) - V_(p_u) draws, m^3: the volume up to a constant per pressure (isobaric tests
         fix volume differences between heights, not the absolute volume)."""
-        return self._evaluate(height_m, p_bar, check, beta, 2)
+        cols = lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[2])  # noqa: E731
+        return self.evaluate(cols, height_m, p_bar, check=check)
 
-    def feff_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """The paper's effective area F_eff = P / p_u (eq. 1), m^2."""
-        p = np.broadcast_to(
-            np.asarray(p_bar, float), np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
-        )
-        return self.force_draws(height_m, p_bar, check=check, beta=beta) / (p * BAR_PA)
-
-    def volume_area_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """The volume-derived area dV/dx = -d2G/dx dp_u draws, m^2 (the second formula of eq. 1);
-        by the Maxwell relation equal to the force's pressure derivative dP/dp_u."""
-        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
-        if check:
-            self.check_range(h, p)
-        out = _force_pressure_slope(
-            self.orders, self.geometry, h.ravel(), p.ravel(), self._coef(beta)
-        )  # (points, draws)
-        return out.T.reshape(-1, *h.shape)
-
-    def volume_pressure_draws(self, height_m, p_bar, *, check=True, beta=None):
-        """dV/dp_u at fixed height, m^3/Pa, up to a function of p_u alone (the same at every
-        height): how the casing's compliance differs between heights. Its value at one height
-        needs a separate measurement (docs/design.md)."""
-        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
-        if check:
-            self.check_range(h, p)
-        o, g = self.orders, self.geometry
-        t = np.asarray(g.t(h.ravel()), float)[..., None]
-        s = np.asarray(g.s(p.ravel()), float)[..., None]
-        k = np.array([k for k, _ in _powers(o)], float)
-        l = np.array([l for _, l in _powers(o)], float)
-        p_ref = g.p_ref_bar * BAR_PA
-        cols = -G_SCALE_J / p_ref**2 * l * (l - 1) * t**k * s ** np.maximum(l - 2, 0)
-        return (self._coef(beta) @ cols.T).reshape(-1, *h.shape)
-
-    def maxwell_ratio_draws(self, height_m, p_bar, *, check=True, beta=None):
+    def maxwell_ratio_draws(self, height_m, p_bar, *, check=True):
         """(dV/dx) / (P / p_u): how far the volume-derived area exceeds the force-derived one
         (1 in the traditional theory; grows with p_u for an elastic casing)."""
-        return self.volume_area_draws(height_m, p_bar, check=check, beta=beta) / self.feff_draws(
-            height_m, p_bar, check=False, beta=beta
+        return self.volume_area_draws(height_m, p_bar, check=check) / self.feff_draws(
+            height_m, p_bar, check=False
         )
 
     def piston_area_draws(self) -> np.ndarray:
-        """The piston area the recordings imply, S / (1 + m), m^2 (flattened draws)."""
-        return self.posterior.flat("piston_area_m2")
+        """The piston area the recordings imply, S / (1 + m), m^2, on the fixed draws."""
+        a = np.asarray(self.reported["piston_area_m2"], float)
+        return thin_rows(a.reshape(-1), self.max_draws)
 
-    def bands(self, height_m, p_bar, level: float = LEVEL) -> dict:
-        """Pointwise 90 % bands of force, F_eff = P/p_u and dV/dx (refuses extrapolation)."""
-        out = {}
-        for name, fn in (
-            ("force_N", self.force_draws),
-            ("feff_m2", self.feff_draws),
-            ("volume_area_m2", self.volume_area_draws),
-        ):
-            m, lo, hi = band(fn(height_m, p_bar), axis=0, level=level)
-            out[name] = {"mean": m, "lower": lo, "upper": hi}
-        return out
-
-    def to_json(self, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
+    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
         """What ``uq surface --model thermodynamic --json`` writes (docs/formats.md)."""
-        return summary(self, comparison, advice)
-
-
-def fit_thermo(
-    rec: Recordings,
-    orders: ThermoOrders | None = None,
-    *,
-    seed: int = 0,
-    settings: Settings = Settings(),
-    max_draws: int = MAX_DRAWS,
-    stand: StandDescription = PAPER_STAND,
-) -> ThermoFit:
-    """The thermodynamic model's posterior by the one driver: optimistix MAP of the noise and the
-    travel factor, emcee over them, exact draws of the potential's coefficients and the piston
-    references, ArviZ data and the convergence verdict. ``stand``: the stand the recordings were
-    taken on (its pressure holding and gas volume enter the reading covariance and priors).
-    ``orders``: the potential's degrees (default: :func:`default_orders` of the campaign)."""
-    if len(rec.tests) < 2:
-        raise InputError(
-            f"{rec.path}: the thermodynamic model relates force and volume through their pressure "
-            "derivatives and needs tests at two or more pressures"
-        )
-    if not rec.has_piston:
-        raise InputError(
-            f"{rec.path}: force-only campaign: the thermodynamic model fits force and volume "
-            "together and needs piston_* or volume_*"
-        )
-    orders = default_orders(len(rec.tests)) if orders is None else orders
-    post = fit_collapsed(
-        MODEL,
-        thermo_data(rec, orders, stand),
-        seed=seed,
-        settings=settings,
-        max_draws=max_draws,
-        seeds=[seed],
-        predictive=False,
-        desc="thermodynamic sampling",
-    )
-    return ThermoFit(rec, post, stand, orders, geometry_of(rec))
-
-
-def select_orders(
-    rec: Recordings,
-    candidates=CANDIDATES,
-    *,
-    seed: int = 0,
-    settings: Settings | None = None,
-    stand: StandDescription = PAPER_STAND,
-):
-    """Fit each candidate and rank by PSIS-LOO; returns (best fit, comparison rows)."""
-    return pair.select_orders(
-        fit_thermo, rec, candidates, seed=seed, settings=settings or Settings(), stand=stand
-    )
+        if self.document is not None:
+            return super().to_json(comparison, advice)
+        return summary(self, comparison, CLI_ADVICE if advice is None else advice)
 
 
 # ----------------------------------------------------------------------------- summary
@@ -416,30 +262,24 @@ DEFINITIONS = {
 def summary(fit: ThermoFit, comparison: dict | None = None, advice: str = CLI_ADVICE) -> dict:
     """The JSON document of the thermodynamic model (:meth:`ThermoFit.to_json`)."""
     g = fit.geometry
-    conv = fit.convergence
-    r_hat_max, ess_bulk_min = conv.worst()
     plo, phi = fit.pressure_range_bar
-    beta = fit.flat_beta(2000)
+    some = fit.on_draws(2000)
     at_x0 = {}
     for pb in sorted({plo, (plo + phi) / 2, phi}):
         x0 = np.array(g.x0_m)
         at_x0[f"{pb:g}"] = {
-            "force_N": estimate(fit.force_draws(x0, pb, beta=beta)),
-            "feff_m2": estimate(fit.feff_draws(x0, pb, beta=beta)),
-            "volume_area_m2": estimate(fit.volume_area_draws(x0, pb, beta=beta)),
-            "maxwell_ratio": estimate(fit.maxwell_ratio_draws(x0, pb, beta=beta)),
+            "force_N": estimate(some.force_draws(x0, pb)),
+            "feff_m2": estimate(some.feff_draws(x0, pb)),
+            "volume_area_m2": estimate(some.volume_area_draws(x0, pb)),
+            "maxwell_ratio": estimate(some.maxwell_ratio_draws(x0, pb)),
         }
-    noise = {}
-    for n in NATURAL_NAMES + ("travel_factor", "piston_area_m2"):
-        est = estimate(fit.posterior.flat(n))
-        est |= {k: conv.variables[n][k] for k in ("r_hat", "ess_bulk")}
-        noise[n] = est
+    noise = fit.noise_summary(NATURAL_NAMES + ("travel_factor", "piston_area_m2"))
     return {
         "model": "thermodynamic",
         "x0_m": g.x0_m,
         "piston_area_m2": g.area_m2,
         "orders": asdict(fit.orders),
-        "orders_label": fit.orders.label,
+        "orders_label": fit.orders_label,
         "basis": "G = 1e4 J sum g_kl t^k s^l, t = (x - x0) / 0.05 m, s = p_u / p_ref; P = -dG/dx, "
         "V = -dG/dp_u",
         "p_ref_bar": g.p_ref_bar,
@@ -449,10 +289,4 @@ def summary(fit: ThermoFit, comparison: dict | None = None, advice: str = CLI_AD
         "implied_piston_area_m2": noise["piston_area_m2"],
         "noise": {k: v for k, v in noise.items() if k in NATURAL_NAMES},
         "at_x0": at_x0,
-        "order_selection": list(fit.selection),
-        "comparison": comparison,
-        "converged": conv.converged,
-        "convergence": conv.to_json(advice, variables=False)
-        | {"r_hat_max": r_hat_max, "ess_bulk_min": ess_bulk_min},
-        "warnings": conv.messages(advice),
-    }
+    } | fit.json_tail(comparison, advice)

@@ -9,8 +9,13 @@ written beside the page; every write is atomic (``uq._io.files``). The page is t
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
+import datetime
+import multiprocessing
 import os
+import signal
+import threading
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -20,10 +25,19 @@ from uq._data.recordings import leading_comments
 from uq._data.reference import Reference, is_n50_reconstruction, paper_reference
 from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
-from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
+from uq._io.errors import InputError
+from uq._io.files import (
+    remove_stale,
+    sha256_of,
+    staged_folder,
+    write_bytes_atomic,
+    write_text_atomic,
+)
+from uq._io.version import __version__
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
-from uq._report.html import FIGURE_FORMATS, Figure, _plt, check_format, encode, render
+from uq._report.html import FIGURE_FORMATS, Figure, check_format, encode, pyplot, render
+from uq._report.pages import write_model_page
 
 #: Names of the files write_report and the surface page write (uq._io.files.remove_stale prunes the rest).
 REPORT_FIGURES = tuple(
@@ -66,9 +80,12 @@ LINE_PT = 1.2  # width of the posterior-mean lines, points
 
 def _pressure_colours(pressures):
     """(colour per pressure, the ScalarMappable for a colour bar) from one colour map."""
-    plt = _plt()
-    from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import ListedColormap, Normalize
+    plt = pyplot()
+    from matplotlib.cm import ScalarMappable  # reason: optional and heavy, loaded only where used
+    from matplotlib.colors import (  # reason: optional and heavy, loaded only where used
+        ListedColormap,
+        Normalize,
+    )
 
     p = np.asarray(pressures, float)
     cmap = ListedColormap(plt.get_cmap("viridis")(np.linspace(0.0, 0.9, 256)))
@@ -101,8 +118,8 @@ def _bands(ax, x, pointwise, simultaneous, scale, color, ls="-"):
 
 def _band_key(ax, *, simultaneous: bool, points: str | None = None) -> None:
     """A legend of what the shades and marks mean (colours are the pressures: the colour bar)."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
+    from matplotlib.lines import Line2D  # reason: optional and heavy, loaded only where used
+    from matplotlib.patches import Patch  # reason: optional and heavy, loaded only where used
 
     handles = [Line2D([], [], color="0.3", lw=LINE_PT, label="posterior mean")]
     handles.append(Patch(color="0.3", alpha=0.4, lw=0, label="pointwise 90 % band"))
@@ -151,7 +168,7 @@ def _residual_grid(fig, gs, n: int, cols: int):
 
 def _with_residuals(n: int):
     """A figure with a main axes on top and a grid of ``n`` residual panels below it."""
-    plt = _plt()
+    plt = pyplot()
     cols = min(n, 6)
     rows = -(-n // cols)
     fig = plt.figure(figsize=(10.5, 4.8 + 1.55 * rows), layout="constrained")
@@ -185,8 +202,8 @@ def _residual_panel(ax, x, h, r, curve: Band, pred: Band, scale, color, p_bar):
 
 def _residual_key(fig) -> None:
     """The residual panels' legend, below them."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
+    from matplotlib.lines import Line2D  # reason: optional and heavy, loaded only where used
+    from matplotlib.patches import Patch  # reason: optional and heavy, loaded only where used
 
     handles = [
         Line2D([], [], color="k", ls="", marker=".", label="readings"),
@@ -293,7 +310,7 @@ def _scaled(b: Band, factor: float) -> Band:
 def figure_feff(cf, cb: CampaignBands):
     """Figure 4 (eq. 1): F_eff = P / p_u of the tests with p_u >= 1 bar, by pressure, with
     pointwise and simultaneous 90 % bands shaded."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 5.4), layout="constrained")
     x = cb.x_m * MM
     shown = [
@@ -320,8 +337,8 @@ def figure_feff(cf, cb: CampaignBands):
 def figure_traditional(cf, cb: CampaignBands):
     """Figure 5: the traditional force p_u (-S dL/dx) from the reference test's volume curve
     against the measured force (left) and their relative difference (right), by pressure."""
-    plt = _plt()
-    from matplotlib.lines import Line2D
+    plt = pyplot()
+    from matplotlib.lines import Line2D  # reason: optional and heavy, loaded only where used
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 5.4), layout="constrained")
     x = cb.x_m * MM
@@ -355,7 +372,7 @@ def figure_traditional(cf, cb: CampaignBands):
 def figure_scatter(cb: CampaignBands, paper_values: bool = True):
     """The paper's scatter of F_eff across the tests with p_u >= 1 bar, with its band (and the
     paper's own values when ``paper_values``: the campaign is the paper's spring)."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 4.6), layout="constrained")
     x = cb.x_m * MM
     _fill(ax, x, cb.scatter, 1.0, "tab:purple", label="posterior mean and pointwise 90 % band")
@@ -404,7 +421,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     in another process. A force-only test's volume panels say so instead; a test in unknown order
     (no branch and step) shows its readings without branch markers.
     """
-    plt = _plt()
+    plt = pyplot()
     fig, axs = plt.subplots(2, 3, figsize=(14, 7.6))
     x = cb.x_m * MM
     h = t.height_m * MM
@@ -537,7 +554,6 @@ def encoded_test_figure(
 
 def _ignore_interrupts() -> None:
     """A figure worker's initializer: leave Ctrl-C to the process that started it."""
-    import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
@@ -552,8 +568,6 @@ def _workers_ignore_interrupts():
     keeps it so. The cost: a Ctrl-C in the few milliseconds the workers take to start is ignored
     here too (press it again). (Only the main thread can set handlers; elsewhere nothing is done.)
     """
-    import signal
-    import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -581,9 +595,6 @@ class _TestFigures:
         ]
         self._pool, self._futures = None, []
         if jobs > 1 and len(self._work) >= self.MIN_TESTS:
-            import concurrent.futures
-            import multiprocessing
-
             with _workers_ignore_interrupts():
                 # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
                 self._pool = concurrent.futures.ProcessPoolExecutor(
@@ -825,7 +836,6 @@ def _reference(reference, comments) -> Reference | None:
         return paper_reference()
     if reference == "auto":
         return None
-    from uq._io.errors import InputError
 
     raise InputError(
         f"reference: expected 'auto', 'paper', None or a Reference, got {reference!r}",
@@ -836,10 +846,6 @@ def _reference(reference, comments) -> Reference | None:
 def provenance(rec, stand) -> dict:
     """The footer of a page: uq's version, the date (``SOURCE_DATE_EPOCH`` when set, for
     reproducible pages), the recordings' file and SHA-256, and the stand description used."""
-    import datetime
-
-    from uq._io.files import sha256_of
-    from uq._io.version import __version__
 
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
     when = (
@@ -969,7 +975,6 @@ def write_report(
     >>> page.name, "Reconstructed data" in page.read_text(encoding="utf-8")
     ('report.html', True)
     """
-    from uq._io.errors import InputError
 
     if draws < MIN_DRAWS:
         raise InputError(f"draws: at least {MIN_DRAWS} draws, got {draws}", param="draws")
@@ -980,12 +985,9 @@ def write_report(
     # All pages and figures go to a hidden folder first and are moved in at the end, so a full
     # disk or a Ctrl-C leaves the previous report (or nothing), never part of a new one.
     with staged_folder(out, last=("surface.html", "report.html")) as stage:
-        if surface is not None:
-            from uq._models.surface import summary
-            from uq._report.surface import write_surface_report
-
-            surface_page = write_surface_report(
-                surface, summary(surface, comparison), stage, figure_format=figure_format
+        if surface is not None:  # the model's page (uq._report.pages: by the fit's class)
+            surface_page = write_model_page(
+                surface, surface.to_json(comparison), stage, figure_format=figure_format
             ).name
         n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
         with _TestFigures(cf, cb, n_jobs, figure_format) as test_figures:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from uq._io.files import dumps_json, remove_stale, staged_folder
-from uq._report.html import Figure, _plt, check_format, encode, render
+from uq._report.html import Figure, check_format, encode, pyplot, render
 
 PAGE = "design.html"
 #: the files the sheet writes, by pattern (for pruning what an earlier run left)
@@ -32,7 +32,7 @@ OUTPUTS = ("design_*.png", "design_*.svg", PAGE, "design.csv", "design.json")
 
 
 def _colours(n: int):
-    plt = _plt()
+    plt = pyplot()
     cmap = plt.get_cmap("viridis")
     return [cmap(0.85 * i / max(n - 1, 1)) for i in range(n)]
 
@@ -40,7 +40,7 @@ def _colours(n: int):
 def figure_sealed_curves(doc: dict, curves: dict):
     """The sealed load-deflection curves, one per charge pressure of the chart (charged at the
     design height), each with its 90 % band; the design height dotted."""
-    plt = _plt()
+    plt = pyplot()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.0, 4.4), layout="constrained")
     cols = _colours(len(curves))
     for c, (p, cv) in zip(cols, sorted(curves.items()), strict=True):
@@ -73,7 +73,7 @@ def figure_sealed_curves(doc: dict, curves: dict):
 def figure_frequency_chart(doc: dict):
     """Natural frequency against load at the design height, one point per charge pressure with
     its 90 % intervals in both directions (the catalogue's chart)."""
-    plt = _plt()
+    plt = pyplot()
     rows = doc["frequency_chart"]["rows"]
     fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
     L = np.array([[r["load_N"][k] for k in ("mean", "q05", "q95")] for r in rows]) * 1e-3
@@ -114,7 +114,7 @@ def figure_frequency_chart(doc: dict):
 
 def figure_isobaric(doc: dict):
     """The isobaric loads of the table against height, one line per pressure, 90 % bands."""
-    plt = _plt()
+    plt = pyplot()
     rows = doc["isobaric"]
     ps = sorted({r["pressure_bar"] for r in rows})
     fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from uq._diagnose.engine import _residuals, summary_text
+from uq._diagnose.engine import residuals_of, summary_text
 from uq._io.files import write_bytes_atomic, write_text_atomic
-from uq._report.html import Figure, _plt, check_format, encode, render
+from uq._report.html import Figure, check_format, encode, pyplot, render
 
 FIGURE = "diagnose_residuals"
 
@@ -29,7 +29,7 @@ FIGURE = "diagnose_residuals"
 def _residual_figure(res):
     """Force and volume residuals of the traditional and the final model, by height (force only
     for a campaign without volume readings)."""
-    plt = _plt()
+    plt = pyplot()
     base, final, meta, d = res.baseline, res.final, res.meta, res.data
     quantities = (("force", 1.0, "N"), ("volume", 1e6, "cm³"))[: 1 + meta["has_volume"]]
     fig, axes = plt.subplots(
@@ -45,7 +45,7 @@ def _residual_figure(res):
     for col, (fit, title) in enumerate(
         ((base, "traditional"), (final, " + ".join(["traditional", *final.names])))
     ):
-        r = _residuals(fit, meta, d)
+        r = residuals_of(fit, meta, d)
         for row, (q, scale, unit) in enumerate(quantities):
             ax = axes[row, col]
             for pb in np.unique(meta["pressure_bar"]):

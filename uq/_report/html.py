@@ -19,17 +19,20 @@ import io
 import math
 from dataclasses import dataclass
 
+from jinja2 import Environment, PackageLoader, StrictUndefined
 from markupsafe import Markup
+
+from uq._io.errors import InputError
 
 DPI = 90
 
 
-def _plt():
+def pyplot():
     """matplotlib.pyplot on the off-screen Agg backend (imported on first use: it is slow)."""
-    import matplotlib
+    import matplotlib  # reason: optional and heavy, loaded only where used
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # reason: optional and heavy, loaded only where used
 
     return plt
 
@@ -42,8 +45,6 @@ _MIME = {"png": "image/png", "svg": "image/svg+xml"}
 def check_format(figure_format: str) -> str:
     """``figure_format`` if it is one of :data:`FIGURE_FORMATS`, else a one-line ``InputError``."""
     if figure_format not in FIGURE_FORMATS:
-        from uq._io.errors import InputError
-
         raise InputError(
             f"figure_format: one of {', '.join(FIGURE_FORMATS)}, got {figure_format!r}",
             param="figure_format",
@@ -57,7 +58,7 @@ def encode(fig, figure_format: str = "png") -> bytes:
     SVG keeps text as paths (the page looks the same in every browser) and is reproducible: no
     date in its metadata and a fixed salt for its element ids, so one figure gives the same bytes.
     """
-    import matplotlib
+    import matplotlib  # reason: optional and heavy, loaded only where used
 
     buf = io.BytesIO()
     with matplotlib.rc_context({"svg.hashsalt": "airspring-uq", "svg.fonttype": "path"}):
@@ -65,7 +66,7 @@ def encode(fig, figure_format: str = "png") -> bytes:
             fig.savefig(buf, format="svg", metadata={"Date": None})
         else:
             fig.savefig(buf, format=check_format(figure_format), dpi=DPI)
-    _plt().close(fig)
+    pyplot().close(fig)
     return buf.getvalue()
 
 
@@ -110,8 +111,6 @@ def _escape(value):
 
 @functools.cache
 def _environment():
-    from jinja2 import Environment, PackageLoader, StrictUndefined
-
     env = Environment(
         loader=PackageLoader("uq", "_report/templates"),
         autoescape=True,

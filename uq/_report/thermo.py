@@ -21,10 +21,11 @@ import numpy as np
 
 from uq._inference.summary import band
 from uq._io.files import write_text_atomic
+from uq._models.registry import CUBICS
 from uq._models.thermo import ThermoFit
 from uq._physics.quantities import BAR_PA
-from uq._report.html import _plt, check_format, render
-from uq._report.surface import (
+from uq._report.html import check_format, pyplot, render
+from uq._report.model_page import (
     comparison_rows,
     figure_residual_overlay,
     noise_rows,
@@ -33,6 +34,15 @@ from uq._report.surface import (
 )
 
 PAGE = "thermodynamic.html"
+#: what the preference means for a model that ties force and volume through one potential
+PHYSICS_NOTES = {
+    CUBICS: " The thermodynamic model ties force and volume through one potential (the Maxwell "
+    "relation dP/dp_u = dV/dx); recordings that break it (relaxation, hysteresis: the Maxwell "
+    "table of uq diagnose) or need higher orders (--select) are fitted better by the cubics, "
+    "which tie nothing.",
+    "model": " The force and the volume obey one potential (the Maxwell relation dP/dp_u = dV/dx) "
+    "to within the noise, as a casing that stores energy elastically does.",
+}
 #: the files the page writes, by pattern (for pruning what an earlier run left)
 OUTPUTS = ("thermo_*.png", "thermo_*.svg", PAGE)
 N_DRAWS = 1000  # posterior draws behind each band
@@ -46,7 +56,7 @@ def _grid(fit: ThermoFit, n: int):
 def figure_areas(fit: ThermoFit):
     """Per test: the effective area from the force, F_eff = P/p_u (eq. 1), and from the volume,
     dV/dx (eq. 1, second formula), with their 90 % bands, and the readings' P/p_u."""
-    plt = _plt()
+    plt = pyplot()
     tests = fit.recordings.tests
     n = len(tests)
     cols = min(4, n)
@@ -54,15 +64,15 @@ def figure_areas(fit: ThermoFit):
     fig, axes = plt.subplots(
         rows, cols, figsize=(3.2 * cols, 2.5 * rows + 0.6), squeeze=False, layout="constrained"
     )
-    beta = fit.flat_beta(N_DRAWS)
+    some = fit.on_draws(N_DRAWS)
     xs = _grid(fit, 80)
     for ax, t in zip(axes.flat, tests, strict=False):
         p = t.pressure_bar
         for fn, colour, label in (
-            (fit.feff_draws, "tab:green", "P / p_u (force)"),
-            (fit.volume_area_draws, "tab:red", "dV/dx (volume)"),
+            (some.feff_draws, "tab:green", "P / p_u (force)"),
+            (some.volume_area_draws, "tab:red", "dV/dx (volume)"),
         ):
-            m, lo, hi = band(fn(xs, p, beta=beta), axis=0)
+            m, lo, hi = band(fn(xs, p), axis=0)
             ax.fill_between(xs * 1e3, lo * 1e4, hi * 1e4, color=colour, alpha=0.35, lw=0)
             ax.plot(xs * 1e3, m * 1e4, color=colour, lw=1, label=label)
         ax.plot(
@@ -91,7 +101,7 @@ def maxwell_region(fit: ThermoFit, n_x: int = 46, n_p: int = 41) -> dict:
     plo, phi = fit.pressure_range_bar
     ps = np.linspace(plo, phi, n_p)
     X, P = np.meshgrid(xs, ps, indexing="ij")
-    m, lo, hi = band(fit.maxwell_ratio_draws(X, P, beta=fit.flat_beta(N_DRAWS)), axis=0)
+    m, lo, hi = band(fit.on_draws(N_DRAWS).maxwell_ratio_draws(X, P), axis=0)
     return {
         "height_m": xs,
         "pressure_bar": ps,
@@ -106,7 +116,7 @@ def figure_maxwell(fit: ThermoFit, region: dict | None = None):
     """Heat map of the Maxwell ratio over height and pressure, centred on 1, the region where its
     90 % band excludes 1 outlined; the colour scale is clipped at the 98th percentile of |r - 1|
     (P/p_u near zero, at low pressure and full height, makes the ratio run away there)."""
-    plt = _plt()
+    plt = pyplot()
     reg = region or maxwell_region(fit)
     xs, ps, m = reg["height_m"] * 1e3, reg["pressure_bar"], reg["mean"]
     fig, ax = plt.subplots(figsize=(7.2, 4.8), layout="constrained")
@@ -134,7 +144,7 @@ def figure_maxwell(fit: ThermoFit, region: dict | None = None):
 
 def figure_piston_area(fit: ThermoFit):
     """The posterior of the piston area the recordings imply, S / (1 + m), against the given S."""
-    plt = _plt()
+    plt = pyplot()
     draws = fit.piston_area_draws() * 1e4
     given = fit.geometry.area_m2 * 1e4
     q05, q95 = np.quantile(draws, [0.05, 0.95])
@@ -183,7 +193,7 @@ def write_thermo_report(
     figures = write_figures(
         {
             "thermo_force": (
-                figure_residual_overlay(fit, "thermodynamic"),
+                figure_residual_overlay(fit),
                 "force readings against the thermodynamic model's band, by test",
             ),
             "thermo_areas": (figure_areas(fit), "effective area from the force and the volume"),
@@ -199,8 +209,8 @@ def write_thermo_report(
         path=fit.recordings.path,
         result=result,
         comparison=comp,
-        rows=comparison_rows(comp, "thermodynamic") if comp else [],
-        preference=preference(comp, "thermodynamic"),
+        rows=comparison_rows(comp, fit.name, fit.words) if comp else [],
+        preference=preference(comp, fit.name, fit.words, PHYSICS_NOTES),
         order_selection=result.get("order_selection") or [],
         noise=noise_rows(result["noise"]),
         maxwell_share=float(region["excludes_one"].mean()),

@@ -18,15 +18,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from uq._data.recordings import recordings_from_text
+from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._data.writing import write_recordings_csv
 from uq._physics.quantities import BAR_PA
+from uq._stand.simulator import PAPER_PISTON_AREA_M2, SPRINGS, Layout, simulate, true_curves
 
-#: The pressure sensor of ``--record-pressure`` (assumed: the paper states its sensor resolves
-#: 1 Pa and is accurate to 0.1 %, section 3.2): a reading shows the held pressure p + dp times
-#: (1 + g), to 1 Pa, where g ~ N(0, 0.1 %) is drawn once per campaign (a calibration error, the
-#: same for every reading) from a random stream of its own, so the other readings of a seed are
-#: the same with and without the sensor.
-SENSOR_RESOLUTION_PA = 1.0
-SENSOR_GAIN_SD = 0.001
+#: The pressure sensor of ``--record-pressure`` is the stand's (``StandDescription.
+#: pressure_sensor_*``; the paper's resolves 1 Pa and is accurate to 0.1 %, section 3.2): a reading
+#: shows the held pressure p + dp times (1 + g), to the resolution, where g ~ N(0, gain sd) is drawn
+#: once per campaign (a calibration error, the same for every reading) from a random stream of its
+#: own, so the other readings of a seed are the same with and without the sensor.
 SENSOR_STREAM = 21  # the issue that asked for it; any fixed number would do
 
 #: quantity -> unit suffix -> the step catalogues print to (whole mm, 10 N, 0.01 L and the like).
@@ -37,22 +39,27 @@ CATALOGUE_ROUNDING = {
 }
 
 
-def sensor_gain(seed: int) -> float:
+def sensor_gain(seed: int, stand: StandDescription = PAPER_STAND) -> float:
     """The relative gain error g of the campaign's pressure sensor (drawn once per seed)."""
-    return float(np.random.default_rng([seed, SENSOR_STREAM]).normal(0.0, SENSOR_GAIN_SD))
+    rng = np.random.default_rng([seed, SENSOR_STREAM])
+    return float(rng.normal(0.0, stand.pressure_sensor_gain_sd))
 
 
-def record_pressure(tests: list[dict], seed: int) -> list[dict]:
+def record_pressure(
+    tests: list[dict], seed: int, stand: StandDescription = PAPER_STAND
+) -> list[dict]:
     """The stand's tests with ``measured_pressure_bar``: each reading's pressure as the sensor read it.
 
     The stand holds p + dp during a reading (``pressure_error_bar``, its holding error); the sensor
-    shows (p + dp)(1 + g) rounded to SENSOR_RESOLUTION_PA, g from :func:`sensor_gain`.
+    shows (p + dp)(1 + g) rounded to the stand's ``pressure_sensor_resolution_pa``, g from
+    :func:`sensor_gain`.
     """
-    g = sensor_gain(seed)
+    g = sensor_gain(seed, stand)
+    step = stand.pressure_sensor_resolution_pa
     out = []
     for t in tests:
         held_Pa = (t["pressure_bar"] + t["pressure_error_bar"]) * BAR_PA
-        shown_Pa = np.round(held_Pa * (1.0 + g) / SENSOR_RESOLUTION_PA) * SENSOR_RESOLUTION_PA
+        shown_Pa = np.round(held_Pa * (1.0 + g) / step) * step
         out.append(dict(t, measured_pressure_bar=shown_Pa / BAR_PA))
     return out
 
@@ -76,7 +83,6 @@ def catalogue(
     stand, not a property of the element), noise-free: a catalogue prints a smoothed value, rounded.
     V(x_max) is the stand's element volume (4.2 L for the paper's stand, assumed).
     """
-    from uq._stand.simulator import SPRINGS, true_curves
 
     spring = (
         SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
@@ -127,10 +133,6 @@ def catalogue_recordings(
     ``uq simulate --catalogue [--volume-at-bar P]`` writes (the same tests, cut and rounded the
     same way) and a reader reads. ``volume_at_bar``: default the middle pressure, as the command;
     ``layout`` default: the paper's pressures, 10 mm steps."""
-    from uq._data.recordings import recordings_from_text
-    from uq._data.stand_description import PAPER_STAND
-    from uq._data.writing import write_recordings_csv
-    from uq._stand.simulator import PAPER_PISTON_AREA_M2, Layout, simulate
 
     stand = PAPER_STAND if stand is None else stand
     area = PAPER_PISTON_AREA_M2 if piston_area_m2 is None else piston_area_m2

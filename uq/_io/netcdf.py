@@ -1,0 +1,90 @@
+"""NetCDF-4 files: groups of xarray Datasets with root attributes, the layout of ArviZ's
+InferenceData (``arviz.from_netcdf`` reads what is written here), written atomically and read
+back with one-line errors. Apart from ``uq._io.files`` so that what writes JSON does not load
+xarray (and pandas under it)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+from pathlib import Path
+
+import xarray as xr
+
+from uq._io.errors import InputError
+from uq._io.files import write_bytes_atomic
+
+
+def _compressible(dtype) -> bool:
+    """Numbers, booleans and byte strings are zlib-compressed (ArviZ's rule); text is not."""
+    return dtype.kind in {"b", "i", "u", "f", "c", "S"}
+
+
+def netcdf_bytes(groups: dict, attrs: dict | None = None) -> bytes:
+    """Groups (name -> xarray Dataset) and root attributes as NetCDF-4 bytes, made in memory
+    (what ArviZ 0.23's ``idata.to_netcdf(path)`` writes: root attributes, every group, zlib
+    compression of numbers).
+
+    Why in memory: HDF5 writing straight to a full disk (or past a file-size limit) fails inside
+    h5py, which can crash the interpreter (a segmentation fault, exit 139); the bytes are
+    written afterwards like any other output, where a full disk is a one-line error."""
+    buf = io.BytesIO()
+    mode = "w"
+    with _local_dask_scheduler():
+        if attrs:  # the file's own attributes, on the root group
+            xr.Dataset(attrs=attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")
+            mode = "a"
+        for group, data in groups.items():
+            encoding = {
+                name: {"zlib": True}
+                for name, values in data.variables.items()
+                if _compressible(values.dtype)
+            }
+            data.to_netcdf(buf, mode=mode, group=f"/{group}", engine="h5netcdf", encoding=encoding)
+            mode = "a"
+    return buf.getvalue()
+
+
+@contextlib.contextmanager
+def _local_dask_scheduler():
+    """In a Dask worker (``uq batch``), xarray would take a cluster-wide lock named after the
+    target, which a buffer in memory cannot name; the data here are in memory, so a local lock is right."""
+    if "dask" not in sys.modules:
+        yield
+        return
+    dask = sys.modules["dask"]
+    with dask.config.set(scheduler="synchronous"):
+        yield
+
+
+def write_netcdf_atomic(path: str | os.PathLike, idata=None, *, groups=None, attrs=None) -> Path:
+    """Write an ArviZ InferenceData (or ``groups`` and ``attrs``) to ``path`` as NetCDF, atomically
+    (:func:`netcdf_bytes`, then :func:`uq._io.files.write_bytes_atomic`): a full disk is an
+    :class:`InputError` and leaves no file."""
+    if idata is not None:
+        groups = {g: getattr(idata, g) for g in idata.groups()}
+        attrs = dict(idata.attrs)
+    return write_bytes_atomic(path, netcdf_bytes(groups, attrs))
+
+
+def read_netcdf(path, groups: tuple[str, ...]) -> tuple[dict, dict]:
+    """(root attributes, {group: Dataset loaded into memory}) of a NetCDF-4 file; a missing file,
+    one that is not NetCDF-4, or one without ``groups`` is an InputError naming it."""
+    path = str(path)
+    if not Path(path).is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        with xr.open_dataset(path, engine="h5netcdf") as root:
+            attrs = dict(root.attrs)
+        out = {}
+        for g in groups:
+            with xr.open_dataset(path, group=g, engine="h5netcdf") as ds:
+                out[g] = ds.load()
+    except Exception as exc:  # h5py/h5netcdf raise OSError, ValueError, KeyError... on other files
+        raise InputError(
+            f"{path}: not a readable NetCDF file with groups {', '.join(groups)} "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
+    return attrs, out

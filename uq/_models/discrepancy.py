@@ -1,0 +1,701 @@
+"""The surface with a discrepancy in pressure (Kennedy and O'Hagan): the smooth surface plus, per
+tested pressure, a deviation of the test's cubic drawn from a Gaussian process in p_u.
+
+Model (uq/_models/surface.py's notation: t = (x - x0) / h, h = 0.05 m, p_i in Pa where it
+multiplies, lever -h/S):
+
+    force_ij  = [surface force]_ij  + p_i sum_k delta_ik t^k
+    piston_ij = [surface piston]_ij - (h/S) sum_k (delta_ik + eps_ik) t^(k+1) / (k+1)
+
+delta_i (m^2, k = 0..K) is a deviation of the pressure area F_p at test i, so it enters the volume
+as F_p does; eps_i (m^2) a deviation of the volume-derived area alone, as the surface's D. Over
+the tests each coefficient is a Gaussian process in p_u (uq._models.discrepancy_gp): Cov(delta_ik,
+delta_jk) = a_F^2 s_k^2 R(p_i, p_j; l), Cov(eps_ik, eps_jk) = a_V^2 s_k^2 R(p_i, p_j; l), Matern 3/2
+R, s_k = 1 (t^k is of order one over the stroke). Written with standardised normals z
+(delta_.k = a_F s_k chol(R) z_Fk), every coefficient -- the surface's beta and z -- is N(0, 1) a
+priori and enters the readings linearly: given theta = (the five noise logs of the pair likelihood,
+log a_F, log a_V, log l) the model is linear-Gaussian, one :class:`CollapsedModel` fitted by the
+one driver (emcee over theta, exact coefficient draws). A campaign without piston readings has
+the force surface (uq/_models/surface_force.py) and delta alone: theta = (three noise logs,
+log a_F, log l).
+
+Cost. At a fixed pressure the surface's force is a polynomial in t of degree m_t = max(K, Ke, Dk)
+and its piston one of degree m_t + 1 with a constant, and so are the deviations: every mean of the
+model lies, test by test, in the span of Z_i = [force: p_i t^k, k <= m_t | piston: t^k, k <= m_t + 1].
+The readings enter through per-test moments H_i = Z_i^T Sigma_i^-1 Z_i, b_i = Z_i^T Sigma_i^-1 y_i
+(segment sums of the monomials of t times the pair likelihood's three weights), and the model's
+coefficients map to each test's Z-coefficients by gamma_i = A_i beta + D_i v_i(theta) z, A_i
+fixed (least squares from the surface's design rows at the test's heights, the residual checked
+to be zero when the data are built), D_i the deviations' columns. The Gram matrix is then
+sum_i C_i^T H_i C_i + I over the surface's and the deviations' coefficients (139 for data/n50):
+the same matrix as the dense design's X^T W X, at a cost independent of the number of readings;
+and by Woodbury's identity it is never factored: the one Cholesky factor per theta is of the
+(T m x T m) matrix I + R P R^T (P = C C^T, H_i = R_i^T R_i), for the density, the exact draws
+(Matheron's rule) and the leave-one-out densities alike (``span_posterior``; tested against the
+dense design and against brute-force Gaussian integration in tests/models/test_discrepancy.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from uq._data.recordings import Recordings
+from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._inference.collapsed import CollapsedModel, fit_collapsed
+from uq._inference.float64 import jax, jnp
+from uq._inference.linear import LOG_2PI, gaussian_loglik, posterior_from_moments
+from uq._inference.sampler import Settings, min_walkers_for_independence
+from uq._io.errors import InputError
+from uq._models import discrepancy_gp as gp
+from uq._models import pair, surface, surface_force, surface_likelihood
+from uq._models.discrepancy_fit import DiscrepancyFit
+from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
+from uq._models.saved import provenance_of
+from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
+
+GP_NAMES = ("log_a_F_m2", "log_a_V_m2", "log_length_bar")
+GP_NATURAL = ("a_F_m2", "a_V_m2", "length_bar")
+THETA_NAMES = NOISE_NAMES + GP_NAMES
+FORCE_THETA_NAMES = surface_force.THETA_NAMES + (GP_NAMES[0], GP_NAMES[2])
+#: relative residual up to which the per-test span Z_i must reproduce the surface's design rows
+SPAN_RTOL = 1e-9
+
+
+class DevData(NamedTuple):
+    """A campaign's arrays for the discrepancy surface with piston readings (n readings, T tests,
+    m = 2 m_t + 3 Z-columns per test, k_s surface coefficients, n_k deviation coefficients).
+
+    The reading fields are named as ``uq._models.pair.PairData``'s, so the pair likelihood's noise
+    functions (``cov_factors``, ``readings``, ``log_prior``) take it as they are."""
+
+    t: jnp.ndarray  # (n,) (x - x0) / h
+    test: jnp.ndarray  # (n,) int, the reading's test
+    F: jnp.ndarray  # (n,) force, N
+    L: jnp.ndarray  # (n,) piston, m
+    phat: jnp.ndarray
+    feff_hat: jnp.ndarray
+    dp_pa: jnp.ndarray
+    p_abs_pa: jnp.ndarray
+    area: jnp.ndarray
+    prior_mean: jnp.ndarray  # (5,) the noise logs' prior centres
+    weight: jnp.ndarray  # (n,) 1 fitted, 0 held out
+    dp_meas: jnp.ndarray
+    p_pa: jnp.ndarray  # (T,) tested overpressures, Pa
+    p_bar: jnp.ndarray  # (T,) the same in bar (the process's coordinate)
+    A: jnp.ndarray  # (T, m, k_s) surface coefficients -> Z-coefficients
+    D: jnp.ndarray  # (T, m, 2 n_k) deviations (delta, eps) -> Z-coefficients
+    s: jnp.ndarray  # (n_k,) coefficient scales s_k
+    rates: jnp.ndarray  # (2,) exponential prior rates of a_F, a_V (1/m^2)
+    AAt: jnp.ndarray  # (T, T, m, m) A_i A_j^T: the surface's share of the span's prior covariance
+
+
+class ForceDevData(NamedTuple):
+    """The same for a campaign without piston readings (m = m_t + 1 force columns, delta alone);
+    the reading fields are named as ``uq._models.surface_force.ForceData``'s."""
+
+    t: jnp.ndarray
+    test: jnp.ndarray
+    F: jnp.ndarray
+    phat: jnp.ndarray
+    feff_hat: jnp.ndarray
+    dp_pa: jnp.ndarray
+    dp_meas: jnp.ndarray
+    prior_mean: jnp.ndarray  # (3,)
+    weight: jnp.ndarray
+    p_pa: jnp.ndarray
+    p_bar: jnp.ndarray
+    A: jnp.ndarray  # (T, m, k_s)
+    D: jnp.ndarray  # (T, m, n_k)
+    s: jnp.ndarray
+    rates: jnp.ndarray  # (1,)
+    AAt: jnp.ndarray  # (T, T, m, m)
+
+
+# ----------------------------------------------------------------------------- the span Z_i
+
+
+def span_degree(orders: surface.Orders) -> int:
+    """m_t: the degree in t of every force mean at a fixed pressure (the piston's is m_t + 1)."""
+    return max(orders.K, orders.Ke, orders.Dk, deviation_degree(orders))
+
+
+def deviation_degree(orders: surface.Orders) -> int:
+    """The deviations' degree in t: the pressure area's K (capped, as K is, by the test with the
+    fewest heights: ``uq._models.surface.orders_for``)."""
+    return orders.K
+
+
+def z_rows(t, p_pa, m_t: int, piston: bool):
+    """Force rows (n, m) and piston rows (n, m) of Z at heights ``t`` of one test at ``p_pa``."""
+    t = np.asarray(t, float)[:, None]
+    nf = m_t + 1
+    m = nf + (m_t + 2 if piston else 0)
+    Zf = np.zeros((t.shape[0], m))
+    Zf[:, :nf] = p_pa * t ** np.arange(nf)
+    Zl = np.zeros_like(Zf)
+    if piston:
+        Zl[:, nf:] = t ** np.arange(m_t + 2)
+    return Zf, Zl
+
+
+def deviation_rows(t, p_pa, n_k: int, area_m2: float | None):
+    """The deviations' force and piston rows at heights ``t``: (n, n_k) each for delta (force
+    p t^k, piston -(h/S) t^(k+1)/(k+1)) and for eps (piston only); ``area_m2`` None: no piston."""
+    t = np.asarray(t, float)[:, None]
+    k = np.arange(n_k)
+    force = p_pa * t**k
+    if area_m2 is None:
+        return force, None, None
+    lever = -BASIS_SCALE_M / area_m2
+    integ = lever * t ** (k + 1) / (k + 1)
+    return force, integ, integ
+
+
+def span_map(Zf, Zl, Xf, Xl, what: str) -> np.ndarray:
+    """The Z-coefficients (m, k) with Z gamma = X on the test's rows, by least squares; InputError-
+    free ValueError when the span does not reproduce them (a programming error, not bad input)."""
+    Z = np.concatenate([Zf, Zl]) if Zl is not None else Zf
+    X = np.concatenate([Xf, Xl]) if Xl is not None else Xf
+    sol, *_ = np.linalg.lstsq(Z, X, rcond=None)
+    err = np.linalg.norm(Z @ sol - X) / max(np.linalg.norm(X), 1e-300)
+    if err > SPAN_RTOL:
+        raise ValueError(
+            f"the per-test span does not reproduce the {what} (relative residual {err:.2e})"
+        )
+    return sol
+
+
+def _tests(rec: Recordings):
+    idx = np.concatenate([np.full(t.n_points, i) for i, t in enumerate(rec.tests)])
+    p = np.array([t.pressure_bar for t in rec.tests], float)
+    return idx, p
+
+
+def dev_data(
+    rec: Recordings, orders: surface.Orders, stand: StandDescription = PAPER_STAND
+) -> DevData:
+    """The model's arrays for a campaign with piston readings."""
+    base = surface_likelihood.surface_data(rec, orders, stand)
+    g = surface.geometry_of(rec)
+    x, _, _, _, _ = pair.arrays(rec)
+    idx, p_bar = _tests(rec)
+    t = g.t(x)
+    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
+    Xf, Xl = np.asarray(base.Xf), np.asarray(base.Xl)
+    A, D = [], []
+    for i, pb in enumerate(p_bar):
+        rows = idx == i
+        Zf, Zl = z_rows(t[rows], pb * BAR_PA, m_t, True)
+        A.append(span_map(Zf, Zl, Xf[rows], Xl[rows], "surface's design"))
+        f, dl, el = deviation_rows(t[rows], pb * BAR_PA, n_k, g.area_m2)
+        Xdf = np.concatenate([f, np.zeros_like(f)], axis=1)
+        Xdl = np.concatenate([dl, el], axis=1)
+        D.append(span_map(Zf, Zl, Xdf, Xdl, "deviations' rows"))
+    rate = gp.amplitude_rate(reference_area(base.feff_hat))
+    return DevData(
+        jnp.asarray(t),
+        jnp.asarray(idx),
+        base.F,
+        base.L,
+        base.phat,
+        base.feff_hat,
+        base.dp_pa,
+        base.p_abs_pa,
+        base.area,
+        base.prior_mean,
+        base.weight,
+        base.dp_meas,
+        jnp.asarray(p_bar * BAR_PA),
+        jnp.asarray(p_bar),
+        jnp.asarray(np.stack(A)),
+        jnp.asarray(np.stack(D)),
+        jnp.full(n_k, gp.COEFFICIENT_SCALE),
+        jnp.asarray([rate, rate]),
+        jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
+    )
+
+
+def force_dev_data(
+    rec: Recordings, orders: surface.Orders, stand: StandDescription = PAPER_STAND
+) -> ForceDevData:
+    """The model's arrays for a campaign without piston readings (force-only, catalogue tables)."""
+    base = surface_likelihood.surface_force_data(rec, orders, stand)
+    g = surface.geometry_of(rec)
+    x, _, _ = surface_likelihood.force_arrays(rec)
+    idx, p_bar = _tests(rec)
+    t = g.t(x)
+    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
+    X = np.asarray(base.X)
+    A, D = [], []
+    for i, pb in enumerate(p_bar):
+        rows = idx == i
+        Zf, _ = z_rows(t[rows], pb * BAR_PA, m_t, False)
+        A.append(span_map(Zf, None, X[rows], None, "force surface's design"))
+        f, _, _ = deviation_rows(t[rows], pb * BAR_PA, n_k, None)
+        D.append(span_map(Zf, None, f, None, "deviations' rows"))
+    return ForceDevData(
+        jnp.asarray(t),
+        jnp.asarray(idx),
+        base.F,
+        base.phat,
+        base.feff_hat,
+        base.dp_pa,
+        base.dp_meas,
+        base.prior_mean,
+        base.weight,
+        jnp.asarray(p_bar * BAR_PA),
+        jnp.asarray(p_bar),
+        jnp.asarray(np.stack(A)),
+        jnp.asarray(np.stack(D)),
+        jnp.full(n_k, gp.COEFFICIENT_SCALE),
+        jnp.asarray([gp.amplitude_rate(reference_area(base.feff_hat))]),
+        jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
+    )
+
+
+def reference_area(feff_hat) -> float:
+    """The campaign's reference area (m^2) that scales the amplitudes' prior: the median pressure
+    area of the surface's least-squares fit over the readings."""
+    return float(np.median(np.abs(np.asarray(feff_hat))))
+
+
+# ----------------------------------------------------------------------------- the coefficient map
+
+
+def has_piston(d) -> bool:
+    return isinstance(d, DevData)
+
+
+def _split(theta, d):
+    """(noise, amplitudes per deviation block, length) from theta."""
+    if has_piston(d):
+        return theta[:5], jnp.exp(theta[5:7]), jnp.exp(theta[7])
+    return theta[:3], jnp.exp(theta[3:4]), jnp.exp(theta[4])
+
+
+def channel_scales(amplitudes, d):
+    """a s_k for every deviation channel (delta's n_k, then eps's), (n_c,)."""
+    return jnp.concatenate([a * d.s for a in amplitudes])
+
+
+def coefficient_map(theta, d):
+    """C (T, m, K): every test's Z-coefficients from the model's standardised coefficients
+    (beta: the surface's k_s, then z: channel-major, n_c x T)."""
+    _, amps, length = _split(theta, d)
+    Lr = jnp.linalg.cholesky(gp.correlation(d.p_bar, length, jnp))
+    g = channel_scales(amps, d)
+    T, m, _ = d.D.shape
+    Cz = jnp.einsum("imc,c,ij->imcj", d.D, g, Lr).reshape(T, m, -1)
+    return jnp.concatenate([d.A, Cz], axis=-1)
+
+
+def n_coefficients(d) -> int:
+    return d.A.shape[2] + d.D.shape[2] * d.D.shape[0]
+
+
+# ----------------------------------------------------------------------------- moments
+
+
+def _segment(v, d):
+    return jax.ops.segment_sum(v, d.test, num_segments=d.p_pa.shape[0])
+
+
+def _powers(d, top):
+    return d.t[:, None] ** jnp.arange(top + 1)
+
+
+def pair_moments(noise, d: DevData):
+    """(H (T, m, m), b (T, m), y'Wy, 2 n, log det Sigma) of the pair likelihood in Z-space."""
+    L11, L21, L22 = pair.cov_factors(noise, d)
+    F, L = pair.readings(noise, d)
+    w = d.weight
+    s = L21 / (L11 * L22)
+    yf = F / L11
+    yl = (L - L21 * yf) / L22
+    m = d.A.shape[1]
+    nf = (m - 1) // 2  # m_t + 1 force columns, m_t + 2 piston columns
+    P = _powers(d, 2 * nf)
+    M1 = _segment((w * (1.0 / L11**2 + s**2))[:, None] * P, d)
+    M2 = _segment((w / L22**2)[:, None] * P, d)
+    M3 = _segment((-w * s / L22)[:, None] * P, d)
+    a, b = np.arange(nf), np.arange(nf + 1)
+    pp = d.p_pa[:, None, None]
+    Hff = M1[:, a[:, None] + a[None, :]] * pp**2
+    Hll = M2[:, b[:, None] + b[None, :]]
+    Hfl = M3[:, a[:, None] + b[None, :]] * pp
+    H = jnp.concatenate(
+        [
+            jnp.concatenate([Hff, Hfl], axis=2),
+            jnp.concatenate([jnp.swapaxes(Hfl, 1, 2), Hll], axis=2),
+        ],
+        axis=1,
+    )
+    vf = w * (yf / L11 - s * yl)
+    vl = w * yl / L22
+    bvec = jnp.concatenate(
+        [
+            _segment(vf[:, None] * P[:, :nf], d) * d.p_pa[:, None],
+            _segment(vl[:, None] * P[:, : nf + 1], d),
+        ],
+        axis=1,
+    )
+    yy = jnp.sum(w * (yf**2 + yl**2))
+    log_det = 2.0 * jnp.sum(w * (jnp.log(L11) + jnp.log(L22)))
+    return H, bvec, yy, 2 * jnp.sum(w), log_det
+
+
+def _force_sigma_y(noise, d: ForceDevData):
+    s0, rel, kp = (jnp.exp(noise[i]) for i in range(3))
+    var = force_noise_var(s0, rel, d.phat) + (kp * d.dp_pa * d.feff_hat) ** 2
+    return jnp.sqrt(var), d.F - d.feff_hat * d.dp_meas
+
+
+def force_moments(noise, d: ForceDevData):
+    """The same for the force alone (independent readings, the force surface's noise)."""
+    sigma, y = _force_sigma_y(noise, d)
+    w = d.weight / sigma**2
+    nf = d.A.shape[1]
+    P = _powers(d, 2 * nf - 2)
+    M = _segment(w[:, None] * P, d)
+    a = np.arange(nf)
+    H = M[:, a[:, None] + a[None, :]] * d.p_pa[:, None, None] ** 2
+    bvec = _segment((w * y)[:, None] * P[:, :nf], d) * d.p_pa[:, None]
+    return H, bvec, jnp.sum(w * y**2), jnp.sum(d.weight), jnp.sum(d.weight * jnp.log(sigma**2))
+
+
+def moments(noise, d):
+    return pair_moments(noise, d) if has_piston(d) else force_moments(noise, d)
+
+
+def prior_span_cov(theta, d):
+    """P (T, T, m, m): the prior covariance of the tests' Z-coefficients, C C^T: the surface's part
+    A_i A_j^T (fixed, ``AAt``) plus the deviations' R_ij D_i diag(a s)^2 D_j^T."""
+    _, amps, length = _split(theta, d)
+    g2 = channel_scales(amps, d) ** 2
+    R = gp.correlation(d.p_bar, length, jnp)
+    return d.AAt + jnp.einsum("ij,iac,c,jbc->ijab", R, d.D, g2, d.D)
+
+
+class SpanPosterior(NamedTuple):
+    """The posterior given theta, in the tests' Z-space (``span_posterior``)."""
+
+    Rt: jnp.ndarray  # (T, m, m) lower Cholesky factors of H_i (R_i = Rt_i^T)
+    u: jnp.ndarray  # (T, m) R^-T b
+    P: jnp.ndarray  # (T, T, m, m) prior covariance of the Z-coefficients
+    Lm: jnp.ndarray  # (T m, T m) lower Cholesky factor of M = I + R P R^T
+    log_marginal: jnp.ndarray  # () log p(readings | theta)
+
+
+def span_posterior(theta, d) -> SpanPosterior:
+    """The coefficients' posterior given theta, in the tests' Z-space.
+
+    With H_i = R_i^T R_i (Cholesky) and B = R C: det(I + C^T H C) = det(I + B B^T) and
+    b^T C (I + C^T H C)^-1 C^T b = |u|^2 - u^T (I + B B^T)^-1 u, u = R^-T b, so the one Cholesky
+    factor is of the (T m x T m) matrix M = I + R P R^T (99 for data/n50), P = C C^T, not of the
+    (K x K) Gram (139). Needs every H_i positive definite, which the fit's check of the heights per
+    test ensures."""
+    noise, _, _ = _split(theta, d)
+    H, bvec, yy, n, log_det = moments(noise, d)
+    Rt = jnp.linalg.cholesky(H)
+    u = jax.scipy.linalg.solve_triangular(Rt, bvec[..., None], lower=True)[..., 0]
+    P = prior_span_cov(theta, d)
+    T, m = bvec.shape
+    RPR = jnp.einsum("iba,ijbc,jcd->iajd", Rt, P, Rt).reshape(T * m, T * m)
+    Lm = jnp.linalg.cholesky(jnp.eye(T * m) + RPR)
+    v = jax.scipy.linalg.solve_triangular(Lm, u.reshape(-1), lower=True)
+    quad = yy - (jnp.sum(u**2) - jnp.sum(v**2))
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(Lm)))
+    return SpanPosterior(Rt, u, P, Lm, -0.5 * (quad + log_det + logdet + n * LOG_2PI))
+
+
+def log_marginal(theta, d):
+    """log p(readings | theta), every coefficient integrated out (``span_posterior``)."""
+    return span_posterior(theta, d).log_marginal
+
+
+def posterior(theta, d):
+    """The (K x K) Gaussian posterior of the coefficients given theta from the Gram matrix
+    sum_i C_i^T H_i C_i + I (uq._inference.linear.LinearPosterior): the direct route, which the
+    tests hold ``span_posterior`` to; the fit never forms it."""
+    noise, _, _ = _split(theta, d)
+    H, bvec, yy, n, log_det = moments(noise, d)
+    C = coefficient_map(theta, d)
+    gram = jnp.einsum("iak,ial->kl", C, jnp.einsum("iab,ibl->ial", H, C))
+    rhs = jnp.einsum("iak,ia->k", C, bvec)
+    return posterior_from_moments(gram, rhs, yy, n, log_det, jnp.ones(C.shape[2]))
+
+
+def _apply_Rt(Rt, x):
+    """R^T x per test, (T, m): Rt_i x_i."""
+    return jnp.einsum("iab,ib->ia", Rt, x)
+
+
+def draw_from_normals(theta, e, d):
+    """An exact posterior draw of the coefficients from standard normals ``e`` (K + T m,) by
+    conditioning a prior draw (Matheron's rule): beta = beta0 + B^T M^-1 (u - B beta0 - xi) with
+    beta0 = e[:K], xi = e[K:], B = R C; its mean is B^T M^-1 u = (I + C^T H C)^-1 C^T b and its
+    covariance I - B^T M^-1 B = (I + C^T H C)^-1. e = 0 gives the posterior mean."""
+    post = span_posterior(theta, d)
+    C = coefficient_map(theta, d)
+    T, m, K = C.shape
+    beta0, xi = e[:K], e[K:].reshape(T, m)
+    Bb = jnp.einsum("iba,ib->ia", post.Rt, jnp.einsum("iak,k->ia", C, beta0))  # R C beta0
+    w = jax.scipy.linalg.cho_solve((post.Lm, True), (post.u - Bb - xi).reshape(-1))
+    return beta0 + jnp.einsum("iak,ia->k", C, _apply_Rt(post.Rt, w.reshape(T, m)))
+
+
+def draw_linear(theta, key, d):
+    T, m = d.A.shape[:2]
+    return draw_from_normals(theta, jax.random.normal(key, (n_coefficients(d) + T * m,)), d)
+
+
+def span_moments(theta, d):
+    """The posterior mean of every test's Z-coefficients (T, m) and the diagonal blocks G_i (T, m, m)
+    of their posterior covariance: C m = P R^T M^-1 u and P - P R^T M^-1 R P (Woodbury)."""
+    post = span_posterior(theta, d)
+    T, m = post.u.shape
+    w = jax.scipy.linalg.cho_solve((post.Lm, True), post.u.reshape(-1)).reshape(T, m)
+    mean = jnp.einsum("ijab,jb->ia", post.P, _apply_Rt(post.Rt, w))
+    RP = jnp.einsum("iba,ijbc->iajc", post.Rt, post.P).reshape(T * m, T * m)
+    Q = jax.scipy.linalg.solve_triangular(post.Lm, RP, lower=True).reshape(T * m, T, m)
+    G = jnp.einsum("iiab->iab", post.P) - jnp.einsum("kia,kib->iab", Q, Q)
+    return mean, G
+
+
+# ----------------------------------------------------------------------------- the model's functions
+
+
+def log_prior(theta, d):
+    noise, _, _ = _split(theta, d)
+    k = noise.shape[0]
+    lp = -0.5 * jnp.sum(((noise - d.prior_mean) / NOISE_PRIOR_SD[:k]) ** 2)
+    for j in range(d.rates.shape[0]):
+        lp = lp + gp.log_prior_amplitude(theta[k + j], d.rates[j], jnp)
+    return lp + gp.log_prior_length(theta[-1], jnp)
+
+
+def log_prob(theta, d):
+    """log p(theta | readings), every coefficient integrated out; theta (8,) or (5,)."""
+    return log_prior(theta, d) + log_marginal(theta, d)
+
+
+def z_means(theta, beta, d):
+    """Every test's Z-coefficients at one draw, (T, m)."""
+    return jnp.einsum("iak,k->ia", coefficient_map(theta, d), beta)
+
+
+def _rows(d):
+    """Each reading's force and piston rows of Z, (n, m) each (traced: built from t)."""
+    m = d.A.shape[1]
+    pp = d.p_pa[d.test][:, None]
+    if not has_piston(d):
+        return d.t[:, None] ** jnp.arange(m) * pp, None
+    nf = (m - 1) // 2
+    P = d.t[:, None] ** jnp.arange(nf + 1)
+    zf = jnp.concatenate([P[:, :nf] * pp, jnp.zeros((d.t.shape[0], nf + 1))], axis=1)
+    zl = jnp.concatenate([jnp.zeros((d.t.shape[0], nf)), P], axis=1)
+    return zf, zl
+
+
+def mean_readings(theta, beta, d):
+    """The model's mean force (and piston) at every reading, (n,) each."""
+    gam = z_means(theta, beta, d)[d.test]
+    zf, zl = _rows(d)
+    return jnp.sum(zf * gam, 1), (None if zl is None else jnp.sum(zl * gam, 1))
+
+
+def pointwise(theta, beta, d):
+    noise, _, _ = _split(theta, d)
+    f, lp = mean_readings(theta, beta, d)
+    if not has_piston(d):
+        sigma, y = _force_sigma_y(noise, d)
+        return {"force": gaussian_loglik(y, f, sigma)}
+    L11, L21, L22 = pair.cov_factors(noise, d)
+    F, L = pair.readings(noise, d)
+    r1 = (F - f) / L11
+    r2 = (L - lp - L21 * r1) / L22
+    return {"reading": -0.5 * (r1**2 + r2**2) - jnp.log(L11) - jnp.log(L22) - LOG_2PI}
+
+
+def pointwise_loo(theta, d):
+    """log p(reading_i | theta, the other readings), every coefficient integrated out exactly (n,):
+    the leverages come from the posterior covariance's per-test blocks G_i (``span_moments``), not
+    from the (2n x K) design."""
+    noise, _, _ = _split(theta, d)
+    gam, G = span_moments(theta, d)
+    gam, G = gam[d.test], G[d.test]
+    zf, zl = _rows(d)
+    if not has_piston(d):
+        sigma, y = _force_sigma_y(noise, d)
+        uf = zf / sigma[:, None]
+        lev = 1.0 - jnp.einsum("na,nab,nb->n", uf, G, uf)
+        r = y / sigma - jnp.sum(uf * gam, 1)
+        return -0.5 * r**2 / lev + 0.5 * jnp.log(lev) - 0.5 * LOG_2PI - jnp.log(sigma)
+    L11, L21, L22 = pair.cov_factors(noise, d)
+    F, L = pair.readings(noise, d)
+    yf = F / L11
+    yl = (L - L21 * yf) / L22
+    uf = zf / L11[:, None]
+    ul = (zl - L21[:, None] * uf) / L22[:, None]
+    a = 1.0 - jnp.einsum("na,nab,nb->n", uf, G, uf)
+    e = 1.0 - jnp.einsum("na,nab,nb->n", ul, G, ul)
+    b = -jnp.einsum("na,nab,nb->n", uf, G, ul)
+    r1 = yf - jnp.sum(uf * gam, 1)
+    r2 = yl - jnp.sum(ul * gam, 1)
+    det = a * e - b * b
+    quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
+    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI - jnp.log(L11) - jnp.log(L22)
+
+
+def predict(theta, beta, key, d):
+    """A replicate of every reading: the mean plus the reading noise (as the surface's)."""
+    noise, _, _ = _split(theta, d)
+    f, lp = mean_readings(theta, beta, d)
+    if not has_piston(d):
+        sigma, y = _force_sigma_y(noise, d)
+        return {"force_N": f + (d.F - y) + sigma * jax.random.normal(key, d.F.shape)}
+    L11, L21, L22 = pair.cov_factors(noise, d)
+    z = jax.random.normal(key, (2, d.F.shape[0]))
+    F, L = pair.readings(noise, d)
+    return {
+        "force_N": f + (d.F - F) + L11 * z[0],
+        "piston_m": lp + (d.L - L) + L21 * z[0] + L22 * z[1],
+    }
+
+
+def observed(d) -> dict:
+    out = {"force_N": np.asarray(d.F)}
+    if has_piston(d):
+        out["piston_m"] = np.asarray(d.L)
+    return out
+
+
+def hold_out(d, held):
+    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
+
+
+def start(d) -> np.ndarray:
+    """Two starts: the prior centres (the amplitudes at their prior mean), and amplitudes 20 times
+    smaller (near the smooth surface)."""
+    a0, l0 = zip(*(gp.prior_start(float(r)) for r in np.asarray(d.rates)), strict=True)
+    noise = np.asarray(d.prior_mean)
+    first = np.concatenate([noise, a0, [l0[0]]])
+    second = first.copy()
+    second[noise.size : noise.size + len(a0)] -= np.log(20.0)
+    return np.stack([first, second])
+
+
+def report(theta, beta, d) -> dict:
+    nat = np.exp(np.asarray(theta))
+    names = (NATURAL_NAMES if has_piston(d) else surface_force.NATURAL) + (
+        GP_NATURAL if has_piston(d) else (GP_NATURAL[0], GP_NATURAL[2])
+    )
+    return {n: nat[:, i] for i, n in enumerate(names)}
+
+
+MODEL = CollapsedModel(
+    name="surface with a discrepancy in pressure",
+    theta_names=THETA_NAMES,
+    log_prob=log_prob,
+    draw_linear=draw_linear,
+    pointwise=pointwise,
+    start=start,
+    report=report,
+    predict=predict,
+    observed=observed,
+    pointwise_loo=pointwise_loo,
+    hold_out=hold_out,
+)
+
+FORCE_MODEL = MODEL._replace(
+    name="force surface with a discrepancy in pressure", theta_names=FORCE_THETA_NAMES
+)
+
+
+# ----------------------------------------------------------------------------- fit
+
+
+def min_heights_needed(orders: surface.Orders, piston: bool) -> int:
+    """Distinct heights a test needs for its per-test moments H_i to be positive definite: the
+    force's m_t + 1 coefficients at a pressure, the piston's m_t + 2."""
+    return span_degree(orders) + (2 if piston else 1)
+
+
+#: walkers per ensemble and sampled parameter (``walkers_for``)
+WALKERS_PER_PARAMETER = 8
+
+
+def walkers_for(settings, ndim: int):
+    """``settings`` with at least ``WALKERS_PER_PARAMETER`` walkers per sampled parameter in each
+    ensemble (64 for the eight of the full model, 40 for the force-only five), and at least what the
+    sampler's independence move needs (uq._inference.sampler.min_walkers_for_independence). Its
+    Student-t proposal is fitted to the other half of the ensemble; the eight parameters' posterior
+    is skewed (the force floor, the length scale), and with few walkers the fitted proposal is too
+    rough. Measured on data/n50 (seed 20201): 36 walkers, acceptance 0.137 (below the sampler's
+    rule, 0.15) and 2612 steps; 48, 0.154 and 2211 steps; 64, 0.183 and 1410 steps, the least CPU of
+    the three. (With the default 32 the independence move is switched off altogether.)"""
+    need = max(min_walkers_for_independence(ndim), WALKERS_PER_PARAMETER * ndim)
+    need = 4 * math.ceil(need / 4)
+    return settings if settings.n_walkers >= need else dataclasses.replace(settings, n_walkers=need)
+
+
+def fit_discrepancy(
+    rec: Recordings,
+    orders: surface.Orders | None = None,
+    *,
+    seed: int = 0,
+    settings=None,
+    max_draws: int = 4000,
+    stand: StandDescription = PAPER_STAND,
+):
+    """The surface with a discrepancy in pressure fitted to a campaign: the one driver (MAP of theta,
+    emcee over it, exact coefficient draws, ArviZ data and the convergence verdict); returns a
+    :class:`uq._models.discrepancy_fit.DiscrepancyFit`.
+
+    ``orders``: the surface's (default :func:`uq._models.surface.orders_for` the campaign); a
+    campaign without piston readings gets the force surface and the pressure-area deviation alone.
+    Needs two tests or more (one test has nothing between tested pressures) and, per test, the
+    distinct heights that fix the test's cubic (``min_heights_needed``). Ensembles get at least the
+    walkers the sampler's independence move needs (``walkers_for``)."""
+    orders = surface.orders_for(rec) if orders is None else orders
+    n_tests = len(rec.tests)
+    if n_tests < max(2, orders.Lp + 1):
+        raise InputError(
+            f"{rec.path}: {n_tests} test(s) at different pressures; the surface with a discrepancy in "
+            f"pressure needs at least {max(2, orders.Lp + 1)} ({orders.label})"
+        )
+    piston = rec.has_piston
+    if not piston and (orders.Dk >= 0 or orders.Dl >= 0):
+        raise InputError(
+            f"orders: {rec.path} has no piston readings; the force surface takes no volume block "
+            f"(Dk = Dl = -1), got {orders.label}",
+            param="orders",
+        )
+    need = min_heights_needed(orders, piston)
+    for t in rec.tests:
+        have = np.unique(np.round(t.height_m, 9)).size
+        if have < need:
+            raise InputError(
+                f"{rec.path}: the {t.pressure_bar:g}-bar test has {have} distinct heights; the "
+                f"surface with a discrepancy in pressure ({orders.label}) needs {need} per test"
+            )
+    data = dev_data(rec, orders, stand) if piston else force_dev_data(rec, orders, stand)
+    model = MODEL if piston else FORCE_MODEL
+    post = fit_collapsed(
+        model,
+        data,
+        seed=seed,
+        settings=walkers_for(settings or Settings(), len(model.theta_names)),
+        max_draws=max_draws,
+        seeds=[seed],
+        predictive=False,
+        desc="discrepancy sampling",
+    )
+    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
+    return DiscrepancyFit.from_posterior(
+        post, rec, orders, surface.geometry_of(rec), stand, provenance=prov
+    )

@@ -1,0 +1,319 @@
+"""The fitted surface with a discrepancy in pressure: its force, areas and blocks on fixed draws.
+
+The model (uq._models.discrepancy) knows the deviations of each tested pressure's cubic from the
+smooth surface; between tested pressures each posterior draw carries its Gaussian process in p_u
+(uq._models.discrepancy_gp) with its own amplitudes and length scale:
+
+* at the tested pressures the deviations are the draw's (a coefficient block of the fit, in m^2);
+* on a fixed grid of virtual pressures (``GRID_STEP_BAR`` apart over the tested range) each draw's
+  process is drawn once, jointly, given its values at the tested pressures: exact, because the
+  virtual pressures carry no readings; the standard normals come from the fit's seed and the
+  draw's index, so every call (and every thinned view, ``on_draws``, and a saved and loaded model)
+  sees the same curves;
+* between neighbouring nodes (tested or virtual) the draw's conditional mean given those two
+  nodes. What it neglects is the process's conditional sd between the nodes: at most
+  ``interpolation_sd(step / l)`` of the amplitude, 5 % for l = 0.5 bar at 0.1-bar nodes.
+
+So a draw's force at 801 pressures is one smooth curve in p_u, as ``uq margin`` needs (it looks for
+where each draw's force crosses the load). Everything else (the surface's blocks and columns, the
+saved format, the JSON's common parts) is the smooth surface's (uq._models.surface.SurfaceFit),
+with the deviations as two more blocks and the amplitudes and length scale among the sampled
+parameters; a fitted or loaded model evaluates in numpy.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from uq._inference.convergence import CLI_ADVICE
+from uq._inference.summary import estimate
+from uq._models import discrepancy_gp as gp
+from uq._models.fitted import thin_rows
+from uq._models.linear_fit import BlockSpec
+from uq._models.surface import SurfaceFit, force_label
+from uq._models.surface import summary as surface_summary
+from uq._physics.quantities import BAR_PA
+
+#: rows of draws whose grid values are computed at once (memory: chunk x nodes^2 floats)
+GRID_CHUNK = 256
+#: the seed stream of the virtual pressures' normals (with the fit's seed)
+GRID_STREAM = 29
+#: the sampled parameters of the discrepancy as reported (the noise's are the surface's)
+HYPER = ("a_F_m2", "a_V_m2", "length_bar")
+BLOCKS = (
+    ("pressure_area_deviation_m2", "delta", "F_p gains sum_k delta_k t^k at each tested pressure"),
+    ("volume_area_deviation_m2", "eps", "-dV/dx gains sum_k (delta_k + eps_k) t^k"),
+)
+
+
+@dataclass(eq=False, frozen=True, repr=False)
+class DiscrepancyFit(SurfaceFit):
+    """The surface with a discrepancy in pressure, fitted to a campaign (or loaded from a saved
+    file), on a fixed set of draws: the surface's coefficients and the deviations at the tested
+    pressures as blocks (physical units), the amplitudes and length scale among ``reported``.
+    Fitted by ``uq._models.discrepancy.fit_discrepancy``."""
+
+    name = "discrepancy"
+    words = "the surface with a discrepancy in pressure"
+    likelihood = "uq._models.discrepancy"
+    coverage_note = (
+        "the default: between tested pressures its band widens by what the data say the smooth "
+        "surface misses (docs/discrepancy.md; coverage in reports/between-coverage)"
+    )
+
+    @property
+    def orders_label(self) -> str:
+        base = force_label(self.orders) if self.force_only else self.orders.label
+        return f"{base}; Matern 3/2 in p_u"
+
+    # ---- blocks: the surface's, then the deviations at the tested pressures
+    @property
+    def n_k(self) -> int:
+        """Coefficients of a deviation in t (the surface's height degree K, plus one)."""
+        return self.orders.K + 1
+
+    @property
+    def n_channels(self) -> int:
+        return self.n_k * (1 if self.force_only else 2)
+
+    def surface_layout(self) -> tuple[BlockSpec, ...]:
+        return SurfaceFit.block_layout(self)
+
+    def block_layout(self) -> tuple[BlockSpec, ...]:
+        dev = tuple(
+            BlockSpec(
+                name,
+                tuple(
+                    f"{sym}_{k}_{p:g}bar"
+                    for p in self.tested_pressures_bar
+                    for k in range(self.n_k)
+                ),
+                1.0,
+                "m^2",
+                basis,
+            )
+            for name, sym, basis in BLOCKS[: self.n_channels // self.n_k]
+        )
+        return (*self.surface_layout(), *dev)
+
+    @property
+    def n_surface(self) -> int:
+        return sum(len(b.names) for b in self.surface_layout())
+
+    def _columns(self, x_m, p_bar, c=0.0, e=0.0, d=0.0) -> np.ndarray:
+        """The surface's columns, zeros for the deviation blocks (they enter through
+        ``deviation_draws``)."""
+        cols = super()._columns(x_m, p_bar, c, e, d)
+        pad = len(self.tested_pressures_bar) * self.n_channels
+        return np.concatenate([cols, np.zeros((cols.shape[0], pad))], axis=1)
+
+    @classmethod
+    def from_posterior(cls, posterior, recordings, orders, geometry, stand, *, provenance=None):
+        """The fit from the driver's posterior: the surface's standardised coefficients times their
+        scales, and the deviations at the tested pressures a s_k chol(R(l)) z of every draw."""
+        shell = cls(
+            orders,
+            geometry,
+            np.zeros((1, 1, 0)),
+            {},
+            np.asarray(recordings.pressures_bar, float),
+            (0.0, 0.0),
+        )
+        scales = np.concatenate([np.full(len(b.names), b.scale) for b in shell.surface_layout()])
+        ks = scales.size
+        beta = np.asarray(posterior.beta)
+        C, D, K = beta.shape
+        post = posterior.idata.posterior
+        reported = {n: np.asarray(post[n]) for n in post.data_vars}
+        amps = [reported[n].reshape(-1) for n in HYPER[: shell.n_channels // shell.n_k]]
+        z = beta[..., ks:].reshape(C * D, shell.n_channels, -1)
+        dev = gp.tested_values(
+            z,
+            np.concatenate(
+                [a[:, None] * np.full(shell.n_k, gp.COEFFICIENT_SCALE) for a in amps], 1
+            ),
+            reported["length_bar"].reshape(-1),
+            shell.tested_pressures_bar,
+        )  # (S, T, n_c)
+        blocks = [
+            dev[:, :, j * shell.n_k : (j + 1) * shell.n_k].reshape(C * D, -1)
+            for j in range(len(amps))
+        ]
+        coefficients = np.concatenate(
+            [beta[..., :ks] * scales, np.concatenate(blocks, axis=1).reshape(C, D, -1)], axis=-1
+        )
+        return cls(
+            orders,
+            geometry,
+            coefficients,
+            reported,
+            shell.tested_pressures_bar,
+            tuple(float(v) for v in recordings.height_range_m),
+            recordings,
+            posterior,
+            stand,
+            posterior.convergence,
+            dict(provenance or {}),
+        )
+
+    # ---- the draws between tested pressures
+    @functools.cached_property
+    def rows(self) -> np.ndarray:
+        """Indices of the fixed draws among all draws (the rule of ``thin_rows``)."""
+        return thin_rows(np.arange(int(np.prod(self.coefficients.shape[:2]))), self.max_draws)
+
+    @functools.cached_property
+    def hyper(self) -> dict:
+        """The fixed draws' amplitudes (S, n_blocks) m^2 and length scales (S,) bar."""
+        names = HYPER[: self.n_channels // self.n_k]
+        amps = np.stack(
+            [np.asarray(self.reported[n], float).reshape(-1)[self.rows] for n in names], 1
+        )
+        return {
+            "amplitude": amps,
+            "length": np.asarray(self.reported["length_bar"], float).reshape(-1)[self.rows],
+        }
+
+    @functools.cached_property
+    def channel_scale(self) -> np.ndarray:
+        """a s_k of every channel (delta's n_k, then eps's), (S, n_c)."""
+        return np.repeat(self.hyper["amplitude"], self.n_k, axis=1) * gp.COEFFICIENT_SCALE
+
+    @functools.cached_property
+    def tested_deviations(self) -> np.ndarray:
+        """The deviations at the tested pressures on the fixed draws, (S, T, n_c) m^2."""
+        dev = self.coef[:, self.n_surface :]
+        T = len(self.tested_pressures_bar)
+        per = dev.reshape(dev.shape[0], -1, T, self.n_k)  # (S, block, T, k)
+        return np.concatenate([per[:, j] for j in range(per.shape[1])], axis=2)
+
+    @functools.cached_property
+    def nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(node pressures (N,) ascending, deviations there (S, N, n_c)): the tested pressures and
+        the virtual ones between them."""
+        tested = np.asarray(self.tested_pressures_bar, float)
+        grid = gp.grid_nodes(tested)
+        S, G, c = self.rows.size, grid.size, self.n_channels
+        seed = int(self.provenance.get("seed") or 0)
+        rng = np.random.default_rng((seed, GRID_STREAM))
+        n_all = int(np.prod(self.coefficients.shape[:2]))
+        xi = rng.standard_normal((n_all, G, c))[self.rows]
+        vg = np.empty((S, G, c))
+        for a in range(0, S, GRID_CHUNK):
+            b = slice(a, a + GRID_CHUNK)
+            vg[b] = gp.draw_on_grid(
+                self.tested_deviations[b],
+                self.channel_scale[b],
+                self.hyper["length"][b],
+                tested,
+                grid,
+                xi[b],
+            )
+        allp = np.concatenate([tested, grid])
+        order = np.argsort(allp, kind="stable")
+        return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
+
+    def deviation_draws(self, height_m, p_bar, *, volume: bool = False, check: bool = True):
+        """The deviation of the pressure area from the surface's (``volume`` True: of the
+        volume-derived area, delta + eps), m^2, (S, *shape)."""
+        h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
+        if check:
+            self.check_range(h, p)
+        shape, t, p = h.shape, self.geometry.t(h.ravel()), p.ravel()
+        nodes, values = self.nodes
+        if nodes.size == 1:
+            i, w = np.zeros(p.size, int), np.ones((self.rows.size, p.size, 2)) * [1.0, 0.0]
+            values = np.concatenate([values, values], axis=1)
+        else:
+            i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
+        out = np.zeros((self.rows.size, p.size))
+        for k in range(self.n_k):
+            series = values[:, :, k]
+            if volume:
+                series = series + values[:, :, self.n_k + k]
+            out += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
+        return out.reshape(-1, *shape)
+
+    def _eps_draws(self, height_m, p_bar):
+        return self.deviation_draws(
+            height_m, p_bar, volume=True, check=False
+        ) - self.deviation_draws(height_m, p_bar, check=False)
+
+    def _p_pa(self, height_m, p_bar):
+        shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
+        return np.broadcast_to(np.asarray(p_bar, float), shape) * BAR_PA
+
+    # ---- the quantities: the surface's plus the deviations
+    def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
+        """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta."""
+        base = super().force_draws(height_m, p_bar, check=check)
+        return base + self._p_pa(height_m, p_bar) * self.deviation_draws(
+            height_m, p_bar, check=False
+        )
+
+    def pressure_area_draws(self, height_m, p_bar, *, check=True):
+        """F_p + delta, m^2: the pressure area with its deviation."""
+        base = super().pressure_area_draws(height_m, p_bar, check=check)
+        return base + self.deviation_draws(height_m, p_bar, check=False)
+
+    def volume_area_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
+        """The volume-derived area dV/dx = F_p + D + delta + eps, m^2 (eq. 1's second formula)."""
+        base = super().volume_area_draws(height_m, p_bar, check=check)
+        return base + self.deviation_draws(height_m, p_bar, volume=True, check=False)
+
+    def volume_excess_draws(self, height_m, p_bar, *, check=True):
+        """D + eps = -dV/dx - (F_p + delta), m^2."""
+        return super().volume_excess_draws(height_m, p_bar, check=check) + self._eps_draws(
+            height_m, p_bar
+        )
+
+    def spread_draws(self, height_m, p_bar, *, check=True):
+        """p_u (-dV/dx) - P = p_u (D + eps) - E, N."""
+        base = super().spread_draws(height_m, p_bar, check=check)
+        return base + self._p_pa(height_m, p_bar) * self._eps_draws(height_m, p_bar)
+
+    # ---- the JSON document
+    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
+        """The surface's document (``uq surface --json``) with the discrepancy: its kernel, priors,
+        sampled amplitudes and length scale, and its deviation at x0 at and between the tested
+        pressures."""
+        if self.document is not None:
+            return super().to_json(comparison, advice)
+        advice = CLI_ADVICE if advice is None else advice
+        doc = surface_summary(self, comparison, advice)
+        doc["label"] = self.label
+        doc["discrepancy"] = discrepancy_summary(self)
+        return doc
+
+
+def discrepancy_summary(fit: DiscrepancyFit) -> dict:
+    names = HYPER[: fit.n_channels // fit.n_k]
+    tested = np.asarray(fit.tested_pressures_bar, float)
+    between = (tested[:-1] + tested[1:]) / 2
+    some = fit.on_draws(2000)
+    x0 = np.array(fit.x0_m)
+    at_x0 = {
+        f"{pb:g}": {
+            "tested": bool(np.any(np.isclose(pb, tested))),
+            "pressure_area_deviation_m2": estimate(some.deviation_draws(x0, pb)),
+            "force_N": estimate(some.force_draws(x0, pb)),
+        }
+        for pb in sorted({*tested.tolist(), *between.tolist()})
+    }
+    return {
+        "kernel": "Matern 3/2 in p_u (bar)",
+        "deviation_degree": fit.n_k - 1,
+        "blocks": [b[0] for b in BLOCKS[: fit.n_channels // fit.n_k]],
+        "priors": {
+            "amplitude": f"exponential, P(a > {gp.AMPLITUDE_UPPER_REL:g} x reference area) = "
+            f"{gp.AMPLITUDE_TAIL:g} (reference area: the median pressure area of a least-squares fit)",
+            "length_bar": f"PC prior of a Matern range, P(l < {gp.LENGTH_LOWER_BAR:g} bar) = "
+            f"{gp.LENGTH_TAIL:g}",
+        },
+        "grid_step_bar": float(np.diff(fit.nodes[0]).max()) if fit.nodes[0].size > 1 else 0.0,
+        **fit.noise_summary(names + ("length_bar",)),
+        "at_x0": at_x0,
+    }

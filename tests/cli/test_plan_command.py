@@ -209,3 +209,34 @@ def test_plan_runs_end_to_end(pilot, tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert doc["model"] == "surface" and doc["n_readings"] <= 20
     assert np.isfinite(doc["targets"][0]["sd_predicted"])
+
+
+def test_model_choices_and_default_come_from_the_registry():
+    """--model takes auto and every registered model; its default is the registry's for plan."""
+    import argparse
+
+    import uq._cli.cmd_plan as cmd
+    from uq._derived.margin import AUTO
+    from uq._models import registry
+
+    p = argparse.ArgumentParser()
+    cmd.configure_plan(p)
+    action = next(a for a in p._actions if a.dest == "model")
+    assert tuple(action.choices) == (AUTO, *registry.names())
+    assert action.default == registry.default("plan")
+
+
+def test_a_model_without_a_planning_frame_is_refused_in_one_line():
+    """A fitted model the planner has no frame of (a model plugged in from outside) is refused
+    with an InputError naming it, not an AttributeError deep in the planner."""
+    from model_doubles import ModelDouble
+
+    from uq._derived.plan_frames import frames_of
+    from uq._io.errors import InputError
+
+    class Outside(ModelDouble):
+        name = "rolling_lobe"
+        label = "rolling lobe"
+
+    with pytest.raises(InputError, match="no planning frame for the model 'rolling_lobe'"):
+        frames_of(Outside())

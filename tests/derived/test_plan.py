@@ -554,6 +554,8 @@ def test_discrepancy_frame_is_the_models_posterior(table1_four):
         np.testing.assert_allclose(frame.mean[s], np.asarray(post.mean), rtol=1e-6, atol=1e-8)
 
 
+# the frame's rows of a test: test_discrepancy_frame_is_the_models_posterior (the same code path)
+@pytest.mark.slow
 def test_discrepancy_planned_precision_is_the_models_on_the_combined_campaign(table1_four):
     """A planned test's readings add to the frame's precision exactly what the model's posterior
     of the combined campaign has (the planned readings' noise references the frame's)."""

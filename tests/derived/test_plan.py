@@ -593,9 +593,26 @@ def test_discrepancy_between_tests_is_the_process_given_its_nodes(table1_four):
 
     b = discrepancy_builder(table1_four, n_draws=3, length_bar=1.0)
     target = [parse_target("force@110mm,5.5bar")]
-    v_between = E.evaluate(b.frame(), target)
-    v_node = E.evaluate(b.frame([5.5], after_bar=b.tested), target)
+    now = b.frame()
+    with_node = b.frame([5.5], after_bar=b.tested)  # built after: each frame keeps its own nodes
+    v_between = E.evaluate(now, target)
+    v_node = E.evaluate(with_node, target)
     np.testing.assert_allclose(v_between, v_node, rtol=1e-6)
     frame = b.frame()
     extra = frame.extra_force_var(np.array([0.110, 0.110]), np.array([4.0, 5.5]))
     assert np.all(extra[:, 0] < 1e-6 * extra[:, 1]) and np.all(extra[:, 1] > 0)
+
+
+def test_discrepancy_plan_tests_between_the_pilots_pressures(table1_four):
+    """make_plan with the discrepancy's frames: a force target between the pilot's pressures gets a
+    new test at its pressure (only there does the deviation's conditional variance go), with the
+    distinct heights the model's per-test span needs, and its predicted sd below now's."""
+    from plan_helpers import discrepancy_builder
+
+    b = discrepancy_builder(table1_four, n_draws=4, length_bar=1.0)
+    target = [parse_target("force@110mm,5.5bar")]
+    plan = P.make_plan(b, target, HEIGHTS, [2.5, 5.5, 8.5], max_readings=16, draws=4)
+    assert [t["pressure_bar"] for t in plan.tests] == [5.5]
+    need = b.min_test_heights(b.model(np.append(b.tested, 5.5))[0])
+    assert len(set(np.round(plan.tests[0]["heights_m"], 9))) >= need == 5
+    assert plan.sd_predicted[0] < plan.sd_now[0]

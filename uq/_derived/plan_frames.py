@@ -33,6 +33,8 @@ geometry, stand and recordings (public attributes of ``uq._models.linear_fit.Lin
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from uq._derived.plan_search import MIN_TEST_READINGS, Frame
@@ -85,6 +87,14 @@ def fit_reference(fit):
         return force, np.abs(lever(x, p, check=False).mean(0))
 
     return reference
+
+
+class Nodes(NamedTuple):
+    """The pressures of a discrepancy frame's tests (the file's, then the planned), bar, and per
+    draw the Cholesky factor of their correlation, (S, T, T)."""
+
+    p_bar: np.ndarray
+    chol: np.ndarray
 
 
 # ----------------------------------------------------------------------------- over all tests
@@ -164,9 +174,10 @@ class PairFrames:
             return f"{words} ({surface.force_label(orders)})"
         return f"{words} ({orders.label})"
 
-    def _designs(self, o, g, x, p, index, n_tests, rows=None):
+    def _designs(self, o, g, x, p, index, n_tests, rows=None, nodes=None):
         """Force and piston design rows (n, k), or (s, n, k) for rows that depend on the draws
-        ``rows`` (indices into ``theta``; None: all); the piston's None for a force-only model."""
+        ``rows`` (indices into ``theta``; None: all) and the frame's ``nodes`` (:meth:`prepare`);
+        the piston's None for a force-only model."""
         if self.force_only:
             return surface.force_design(o, g, x, p), None
         if self.thermo:
@@ -215,11 +226,11 @@ class PairFrames:
         ]
         return np.stack([zf, zl], axis=2)
 
-    def _pilot_block(self, rows, o, g, n_tests):
+    def _pilot_block(self, rows, o, g, n_tests, nodes):
         """Whitened design (s, n, k) and readings (s, n) of the file's readings for the draws
         ``rows`` (indices into ``theta``)."""
         d = self.data
-        Xf, Xl = self._designs(o, g, self.x, self.p, self.test_index, n_tests, rows)
+        Xf, Xl = self._designs(o, g, self.x, self.p, self.test_index, n_tests, rows, nodes)
         th = self.theta[rows]
         Xf = _draws(Xf, th.shape[0])
         if self.force_only:
@@ -240,13 +251,13 @@ class PairFrames:
         yw = np.concatenate([F / L11, (L - L21 * F / L11) / L22], axis=1)
         return Z, yw
 
-    def _pilot(self, o, g, n_tests):
+    def _pilot(self, o, g, n_tests, nodes):
         """Precision and mean per draw from the file's readings (prior N(0, I) in the standardised
         coefficients), in blocks of ``CHUNK`` draws."""
         S = self.theta.shape[0]
         P = m = None
         for lo in range(0, S, CHUNK):
-            Z, yw = self._pilot_block(np.arange(lo, min(lo + CHUNK, S)), o, g, n_tests)
+            Z, yw = self._pilot_block(np.arange(lo, min(lo + CHUNK, S)), o, g, n_tests, nodes)
             k = Z.shape[-1]
             if P is None:
                 P, m = np.empty((S, k, k)), np.empty((S, k))
@@ -266,28 +277,28 @@ class PairFrames:
         after = np.concatenate([self.tested, new]) if after_bar is None else after_bar
         o, g = self.model(after)
         T0, J = self.tested.size, new.size
-        self.prepare(new)
-        P, m = self._pilot(o, g, T0 + J)
+        nodes = self.prepare(new)
+        P, m = self._pilot(o, g, T0 + J, nodes)
         area = self.rec.piston_area_m2
 
         def reading_rows(j, heights_m):
             x = np.asarray(heights_m, float).reshape(-1)
             p = np.full(x.shape, new[j])
-            Xf_, Xl_ = self._designs(o, g, x, p, np.full(x.shape, T0 + j), T0 + J)
+            Xf_, Xl_ = self._designs(o, g, x, p, np.full(x.shape, T0 + j), T0 + J, None, nodes)
             return self._whiten(self.theta, Xf_, Xl_, *self._noise_data(x, p))
 
         def force_rows(x, p, open_=None):
             x, p = np.broadcast_arrays(np.asarray(x, float), np.asarray(p, float))
             idx = np.zeros(x.size, int)
-            return self._designs(o, g, x.ravel(), p.ravel(), idx, T0 + J)[0]
+            return self._designs(o, g, x.ravel(), p.ravel(), idx, T0 + J, None, nodes)[0]
 
         def area_rows(x, p, open_=None):
             """dV/dx = -S dL/dx, from the piston design by central differences (exact to
             rounding for these polynomials; the piston references drop out)."""
             x, p = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(x, p))
             idx = np.zeros(x.size, int)
-            up = self._designs(o, g, x + STEP_X_M, p, idx, T0 + J)[1]
-            down = self._designs(o, g, x - STEP_X_M, p, idx, T0 + J)[1]
+            up = self._designs(o, g, x + STEP_X_M, p, idx, T0 + J, None, nodes)[1]
+            down = self._designs(o, g, x - STEP_X_M, p, idx, T0 + J, None, nodes)[1]
             return -area * (np.asarray(up) - np.asarray(down)) / (2 * STEP_X_M)
 
         return Frame(
@@ -301,16 +312,18 @@ class PairFrames:
             reading_rows=reading_rows,
             force_rows=force_rows,
             area_rows=None if self.force_only else area_rows,
-            extra_force_var=self.extra_force_var(o),
+            extra_force_var=self.extra_force_var(nodes),
             volume_why=surface.volume_omitted_reason(self.rec) if self.force_only else "",
             key=(repr(o), repr(g)),
             min_test_heights=self.min_test_heights(o),
         )
 
-    def prepare(self, new_bar) -> None:
-        """Set up what the designs of a frame with new tests at ``new_bar`` need (nothing here)."""
+    def prepare(self, new_bar):
+        """What the designs of a frame with new tests at ``new_bar`` need besides the orders (None
+        here), passed to :meth:`_designs` as ``nodes``."""
+        return None
 
-    def extra_force_var(self, orders):
+    def extra_force_var(self, nodes):
         """The force's variance no reading reduces, as ``Frame.extra_force_var`` (None: none)."""
         return None
 
@@ -334,7 +347,6 @@ class DiscrepancyFrames(PairFrames):
         self.amplitudes = np.exp(self.theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
         self.length = np.exp(self.theta[:, n_noise + n_blocks])  # (S,)
         self.scales = np.asarray(data.s, float)  # s_k
-        self.nodes = self.tested
 
     @classmethod
     def of_fit(cls, fit, draws: int = DRAWS):
@@ -356,22 +368,19 @@ class DiscrepancyFrames(PairFrames):
     def min_test_heights(self, orders) -> int:
         return dev.min_heights_needed(orders, not self.force_only)
 
-    def prepare(self, new_bar) -> None:
+    def prepare(self, new_bar) -> Nodes:
         """The frame's pressures (the file's tests, then ``new_bar``) and, per draw, the Cholesky
         factor of their correlation."""
-        self.nodes = np.concatenate([self.tested, np.asarray(new_bar, float)])
-        d = np.abs(self.nodes[:, None] - self.nodes[None, :])
-        R = gp.matern32(d[None], self.length[:, None, None]) + gp.JITTER * np.eye(self.nodes.size)
-        self.chol = np.linalg.cholesky(R)  # (S, T, T)
+        p = np.concatenate([self.tested, np.asarray(new_bar, float)])
+        R = gp.matern32(np.abs(p[:, None] - p[None, :])[None], self.length[:, None, None])
+        return Nodes(p, np.linalg.cholesky(R + gp.JITTER * np.eye(p.size)))
 
-    def _weights(self, p_bar, rows):
+    def _weights(self, p_bar, rows, nodes: Nodes):
         """(L^-1 r(p)) (s, n, T) and the conditional variance 1 - |L^-1 r|^2 (s, n) of the
         process at pressures ``p_bar`` given the frame's tests, for the draws ``rows``."""
-        ell = self.length[rows]
-        d = np.asarray(p_bar, float)[None, :, None] - self.nodes[None, None]
-        r = gp.matern32(d, ell[:, None, None])
-        w = np.linalg.solve(self.chol[rows], np.swapaxes(r, 1, 2))  # (s, T, n)
-        w = np.swapaxes(w, 1, 2)
+        d = np.asarray(p_bar, float)[None, :, None] - nodes.p_bar[None, None]
+        r = gp.matern32(d, self.length[rows][:, None, None])
+        w = np.swapaxes(np.linalg.solve(nodes.chol[rows], np.swapaxes(r, 1, 2)), 1, 2)
         return w, np.clip(1.0 - np.sum(w**2, axis=-1), 0.0, None)
 
     def _channels(self, x, p):
@@ -390,10 +399,10 @@ class DiscrepancyFrames(PairFrames):
         a = self.amplitudes[rows]
         return np.concatenate([a[:, b : b + 1] * self.scales for b in range(a.shape[1])], axis=1)
 
-    def _designs(self, o, g, x, p, index, n_tests, rows=None):
+    def _designs(self, o, g, x, p, index, n_tests, rows=None, nodes=None):
         Xf, Xl = super()._designs(o, g, x, p, index, n_tests)
         rows = np.arange(self.theta.shape[0]) if rows is None else rows
-        w, _ = self._weights(p, rows)  # (s, n, T)
+        w, _ = self._weights(p, rows, nodes)  # (s, n, T)
         gc = self._channel_scales(rows)  # (s, n_c)
         cf, cl = self._channels(x, p)
         S, n = rows.size, np.size(x)
@@ -404,11 +413,11 @@ class DiscrepancyFrames(PairFrames):
 
         return dense(Xf, cf), (None if cl is None else dense(Xl, cl))
 
-    def extra_force_var(self, orders):
+    def extra_force_var(self, nodes):
         def extra(x, p, open_=None):
             x, p = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(x, p))
             rows = np.arange(self.theta.shape[0])
-            _, cv = self._weights(p, rows)  # (S, n)
+            _, cv = self._weights(p, rows, nodes)  # (S, n)
             cf, _ = self._channels(x, p)
             gc = self._channel_scales(rows)
             return np.einsum("nc,sc->sn", cf**2, gc**2) * cv

@@ -544,8 +544,9 @@ def test_discrepancy_frame_is_the_models_posterior(table1_four):
 
     b = discrepancy_builder(table1_four, n_draws=3)
     frame = b.frame()
+    posterior = jax.jit(dev.posterior)
     for s in range(frame.n_draws):
-        post = dev.posterior(jnp.asarray(b.theta[s]), b.data)
+        post = posterior(jnp.asarray(b.theta[s]), b.data)
         L = np.asarray(post.chol)
         want = L @ L.T
         np.testing.assert_allclose(
@@ -603,6 +604,9 @@ def test_discrepancy_between_tests_is_the_process_given_its_nodes(table1_four):
     assert np.all(extra[:, 0] < 1e-6 * extra[:, 1]) and np.all(extra[:, 1] > 0)
 
 
+# the frames' identities: test_discrepancy_frame_is_the_models_posterior and
+# test_discrepancy_between_tests_is_the_process_given_its_nodes (a frame keeps its own nodes)
+@pytest.mark.slow
 def test_discrepancy_plan_tests_between_the_pilots_pressures(table1_four):
     """make_plan with the discrepancy's frames: a force target between the pilot's pressures gets a
     new test at its pressure (only there does the deviation's conditional variance go), with the

@@ -730,6 +730,48 @@ def scaling_bench_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def plan_proof_summary(rel: str) -> Callable[[], str]:
+    """scripts/plan_proof.py: achieved against predicted sd, coverage, plan against uniform grid."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        lo, hi = d["binomial_region_95"]
+        lines = [
+            f"From `{rel}` (`{d['command']}`; {d['replications']} replications):",
+            "",
+            f"- 90 % intervals holding the truth: {d['covered']} of {d['intervals']} (exact binomial "
+            f"95 % region {lo}-{hi}).",
+            f"- Achieved over predicted posterior sd: mean {d['ratio_mean']:.2f}, range "
+            f"{d['ratio_min']:.2f}-{d['ratio_max']:.2f}.",
+            f"- Fits converged: {d['converged']['plan']} of {d['replications']} after the plan, "
+            f"{d['converged']['uniform']} after the uniform grid.",
+            "",
+            "| scenario | target | replications | achieved / predicted sd: mean (range) | truth covered "
+            "| uniform grid's sd over the plan's | plan better |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for t in d["by_target"]:
+            lines.append(
+                f"| {t['scenario']} | `{t['spec']}` | {t['n']} | {t['ratio_mean']:.2f} "
+                f"({t['ratio_min']:.2f}-{t['ratio_max']:.2f}) | {t['covered']}/{t['n']} | "
+                f"{t['uniform_over_plan_sd']:.2f} | {t['plan_better']}/{t['n']} |"
+            )
+        lines += [
+            "",
+            "Flagged (a mean ratio outside 0.8-1.25, a replication outside 0.6-1.6, coverage "
+            "below its binomial region, a model choice that changed):",
+            "",
+        ]
+        lines += [f"- {w}" for w in d.get("poor", [])] or ["- none"]
+        if d.get("model_choice"):
+            lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def n50_bands_summary(rel: str) -> Callable[[], str]:
     """scripts/n50_bands.py: the three models' 90 % force bands on data/n50 against Table 1's curves."""
 
@@ -952,6 +994,13 @@ BLOCKS: dict[str, Block] = {
         surface_coverage_summary("reports/surface-coverage/coverage.json")
     ),
     "diagnose-proof": report_block(diagnose_proof_summary("reports/diagnose-proof/summary.json")),
+    "plan-example": run_block(
+        "simulate --spring n50-smooth --pressures 2,5,8 --seed 3 --out pilot.csv",
+        "plan pilot.csv --target force@110mm,6.5bar --target pressure_for@110mm,9000N "
+        "--max-readings 60 --model surface --json plan.json --template next-tests.csv --plot plan.png",
+        slow=True,
+    ),
+    "plan-proof": report_block(plan_proof_summary("reports/plan-proof/proof.json")),
     "diagnose-power": report_block(diagnose_power_summary("reports/diagnose-power/power.json")),
     "noise-check": report_block(noise_check_summary("reports/noise-check/results.json")),
     "n50-bands": report_block(n50_bands_summary("reports/between-coverage/n50-bands.json")),

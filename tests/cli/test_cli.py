@@ -434,6 +434,20 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         ],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
         "batch": ["batch", d / "batch.csv", "--out", d / "batch"],
+        "plan": [
+            "plan",
+            csv,
+            "--target",
+            "force@110mm,5bar",
+            "--max-readings",
+            16,
+            "--model",
+            "surface",
+            "--draws",
+            30,
+            "--max-steps",
+            "300",
+        ],
     }
 
 
@@ -441,9 +455,9 @@ def test_every_command_has_a_json_row():
     assert set(_json_rows(Path("."), Path("."), Path("."))) == {c[0] for c in COMMANDS}
 
 
-#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration): their
-#: --json - runs with the slow suite
-HEAVY = ("batch", "diagnose", "calibrate")
+#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration,
+#: test_plan_command): their --json - runs with the slow suite
+HEAVY = ("batch", "diagnose", "calibrate", "plan")
 
 
 @pytest.mark.parametrize(

@@ -33,6 +33,7 @@ RUN_BY = {
     "(and the mkdocs build of scripts/test.sh)",
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
     "scripts/margin_coverage.py": "test_margin_coverage_tiny",
+    "scripts/plan_proof.py": "test_plan_proof_tiny",
     "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
@@ -364,3 +365,14 @@ def test_export_n50_from_a_saved_model(n50_surface, tmp_path):
     assert any(said in str(v) for row in sheet.iter_rows(values_only=True) for v in row)
     assert said in scipy.io.loadmat(out / "n50.mat", simplify_cells=True)["airspring"]["notes"]
     assert "reconstructed from its Table 1" in (out / "README.md").read_text()
+
+
+@pytest.mark.slow  # about 2.5 min; the claims it measures are carried by tests/derived/test_plan.py
+def test_plan_proof_tiny(tmp_path):
+    """One replication of one scenario with tiny settings: the JSON and the summary page."""
+    proc = _run("scripts/plan_proof.py", "--tiny", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "proof.json").read_text())
+    assert doc["replications"] == 1 and doc["intervals"] == 2
+    assert all(t["sd_achieved"] > 0 and t["sd_predicted"] > 0 for t in doc["rows"][0]["targets"])
+    assert "uq plan on the virtual stand" in (tmp_path / "summary.md").read_text()

@@ -248,10 +248,32 @@ def record_convergence(args, converged: bool, what: str) -> None:
         args.unconverged_fits = [*getattr(args, "unconverged_fits", []), what]
 
 
+def add_misfit(p: argparse.ArgumentParser) -> None:
+    """``--allow-misfit`` for the commands that check their model at the tested points before
+    answering (``uq design``, ``uq margin``; uq._derived.model_check)."""
+    p.add_argument(
+        "--allow-misfit",
+        action="store_true",
+        help="exit status 0 when the model that answers misses the readings it was fitted to (its "
+        "posterior-predictive check at the tested pressures fails): the answer is still printed and "
+        "written with the check; without it the exit status is 1",
+    )
+
+
+def record_misfit(args, check: dict) -> None:
+    """Tell the command line that the model behind this command's answer missed its readings
+    (``check``: :func:`uq._derived.model_check.predictive_check`); :func:`convergence_status`
+    turns it into the exit status."""
+    if check.get("misses"):
+        bars = ", ".join(f"{p:g}" for p in check["missed_pressures_bar"])
+        args.misfits = [*getattr(args, "misfits", []), f"{check['model']} at {bars} bar"]
+
+
 def convergence_status(args, name: str, status: int) -> int:
     """The exit-status policy for fits that failed their convergence rules (one place for every
     command): a command that finished (``status`` 0) with such a fit exits 1 with one line on
     stderr saying so, or 0 with ``--allow-unconverged``; any other status stands."""
+    status = misfit_status(args, name, status)
     failed = getattr(args, "unconverged_fits", [])
     if status != 0 or not failed:
         return status
@@ -428,3 +450,24 @@ def stand_from(args, model: bool = True):
             "them\n"
         )
     return stand
+
+
+def misfit_status(args, name: str, status: int) -> int:
+    """The exit-status policy for an answer whose model missed its readings (``record_misfit``):
+    exit 1 with one line on stderr, or 0 with ``--allow-misfit``; any other status stands."""
+    missed = getattr(args, "misfits", [])
+    if status != 0 or not missed:
+        return status
+    what = "; ".join(missed)
+    if getattr(args, "allow_misfit", False):
+        sys.stderr.write(
+            f"uq {name}: the model misses the readings ({what}), accepted with --allow-misfit: "
+            "exit 0; the answer carries the check\n"
+        )
+        return 0
+    sys.stderr.write(
+        f"uq {name}: the model misses the readings ({what}): its posterior-predictive check at the "
+        "tested pressures fails, so the answer printed and written is not to be trusted there; "
+        "exit 1. Use a model that follows them (see --model), or pass --allow-misfit to accept it\n"
+    )
+    return 1

@@ -58,7 +58,11 @@ COMMANDS = [
         "check posterior results against stored point estimates (exit 0 agree, 1 disagree, 2 bad input)",
     ),
     ("surface", "uq._cli.cmd_surface", "pressure-coupled surface model over all tests at once"),
-    ("margin", "uq._cli.cmd_margin", "design-margin queries on the surface model"),
+    (
+        "margin",
+        "uq._cli.cmd_margin",
+        "design-margin queries (by default on the surface with a discrepancy in pressure)",
+    ),
     (
         "design",
         "uq._cli.cmd_design",
@@ -80,6 +84,11 @@ COMMANDS = [
         "coverage of the credible intervals on simulated campaigns with known truth",
     ),
     (
+        "plan",
+        "uq._cli.cmd_plan",
+        "where to measure next: the readings that make chosen quantities' sd smallest for the stand time",
+    ),
+    (
         "batch",
         "uq._cli.cmd_batch",
         "a catalogue of campaigns (fit, report, surface, diagnose) on Dask: summary table, reruns skip finished ones",
@@ -89,7 +98,14 @@ COMMANDS = [
 #: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"
 #: (the folder to write into). --out is always "where this command writes": the file for
 #: simulate (--out FILE.csv), the folder for every other command.
-OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir", "csv": "file"}
+OUTPUT_KIND = {
+    "json": "file",
+    "report": "dir",
+    "out": "dir",
+    "csv": "file",
+    "template": "file",
+    "plot": "file",
+}
 OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file", ("export", "out"): "file"}
 
 #: the library's parameter names (``InputError.param``) and the options that set them
@@ -137,6 +153,10 @@ PARAM_OPTIONS = {
     "pressure": "--pressure",
     "ar1": "--pressure-ar1",
     "reps": "--reps",
+    "target": "--target",
+    "candidates_bar": "--pressures-bar",
+    "heights_m": "--heights-mm",
+    "model": "--model",
 }
 
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (

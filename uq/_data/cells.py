@@ -18,6 +18,9 @@ from uq._data.rows import DELIMITERS, Table
 from uq._io.errors import InputError, where
 
 BRANCHES = ("compression", "rebound")
+#: The first comment of a recordings template ``uq plan --template`` writes: its empty force and
+#: piston cells are readings still to be made, and the reader says so.
+PLANNED_MARK = "uq plan template"
 
 # ----------------------------------------------------------------------------- plausibility
 # Ranges no air spring on a stand like the paper's leaves; wide on purpose, so other springs,
@@ -262,6 +265,28 @@ class Readings:
     step: np.ndarray | None
 
 
+def _refuse_unfilled(table: Table, cols: dict[str, Column]) -> None:
+    """A ``uq plan`` template with readings not yet made: one line naming the first empty cell and
+    how many planned readings are still empty."""
+    if not any(c.startswith(PLANNED_MARK) for c in table.comments):
+        return
+    measured = [cols[q] for q in ("force", "piston") if q in cols]
+    empty = [
+        (row, c.name)
+        for row, fields in table.body
+        for c in measured
+        if c.index >= len(fields) or not str(fields[c.index]).strip()
+    ]
+    if empty:
+        rows = len({r for r, _ in empty})
+        row, name = empty[0]
+        raise InputError(
+            f"{where(table.name, row, name)}: empty: a reading planned by uq plan and not measured "
+            f"yet ({rows} planned reading{'s' if rows > 1 else ''} still empty); fill in "
+            f"{' and '.join(c.name for c in measured)} at the stand"
+        )
+
+
 def parse(table: Table, cols: dict[str, Column], pressure_offset_bar: float) -> Readings:
     """Every data row parsed, converted and checked against the ranges above, in file order.
 
@@ -276,6 +301,7 @@ def parse(table: Table, cols: dict[str, Column], pressure_offset_bar: float) -> 
         if c.index < len(fields)
     )
     n = len(table.body)
+    _refuse_unfilled(table, cols)
     values = {q: np.empty(n) for q in cols if q not in ("branch", "step")}
     comp = np.empty(n, bool) if "branch" in cols else None
     step = np.empty(n, int) if "step" in cols else None

@@ -9,7 +9,9 @@ section 6, has the tables):
   ``uq_version``, ``written_by``, ``settings_json``, ``stand_json``, ``converged``,
   ``warnings_json`` (the sampler's verdict and warnings), ``max_draws`` (the fixed draws' bound,
   -1 for none), ``recordings_comments_json`` (the recordings' header lines, e.g. that they are
-  reconstructed; exports repeat them) and whatever else the writer adds (``model_info_json``: why ``uq margin`` chose it);
+  reconstructed; exports repeat them) and whatever else the writer adds (``model_info_json``: why
+  ``uq margin`` chose it; ``model_check_json``: its posterior-predictive check at the tested points
+  when it was fitted);
 * group ``posterior``: every named coefficient block as a variable (chain, draw, coefficient) in
   physical units, and the sampled parameters as reported (chain, draw);
 * group ``constant_data``: the model's orders and geometry (``orders``/``orders_field``,
@@ -90,6 +92,8 @@ def _attrs(model, provenance: dict) -> dict:
     }
     if prov.get("model_info") is not None:
         attrs["model_info_json"] = dumps_json(prov["model_info"])
+    if prov.get("model_check") is not None:  # uq margin --save-fit: the check at the tested points
+        attrs["model_check_json"] = dumps_json(prov["model_check"])
     return attrs
 
 
@@ -185,6 +189,8 @@ def provenance_from(attrs: dict) -> dict:
     out["recordings_comments"] = json.loads(attrs.get("recordings_comments_json", "[]"))
     if "model_info_json" in attrs:
         out["model_info"] = json.loads(attrs["model_info_json"])
+    if "model_check_json" in attrs:
+        out["model_check"] = json.loads(attrs["model_check_json"])
     return out
 
 

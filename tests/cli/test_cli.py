@@ -311,7 +311,8 @@ def test_out_has_one_meaning():
         for action in _subparser(name)._actions:
             if "--out" in action.option_strings:
                 kind = OUTPUT_KIND_BY_COMMAND.get((name, "out"), OUTPUT_KIND["out"])
-                assert action.metavar == ("FILE.csv" if kind == "file" else "DIR"), name
+                file = "PATH" if name == "export" else "FILE.csv"  # export: any format's file
+                assert action.metavar == (file if kind == "file" else "DIR"), name
                 assert ("file" if kind == "file" else "folder") in action.help, name
 
 
@@ -448,6 +449,8 @@ def _json_rows(d: Path, csv: Path, fit: Path):
             "--max-steps",
             "300",
         ],
+        "export": ["export", csv, "--out", d / "e.csv", "--draws", "200", "--max-steps", "300"]
+        + ["--allow-unconverged"],
     }
 
 
@@ -456,8 +459,8 @@ def test_every_command_has_a_json_row():
 
 
 #: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration,
-#: test_plan_command): their --json - runs with the slow suite
-HEAVY = ("batch", "diagnose", "calibrate", "plan")
+#: test_plan_command, tests/cli/test_export_command.py): their --json - runs with the slow suite
+HEAVY = ("batch", "diagnose", "calibrate", "plan", "export")
 
 
 @pytest.mark.parametrize(

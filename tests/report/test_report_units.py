@@ -11,7 +11,7 @@ US = OutputUnits.of({"pressure": "psi", "height": "in", "force": "lbf", "volume"
 
 
 def test_axes_in_mm_and_kn_get_second_axes_in_inches_and_pounds():
-    plt = html._plt()
+    plt = html.pyplot()
     fig, (a, b) = plt.subplots(1, 2)
     a.set(xlabel="height x (mm)", ylabel="force P (kN)")
     b.set(xlabel="height x (mm)", ylabel="effective area F_eff = P / p_u (cm²)")
@@ -32,7 +32,7 @@ def test_axes_in_mm_and_kn_get_second_axes_in_inches_and_pounds():
 
 
 def test_units_the_figure_already_shows_get_no_second_axis():
-    plt = html._plt()
+    plt = html.pyplot()
     fig, ax = plt.subplots()
     ax.set(xlabel="height x (mm)", ylabel="force (N)")
     html.input_unit_axes(fig, OutputUnits())  # bar, mm, N: nothing to add

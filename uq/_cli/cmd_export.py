@@ -81,7 +81,14 @@ def _quantiles(text):
 
 
 def configure_export(p) -> None:
-    from uq._cli.cmd_design import POLYTROPIC_HELP, dvdp, polytropic
+    from uq._cli.cmd_design import (  # uq design's options and defaults: the same closed spring
+        DEFAULT_POLYTROPIC,
+        DVDP_HELP,
+        DVDP_SD_HELP,
+        POLYTROPIC_HELP,
+        dvdp,
+        polytropic,
+    )
 
     add_recordings(p)
     p.set_defaults(file=None)
@@ -156,16 +163,14 @@ def configure_export(p) -> None:
     g.add_argument(
         "--volume-sd-l", type=nonnegative_float, default=0.0, help="sd of --volume-l, litres"
     )
-    g.add_argument("--polytropic", type=polytropic, default=1.0, help=POLYTROPIC_HELP)
+    g.add_argument(
+        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
+    )
     g.add_argument(
         "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir, litres"
     )
-    g.add_argument(
-        "--dvdp-l-per-bar",
-        type=dvdp,
-        default=0.0,
-        help="dV/dp_u at the design height, L/bar (default 0, stated), or 'model'",
-    )
+    g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
+    g.add_argument("--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP)
     add_sampling(p)
     _export_allow_unconverged_help(p)
     add_stand(p)

@@ -52,7 +52,7 @@ def provenance_of(recordings, *, seed: int | None, settings=None, stand=None) ->
             "x0_mm": recordings.x0_m * 1e3,
             "piston_area_cm2": recordings.piston_area_m2 * 1e4,
         }
-        if recordings.sha256:  # the hash taken when the file was read (no second read)
+        if getattr(recordings, "sha256", None):  # the hash taken when read (no second read)
             out["recordings_sha256"] = recordings.sha256
         # the file's own header lines (e.g. "RECONSTRUCTED recordings ..."), which every export of
         # the saved model repeats

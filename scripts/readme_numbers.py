@@ -132,16 +132,49 @@ def maxwell_summary(rel: str) -> Callable[[], str]:
         d = _load(rel)
         if d is None:
             return f"(no results: {rel} is missing)\n"
-        levels = d["interpretation"]["middle"]["mean_r_by_pressure"]
+        middle = d["interpretation"]["middle"]
+        levels = middle["mean_r_by_pressure"]
+        sds = middle.get("sd_r_by_pressure", {})
         rows = ["| p_u bar | " + " | ".join(levels) + " |", "| --- |" + " --- |" * len(levels)]
         rows.append(
             "| r (middle of the stroke) | "
             + " | ".join(f"{v:+.3f}" for v in levels.values())
             + " |"
         )
+        if sds:
+            rows.append("| sd | " + " | ".join(f"{sds[p]:.3f}" for p in levels) + " |")
+        shapes = middle.get("shapes", {})
+        table = ""
+        if shapes:
+            names = {
+                "zero": "zero (the relation holds)",
+                "constant": "one value (a piston-area error alone)",
+                "step": "a step between two tested pressures",
+                "fade": "a fade (a straight line in p_u)",
+            }
+            lines = [
+                "| shape of r over pressure | chi^2 | dof | p | fits |",
+                "| --- | --- | --- | --- | --- |",
+            ]
+            for k, v in shapes.items():
+                where = (
+                    f" ({v['between_bar'][0]:g} and {v['between_bar'][1]:g} bar)"
+                    if k == "step"
+                    else ""
+                )
+                lines.append(
+                    f"| {names[k]}{where} | {v['chi2']:.1f} | {v['dof']} | {v['p']:.1e} | "
+                    f"{'yes' if v['fits'] else 'no'} |"
+                )
+            corr = middle.get("most_negative_correlation")
+            table = (
+                "\n\nThe levels' joint covariance (from the draws) enters every chi^2; the most "
+                f"negative correlation between two levels is {corr:+.2f}.\n\n" + "\n".join(lines)
+            )
         return (
             f"From `{rel}` (`{d['command']}`):\n\n"
             + "\n".join(rows)
+            + table
             + "\n\n"
             + d["interpretation"]["words"]
             + ".\n"
@@ -399,6 +432,45 @@ def diagnose_proof_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def noise_check_summary(rel: str) -> Callable[[], str]:
+    """scripts/noise_check_study.py: false alarms at the budget, and power."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        s = d["summary"]
+        lines = [
+            f"From `{rel}` (`{d['command']}`): the check fails when q05 of a noise scale factor k "
+            f"exceeds {s['noise_excess']:g} (before: {s['old_excess']:g}).",
+            "",
+            "| campaigns | how many | check fails | old rule fails | posterior mean of k (force) |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        f = s["null"]["force"]
+        lines.append(
+            f"| at 1.0x the budget, the model they were made with | {s['n_null']} | "
+            f"{s['null_alarms']} | {s['null_alarms_old']} | {f['k_mean_range'][0]:.2f} .. "
+            f"{f['k_mean_range'][1]:.2f} |"
+        )
+        for what, p in s["power"].items():
+            ks = p["k_force_mean"]
+            lines.append(
+                f"| {what} | {p['runs']} | {p['caught']} | {p['caught_old']} | "
+                f"{min(ks):.2f} .. {max(ks):.2f} |"
+            )
+        q = max(t["q05_max"] for t in s["null"].values())
+        lines += [
+            "",
+            f"False-alarm rate at the budget: at most {s['null_rate_upper_95']:.1%} per campaign "
+            f"(one-sided 95 % binomial bound on {s['null_alarms']} of {s['n_null']}); the largest "
+            f"q05 of k among them was {q:.2f}.",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def diagnose_power_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         d = _load(rel)
@@ -453,6 +525,48 @@ def ess_bench_summary(rel: str) -> Callable[[], str]:
             + ", ".join(f"{n} {v:.1f}" for n, v in r["ratio_each"].items())
             + f"; smallest {r['ratio_min_all']:.1f}",
         ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+def commands_bench_summary(rel: str) -> Callable[[], str]:
+    """The before/after table of ``benchmarks/commands.py --baseline`` (issue 32's goals)."""
+
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return (
+                f"(no benchmark yet: `python benchmarks/commands.py --baseline MAIN --json {rel}` "
+                "writes it)\n"
+            )
+        lines = [
+            f"From `{rel}` (`python benchmarks/commands.py`, {r['cores']} cores at load average "
+            f"{r['load_average_1min']:.1f}, {r['date']}): {r['workload']}, warm compilation cache, "
+            f"median of {r['reps']} repetitions; each command and the import floor "
+            f"(`import {', '.join(r['floor_modules'])}`: median {r['floor_wall_s']:.1f} s wall, "
+            f"{r['floor_cpu_s']:.1f} s CPU) in fresh interpreters, back to back. Before: "
+            f"{r.get('baseline_label') or 'the baseline checkout'}; after: commit {r['commit']}.",
+            "",
+            "| command | goal (x floor) | wall x floor, before | after | CPU x floor, before | after "
+            "| CPU s, before | after | peak RSS MB, before | after | largest worker MB, before | after |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for n, c in r["commands"].items():
+            b = c.get("baseline") or {}
+
+            def pair(key, fmt, b=b, c=c):
+                before = format(b[key], fmt) if key in b else "-"
+                return f"{before} | {format(c[key], fmt)}"
+
+            goal = f"{c['goal_ratio']:.1f}" if c.get("goal_ratio") else "-"
+            lines.append(
+                f"| `uq {n}` | {goal} | {pair('ratio_wall', '.2f')} | {pair('ratio_cpu', '.2f')} "
+                f"| {pair('cpu_s', '.1f')} | {pair('peak_rss_mb', '.0f')} "
+                f"| {pair('children_peak_rss_mb', '.0f')} |"
+            )
+        if r.get("note"):
+            lines += ["", f"Note: {r['note']}"]
         return "\n".join(lines) + "\n"
 
     return make
@@ -716,6 +830,7 @@ BLOCKS: dict[str, Block] = {
     ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),
+    "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),
     "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
     "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),
@@ -745,6 +860,7 @@ BLOCKS: dict[str, Block] = {
     ),
     "plan-proof": report_block(plan_proof_summary("reports/plan-proof/proof.json")),
     "diagnose-power": report_block(diagnose_power_summary("reports/diagnose-power/power.json")),
+    "noise-check": report_block(noise_check_summary("reports/noise-check/results.json")),
     "n50-bands": report_block(n50_bands_summary("reports/between-coverage/n50-bands.json")),
     "between-coverage": report_block(
         between_coverage_summary("reports/between-coverage/coverage.json")

@@ -34,3 +34,26 @@ def n50_surface(n50_recordings):
     from uq._models.surface_likelihood import fit_surface
 
     return fit_surface(n50_recordings, seed=20201)
+
+
+#: the small campaign the report's figure and page tests share: four pressures, 10 mm steps
+SMALL_LAYOUT_PRESSURES_BAR = (1.0, 3.0, 5.0, 8.0)
+
+
+@pytest.fixture(scope="session")
+def small_campaign():
+    """Four pressures of data/n50's spring every 10 mm (seed 4): the report's figures and pages."""
+    import uq
+
+    return uq.simulate(
+        "n50", seed=4, layout=uq.Layout(pressures_bar=SMALL_LAYOUT_PRESSURES_BAR, step_m=0.01)
+    )
+
+
+@pytest.fixture(scope="session")
+def small_cubics(small_campaign):
+    """The small campaign's per-pressure cubics on a short run (200 steps: the pages and figures
+    need draws of the right shape, not converged ones), fitted once for every module."""
+    import uq
+
+    return uq.fit_campaign(small_campaign, seed=4, settings=uq.Settings(max_steps=200))

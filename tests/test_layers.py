@@ -284,8 +284,10 @@ def test_no_model_name_literal_outside_the_models():
     assert not found, "model names typed outside uq/_models/:\n" + "\n".join(found)
 
 
-#: optional heavy dependencies a function may import where it needs them (with a "# reason:")
-LATE_IMPORTS = {"matplotlib", "dask", "distributed", "pandas"}
+#: optional heavy dependencies a function may import where it needs them (with a "# reason:"), and
+#: ArviZ and xarray (a second of import between them), which only some commands need: `uq fit`
+#: imports neither (issue 32)
+LATE_IMPORTS = {"matplotlib", "dask", "distributed", "pandas", "arviz", "xarray"}
 #: modules other engineers rewrite this round (the reader; the sampler's speed): their
 #: function-level imports move when that work lands (tracked in the round's issues)
 PENDING = {

@@ -20,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Every script and the test that runs it (test_every_script_is_run_by_a_test checks the list).
 RUN_BY = {
     "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
+    "benchmarks/commands.py": "test_commands_bench_tiny_run",
     "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
     "scripts/diagnose_proof.py": "test_diagnose_proof_small",
     "scripts/diagnose_power.py": "test_diagnose_power_tiny",
@@ -33,6 +34,7 @@ RUN_BY = {
     "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
+    "scripts/noise_check_study.py": "test_noise_check_study_tiny",
     "scripts/sealed_coverage.py": "tests/derived/test_design.py::test_coverage_script_runs_with_tiny_settings",
     "scripts/install.sh": "test_shell_scripts_parse (and every CI run: scripts/test.sh calls it)",
     "scripts/main.sh": "test_shell_scripts_parse",
@@ -125,6 +127,21 @@ def test_diagnose_proof_shapes_and_elastic_casing():
     assert not rec.has_both_branches
 
 
+def test_noise_check_study_tiny(tmp_path):
+    """The noise-check study on a small layout: the check passes at the budget with the model the
+    campaign was made with, and fails at 1.5x the budget (the claim reports/noise-check makes on
+    92 campaigns; the full run takes minutes)."""
+    proc = _run("scripts/noise_check_study.py", "--tiny", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "results.json").read_text())
+    verdicts = {r["what"]: r["passes"] for r in d["results"]}
+    assert verdicts == {"clean": True, "casing_force": True, "1.5x budget": False}, verdicts
+    assert (
+        d["summary"]["null_alarms"] == 0
+        and "false-alarm rate at most" in (tmp_path / "README.md").read_text()
+    )
+
+
 def test_diagnose_power_tiny(tmp_path):
     proc = _run(
         "scripts/diagnose_power.py",
@@ -183,7 +200,7 @@ def test_docs_figure_from_a_small_report(tmp_path):
     csv, png = tmp_path / "small.csv", tmp_path / "fig.png"
     simulate = ["simulate", "--out", csv, "--pressures", "1,5", "--step-mm", 10]
     assert _run("-m", "uq._cli.main", *simulate).returncode == 0
-    quick = ["--max-steps", 200, "--walkers", 8, "--draws", 50]
+    quick = ["--max-steps", 200, "--walkers", 8, "--draws", 50, "--allow-unconverged"]
     proc = _run("scripts/docs_figure.py", "--recordings", csv, "--out", png, *quick)
     assert proc.returncode == 0, proc.stderr
     image = matplotlib.image.imread(png)
@@ -219,6 +236,33 @@ def test_bench_tiny_run_writes_only_where_asked(tmp_path):
         want = r["project"]["ess_per_s_each"][n] / r["baseline"]["ess_per_s_each"][n]
         assert r["ratio_each"][n] == want
     assert "ratio project / baseline" in proc.stdout and f"written to {out}" in proc.stdout
+
+
+def test_commands_bench_tiny_run(tmp_path):
+    """The command benchmark on a small campaign with a short chain, one repetition, the same
+    code as its own baseline: the JSON's ratios are the medians of its pairs, the summary names
+    every command; never timing."""
+    csv, out = tmp_path / "small.csv", tmp_path / "r.json"
+    simulate = ["simulate", "--out", csv, "--pressures", "1,5", "--step-mm", 10]
+    assert _run("-m", "uq._cli.main", *simulate).returncode == 0
+    proc = _run(
+        ROOT / "benchmarks" / "commands.py",
+        *("--commands", "fit", "--reps", 1, "--cold", "--recordings", csv),
+        *("--extra", "--max-steps 100 --walkers 8", "--baseline", ROOT, "--json", out),
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    r = json.loads(out.read_text())
+    fit = r["commands"]["fit"]
+    (run,) = fit["runs"]
+    assert (
+        fit["ratio_wall"] == run["ratio_wall"] == run["command"]["wall_s"] / run["floor"]["wall_s"]
+    )
+    assert fit["baseline"]["ratio_cpu"] == run["ratio_cpu_baseline"] > 0
+    assert fit["goal_ratio"] == 1.6 and fit["peak_rss_mb"] > 0
+    assert "fit" in proc.stdout and "import floor" in proc.stdout
+    bad = _run(ROOT / "benchmarks" / "commands.py", "--commands", "fit,nope")
+    assert bad.returncode == 2 and "--commands" in bad.stderr
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,7 @@ import pytest
 
 from uq._io.errors import InputError
 
-QUICK = ["--max-steps", "200", "--walkers", "8"]
+QUICK = ["--max-steps", "200", "--walkers", "8", "--allow-unconverged"]
 
 
 def _env(**extra) -> dict:

@@ -21,7 +21,7 @@ DATA = {
     "force-only": ROOT / "data" / "n50-force-only" / "recordings.csv",
     "catalogue": ROOT / "data" / "n50-catalogue" / "recordings.csv",
 }
-FAST = ["--walkers", "8", "--ensembles", "2", "--max-steps", "40", "--quiet"]
+FAST = ["--walkers", "8", "--ensembles", "2", "--max-steps", "40", "--quiet", "--allow-unconverged"]
 
 
 def _run(argv) -> tuple[int, str]:
@@ -153,6 +153,9 @@ def test_report_surface_on_a_catalogue_links_the_force_surface_page(tmp_path):
     assert "href='surface.html'" in (out / "report.html").read_text()
     page = (out / "surface.html").read_text()
     assert "volume results omitted" in page and "force alone" in page
+    # 40 steps: the surface's sampler did not converge, and its page opens saying so (issue 29)
+    assert "NOT CONVERGED: the surface model" in page[: page.index("<h2")]
+    assert "NOT CONVERGED" in (out / "report.html").read_text()
 
 
 def test_batch_runs_force_only_and_catalogue_campaigns(tmp_path):
@@ -162,8 +165,23 @@ def test_batch_runs_force_only_and_catalogue_campaigns(tmp_path):
         f"fo,{DATA['force-only']},fit,8,2,40\n"
         f"cat,{DATA['catalogue']},fit,8,2,40\n"
     )
-    code, _ = _run(["batch", cat, "--out", tmp_path / "out", "--serial", "--quiet"])
+    code, out = _run(["batch", cat, "--out", tmp_path / "out", "--serial", "--quiet"])
     rows = list(csv.DictReader((tmp_path / "out" / "summary.csv").read_text().splitlines()))
-    assert code == 0 and [r["status"] for r in rows] == ["done", "done"], rows
+    assert [r["status"] for r in rows] == ["done", "done"], rows
     fo = json.loads((tmp_path / "out" / "fo" / "fit" / "fit.json").read_text())
     assert all("piston" in t["omitted"] for t in fo["tests"])
+    # 40 steps do not converge: every task ran, but the batch does not pass them as results
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert [r["converged"] for r in rows] == ["False", "False"]
+    assert summary["not_converged"] == 2 and code == 1
+    assert [(v["campaign"], v["verdict"]) for v in summary["verdicts"]] == [
+        ("fo", "not converged"),
+        ("cat", "not converged"),
+    ]
+    assert "fo: not converged (not converged: fit)" in out and "NOT CONVERGED;" in out
+    assert "NOT CONVERGED" in (tmp_path / "out" / "index.html").read_text()
+    # asked to continue: the same (skipped, finished) tasks, exit 0
+    code, _ = _run(
+        ["batch", cat, "--out", tmp_path / "out", "--serial", "--quiet", "--allow-unconverged"]
+    )
+    assert code == 0

@@ -454,7 +454,16 @@ def test_bad_recordings_exit_2_one_line_nothing_written(tmp_path, capsys, lines,
     csv = _write_input(tmp_path, lines)
     out = tmp_path / "out"
     status = _run(
-        ["fit", str(csv), "--json", str(out / "fit.json"), "--max-steps", "400", *options]
+        [
+            "fit",
+            str(csv),
+            "--json",
+            str(out / "fit.json"),
+            "--max-steps",
+            "400",
+            "--allow-unconverged",
+            *options,
+        ]
     )
     captured = capsys.readouterr()
     err = captured.err.strip()

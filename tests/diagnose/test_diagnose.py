@@ -177,7 +177,19 @@ def test_same_seed_gives_byte_identical_json(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     for out in (a, b):
         assert (
-            main(["diagnose", str(csv), "--json", str(out), "--seed", "5", "--max-steps", "400"])
+            main(
+                [
+                    "diagnose",
+                    str(csv),
+                    "--json",
+                    str(out),
+                    "--seed",
+                    "5",
+                    "--max-steps",
+                    "400",
+                    "--allow-unconverged",
+                ]
+            )
             == 0
         )
     assert a.read_bytes() == b.read_bytes()

@@ -175,7 +175,7 @@ def test_local_cluster_run_failed_campaign_summary_and_rerun_skip(campaigns, tmp
     tty = _Terminal()
     sys_stderr, sys.stderr = sys.stderr, tty
     try:
-        assert main(["batch", cat2, "--out", str(out)]) == 0
+        assert main(["batch", cat2, "--out", str(out), "--allow-unconverged"]) == 0
     finally:
         sys.stderr = sys_stderr
         _progress.set_enabled(False)

@@ -4,6 +4,7 @@ saved posteriors that ArviZ's own tools (az.loo, az.plot_ppc) work on."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import uq
 
@@ -45,3 +46,74 @@ def test_saved_posteriors_work_with_arviz(tmp_path):
         loo = az.loo(idata, var_name="force_N")
         axes = az.plot_ppc(idata, var_names=["force_N"], num_pp_samples=20)
     assert np.isfinite(loo.elpd_loo) and np.size(axes) >= 1
+
+
+def _map_and_jax_hessian(model, data, active=None):
+    import jax
+    import jax.numpy as jnp
+
+    from uq._inference import collapsed as C
+
+    opt = C.find_map(model, data, active)
+    act = opt.active
+    dims = np.flatnonzero(act)
+    flags = jnp.asarray(act.astype(float))
+    H = np.asarray(jax.hessian(C._objective(model.log_prob))(jnp.asarray(opt.theta), (flags, data)))
+    return opt, H[np.ix_(dims, dims)]
+
+
+def _cubic_case():
+    from uq._models import cubic
+
+    test = uq.simulate("n50", seed=6, layout=LAYOUT).tests[0]
+    return cubic.MODEL, cubic.prepare(test, 0.112, "budget", uq.PAPER_STAND)[0], None
+
+
+def _diagnose_case():
+    from uq._models import diagnose as M
+
+    layout = uq.Layout(pressures_bar=(2.0, 5.0), step_m=0.01)
+    d, _ = M.prepare(uq.simulate("n50-traditional", seed=3, layout=layout))
+    names = ("hysteresis", "volume_excess")
+    return M.MODEL, M.with_model(d, names, 3), M.active_of(names)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        _cubic_case,
+        # slow: the diagnose model's JAX Hessian takes minutes to trace on a loaded machine; the
+        # cubic case above carries the claim in the fast suite
+        pytest.param(_diagnose_case, marks=pytest.mark.slow),
+    ],
+)
+def test_laplace_curvature_by_differences_is_jax_s_hessian(case):
+    """The Laplace covariance comes from central differences through the sampler's compiled log
+    posterior (no Hessian program to trace): within 1e-5 of JAX's exact Hessian at the MAP, for
+    the per-pressure cubic and a diagnose candidate with magnitudes free."""
+    model, data, active = case()
+    opt, H = _map_and_jax_hessian(model, data, active)
+    np.testing.assert_allclose(np.linalg.inv(opt.cov), H, rtol=1e-5, atol=1e-6 * np.abs(H).max())
+
+
+def test_posterior_makes_its_parts_on_demand_and_the_same_whenever():
+    """Pointwise terms, replicates, leave-one-out densities and the InferenceData are made when
+    first asked for (a fit that does not use them does not pay for them) and are the same draws
+    whenever they are made: fixed by the fit's seed."""
+    from uq._models import cubic
+
+    test = uq.simulate("n50", seed=8, layout=uq.Layout(pressures_bar=(5.0,), step_m=0.01)).tests[0]
+    data = cubic.prepare(test, 0.112, "budget", uq.PAPER_STAND)[0]
+    quick = uq.Settings(max_steps=300)
+    a = uq._inference.collapsed.fit_collapsed(cubic.MODEL, data, seed=3, settings=quick)
+    b = uq._inference.collapsed.fit_collapsed(cubic.MODEL, data, seed=3, settings=quick)
+    assert not a._cache  # nothing beyond the draws, the reported variables and the verdict
+    idata = a.idata  # everything at once, through the InferenceData
+    assert {"posterior", "log_likelihood", "posterior_predictive", "observed_data"} <= set(
+        idata.groups()
+    )
+    for name in ("force_N", "piston_m"):  # b's made one at a time, in another order
+        np.testing.assert_array_equal(b.predictive[name], idata.posterior_predictive[name])
+        np.testing.assert_array_equal(b.loglik[name], idata.log_likelihood[name])
+    np.testing.assert_array_equal(a.loglik_loo, b.loglik_loo)
+    np.testing.assert_array_equal(a.flat("a_P"), np.asarray(idata.posterior["a_P"]).reshape(-1))

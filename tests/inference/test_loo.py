@@ -60,3 +60,15 @@ def test_kfold_holds_every_term_out_once():
     assert (
         np.all(held_counts == 1) and res.elpd == -25.0 and res.method == "5-fold cross-validation"
     )
+
+
+def test_an_undefined_pareto_k_is_unreliable_and_json_safe():
+    """ArviZ returns k = inf where it cannot fit the tail: such a term counts as over 0.7, and the
+    summary a command writes as JSON carries no infinity (it failed json.dumps(allow_nan=False))."""
+    import json
+
+    k = np.array([0.1, np.inf, 0.8, 0.2])
+    summary = L.Loo(loo_i=np.zeros(4), pareto_k=k).pareto()
+    assert summary == {"max": None, "n_over_0.7": 2, "n_undefined": 1, "n_terms": 4}
+    json.dumps(summary, allow_nan=False)
+    assert L.Loo(loo_i=np.zeros(2), pareto_k=np.array([0.1, 0.3])).pareto()["max"] == 0.3

@@ -366,3 +366,25 @@ def test_snooker_proposal_is_ter_braak_and_vrugts():
             f = (D - 1) * np.log(np.linalg.norm(x_new - z) / np.linalg.norm(s[g] - z))
             found.append(np.allclose(q[g], x_new) and np.isclose(factor[g], f))
         assert any(found), g
+
+
+def test_tau_is_emcee_s_integrated_time():
+    """The vectorised tau (all ensembles, walkers and parameters in one FFT) is emcee's
+    ``integrated_time`` (c = 5), a walker that never moved giving NaN as there."""
+    import warnings
+
+    import emcee
+
+    from uq._inference.sampler import _tau
+
+    rng = np.random.default_rng(11)
+    for shape in [(100, 32, 3), (7, 8, 2), (300, 8, 5), (1, 4, 1)]:
+        x = 0.1 * rng.standard_normal(shape).cumsum(0) + rng.standard_normal(shape)
+        x2 = x.copy()
+        x2[:, 0, 0] = 1.0  # a stuck walker
+        for chain in (x, x2):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                want = emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
+            np.testing.assert_allclose(_tau(chain), want, rtol=1e-10, equal_nan=True)
+        np.testing.assert_allclose(_tau(np.stack([x, x2]))[0], _tau(x), rtol=1e-12, equal_nan=True)

@@ -210,6 +210,8 @@ def test_a_model_plugged_in_runs_through_every_command(plugged, tmp_path, capsys
     )
     d = json.loads(design.read_text())
     assert d["model"].startswith("traditional test model") and d["natural_frequency_Hz"]["mean"] > 0
+    # uq design ranks its model by default; one without pointwise likelihoods is said unranked
+    assert d["comparison"]["better"] == "refused" and "no pointwise" in d["comparison"]["reason"]
     capsys.readouterr()
 
 

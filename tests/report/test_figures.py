@@ -17,14 +17,11 @@ from uq._derived.bands import campaign_bands
 from uq._report import campaign
 from uq._report.html import encode, pyplot
 
-SMALL = uq.Layout(pressures_bar=(1.0, 3.0, 5.0, 8.0), step_m=0.01)
-QUICK = uq.Settings(max_steps=200)
-
 
 @pytest.fixture(scope="module")
-def small_fit():
-    fit = uq.fit_campaign(uq.simulate("n50", seed=4, layout=SMALL), seed=4, settings=QUICK)
-    return fit, campaign_bands(fit, n_draws=100, seed=0)
+def small_fit(small_cubics):
+    """The shared small campaign's cubics (tests/conftest.py, fitted once per session)."""
+    return small_cubics, campaign_bands(small_cubics, n_draws=100, seed=0)
 
 
 def test_the_overlap_check_finds_two_long_titles_side_by_side():

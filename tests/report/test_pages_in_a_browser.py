@@ -18,19 +18,12 @@ from figure_text import overlaps
 import uq
 from uq._derived.comparison import compare
 
-SMALL = uq.Layout(pressures_bar=(1.0, 3.0, 5.0, 8.0), step_m=0.01)
 QUICK = uq.Settings(max_steps=200)
 NOISE_CODE_NAMES = ("s0_N", "rel_load", "k_p", "sL_m", "V0_m3", "σ0", "σ_L")
 
 
-@pytest.fixture(scope="module")
-def small_campaign():
-    return uq.simulate("n50", seed=4, layout=SMALL)
-
-
-@pytest.fixture(scope="module")
-def small_cubics(small_campaign):
-    return uq.fit_campaign(small_campaign, seed=4, settings=QUICK)
+# small_campaign and small_cubics (four pressures, 200 steps) are shared with the figure tests:
+# tests/conftest.py fits them once per session
 
 
 def test_the_checker_refuses_a_blank_page(tmp_path):
@@ -156,7 +149,7 @@ def small_diagnosis(small_campaign):
     return uq.diagnose(small_campaign, seed=4, settings=QUICK, sample_final=False)
 
 
-def test_diagnose_page(small_diagnosis, tmp_path):
+def test_diagnose_page(small_diagnosis, small_campaign, tmp_path):
     from uq._report.diagnose import write_diagnose_report
 
     found = small_diagnosis
@@ -173,7 +166,7 @@ def test_diagnose_page(small_diagnosis, tmp_path):
             assert "The other reading of the same numbers" in text
     mx = found["maxwell"]
     assert text.count("<td class='out'>") == sum(r["breaks"] for r in mx["rows"])
-    for p in SMALL.pressures_bar:
+    for p in small_campaign.pressures_bar:
         assert f"<tr><th>{p:g}</th><td" in text
     assert mx["interpretation"]["words"].replace("'", "&#x27;") in text
     assert "Every mechanism was offered" in text

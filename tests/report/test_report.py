@@ -45,6 +45,37 @@ def test_report_on_n50_fixture(n50_fit, tmp_path):
     assert "5-bar test" in page and "Figure 5" in page
     for p in (0.1, 5, 10):
         assert f"test_{p:g}bar.png" in page
+    assert n50_fit.converged and "NOT CONVERGED" not in page  # no banner on a converged fit
+
+
+def test_an_unconverged_fit_opens_with_a_banner_and_every_figure_is_stamped(tmp_path, monkeypatch):
+    """Issue 29: a fit whose convergence rules fail cannot pass as a result: the page opens with
+    the NOT CONVERGED banner naming the tests and their failed rules, and every figure drawn from
+    the fit (the campaign's, and the failing tests' own) carries the stamp, also as a file."""
+    import uq
+    import uq._report.campaign as campaign
+    from uq._report.html import stamp_unconverged
+
+    rec = uq.simulate("n50", seed=3, layout=uq.Layout(pressures_bar=(2.0, 6.0), step_m=0.01))
+    short = uq.Settings(n_walkers=8, n_ensembles=2, min_steps=12, chunk=4, max_steps=16)
+    fit = uq.fit_campaign(rec, seed=3, settings=short)
+    assert not fit.converged
+    stamped = []
+
+    def stamp(fig, what):
+        stamped.append(what)
+        stamp_unconverged(fig, what)
+        assert any("NOT CONVERGED" in t.get_text() for t in fig.texts)
+
+    monkeypatch.setattr(campaign, "stamp_unconverged", stamp)
+    write_report(fit, tmp_path / "rep", draws=200)
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    head = page[: page.index("<h2")]
+    assert "NOT CONVERGED: 2 of 2 tests (2, 6 bar)" in head and "R-hat" in page
+    assert "--allow-unconverged" in head
+    n_figures = len(list((tmp_path / "rep").glob("*.png")))
+    assert len(stamped) == n_figures  # the campaign's figures and both tests' own
+    assert stamped.count("the 2 bar test") == 1 and stamped.count("the 6 bar test") == 1
 
 
 def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path, monkeypatch):
@@ -94,6 +125,7 @@ def test_report_cli_small_campaign(small_csv, tmp_path, capsys):
             "600",
             "--draws",
             "300",
+            "--allow-unconverged",
         ]
     )
     assert rc == 0
@@ -145,6 +177,7 @@ def test_report_links_the_surface_page(tmp_path):
                 "200",
                 "--max-steps",
                 "400",
+                "--allow-unconverged",
             ]
         )
         == 0

@@ -47,6 +47,12 @@ def configure_batch(p) -> None:
     p.add_argument(
         "--json", metavar="PATH", help="also write the summary JSON to PATH ('-' for stdout)"
     )
+    p.add_argument(
+        "--allow-unconverged",
+        action="store_true",
+        help="exit status 0 when every task ran but some fit failed its convergence rules (its "
+        "outputs still say NOT CONVERGED); without it the exit status is 1",
+    )
 
 
 def command_batch(args) -> int:
@@ -94,14 +100,31 @@ def command_batch(args) -> int:
         f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed in {time.perf_counter() - t0:.1f} s; "
         f"summary: {Path(args.out) / 'index.html'}"
     )
+    for v in res["verdicts"]:
+        print(f"  {v['campaign']}: {v['verdict']}" + (f" ({v['why']})" if v["why"] else ""))
     emit_json(res, args.json)
     if c["failed"]:
         print(f"uq batch: {c['failed']} task(s) failed (see the summary)", file=sys.stderr)
         return 1
+    if res["not_converged"]:
+        accepted = getattr(args, "allow_unconverged", False)
+        print(
+            f"uq batch: NOT CONVERGED: {res['not_converged']} task(s) finished with a fit that failed "
+            "its convergence rules (see the summary); "
+            + (
+                "accepted with --allow-unconverged: exit 0"
+                if accepted
+                else "exit 1 (--allow-unconverged to accept them)"
+            ),
+            file=sys.stderr,
+        )
+        return 0 if accepted else 1
     return 0
 
 
 def _row_line(r: dict) -> str:
     secs = "" if r.get("seconds") is None else f" {r['seconds']:.1f} s"
     tail = r["error"] if r["status"] == "failed" else r.get("result", "")
+    if r["status"] != "failed" and r.get("converged") is False:
+        tail = f"NOT CONVERGED; {tail}"
     return f"  {r['status']:<7} {r['campaign']}/{r['task']}{secs}: {tail}"

@@ -15,7 +15,7 @@ import sys
 import time
 from types import SimpleNamespace
 
-from uq._cli.common import option_type
+from uq._cli.common import option_type, record_convergence
 from uq._models import registry
 
 POLYTROPIC_HELP = (
@@ -139,6 +139,12 @@ def configure_design(p) -> None:
         default=registry.default("design"),
         help=f"the model of the element ({registry.help_words()}); a model with its own dV/dp_u "
         "offers --dvdp-l-per-bar model",
+    )
+    g.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="skip ranking the model against the per-pressure cubics by PSIS-LOO (saves the "
+        "cubics' fit; the sheet and the JSON then say the answer was not ranked)",
     )
     s = p.add_argument_group("the data sheet")
     s.add_argument(
@@ -294,16 +300,28 @@ def command_design(args) -> int:
         if args.sheet_heights_mm
         else _default_heights(rec, x_c)
     )
-    pressures = sorted({t.pressure_bar for t in rec.tests})
+    tested = sorted({t.pressure_bar for t in rec.tests})
+    # the isobaric table also at the design charge when it was not tested (the sheet marks it)
+    pressures = sorted(set(tested) | {float(args.charge_bar)})
     charges = args.charges_bar or _default_charges(rec)
     if not rec.has_piston:
         return _force_only(args, rec, stand, settings, heights, pressures, t0)
-    fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+    comparison = None
+    if args.no_compare or not entry.over_all_tests:
+        fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+    else:  # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
+        from uq._derived.comparison import fit_both
+
+        fit, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, model=args.model
+        )
     model = fit.on_draws(args.draws)
     design = _design_from(args)
     grid = D.DesignGrid(model, x_c)
     doc = D.design_document(model, design, charges, grid)
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
+    doc["tested_pressures_bar"] = tested
+    doc["comparison"] = comparison
     doc["source"] = _source(args, rec, fit)
     curves = None
     if args.out:
@@ -315,7 +333,8 @@ def command_design(args) -> int:
     _sheet_and_json(
         args, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
     )
-    return 1 if (args.strict and not fit.convergence.converged) else 0
+    record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
+    return 0
 
 
 def _source(args, rec, fit) -> dict:
@@ -378,6 +397,8 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
             model.label,
         ],
         "isobaric": D.isobaric_table(model, pressures, heights, x_c),
+        "tested_pressures_bar": sorted({t.pressure_bar for t in rec.tests}),
+        "comparison": None,  # the per-pressure cubics answer: no other model fitted to rank against
         "source": _source(args, rec, fit),
     }
     e = doc["load_N"]
@@ -390,7 +411,8 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
     )
     print(f"  {FORCE_ONLY_WHY}")
     _sheet_and_json(args, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
-    return 1 if (args.strict and not fit.convergence.converged) else 0
+    record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
+    return 0
 
 
 def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
@@ -446,5 +468,12 @@ def _print_sealed(rec, model, doc) -> None:
             f"  sealed curve {c['height_m'][0] * 1e3:g}..{c['height_m'][-1] * 1e3:g} mm"
             + (f" ({c['omitted_reason']})" if c["omitted_reason"] else "")
         )
+    from uq._derived.comparison import words
+
+    c = doc.get("comparison")
+    print(
+        "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
+        + (words(c) if c else "not ranked (--no-compare, or the cubics answered)")
+    )
     for w in doc["source"]["warnings"]:
         print(f"  warning: {w}", file=sys.stderr)

@@ -6,7 +6,15 @@ import argparse
 import math
 import sys
 
-from uq._cli.common import add_json, add_recordings, add_sampling, add_stand, load, stand_from
+from uq._cli.common import (
+    add_json,
+    add_recordings,
+    add_sampling,
+    add_stand,
+    load,
+    record_convergence,
+    stand_from,
+)
 from uq._diagnose import engine as _diagnose
 from uq._diagnose.engine import GAIN_SE, summary_text
 from uq._inference.sampler import Settings
@@ -70,4 +78,5 @@ def command_diagnose(args) -> int:
     if args.report:
         write_diagnose_report(res, args.report)
     warn = (res["sampling"] or {}).get("warnings") or []
-    return 1 if (args.strict and warn) else 0
+    record_convergence(args, not warn, "the final model's sampler")
+    return 0

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uq._cli.common import add_stand, stand_from
+from uq._cli.common import add_stand, record_convergence, stand_from
 from uq._derived.margin import AUTO, load_answer, margin, model_choices
 from uq._io.errors import InputError
 from uq._io.files import sha256_of
@@ -474,7 +474,8 @@ def command_margin(args) -> int:
         )
     if queries or args.json is not None:
         emit_json(results if args.queries else results[0], args.json)
-    return 1 if (getattr(args, "strict", False) and not diagnostics["converged"]) else 0
+    record_convergence(args, diagnostics["converged"], "the fit the answers come from")
+    return 0
 
 
 def _warn_if_recordings_changed(meta: dict) -> None:

@@ -12,6 +12,7 @@ from uq._cli.common import (
     add_stand,
     load,
     positive_int,
+    record_convergence,
     settings_from,
     stand_from,
 )
@@ -147,9 +148,9 @@ def command_report(args) -> int:
     print(f"report: {path}")
     if args.json:
         emit_json(cf.to_json() | {"bands": cb.to_json(), "report": str(path)}, args.json)
-    if not cf.converged and args.strict:
-        print(
-            "WARNING: sampling did not converge for every test; --strict: exit 1", file=sys.stderr
-        )
-        return 1
+    from uq._cli.cmd_basic import unconverged_tests
+
+    record_convergence(args, cf.converged, unconverged_tests(cf.to_json()))
+    if surface is not None:
+        record_convergence(args, surface.convergence.converged, f"{surface.words}'s sampler")
     return 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from uq._cli.common import add_stand, stand_from
+from uq._cli.common import add_stand, record_convergence, stand_from
 from uq._io.errors import InputError
 from uq._models import registry
 
@@ -102,7 +102,8 @@ def command_surface(args) -> int:
     # printed, not in the JSON: reruns give identical bytes
     print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(res, args.json)
-    return 1 if (getattr(args, "strict", False) and not res["converged"]) else 0
+    record_convergence(args, res["converged"], f"the {args.model} model's sampler")
+    return 0
 
 
 def _print_comparison(name: str, c: dict) -> None:

@@ -157,9 +157,57 @@ def add_sampling(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_MAX_STEPS,
         help="cap on emcee steps per ensemble",
     )
-    p.add_argument(
-        "--strict", action="store_true", help="exit status 1 when sampling did not converge"
+    add_convergence(p)
+
+
+def add_convergence(p: argparse.ArgumentParser) -> None:
+    """``--allow-unconverged`` (and ``--strict``, its opposite and the default): one name for every
+    command that samples (docs/commands.md, exit status)."""
+    g = p.add_argument_group("convergence (exit status)").add_mutually_exclusive_group()
+    g.add_argument(
+        "--allow-unconverged",
+        action="store_true",
+        help="exit status 0 when a fit fails its convergence rules (R-hat, ESS, chain length): its "
+        "results are still written and printed with the warnings and a NOT CONVERGED banner, as "
+        "without the option; without it the exit status is 1",
     )
+    g.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit status 1 when a fit fails its convergence rules: the default since round 7 "
+        "(kept so that scripts which pass it keep working)",
+    )
+
+
+def record_convergence(args, converged: bool, what: str) -> None:
+    """Tell the command line whether a fit behind this command's results passed its convergence
+    rules (``what``: which fit, in words). The command writes and prints its results either way
+    (with the warnings and the NOT CONVERGED banner); ``uq._cli.main`` turns a failure into the
+    exit status (:func:`convergence_status`)."""
+    if not converged:
+        args.unconverged_fits = [*getattr(args, "unconverged_fits", []), what]
+
+
+def convergence_status(args, name: str, status: int) -> int:
+    """The exit-status policy for fits that failed their convergence rules (one place for every
+    command): a command that finished (``status`` 0) with such a fit exits 1 with one line on
+    stderr saying so, or 0 with ``--allow-unconverged``; any other status stands."""
+    failed = getattr(args, "unconverged_fits", [])
+    if status != 0 or not failed:
+        return status
+    what = "; ".join(failed)
+    if getattr(args, "allow_unconverged", False):
+        sys.stderr.write(
+            f"uq {name}: NOT CONVERGED ({what}), accepted with --allow-unconverged: exit 0; the "
+            "results carry the warnings and the NOT CONVERGED banner\n"
+        )
+        return 0
+    sys.stderr.write(
+        f"uq {name}: NOT CONVERGED ({what}): the convergence rules failed, so what was written and "
+        "printed is not a result yet (each output says so); exit 1. Raise --max-steps or use more "
+        "walkers, or pass --allow-unconverged to accept it\n"
+    )
+    return 1
 
 
 def settings_from(args):

@@ -7,7 +7,10 @@ being run is imported (``uq --help`` imports no numpy, JAX, ArviZ or matplotlib)
 Exit status, the same for every command (docs/commands.md):
 
 * 0  done (for ``uq check``: all agree)
-* 1  ``uq check`` found a disagreement, or sampling did not converge under ``--strict``
+* 1  ``uq check`` found a disagreement, or a fit failed its convergence rules (without
+     ``--allow-unconverged``; the policy is :func:`uq._cli.common.convergence_status`, the
+     commands only report which fits failed, :func:`uq._cli.common.record_convergence`), or
+     ``uq batch``: a task failed or did not converge
 * 2  bad input or usage: one line on stderr naming the file, row, column or option; nothing written
 * 3  internal error (a bug): one line naming the exception; ``--debug`` or ``UQ_DEBUG=1`` prints the traceback
 * 130 interrupted (Ctrl-C): one line
@@ -147,7 +150,8 @@ EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN
 )
 
 EPILOG = (
-    "exit status: 0 done, 1 check disagrees or not converged under --strict, 2 bad input or usage, "
+    "exit status: 0 done, 1 check disagrees or a fit did not converge (unless --allow-unconverged), "
+    "2 bad input or usage, "
     "3 internal error, 130 interrupted. --out is where a command writes: the CSV file for simulate, "
     "the folder for the others. --json - prints the JSON alone on stdout."
 )
@@ -276,24 +280,13 @@ def _fail(name: str, text: str, status: int) -> int:
 
 
 def _compile_cache() -> None:
-    """JAX's persistent compilation cache for the command line (not for library users): compiled
-    log-probabilities are kept in ``$UQ_CACHE_DIR`` (default ``$XDG_CACHE_HOME/airspring-uq/jax``,
-    i.e. ``~/.cache/airspring-uq/jax``), so a second run skips XLA compilation. ``UQ_CACHE_DIR=off``
-    turns it off. Only environment variables are set (JAX reads them when first imported), so
-    commands that never import JAX stay fast; a cache location set by the user wins."""
-    where = os.environ.get("UQ_CACHE_DIR", "")
-    if (
-        where.lower() in ("off", "0", "none")
-        or "JAX_COMPILATION_CACHE_DIR" in os.environ
-        or "jax" in sys.modules
-    ):
-        return
-    if not where:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        where = os.path.join(base, "airspring-uq", "jax")
-    os.environ["JAX_COMPILATION_CACHE_DIR"] = where
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+    """JAX's persistent compilation cache (``uq._inference.jax_cache``): only environment
+    variables are set, before any command module is imported (JAX reads them when first
+    imported), so commands that never import JAX stay fast; a cache location set by the user
+    wins; ``UQ_CACHE_DIR=off`` turns it off."""
+    from uq._inference.jax_cache import set_environment
+
+    set_environment()
 
 
 def _interrupts_are_not_lost() -> None:
@@ -335,8 +328,13 @@ def main(argv: list[str] | None = None) -> int:
     set_enabled(not args.quiet)
     try:
         check_outputs(args)
+        from uq._cli.common import convergence_status
+
         with _json_on_stdout(args):
-            return int(getattr(importlib.import_module(args._module), f"command_{name}")(args) or 0)
+            status = int(
+                getattr(importlib.import_module(args._module), f"command_{name}")(args) or 0
+            )
+        return convergence_status(args, name, status)
     except InputError as exc:
         exc = exc.for_cli(PARAM_OPTIONS)
         return _fail(name, f"error: {exc}", EXIT_INPUT)

@@ -65,6 +65,8 @@ class PressureTest:
     measured_pressure_bar  each reading's measured overpressure (bar); the set value repeated
                            when the file gives only set values
     volume_m3              the element's internal volume (m^3) at each reading, or None
+    volume_step_m3         the step the volume column was printed to (m^3: its last digit, e.g.
+                           0.01 L), read from its values; None when unknown (a test made in code)
     """
 
     pressure_bar: float
@@ -76,6 +78,7 @@ class PressureTest:
     rows: np.ndarray  # line numbers in the file, for messages
     measured_pressure_bar: np.ndarray | None = None
     volume_m3: np.ndarray | None = None
+    volume_step_m3: float | None = None
 
     def __post_init__(self):
         if self.measured_pressure_bar is None:
@@ -500,12 +503,14 @@ def _make_test(
     comp = None if r.compression is None else r.compression[order]
     if comp is not None:
         _check_branch_order(name, label, r.height_m[order], comp, r.rows[order], h.name, hmm)
-    volume = None
+    volume = step = None
     if r.volume_m3 is not None:
         v = r.volume_m3[order]
         given = ~np.isnan(v)
         if given.all():
             volume = v
+            factor = cols["volume"].factor
+            step = _units.printed_step(v / factor) * factor
         elif given.any():
             c = cols["volume"]
             empty = int(r.rows[order][~given].min())
@@ -524,6 +529,7 @@ def _make_test(
         rows=r.rows[order],
         measured_pressure_bar=r.pressure_bar[order],
         volume_m3=volume,
+        volume_step_m3=step,
     )
 
 

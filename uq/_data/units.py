@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import functools
 
+import numpy as np
+
 #: quantity -> (unit inside, {suffix: pint unit}); the suffixes are those of docs/formats.md section 1.
 _PRESSURE = {"bar": "bar", "psi": "psi", "kPa": "kPa", "MPa": "MPa", "mbar": "mbar"}
 _LENGTH = {"mm": "mm", "m": "m", "in": "inch"}
@@ -71,3 +73,25 @@ def factor(quantity: str, suffix: str) -> float:
 
 def shown(suffix: str) -> str:
     return SHOWN.get(suffix, suffix)
+
+
+def printed_step(values) -> float:
+    """The step a column's values were printed to, in the column's unit: the largest power of
+    ten (10^-9 .. 10^6) of which every value is a whole multiple (4.20, 3.88, 3.49 L: 0.01).
+
+    A printed value is known only to its last digit: its rounding error is uniform over one step,
+    of sd step / sqrt(12). Values with more digits than 10^-9 give 10^-9.
+
+    >>> printed_step([4.2, 3.88, 3.49]), printed_step([2500.0, 3610.0]), printed_step([0.1234567])
+    (0.01, 10.0, 1e-07)
+    """
+    v = np.abs(np.asarray(values, float))
+    v = v[np.isfinite(v) & (v > 0)]
+    for k in range(6, -10, -1):
+        step = 10.0**k
+        q = v / step
+        whole = np.round(q)
+        # a whole multiple up to float error (1e-9 of the value), and not zero for a value that is not
+        if v.size and np.all((whole >= 1) & (np.abs(q - whole) < 1e-9 * np.maximum(q, 1e3))):
+            return float(f"{step:.0e}")
+    return 1e-9

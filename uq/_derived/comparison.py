@@ -139,6 +139,12 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
     per-pressure cubics, per (force, piston) reading (module docstring); the ``comparison``
     document of the JSON results."""
     name = surface_fit.name
+    if getattr(surface_fit, "posterior", None) is None:  # a model plugged in without one
+        return {
+            "model": name,
+            "better": "refused",
+            "reason": f"the {name} model gives no pointwise log-likelihoods (no posterior) to rank it by",
+        }
     force_only = not surface_fit.recordings.has_piston  # the force surface: per force reading
     if force_only and any(t.has_piston for t in cubic_fit.tests):
         raise ValueError(

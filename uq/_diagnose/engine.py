@@ -20,7 +20,8 @@ Pipeline (models in ``uq._models.diagnose``):
    one with most parameters: a shaped casing force goes before a constant offset it can stand
    in for) until every remaining one stays.
    Mechanisms are reported as provisional while the final model's noise scales exceed the
-   stand's error budget by more than 2x (its own noise-scale check).
+   stand's error budget by more than 1.25x (its own noise-scale check, NOISE_EXCESS; its false
+   alarms and power on the virtual stand: reports/noise-check).
 4. The final model's sampled parameters are drawn with emcee (short chains; R-hat, ESS),
    coefficients exactly; magnitudes in the units of docs/formats.md section 3.
 5. Posterior predictive checks of baseline and final model: residuals by pressure, height,
@@ -65,7 +66,14 @@ GAIN_SE = 4.0
 GAIN_MIN = 4.0
 FLAG_Z = 5.0  # |mean standardised residual| x sqrt(n) of a group beyond which it is flagged
 FLAG_CHI2_LOGP = math.log(1e-6)
-NOISE_EXCESS = 2.0  # noise scale this many times the error budget counts as a mismatch
+#: The noise-scale check that certifies mechanisms (``noise_check``): the final model's noise scale
+#: factors must stay at or below this with 95 % posterior probability. On campaigns made at exactly
+#: the budget with the model they were made with, q05 of k stays far below it (false-alarm rate:
+#: reports/noise-check, scripts/noise_check_study.py); at 1.5x the budget, or on data/n50's Table 1
+#: curves with the final model (k = 1.9), it fails. The rule before issue 29 allowed 2.
+NOISE_EXCESS = 1.25
+#: noise scale this many times the error budget is itself flagged as a mismatch (``where``)
+NOISE_FLAG = 2.0
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -370,7 +378,7 @@ def _flagged(w: dict) -> list[str]:
                         f"{'N' if q == 'force' else 'cm^3'}, {g['outside_90_pct']:.0f}% outside the 90% band)"
                     )
     for q in w["noise_scale_vs_budget"]:
-        if w["noise_scale_vs_budget"][q]["q05"] > NOISE_EXCESS:
+        if w["noise_scale_vs_budget"][q]["q05"] > NOISE_FLAG:
             out.append(f"{q} noise {w['noise_scale_vs_budget'][q]['mean']:.1f} x the error budget")
     return out
 
@@ -489,13 +497,65 @@ def _select(
     return current, steps, chosen
 
 
-def _other_reading(name: str, magnitude: np.ndarray, rec) -> dict:
+def _link_words(names) -> str:
+    """What reading a volume excess as a piston-area error assumes: the final model's link between
+    force and volume (``names``: its mechanisms) is the element's."""
+    if "elastic_casing" not in names:
+        return (
+            "the traditional theory's link between force and volume (eqs. 1 and 2 give one area: a "
+            "casing that stores no elastic energy)"
+        )
+    if "pressure_dependent_area" in names:
+        return (
+            "the final model's link between force and volume: the traditional one with a casing "
+            "that stores energy as elastic_casing models it and an area that grows with pressure "
+            "in force and volume alike (pressure_dependent_area, which breaks the Maxwell relation "
+            "a conservative casing obeys)"
+        )
+    return (
+        "the final model's link between force and volume: one potential of the form "
+        "elastic_casing gives it"
+    )
+
+
+def _potential_reading(maxwell: dict | None) -> dict:
+    """The piston area the potential's relation (dP/dp_u = dV/dx, which force and volume from one
+    energy obey) gives from the same readings: the Maxwell check's, where one value fits, with what
+    it assumes; and where the thermodynamic model reads it from every test at once."""
+    out = {
+        "command": "uq surface FILE --model thermodynamic (implied_piston_area_m2): one potential "
+        "fitted to every test reads S from all of them at once",
+    }
+    middle = (maxwell or {}).get("interpretation", {}).get("middle", {})
+    if "piston_area_m2" in middle:
+        a = middle["piston_area_m2"]
+        out["maxwell_piston_area_m2"] = {"mean": a["mean"], "sd": a["sd"]}
+        out["assumes"] = a.get(
+            "assumes", "the relation's residual is a piston-area error alone at every pressure"
+        )
+    else:
+        out["maxwell_piston_area_m2"] = None
+        out["assumes"] = (
+            "no single piston area makes the Maxwell relation hold where it was checked (middle "
+            "of the stroke): the check gives no reading"
+            if maxwell
+            else "the Maxwell check needs piston readings and three or more pressures"
+        )
+    return out
+
+
+def _other_reading(name: str, magnitude: np.ndarray, rec, names=(), maxwell=None) -> dict:
     """What else the same readings say when a mechanism is confounded with a stand constant: both
-    readings are named (a piston-area error is exactly a volume excess)."""
+    readings are named (a piston-area error is exactly a volume excess). The piston area read from
+    a volume excess holds only if the final model's force-volume link (``names``: its mechanisms)
+    is the element's (``assumes``); the potential's reading of the same readings, from the Maxwell
+    check (``maxwell``), is given beside it (``potential``)."""
     out = {"words": MECHANISMS[name].confounded_with}
     if name == "volume_excess":
         out["piston_area_m2"] = estimate(rec.piston_area_m2 / (1.0 + magnitude))
         out["given_piston_area_m2"] = rec.piston_area_m2
+        out["assumes"] = _link_words(names)
+        out["potential"] = _potential_reading(maxwell)
     return out
 
 
@@ -507,7 +567,8 @@ def noise_check(w: dict) -> dict:
         "passes": not any(fails.values()),
         "rule": (
             f"force and piston noise scale factors (residual scatter over the stand's error budget) must not "
-            f"exceed {NOISE_EXCESS:g} with 95 % posterior probability"
+            f"exceed {NOISE_EXCESS:g} with 95 % posterior probability (false-alarm rate on campaigns at "
+            "the budget: reports/noise-check)"
         ),
         "force_scale": ns["force"]["mean"],
         "piston_scale": ns["piston"]["mean"] if "piston" in ns else None,
@@ -646,6 +707,7 @@ def diagnose(
     w_final = where(final, meta, d) if final is not base else w_base
     flags_base = _flagged(w_base)
     check = noise_check(w_final)
+    maxwell = campaign_table(rec, seed=seed)
     mechanisms = []
     for name, c in chosen:
         mag = final.magnitude(name, n_tests, meta["context"])
@@ -663,7 +725,7 @@ def diagnose(
         if diagnostics and name in diagnostics:
             entry["magnitude"] |= diagnostics[name]
         if MECHANISMS[name].confounded_with:
-            entry["other_reading"] = _other_reading(name, mag, rec)
+            entry["other_reading"] = _other_reading(name, mag, rec, final.names, maxwell)
         mechanisms.append(entry)
     mechanisms.sort(key=lambda e: -e["delta_elpd"])
     rms = {
@@ -718,7 +780,7 @@ def diagnose(
             "n_tests": n_tests,
         },
         "sampling": diagnostics["_summary"] if diagnostics else None,
-        "maxwell": campaign_table(rec, seed=seed),
+        "maxwell": maxwell,
     }
     # wall times are kept off the JSON, so reruns with one seed give identical bytes
     seconds = {"screening": t_screen, "total": time.time() - t_start}
@@ -759,6 +821,13 @@ def _sample(fit: Fit, d, seed: int, settings: Settings):
 # ----------------------------------------------------------------------------- output
 
 
+def _k_max(pareto: dict) -> str:
+    """The largest Pareto k as printed: a number, or how many terms have none (``Loo.pareto``)."""
+    if pareto["max"] is None:
+        return f"undefined for {pareto['n_undefined']} terms"
+    return f"{pareto['max']:.2f}"
+
+
 def _volume_rms(v) -> str:
     return "" if v is None else f", volume rms {v:.1f} cm^3"  # None: a force-only campaign
 
@@ -795,13 +864,27 @@ def summary_text(res: dict) -> str:
                     f"instead of the {o['given_piston_area_m2'] * 1e4:.2f} cm^2 given"
                 )
             lines.append(f"    or, from the same readings: {o['words']}{extra}")
+            if "assumes" in o:
+                lines.append(f"      that reading assumes {o['assumes']}")
+                pot = o["potential"]
+                mx_area = pot["maxwell_piston_area_m2"]
+                lines.append(
+                    "      the potential's reading (force and volume from one energy: dP/dp_u = dV/dx): "
+                    + (
+                        f"{mx_area['mean'] * 1e4:.2f} +- {mx_area['sd'] * 1e4:.2f} cm^2 from the "
+                        f"Maxwell check, if {pot['assumes']}"
+                        if mx_area
+                        else f"none from the Maxwell check ({pot['assumes']})"
+                    )
+                    + f"; {pot['command']}"
+                )
     if not res["mechanisms"]:
         lines.append(f"none of the {len(M.MECHS)} mechanisms explains the mismatch")
     nc = f["noise_check"]
     pk = f["pareto_k"]
     lines.append(
         f"final model ({' + '.join(f['model'])}): force rms {f['rms_N']:.1f} N"
-        f"{_volume_rms(f['volume_rms_cm3'])}, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {pk['max']:.2f}, "
+        f"{_volume_rms(f['volume_rms_cm3'])}, ELPD-LOO {f['elpd_loo']:.1f} (Pareto k max {_k_max(pk)}, "
         f"{pk['n_over_0.7']} of {pk['n_terms']} over 0.7)"
     )
     lines.append(
@@ -839,9 +922,14 @@ def summary_text(res: dict) -> str:
     mx = res.get("maxwell")
     if mx:
         levels = mx["interpretation"]["middle"]["mean_r_by_pressure"]
+        sds = mx["interpretation"]["middle"].get("sd_r_by_pressure", {})
         lines.append(
             "Maxwell relation dP/dp_u = dV/dx, test by test (r = (dV/dx)/(dP/dp_u) - 1, middle of the "
-            "stroke): " + ", ".join(f"{p} bar {v:+.3f}" for p, v in levels.items())
+            "stroke, +- sd): "
+            + ", ".join(
+                f"{p} bar {v:+.3f}" + (f" +- {sds[p]:.3f}" if p in sds else "")
+                for p, v in levels.items()
+            )
         )
         lines.append(f"  {mx['interpretation']['words']}")
     if f["remaining_flags"]:

@@ -11,7 +11,9 @@ Outputs: ``DIR/<campaign>/<task>/`` per pair, with a stamp ``batch.json`` writte
 the content hash of (recordings bytes, stand file bytes, task, options, package version); a
 rerun skips every pair whose stamp matches. ``DIR/summary.csv``, ``summary.json`` and
 ``index.html`` list every pair (done, skipped or failed with its one-line error), all written
-atomically. A failed pair does not stop the others; the command exits 1 at the end if any failed.
+atomically, with one verdict per campaign (passed, failed, not converged). A failed pair does
+not stop the others; the command exits 1 at the end if any failed, or if a fit did not converge
+(unless ``--allow-unconverged``).
 
 The catalogue is validated before any work: an unknown task or option, a missing file or a
 duplicate name is one line naming the catalogue and the row (exit 2).
@@ -553,6 +555,31 @@ def _ordered(rows: list[dict], jobs: list[dict]) -> list[dict]:
     return sorted(rows, key=lambda r: pos[(r["campaign"], r["task"])])
 
 
+def verdicts(rows: list[dict]) -> list[dict]:
+    """One verdict per campaign, in the rows' order: "failed" when one of its tasks failed, "not
+    converged" when one of its fits (done now or skipped as done before) failed its convergence
+    rules, else "passed"; ``why`` names the tasks."""
+    out: dict[str, dict] = {}
+    for r in rows:
+        v = out.setdefault(
+            r["campaign"], {"campaign": r["campaign"], "failed": [], "unconverged": []}
+        )
+        if r["status"] == "failed":
+            v["failed"].append(r["task"])
+        elif r.get("converged") is False:
+            v["unconverged"].append(r["task"])
+    result = []
+    for v in out.values():
+        if v["failed"]:
+            verdict, why = "failed", f"failed: {', '.join(v['failed'])}"
+        elif v["unconverged"]:
+            verdict, why = "not converged", f"not converged: {', '.join(v['unconverged'])}"
+        else:
+            verdict, why = "passed", ""
+        result.append({"campaign": v["campaign"], "verdict": verdict, "why": why})
+    return result
+
+
 def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
     """summary.csv, summary.json and index.html in ``out_dir``, each written atomically."""
 
@@ -562,6 +589,8 @@ def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
         "catalogue": str(catalogue),
         "version": _version(),
         "counts": counts,
+        "not_converged": sum(r["status"] != "failed" and r.get("converged") is False for r in rows),
+        "verdicts": verdicts(rows),
         "campaigns": rows,
     }
     buf = io.StringIO()
@@ -570,18 +599,20 @@ def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
     w.writerows({k: ("" if r.get(k) is None else r.get(k)) for k in SUMMARY_COLUMNS} for r in rows)
     write_text_atomic(out / "summary.csv", buf.getvalue())
     write_text_atomic(out / "summary.json", dumps_json(result))
-    write_text_atomic(out / "index.html", _index_html(rows, catalogue, counts))
+    write_text_atomic(out / "index.html", _index_html(result))
     return result
 
 
-def _index_html(rows: list[dict], catalogue, counts: dict) -> str:
+def _index_html(result: dict) -> str:
     """index.html: the template ``batch_index.html`` of ``uq._report`` (autoescaped)."""
 
     return render(
         "batch_index.html",
-        rows=rows,
-        catalogue=Path(catalogue).name,
-        counts=counts,
+        rows=result["campaigns"],
+        catalogue=Path(result["catalogue"]).name,
+        counts=result["counts"],
+        not_converged=result["not_converged"],
+        verdicts=result["verdicts"],
         version=_version(),
     )
 

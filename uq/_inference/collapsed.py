@@ -10,14 +10,20 @@ and a start for the optimiser. The driver does the rest, the same way for every 
 1. MAP of theta: optimistix BFGS on the collapsed negative log posterior from the model's
    start(s), the best optimum kept; a run that does not report success is restarted once from
    where it stopped and kept only if a Newton step from it would gain less than
-   ``MAP_DECREMENT`` nats. The Laplace covariance is the inverse of JAX's Hessian there.
+   ``MAP_DECREMENT`` nats. The Laplace covariance is the inverse of the Hessian there, by
+   central differences (Richardson-extrapolated) through the same compiled log posterior the
+   sampler calls (:func:`laplace_curvature`): no Hessian program to trace and compile per model.
 2. Sampling of theta: emcee (``uq._inference.sampler.run_many``) from starts overdispersed by
    the Laplace covariance, until the convergence rules pass (``uq._inference.convergence``); or,
    for quick screening (``method="laplace"``), independent draws from the Laplace approximation.
-3. An exact draw of beta for every retained theta (``uq._inference.linear.map_rows``).
-4. Pointwise log-likelihood, optional posterior-predictive replicates, and an ArviZ
-   ``InferenceData`` with ``posterior``, ``log_likelihood``, ``posterior_predictive``,
-   ``observed_data`` and ``sample_stats`` groups, so that ``az.loo`` and ``az.plot_ppc`` work on it.
+3. An exact draw of beta for every retained theta (``uq._inference.linear.map_rows``), the
+   model's reported variables and the convergence verdict.
+4. On demand (:class:`Posterior`: made when first asked for, the same draws whenever): the
+   pointwise log-likelihood, posterior-predictive replicates, the integrated leave-one-out
+   densities and an ArviZ ``InferenceData`` with ``posterior``, ``log_likelihood``,
+   ``posterior_predictive``, ``observed_data`` and ``sample_stats`` groups, so that ``az.loo``
+   and ``az.plot_ppc`` work on it. A command pays only for what it uses (``uq fit`` for none of
+   them; the report's bands need none either).
 
 Several problems of one model (the tests of a campaign) are fitted in one emcee run
 (:func:`fit_collapsed` with a list of data): every problem keeps its own ensembles, burn-in and
@@ -34,7 +40,7 @@ import functools
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -129,6 +135,9 @@ def _bfgs(fn, x0, active, data):
 
 @functools.partial(jax.jit, static_argnums=0)
 def _gradient_hessian(fn, x, active, data):
+    """JAX's exact gradient and Hessian of the objective: the fallback of the finite differences
+    where they cannot be taken (an optimum on a wall of the support, where every step to one side
+    leaves it); traced only then."""
     objective = _objective(fn)
     return jax.grad(objective)(x, (active, data)), jax.hessian(objective)(x, (active, data))
 
@@ -166,14 +175,32 @@ class Optimum:
     converged: bool
 
 
-def find_map(model: CollapsedModel, data, active=None) -> Optimum:
+#: finite-difference steps of the Laplace curvature: a first pass at ``FD_STEP`` times max(1, |x|)
+#: finds each coordinate's posterior sd, the second takes ``FD_SD_FRACTION`` of it and half that
+FD_STEP = 1e-4
+FD_SD_FRACTION = 0.1
+FD_RETRIES = 4
+
+
+def find_map(model: CollapsedModel, data, active=None, *, block: int = 64) -> Optimum:
     """MAP of the sampled parameters and the Laplace covariance over the active ones (step 1 of
-    the module docstring). Raises FloatingPointError when no start gives a finite optimum."""
-    starts = np.atleast_2d(np.asarray(model.start(data), float))
-    D = starts.shape[1]
-    act = np.ones(D, bool) if active is None else np.asarray(active, bool)
+    the module docstring). Raises FloatingPointError when no start gives a finite optimum.
+    ``block``: the rows of one call of the compiled log posterior (``_campaign_log_prob``)."""
+    act = _active(model, data, active)
+    lp, _ = _campaign_log_prob(model, [data], act, block)
+    return _optima(model, [data], act, lp)[0]
+
+
+def _active(model: CollapsedModel, data, active) -> np.ndarray:
+    D = np.atleast_2d(np.asarray(model.start(data), float)).shape[1]
+    return np.ones(D, bool) if active is None else np.asarray(active, bool)
+
+
+def _bfgs_best(model: CollapsedModel, data, act: np.ndarray):
+    """BFGS from every start of the model, the best optimum kept; a run that does not report
+    success restarted once from where it stopped: (x (D,), objective, success) or None."""
     flags = jnp.asarray(act.astype(float))
-    starts = starts * act
+    starts = np.atleast_2d(np.asarray(model.start(data), float)) * act
 
     def best_of(xs):
         best = None
@@ -189,60 +216,260 @@ def find_map(model: CollapsedModel, data, active=None) -> Optimum:
         again = best_of([best[0]])
         if again is not None and again[1] <= best[1]:
             best = again
-    if best is None:
+    return best
+
+
+def laplace_curvature(lp, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradient (K, d) and Hessian (K, d, d) of K log posteriors at ``centers`` (K, d), by
+    central differences through ``lp`` ((K, m, d) -> (K, m), the same compiled program the
+    sampler calls): no second program to trace and compile for the curvature of every model.
+
+    Two passes: the diagonal at steps ``FD_STEP`` max(1, |x|) gives each coordinate's posterior
+    sd (1 / sqrt(-H_ii)); the full stencil (2 d^2 + 1 points) then steps ``FD_SD_FRACTION`` of it
+    and half that, combined by Richardson's extrapolation (truncation error of order the step to
+    the fourth power). Steps that large are needed: the collapsed log posterior is a difference of
+    terms far larger than itself (y' W y - m' A m), so its rounding error is about 1e-8, not 1e-16,
+    of its size. Agreement with JAX's exact Hessian: within 1e-5 relative on the models checked
+    (tests/inference/test_collapsed.py). Where a step to one side leaves the support at every
+    size tried (an optimum on a wall), the result is not finite and the caller takes JAX's
+    Hessian instead."""
+    x = np.atleast_2d(np.asarray(centers, float))
+    K, d = x.shape
+    eye = np.eye(d)
+    h = FD_STEP * np.maximum(1.0, np.abs(x))
+    f = np.asarray(
+        lp(
+            np.concatenate(
+                [x[:, None], x[:, None] + h[:, None] * eye, x[:, None] - h[:, None] * eye], axis=1
+            )
+        ),
+        float,
+    )
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        curv = -(f[:, 1 : 1 + d] - 2.0 * f[:, :1] + f[:, 1 + d :]) / h**2
+        sd = 1.0 / np.sqrt(curv)
+    h = np.where(np.isfinite(sd) & (sd > 0), FD_SD_FRACTION * sd, h)
+    pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
+
+    def stencil(h):
+        steps = [np.zeros_like(h)]
+        steps += [s * h * eye[i] for i in range(d) for s in (1.0, -1.0)]
+        steps += [
+            si * h * eye[i] + sj * h * eye[j]
+            for i, j in pairs
+            for si, sj in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
+        ]
+        return np.stack(steps, axis=1)
+
+    def differences(f, h):
+        K = f.shape[0]
+        f0, fp, fm = f[:, 0], f[:, 1 : 1 + 2 * d : 2], f[:, 2 : 2 + 2 * d : 2]
+        grad = (fp - fm) / (2.0 * h)
+        hess = np.zeros((K, d, d))
+        idx = np.arange(d)
+        hess[:, idx, idx] = (fp - 2.0 * f0[:, None] + fm) / h**2
+        for n, (i, j) in enumerate(pairs):
+            q = f[:, 1 + 2 * d + 4 * n : 5 + 2 * d + 4 * n]
+            hess[:, i, j] = hess[:, j, i] = (q[:, 0] - q[:, 1] - q[:, 2] + q[:, 3]) / (
+                4.0 * h[:, i] * h[:, j]
+            )
+        return grad, hess
+
+    n = 1 + 2 * d + 2 * d * (d - 1)
+    grad, hess = np.full((K, d), np.nan), np.full((K, d, d), np.nan)
+    todo = np.arange(K)
+    for _ in range(FD_RETRIES):  # a step that leaves the support (-inf): ten times smaller
+        hk = h[todo]
+        pts = x[todo, None] + np.concatenate([stencil(hk), stencil(hk / 2)], axis=1)
+        f = np.full((K, pts.shape[1]), -np.inf)
+        f[todo] = np.asarray(lp(_rows_of(pts, todo, K)), float)[todo]
+        with np.errstate(invalid="ignore", over="ignore"):
+            (g1, h1), (g2, h2) = differences(f[todo, :n], hk), differences(f[todo, n:], hk / 2)
+            g, H = (4.0 * g2 - g1) / 3.0, (4.0 * h2 - h1) / 3.0
+        ok = np.all(np.isfinite(g), axis=1) & np.all(np.isfinite(H), axis=(1, 2))
+        grad[todo], hess[todo] = g, H
+        todo = todo[~ok]
+        if todo.size == 0:
+            break
+        h[todo] = h[todo] / 10.0
+    return grad, hess
+
+
+def _rows_of(pts: np.ndarray, todo: np.ndarray, K: int) -> np.ndarray:
+    """``pts`` (len(todo), m, d) of the problems ``todo`` as the (K, m, d) ``lp`` takes (the
+    other problems at the first problem's points: evaluated and discarded)."""
+    out = np.repeat(pts[:1], K, axis=0)
+    out[todo] = pts
+    return out
+
+
+def _optima(model: CollapsedModel, datas: list, act: np.ndarray, lp) -> list[Optimum]:
+    """The MAP of every problem (BFGS, one after another) and their Laplace covariances (one
+    batch of finite differences through ``lp`` for all of them)."""
+    bests = [_bfgs_best(model, d, act) for d in datas]
+    if any(b is None for b in bests):
         raise FloatingPointError(
             f"{model.name}: the log posterior is not finite at any start of the optimiser"
         )
-    x, f, ok = best
     dims = np.flatnonzero(act)
-    g, H = (np.asarray(a) for a in _gradient_hessian(model.log_prob, jnp.asarray(x), flags, data))
-    g, H = g[dims], H[np.ix_(dims, dims)]
-    try:
-        cov = np.linalg.inv(H)
-        np.linalg.cholesky(cov)
-    except np.linalg.LinAlgError:
-        cov = None
-    if cov is not None and not np.all(np.isfinite(cov)):
-        cov = None
-    if not np.all(np.isfinite(x)) or (
-        not ok and (cov is None or 0.5 * g @ cov @ g > MAP_DECREMENT)
-    ):
-        raise FloatingPointError(
-            f"{model.name}: the MAP did not converge (BFGS, {MAP_MAX_STEPS} steps, restarted once)"
-        )
-    if cov is None:
-        cov = np.diag(1.0 / np.maximum(np.abs(np.diag(H)), 1e-12))
-    return Optimum(x * act, -f, cov, act, bool(ok))
+    grads, hessians = laplace_curvature(lp, np.stack([b[0][dims] for b in bests]))
+    out = []
+    for (x, f, ok), g, H, d in zip(bests, grads, hessians, datas, strict=True):
+        g, H = -g, -H  # of the objective, the negative log posterior
+        if not (np.all(np.isfinite(g)) and np.all(np.isfinite(H))):  # on a wall: JAX's Hessian
+            flags = jnp.asarray(act.astype(float))
+            g, H = (
+                np.asarray(a) for a in _gradient_hessian(model.log_prob, jnp.asarray(x), flags, d)
+            )
+            g, H = g[dims], H[np.ix_(dims, dims)]
+        try:
+            cov = np.linalg.inv(H)
+            np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            cov = None
+        if cov is not None and not np.all(np.isfinite(cov)):
+            cov = None
+        if not np.all(np.isfinite(x)) or (
+            not ok and (cov is None or 0.5 * g @ cov @ g > MAP_DECREMENT)
+        ):
+            raise FloatingPointError(
+                f"{model.name}: the MAP did not converge (BFGS, {MAP_MAX_STEPS} steps, restarted once)"
+            )
+        if cov is None:
+            cov = np.diag(1.0 / np.maximum(np.abs(np.diag(H)), 1e-12))
+        out.append(Optimum(x * act, -f, cov, act, bool(ok)))
+    return out
 
 
 # ----------------------------------------------------------------------------- the posterior
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class Posterior:
     """The fitted posterior of one problem of a :class:`CollapsedModel`.
 
     ``theta`` (C, D, n_theta) the sampled parameters (full vector; held coordinates zero),
-    ``beta`` (C, D, k) the exact coefficient draws, ``loglik`` {name: (C, D, n)} the pointwise
-    log-likelihood, ``idata`` the ArviZ view (posterior = the model's reported variables).
-    ``convergence`` is None for Laplace draws (``method == "laplace"``), which are independent.
+    ``beta`` (C, D, k) the exact coefficient draws, ``reported`` {name: (C, D, ...)} the model's
+    reported variables, ``convergence`` the verdict (None for Laplace draws, ``method ==
+    "laplace"``, which are independent).
+
+    Made when first asked for, not by every fit (a command uses some of them, never all; each
+    is computed once and kept): ``loglik`` {name: (C, D, n)} the pointwise log-likelihood,
+    ``loglik_loo`` (C, D', n) the integrated leave-one-out densities, ``predictive`` the
+    posterior-predictive replicates, and ``idata``, the ArviZ view (posterior = the reported
+    variables, with log_likelihood, posterior_predictive when the fit asked for it, observed_data
+    and sample_stats). The draws behind them are fixed by the fit's seed, so they are the same
+    whenever they are made.
     """
 
-    model: str
-    method: str
-    theta: np.ndarray
-    beta: np.ndarray
-    loglik: dict
-    idata: Any
-    optimum: Optimum
-    convergence: Convergence | None = None
-    chains: Chains | None = field(default=None)
-    seconds: float = 0.0
-    #: (C, D', n) log p(reading_i | theta, other readings) on at most ``LOO_DRAWS`` draws, for
-    #: PSIS-LOO over theta alone (the model's ``pointwise_loo``); None when the model has none
-    loglik_loo: np.ndarray | None = None
-    #: the model's data this posterior was fitted to (for refits without some readings)
-    data: Any = None
+    def __init__(
+        self,
+        model: CollapsedModel,
+        method: str,
+        theta: np.ndarray,
+        beta: np.ndarray,
+        reported: dict,
+        optimum: Optimum,
+        convergence: Convergence | None = None,
+        chains: Chains | None = None,
+        seconds: float = 0.0,
+        data: Any = None,
+        *,
+        seed: int = 0,
+        predictive: bool = True,
+        lp=None,
+        attrs: dict | None = None,
+    ):
+        self._model = model
+        self.model = model.name
+        self.method = method
+        self.theta = theta
+        self.beta = beta
+        self.reported = reported
+        self.optimum = optimum
+        self.convergence = convergence
+        self.chains = chains
+        self.seconds = seconds
+        #: the model's data this posterior was fitted to (for refits without some readings)
+        self.data = data
+        self._seed = seed
+        self._predictive = predictive
+        self._lp = lp
+        self._attrs = attrs or {}
+        self._cache: dict = {}
+
+    def _rows(self):
+        C, D, nt = self.theta.shape
+        return self.theta.reshape(C * D, nt), self.beta.reshape(C * D, -1)
+
+    def _keys(self):
+        return jax.random.split(jax.random.PRNGKey(self._seed))  # (key of the draws, of replicates)
+
+    @property
+    def loglik(self) -> dict:
+        """Pointwise log-likelihood {observed variable: (C, D, n)} (computed on first use)."""
+        if "loglik" not in self._cache:
+            C, D = self.theta.shape[:2]
+            rows, beta = self._rows()
+            ll = map_rows(
+                _pointwise_row, (rows, beta), (self.data,), static=(self._model.pointwise,)
+            )
+            self._cache["loglik"] = {k: np.asarray(v).reshape(C, D, -1) for k, v in ll.items()}
+        return self._cache["loglik"]
+
+    @property
+    def predictive(self) -> dict | None:
+        """Posterior-predictive replicates {observed variable: (C, D, n)}: one replicate of the
+        readings per draw (computed on first use; None when the model has no ``predict``)."""
+        if self._model.predict is None:
+            return None
+        if "predictive" not in self._cache:
+            C, D = self.theta.shape[:2]
+            rows, beta = self._rows()
+            pred = map_rows(
+                _predict_row,
+                (rows, beta, row_keys(self._keys()[1], C * D)),
+                (self.data,),
+                static=(self._model.predict,),
+            )
+            self._cache["predictive"] = {
+                k: np.asarray(v).reshape(C, D, -1) for k, v in pred.items()
+            }
+        return self._cache["predictive"]
+
+    @property
+    def loglik_loo(self) -> np.ndarray | None:
+        """(C, D', n) log p(reading_i | theta, other readings) on at most ``LOO_DRAWS`` draws, for
+        PSIS-LOO over theta alone (the model's ``pointwise_loo``); None when the model has none."""
+        if self._model.pointwise_loo is None:
+            return None
+        if "loglik_loo" not in self._cache:
+            C, D, nt = self.theta.shape
+            step = max(1, int(np.ceil(C * D / LOO_DRAWS)))
+            sub = self.theta[:, ::step]
+            self._cache["loglik_loo"] = np.asarray(
+                map_rows(
+                    _loo_row,
+                    (sub.reshape(-1, nt),),
+                    (self.data,),
+                    static=(self._model.pointwise_loo,),
+                )
+            ).reshape(sub.shape[0], sub.shape[1], -1)
+        return self._cache["loglik_loo"]
+
+    @property
+    def idata(self):
+        """The ArviZ ``InferenceData`` (made on first use: ArviZ and xarray are slow to build)."""
+        if "idata" not in self._cache:
+            self._cache["idata"] = _idata(
+                self._model,
+                self.reported,
+                self.loglik,
+                self.predictive if self._predictive else None,
+                self.data,
+                self._lp,
+                {"model": self.model, "method": self.method} | self._attrs,
+            )
+        return self._cache["idata"]
 
     @property
     def converged(self) -> bool:
@@ -250,7 +477,7 @@ class Posterior:
 
     def flat(self, name: str) -> np.ndarray:
         """Draws of a reported variable with chains flattened, (N, ...)."""
-        a = np.asarray(self.idata.posterior[name])
+        a = np.asarray(self.reported[name])
         return a.reshape(-1, *a.shape[2:])
 
     def loglik_total(self) -> np.ndarray:
@@ -266,7 +493,7 @@ class Posterior:
 
         from uq._inference.summary import estimate
 
-        names = list(self.idata.posterior.data_vars) if var_names is None else list(var_names)
+        names = list(self.reported) if var_names is None else list(var_names)
         variables = self.convergence.variables if self.convergence is not None else {}
         rows = {}
         for name in names:
@@ -318,26 +545,20 @@ def _finish(
     predictive: bool,
     t0: float,
 ) -> Posterior:
-    """Steps 3 and 4 of the module docstring for retained draws ``theta`` (C, D, n_theta)."""
+    """Step 3 of the module docstring for retained draws ``theta`` (C, D, n_theta), the reported
+    variables and the verdict; step 4 (pointwise terms, replicates, InferenceData) is left to the
+    :class:`Posterior`, which makes each when it is first asked for."""
     C, D, nt = theta.shape
     rows = theta.reshape(C * D, nt)
-    key_draw, key_pred = jax.random.split(jax.random.PRNGKey(seed))
+    key_draw = jax.random.split(jax.random.PRNGKey(seed))[0]
     beta = np.asarray(
         map_rows(_draw_row, (rows, row_keys(key_draw, C * D)), (data,), static=(model.draw_linear,))
     )
-    ll = map_rows(_pointwise_row, (rows, beta), (data,), static=(model.pointwise,))
-    ll = {k: np.asarray(v).reshape(C, D, -1) for k, v in ll.items()}
-    pred = None
-    if predictive and model.predict is not None:
-        pred = map_rows(
-            _predict_row, (rows, beta, row_keys(key_pred, C * D)), (data,), static=(model.predict,)
-        )
-        pred = {k: np.asarray(v).reshape(C, D, -1) for k, v in pred.items()}
     reported = {
         k: np.asarray(v).reshape(C, D, *np.shape(v)[1:])
         for k, v in model.report(rows, beta, data).items()
     }
-    attrs = {"model": model.name, "method": method}
+    attrs = {}
     if chains is not None:
         attrs |= {
             "n_ensembles": chains.n_ensembles,
@@ -346,28 +567,22 @@ def _finish(
             "sampler": "emcee (DE, DE-snooker and independence-t moves) on the sampled parameters; "
             "coefficients drawn exactly",
         }
-    idata = _idata(model, reported, ll, pred, data, lp, attrs)
     conv = convergence(reported, chains) if chains is not None else None
-    ll_loo = None
-    if model.pointwise_loo is not None:
-        step = max(1, int(np.ceil(C * D / LOO_DRAWS)))
-        sub = theta[:, ::step]
-        ll_loo = np.asarray(
-            map_rows(_loo_row, (sub.reshape(-1, nt),), (data,), static=(model.pointwise_loo,))
-        ).reshape(sub.shape[0], sub.shape[1], -1)
     return Posterior(
-        model.name,
+        model,
         method,
         theta,
         beta.reshape(C, D, -1),
-        ll,
-        idata,
+        reported,
         optimum,
         conv,
         chains,
         time.perf_counter() - t0,
-        ll_loo,
         data,
+        seed=seed,
+        predictive=predictive,
+        lp=lp,
+        attrs=attrs,
     )
 
 
@@ -379,9 +594,12 @@ def _signature(data) -> tuple:
     return (tree, tuple(np.shape(x) for x in leaves))
 
 
-def _campaign_log_prob(model: CollapsedModel, datas: list, active: np.ndarray):
+def _campaign_log_prob(model: CollapsedModel, datas: list, active: np.ndarray, block: int = 64):
     """One log-probability over all problems, (K, W, d) -> (K, W): one jitted, vmapped call per
-    group of problems with equal data shapes (the tests of a campaign usually form one group)."""
+    group of problems with equal data shapes (the tests of a campaign usually form one group)
+    and per ``block`` rows of each: the rows are padded to a multiple of ``block``, so the
+    sampler's starts, its moves (half of the walkers) and its first step (all of them) and the
+    Laplace curvature's stencils all run one compiled program instead of one per shape."""
     groups: dict[tuple, list[int]] = {}
     for i, d in enumerate(datas):
         groups.setdefault(_signature(d), []).append(i)
@@ -399,6 +617,11 @@ def _campaign_log_prob(model: CollapsedModel, datas: list, active: np.ndarray):
 
     def lp(thetas):
         thetas = expand(np.asarray(thetas, float))
+        m = thetas.shape[1]
+        if not model.sequential and m % block:  # pad with copies of the last row
+            thetas = np.concatenate(
+                [thetas, np.repeat(thetas[:, -1:], block - m % block, axis=1)], axis=1
+            )
         out = np.empty(thetas.shape[:2])
         for idx, d in stacked:
             if model.sequential:
@@ -412,8 +635,11 @@ def _campaign_log_prob(model: CollapsedModel, datas: list, active: np.ndarray):
                         chunk=32,
                     )
             else:
-                out[idx] = np.asarray(_log_prob_problems(model.log_prob, thetas[idx], d))
-        return out
+                for j in range(0, thetas.shape[1], block):
+                    out[idx, j : j + block] = np.asarray(
+                        _log_prob_problems(model.log_prob, thetas[idx, j : j + block], d)
+                    )
+        return out[:, :m]
 
     return lp, expand
 
@@ -443,15 +669,20 @@ def fit_collapsed(
     ``max_draws`` retained draws per problem) or "laplace" (``n_laplace`` independent draws from
     the Laplace approximation: quick screening, no convergence verdict). ``active`` (n_theta,)
     bool: the coordinates of theta that are free (the others are held at zero). ``seeds``: the
-    seed of each problem's exact draws (default: derived from ``seed``). Returns a
-    :class:`Posterior` (or a list of them for a list of data).
+    seed of each problem's exact draws (default: derived from ``seed``). ``predictive``: whether
+    the posterior's InferenceData carries posterior-predictive replicates (made, as every part
+    beyond the draws, only when first asked for). Returns a :class:`Posterior` (or a list of them
+    for a list of data).
     """
     many = isinstance(data, list)
     datas = data if many else [data]
     t0 = time.perf_counter()
-    optima = [find_map(model, d, active) for d in datas]
-    act = optima[0].active
+    act = _active(model, datas[0], active)
     dims = np.flatnonzero(act)
+    # one block of the compiled log posterior: half of the walkers (one emcee move)
+    block = max(settings.n_ensembles * settings.n_walkers // 2, 1)
+    lp, expand = _campaign_log_prob(model, datas, act, block)
+    optima = _optima(model, datas, act, lp)
     if seeds is None:
         seeds = [seed + 1 + i for i in range(len(datas))] if many else [seed + 1]
     if method == "laplace":
@@ -480,7 +711,6 @@ def fit_collapsed(
         return posts if many else posts[0]
     if method != "emcee":
         raise ValueError(f"method must be 'emcee' or 'laplace', got {method!r}")
-    lp, expand = _campaign_log_prob(model, datas, act)
     names = [model.theta_names[i] for i in dims]
     runs = run_many(
         lp,

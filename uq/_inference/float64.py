@@ -6,9 +6,15 @@ hundreds of readings), so every module that uses JAX imports this one first, and
 calls :func:`enable_x64`. The flag belongs to the process: once a uq model is loaded, other JAX
 code in the same process computes in float64 too (its default dtypes become 64-bit). ``import uq``
 alone loads no JAX; the switch happens when a JAX-using part of uq is first used.
+
+Importing it also turns on JAX's persistent compilation cache (``uq._inference.jax_cache``:
+``~/.cache/airspring-uq/jax``, ``UQ_CACHE_DIR`` to move it or ``off``), as the ``uq`` command
+does, unless a cache directory was set for JAX already.
 """
 
 import jax
+
+from uq._inference.jax_cache import configure
 
 
 def enable_x64() -> None:
@@ -28,6 +34,7 @@ def enable_x64() -> None:
 
 
 enable_x64()
+configure(jax)
 
 import jax.numpy as jnp  # noqa: E402
 

@@ -11,8 +11,6 @@ import os
 import sys
 from pathlib import Path
 
-import xarray as xr
-
 from uq._io.errors import InputError
 from uq._io.files import write_bytes_atomic
 
@@ -30,6 +28,9 @@ def netcdf_bytes(groups: dict, attrs: dict | None = None) -> bytes:
     Why in memory: HDF5 writing straight to a full disk (or past a file-size limit) fails inside
     h5py, which can crash the interpreter (a segmentation fault, exit 139); the bytes are
     written afterwards like any other output, where a full disk is a one-line error."""
+    # reason: xarray costs about half a second to import; only saving and loading a model need it
+    import xarray as xr
+
     buf = io.BytesIO()
     mode = "w"
     with _local_dask_scheduler():
@@ -75,6 +76,9 @@ def read_netcdf(path, groups: tuple[str, ...]) -> tuple[dict, dict]:
     path = str(path)
     if not Path(path).is_file():
         raise InputError(f"{path}: no such file")
+    # reason: xarray costs about half a second to import; only reading a saved model needs it
+    import xarray as xr
+
     try:
         with xr.open_dataset(path, engine="h5netcdf") as root:
             attrs = dict(root.attrs)

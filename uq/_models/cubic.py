@@ -28,6 +28,7 @@ pressure as a covariate (``uq._models.cubic_measured``), AR(1) pressure-holding 
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -109,6 +110,22 @@ class CubicData(NamedTuple):
     weight: jnp.ndarray  # (n,) 1 = the reading informs the fit, 0 = held out (exact LOO refits)
 
 
+class VolumeData(NamedTuple):
+    """``CubicData`` of a test whose L readings come from a printed volume column (L = -V / S),
+    with the sd of their rounding: ``MODEL``'s functions add it to sigma_L in quadrature. A type of
+    its own, so that a piston test's program (``CubicData``) is exactly what it was."""
+
+    X: jnp.ndarray
+    force: jnp.ndarray
+    piston: jnp.ndarray
+    ref_force: jnp.ndarray
+    prior_mean: jnp.ndarray
+    weight: jnp.ndarray
+    #: () sd (m) of the L readings' rounding: the volume's last printed digit, step/sqrt(12)/S
+    #: (:func:`piston_rounding_sd`)
+    piston_floor: jnp.ndarray
+
+
 def natural_noise(theta, ref_mean):
     """Sampler coordinates -> (log sigma0, log r, log sigma_L); theta (..., 2) of a force-only
     test gives (log sigma0, log r).
@@ -127,9 +144,21 @@ def natural_noise(theta, ref_mean):
     return jnp.concatenate([force, theta[..., 2:]], axis=-1)
 
 
+def piston_sd(log_sigma_L, floor=None):
+    """The sd of an L reading: the sampled scatter sigma_L, and for a printed volume its rounding
+    (``floor``; None for a piston read on the stand) in quadrature."""
+    sigma_L = jnp.exp(log_sigma_L)
+    return sigma_L if floor is None else jnp.hypot(floor, sigma_L)
+
+
+def _floor(d):
+    """The L rounding sd of a test's data: a ``VolumeData``'s, else None (a piston)."""
+    return getattr(d, "piston_floor", None)
+
+
 def _noise(theta, d: CubicData):
     nat = natural_noise(theta, jnp.mean(d.ref_force))
-    sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), jnp.exp(nat[2])
+    sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), piston_sd(nat[2], _floor(d))
     sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, d.ref_force))
     return sigma_f, sigma_L, nat
 
@@ -199,13 +228,20 @@ def start(d: CubicData) -> np.ndarray:
         res = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
         return np.sqrt(np.sum(res**2) / max(n - 4, 1))
 
+    floor = float(_floor(d) if _floor(d) is not None else 0.0)
     return np.array(
-        [np.log(sd(np.asarray(d.force)) + 1e-9), 0.0, np.log(sd(np.asarray(d.piston)) + 1e-12)]
+        [
+            np.log(sd(np.asarray(d.force)) + 1e-9),
+            0.0,
+            np.log(max(sd(np.asarray(d.piston)), floor) + 1e-12),
+        ]
     )
 
 
 def report(theta, beta, d: CubicData) -> dict:
     noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
+    if _floor(d) is not None:  # a printed volume: the sd of an L reading holds its rounding
+        noise[:, 2] = np.hypot(float(d.piston_floor), noise[:, 2])
     force, piston = to_paper_basis(beta[:, :4]), to_paper_basis(beta[:, 4:])
     out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
     out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
@@ -244,6 +280,22 @@ def piston_coordinate(test: PressureTest, piston_area_m2: float):
     return None, None
 
 
+def piston_rounding_sd(test: PressureTest, piston_area_m2: float) -> float:
+    """The sd (m) of the rounding of a test's L readings: a volume column printed to a step q (its
+    last digit, ``PressureTest.volume_step_m3``) is known to within +-q/2, a uniform error of sd
+    q / sqrt(12), which L = -V / S carries divided by S. 0 for a piston read on the stand (its
+    readings are in ``sigma_L``'s prior) and for a volume of unknown step (a test made in code).
+
+    The rounding is a known part of the L readings' noise, like the stand's error budget: without
+    it, a printed volume that a cubic passes through exactly (six catalogue heights whose
+    rounded values happen to lie on a cubic) has a likelihood that grows without bound as
+    sigma_L -> 0, and the fit of that test is lost to float64 (issue 29)."""
+    step = getattr(test, "volume_step_m3", None)
+    if test.piston_m is not None or test.volume_m3 is None or not step:
+        return 0.0
+    return float(step) / math.sqrt(12.0) / piston_area_m2
+
+
 def prepare(
     test: PressureTest,
     x0_m: float,
@@ -255,7 +307,7 @@ def prepare(
     and ``(lsq_force, lsq_piston, ref_force)``."""
     if noise not in ("budget", "constant"):
         raise ValueError(f"noise must be 'budget' or 'constant', got {noise!r}")
-    piston, _ = piston_coordinate(test, piston_area_m2)
+    piston, source = piston_coordinate(test, piston_area_m2)
     if piston is None:
         raise ValueError(
             f"the {test.label} test is force-only: fit it with FORCE_ONLY (force_data)"
@@ -264,7 +316,7 @@ def prepare(
     lsq_f = least_squares(u, test.force_N)
     lsq_l = least_squares(u, piston)
     ref_force = noise_reference(lsq_f, u, noise)
-    data = CubicData(
+    fields = (
         basis(u),
         jnp.asarray(test.force_N),
         jnp.asarray(piston),
@@ -272,6 +324,10 @@ def prepare(
         jnp.asarray(noise_prior_mean(stand)),
         jnp.ones(np.size(test.force_N)),
     )
+    if source == "volume":
+        data = VolumeData(*fields, jnp.asarray(piston_rounding_sd(test, piston_area_m2)))
+    else:
+        data = CubicData(*fields)
     return data, lsq_f, lsq_l, ref_force
 
 

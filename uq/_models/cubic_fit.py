@@ -17,7 +17,7 @@ from uq._data.reference import PAPER_PISTON_AREA_M2
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel, fit_collapsed
 from uq._inference.sampler import Settings
-from uq._models.cubic import MAX_DRAWS, MODEL, CubicData, basis, prepare
+from uq._models.cubic import MAX_DRAWS, MODEL, CubicData, VolumeData, basis, prepare
 from uq._models.cubic_ar1 import AR1, AR1Data, ar1_data, ar1_order_whitening, prewhiten
 from uq._models.cubic_force import FORCE_ONLY, ForceData, force_data
 from uq._models.cubic_measured import MEASURED, MeasuredData, measured_corrected, measured_data
@@ -85,7 +85,7 @@ def fit_tests(
         if t.piston_m is None and t.volume_m3 is None:  # force only
             return "force-measured" if pressure == "measured" else "force"
         if t.piston_m is None:  # L from a volume column: not read off the stand's piston
-            return "plain"
+            return "volume"
         if pressure == "measured":
             return "measured"
         if ar1 == "on" and t.step is not None:
@@ -103,13 +103,14 @@ def fit_tests(
 
     models = {
         "plain": MODEL,
+        "volume": MODEL,  # the plain model on VolumeData: L's rounding in its noise
         "measured": MEASURED,
         "ar1": AR1,
         "force": FORCE_ONLY,
         "force-measured": FORCE_ONLY,
     }
     #: the pressure-holding treatment PressureFit.variant records for each model key
-    holding = {"force": "plain", "force-measured": "measured"}
+    holding = {"force": "plain", "force-measured": "measured", "volume": "plain"}
     variants = [variant_of(t) for t in tests]
 
     def run(indices, variant, label):
@@ -263,7 +264,13 @@ def order_check(fit: PressureFit) -> dict:
 
 def collapsed_model(data) -> CollapsedModel:
     """The model bundle whose data ``data`` is (a fit's ``posterior.data``), for refits."""
-    kinds = ((ForceData, FORCE_ONLY), (MeasuredData, MEASURED), (AR1Data, AR1), (CubicData, MODEL))
+    kinds = (
+        (ForceData, FORCE_ONLY),
+        (MeasuredData, MEASURED),
+        (AR1Data, AR1),
+        (CubicData, MODEL),
+        (VolumeData, MODEL),
+    )
     for kind, model in kinds:
         if isinstance(data, kind):
             return model

@@ -102,7 +102,7 @@ class PressureFit:
         noise_model,
         variant: str = "plain",
     ):
-        post = posterior.idata.posterior
+        post = posterior.reported
         has_piston = lsq_piston is not None
 
         def stack(names):
@@ -245,7 +245,7 @@ class PressureFit:
         if self.variant == "plain":
             return {}
         names = AR_EXTRA_NAMES if self.variant == "ar1" else MEASURED_EXTRA_NAMES
-        post = self.idata.posterior
+        post = self.posterior.reported
         block = {"model": self.variant}
         for n in (n for n in names if n in post):  # a force-only test has no gas volume
             block[n] = estimate(np.asarray(post[n])) | {

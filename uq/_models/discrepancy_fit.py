@@ -126,8 +126,7 @@ class DiscrepancyFit(SurfaceFit):
         ks = scales.size
         beta = np.asarray(posterior.beta)
         C, D, K = beta.shape
-        post = posterior.idata.posterior
-        reported = {n: np.asarray(post[n]) for n in post.data_vars}
+        reported = {n: np.asarray(v) for n, v in posterior.reported.items()}
         amps = [reported[n].reshape(-1) for n in HYPER[: shell.n_channels // shell.n_k]]
         z = beta[..., ks:].reshape(C * D, shell.n_channels, -1)
         dev = gp.tested_values(

@@ -156,12 +156,11 @@ class LinearFit:
         ``posterior.beta`` times each block's scale)."""
         shell = cls(orders, geometry, np.zeros((1, 1, 0)), {}, _pressures(recordings), (0.0, 0.0))
         scales = np.concatenate([np.full(len(b.names), b.scale) for b in shell.block_layout()])
-        post = posterior.idata.posterior
         return cls(
             orders,
             geometry,
             np.asarray(posterior.beta) * scales,
-            {n: np.asarray(post[n]) for n in post.data_vars},
+            {n: np.asarray(v) for n, v in posterior.reported.items()},
             _pressures(recordings),
             tuple(float(v) for v in recordings.height_range_m),
             recordings,

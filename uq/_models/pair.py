@@ -38,7 +38,6 @@ import dataclasses
 import warnings
 from typing import NamedTuple
 
-import arviz as az
 import numpy as np
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
@@ -276,6 +275,9 @@ def arrays(rec):
 def select_orders(fitter, rec, candidates, *, seed: int, settings, stand):
     """Fit ``fitter(rec, orders, seed=, settings=, stand=)`` for each candidate and rank them by
     PSIS-LOO per reading (ArviZ's compare); returns (the best fit with its ``selection``, rows)."""
+    # reason: ArviZ (and xarray under it) costs about a second to import; only this ranking needs it
+    import arviz as az
+
     fits = {o.label: fitter(rec, o, seed=seed, settings=settings, stand=stand) for o in candidates}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)

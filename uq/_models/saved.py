@@ -26,7 +26,6 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 
 from uq._io.errors import InputError
 from uq._io.files import dumps_json, sha256_of
@@ -93,6 +92,9 @@ def write(path, model, variables: dict, params: dict, document: dict, **provenan
     ranges into ``constant_data``, provenance (the model's, updated by ``provenance``: ``seed``,
     ``written_by``, ``settings``, ``stand``, ``converged``, ``warnings``, ``model_info``) as root
     attributes."""
+    # reason: xarray costs about half a second to import; only saving and loading a model need it
+    import xarray as xr
+
     data, coords = {}, {}
     for name, (dims, values, attrs, names) in variables.items():
         values = np.asarray(values)

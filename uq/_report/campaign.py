@@ -36,7 +36,15 @@ from uq._io.files import (
 from uq._io.version import __version__
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
-from uq._report.html import FIGURE_FORMATS, Figure, check_format, encode, pyplot, render
+from uq._report.html import (
+    FIGURE_FORMATS,
+    Figure,
+    check_format,
+    encode,
+    pyplot,
+    render,
+    stamp_unconverged,
+)
 from uq._report.pages import write_model_page
 
 #: Names of the files write_report and the surface page write (uq._io.files.remove_stale prunes the rest).
@@ -155,6 +163,17 @@ def _band_note(ax, widths, factor: float, unit: str) -> str:
     return f"the curves' 90 % bands are at most {widest:.3g} {unit} wide ({seen})"
 
 
+def _band_note_after_layout(fig, ax, title: str, widths, factor: float, unit: str) -> str:
+    """:func:`_band_note` of the laid-out figure, laid out once: the title's two lines are set
+    (with a stand-in second line) before the one layout pass, and the layout is then kept
+    (``set_layout_engine("none")``), so that saving the figure does not lay it out again (the
+    constrained layout of a figure with a dozen residual panels costs about a second a pass)."""
+    ax.set_title(title.format("the curves' 90 % bands are at most 0.000 N wide (seen)"), fontsize=9)
+    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
+    fig.set_layout_engine("none")
+    return _band_note(ax, widths, factor, unit)
+
+
 def _residual_grid(fig, gs, n: int, cols: int):
     """``n`` small axes in the rows of ``gs`` below its first, sharing their x axis."""
     axes = []
@@ -247,12 +266,12 @@ def figure_force(cf, cb: CampaignBands):
     ax.grid(alpha=0.3)
     _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
     _residual_labels(fig, res, "reading − mean (N)")
-    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
-    note = _band_note(ax, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N")
+    title = "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n{}"
+    note = _band_note_after_layout(
+        fig, ax, title, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N"
+    )
     ax.set_title(
-        "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n"
-        f"{note}; below: readings and bands minus the mean curve",
-        fontsize=9,
+        title.format(f"{note}; below: readings and bands minus the mean curve"), fontsize=9
     )
     return fig
 
@@ -293,11 +312,15 @@ def figure_volume(cf, cb: CampaignBands):
     ax.grid(alpha=0.3)
     _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
     _residual_labels(fig, res, "S (L − mean L) (cm³)")
-    fig.draw_without_rendering()
-    note = _band_note(ax, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³")
+    title = (
+        "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean "
+        "curves\n{}"
+    )
+    note = _band_note_after_layout(
+        fig, ax, title, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³"
+    )
     ax.set_title(
-        "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean curves\n"
-        f"{note}; below: piston readings and bands minus the mean L(x), times S",
+        title.format(f"{note}; below: piston readings and bands minus the mean L(x), times S"),
         fontsize=9,
     )
     return fig
@@ -546,10 +569,28 @@ def _absent(ax, words: str, x, y: float = 0.5) -> None:
 
 
 def encoded_test_figure(
-    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None
+    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None, converged=True
 ) -> bytes:
-    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns)."""
-    return encode(figure_test(t, force_mean, x0_m, tb, cb, piston_m), figure_format)
+    """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns), stamped NOT
+    CONVERGED when the test's fit failed its convergence rules."""
+    fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m)
+    if not converged:
+        stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
+    return encode(fig, figure_format)
+
+
+def not_converged(cf) -> tuple[str, list[str]]:
+    """Which tests of ``cf`` failed their convergence rules, in words ("" when none), and their
+    failed rules (for the page's banner and the figures' stamps)."""
+    bad = [t for t in cf.tests if not t.convergence.converged]
+    if not bad:
+        return "", []
+    what = (
+        f"{len(bad)} of {len(cf.tests)} tests ({', '.join(f'{t.pressure_bar:g}' for t in bad)} bar)"
+    )
+    return what, [
+        f"{t.pressure_bar:g} bar: {m}" for t in bad for m in t.convergence.messages(CLI_ADVICE)
+    ]
 
 
 def _ignore_interrupts() -> None:
@@ -590,7 +631,16 @@ class _TestFigures:
     def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png"):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
-            (tf.test, tf.flat("force").mean(0), tf.x0_m, tb, grid, figure_format, _piston(tf))
+            (
+                tf.test,
+                tf.flat("force").mean(0),
+                tf.x0_m,
+                tb,
+                grid,
+                figure_format,
+                _piston(tf),
+                tf.convergence.converged,
+            )
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
         self._pool, self._futures = None, []
@@ -915,6 +965,10 @@ def _draw_figures(
                 "F_eff scatter vs height",
             )
         )
+    what, _ = not_converged(cf)
+    if what:  # the campaign's figures show every test
+        for _, fig, _ in drawn:
+            stamp_unconverged(fig, what)
     figs = {
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, fig, alt in drawn
@@ -1038,6 +1092,8 @@ def _write_page(
         bands_seed=cb.seed,
         fit_seed=cf.seed,
         n_not_converged=sum(not t.convergence.converged for t in cf.tests),
+        not_converged_what=not_converged(cf)[0],
+        not_converged_messages=not_converged(cf)[1],
         reference_bar=cb.reference_bar,
         reference_note=cb.reference_note,
         scatter_pressures=cb.scatter_pressures_bar,

@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from uq._derived.comparison import words
 from uq._io.files import dumps_json, remove_stale, staged_folder
-from uq._report.html import Figure, check_format, encode, pyplot, render
+from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
 PAGE = "design.html"
 #: the files the sheet writes, by pattern (for pruning what an earlier run left)
@@ -37,13 +38,28 @@ def _colours(n: int):
     return [cmap(0.85 * i / max(n - 1, 1)) for i in range(n)]
 
 
+def _is_tested(doc: dict, p: float) -> bool:
+    """Whether ``p`` (bar) is one of the tested pressures (``doc["tested_pressures_bar"]``)."""
+    tested = doc.get("tested_pressures_bar")
+    return tested is None or any(abs(p - t) < 1e-9 for t in tested)
+
+
 def figure_sealed_curves(doc: dict, curves: dict):
     """The sealed load-deflection curves, one per charge pressure of the chart (charged at the
-    design height), each with its 90 % band; the design height dotted."""
+    design height), each with its 90 % band, and the design charge's own curve in black (dashed
+    when the charge was not a tested pressure); the design height dotted."""
     plt = pyplot()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.0, 4.4), layout="constrained")
     cols = _colours(len(curves))
-    for c, (p, cv) in zip(cols, sorted(curves.items()), strict=True):
+    design = doc.get("sealed_curve")
+    drawn = [
+        (c, cv, f"{p:g} bar", 1.2, "-")
+        for c, (p, cv) in zip(cols, sorted(curves.items()), strict=True)
+    ]
+    if design is not None:
+        ls = "-" if _is_tested(doc, doc["charge_bar"]) else "--"
+        drawn.append(("k", design, f"design: {doc['charge_bar']:g} bar", 2.0, ls))
+    for c, cv, label, lw, ls in drawn:
         x = np.asarray(cv["height_m"]) * 1e3
         if x.size == 0:
             continue
@@ -54,10 +70,10 @@ def figure_sealed_curves(doc: dict, curves: dict):
                 np.asarray(b["q05"]) * scale,
                 np.asarray(b["q95"]) * scale,
                 color=c,
-                alpha=0.3,
+                alpha=0.3 if c != "k" else 0.15,
                 lw=0,
             )
-            a.plot(x, np.asarray(b["mean"]) * scale, color=c, lw=1.2, label=f"{p:g} bar")
+            a.plot(x, np.asarray(b["mean"]) * scale, color=c, lw=lw, ls=ls, label=label)
     for a in (ax, ax2):
         a.axvline(doc["height_m"] * 1e3, color="k", ls=":", lw=1)
         a.set_xlabel("height x, mm")
@@ -101,6 +117,23 @@ def figure_frequency_chart(doc: dict):
             xytext=(4, 5),
             fontsize=7,
         )
+    d = design_row(doc)
+    if d is not None:  # the design point itself, whether or not its charge is one of the chart's
+        dl = np.array([d["load_N"][k] for k in ("mean", "q05", "q95")]) * 1e-3
+        df = np.array([d["natural_frequency_Hz"][k] for k in ("mean", "q05", "q95")])
+        ax.errorbar(
+            [dl[0]],
+            [df[0]],
+            xerr=[[dl[0] - dl[1]], [dl[2] - dl[0]]],
+            yerr=[[df[0] - df[1]], [df[2] - df[0]]],
+            fmt="*",
+            color="tab:red",
+            ms=12,
+            capsize=3,
+            zorder=5,
+            label=f"design: {doc['charge_bar']:g} bar"
+            + ("" if _is_tested(doc, doc["charge_bar"]) else " (not a tested pressure)"),
+        )
     ax.set_xlabel("load carried at the design height, kN")
     ax.set_ylabel("natural frequency, Hz")
     ax.set_title(
@@ -122,12 +155,20 @@ def figure_isobaric(doc: dict):
         rr = sorted((r for r in rows if r["pressure_bar"] == p), key=lambda r: r["height_m"])
         x = np.array([r["height_m"] for r in rr]) * 1e3
         m, lo, hi = (np.array([r["load_N"][k] for r in rr]) * 1e-3 for k in ("mean", "q05", "q95"))
-        ax.fill_between(x, lo, hi, color=c, alpha=0.3, lw=0)
-        ax.plot(x, m, "o-", color=c, ms=2.5, lw=1, label=f"{p:g} bar")
+        tested = _is_tested(doc, p)
+        c = c if tested else "k"
+        ax.fill_between(x, lo, hi, color=c, alpha=0.3 if tested else 0.15, lw=0)
+        label = f"{p:g} bar" if tested else f"{p:g} bar: design charge, not tested"
+        ax.plot(x, m, "o-" if tested else "o--", color=c, ms=2.5, lw=1, label=label)
     ax.axvline(doc["height_m"] * 1e3, color="k", ls=":", lw=1)
     ax.set_xlabel("height x, mm")
     ax.set_ylabel("isobaric load, kN")
-    ax.set_title("Isobaric load at the tested pressures, 90 % bands", fontsize=10)
+    ax.set_title(
+        "Isobaric load at the tested pressures"
+        + ("" if all(_is_tested(doc, p) for p in ps) else " and the design charge")
+        + ", 90 % bands",
+        fontsize=10,
+    )
     ax.legend(fontsize=6, ncol=2)
     ax.grid(alpha=0.3)
     return fig
@@ -154,12 +195,58 @@ CSV_COLUMNS = (
 )
 
 
+def design_row(doc: dict) -> dict | None:
+    """The design point as a row of the frequency chart (charge, load, rate, natural frequency),
+    None for a campaign without the sealed outputs."""
+    if doc.get("rate_N_per_m") is None:
+        return None
+    return {
+        "charge_bar": doc["charge_bar"],
+        "load_N": doc["load_N"],
+        "rate_N_per_m": doc["rate_N_per_m"],
+        "natural_frequency_Hz": doc["natural_frequency_Hz"],
+        "design": True,
+        "tested": _is_tested(doc, doc["charge_bar"]),
+    }
+
+
+def chart_rows(doc: dict) -> list[dict]:
+    """The frequency chart's rows with the design point among them (marked ``design``; it
+    replaces the chart's row at the same charge), by charge."""
+    rows = [dict(r, design=False) for r in doc["frequency_chart"]["rows"]]
+    d = design_row(doc)
+    if d is not None:
+        rows = [r for r in rows if abs(r["charge_bar"] - d["charge_bar"]) > 1e-9] + [d]
+    return sorted(rows, key=lambda r: r["charge_bar"])
+
+
+def ranking(doc: dict) -> dict:
+    """Which model answered and how the data rank it (PSIS-LOO against the per-pressure cubics),
+    in words, for the sheet."""
+    c = doc.get("comparison")
+    if c is None:
+        why = (
+            "not ranked: the per-pressure cubics answer (no model over all tests was fitted)"
+            if doc.get("rate_N_per_m") is None
+            else "not ranked in this run (--no-compare)"
+        )
+        return {"model": doc["model"], "words": why, "better": None}
+    return {
+        "model": doc["model"],
+        "words": words(c),
+        "better": c.get("better"),
+        "rule": c.get("rule"),
+    }
+
+
 def sheet_csv(doc: dict) -> str:
-    """Every table of the sheet in one long CSV: one estimate a row (mean, sd, 5 % and 95 %)."""
+    """Every table of the sheet in one long CSV: one estimate a row (mean, sd, 5 % and 95 %).
+    The design point has its own rows ("design_point"), and so does the isobaric column at a
+    design charge that was not tested ("isobaric_design_charge")."""
     rows = []
     for r in doc["isobaric"]:
         pre = {
-            "table": "isobaric",
+            "table": "isobaric" if _is_tested(doc, r["pressure_bar"]) else "isobaric_design_charge",
             "pressure_bar": f"{r['pressure_bar']:g}",
             "height_mm": f"{r['height_m'] * 1e3:g}",
         }
@@ -171,6 +258,16 @@ def sheet_csv(doc: dict) -> str:
                 _est_row(pre, "volume_increment_from_design_height", "L", r["volume_increment_l"])
             )
     h = f"{doc['height_m'] * 1e3:g}"
+    pre = {"table": "design_point", "height_mm": h, "charge_bar": f"{doc['charge_bar']:g}"}
+    rows.append(_est_row(pre, "load", "N", doc["load_N"]))
+    if doc.get("rate_N_per_m") is not None:
+        rows.append(_est_row(pre, "rate", "N/m", doc["rate_N_per_m"]))
+        rows.append(_est_row(pre, "natural_frequency", "Hz", doc["natural_frequency_Hz"]))
+        if "transmissibility" in doc:
+            t = doc["transmissibility"]
+            f = f"{t['forcing_Hz']:g}Hz"
+            rows.append(_est_row(pre, f"transmissibility_at_{f}", "1", t["transmissibility"]))
+            rows.append(_est_row(pre, f"isolation_at_{f}", "%", t["isolation_pct"]))
     if doc.get("rate_N_per_m") is not None:
         for r in doc["frequency_chart"]["rows"]:
             pre = {
@@ -189,7 +286,8 @@ def sheet_csv(doc: dict) -> str:
 
 
 def _isobaric_matrix(doc: dict, key: str, scale: float):
-    """(pressures bar, [(height mm, [estimate scaled per pressure])]) of one isobaric quantity."""
+    """(pressures bar, [(height mm, [estimate scaled per pressure])], [whether each pressure was
+    tested]) of one isobaric quantity."""
     rows = doc["isobaric"]
     hs = sorted({r["height_m"] for r in rows})
     ps = sorted({r["pressure_bar"] for r in rows})
@@ -203,7 +301,7 @@ def _isobaric_matrix(doc: dict, key: str, scale: float):
                 None if e is None else {k: float(e[k]) * scale for k in ("mean", "q05", "q95")}
             )
         out.append((h * 1e3, line))
-    return ps, out
+    return ps, out, [_is_tested(doc, p) for p in ps]
 
 
 def write_design_sheet(
@@ -227,6 +325,9 @@ def write_design_sheet(
                 "sealed load-deflection and rate curves with 90 % bands",
             )
         figs["design_frequency"] = (figure_frequency_chart(doc), "natural frequency against load")
+    if not doc["source"]["converged"]:
+        for fig, _ in figs.values():
+            stamp_unconverged(fig, f"{doc['model']}'s sampler")
     figures = {
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, (fig, alt) in figs.items()
@@ -250,6 +351,9 @@ def write_design_sheet(
         reconstructed=reconstructed,
         source=doc["source"],
         curve=doc.get("sealed_curve"),
+        chart=chart_rows(doc) if sealed else [],
+        ranking=ranking(doc),
+        untested_charge=not _is_tested(doc, doc["charge_bar"]),
     )
     with staged_folder(out, last=(PAGE,)) as stage:
         for f in figures.values():

@@ -21,7 +21,7 @@ import numpy as np
 
 from uq._diagnose.engine import residuals_of, summary_text
 from uq._io.files import write_bytes_atomic, write_text_atomic
-from uq._report.html import Figure, check_format, encode, pyplot, render
+from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
 FIGURE = "diagnose_residuals"
 
@@ -87,7 +87,23 @@ def _mechanism_rows(doc: dict) -> list[dict]:
                     "given": other["given_piston_area_m2"] * 1e4,
                     "unit": "cm²",
                 }
-            row["other"] = {"words": other["words"], "value": extra}
+            pot = other.get("potential")
+            row["other"] = {
+                "words": other["words"],
+                "value": extra,
+                "assumes": other.get("assumes"),
+                "potential": pot
+                and {
+                    "area": None
+                    if pot["maxwell_piston_area_m2"] is None
+                    else {
+                        "mean": pot["maxwell_piston_area_m2"]["mean"] * 1e4,
+                        "sd": pot["maxwell_piston_area_m2"]["sd"] * 1e4,
+                    },
+                    "assumes": pot["assumes"],
+                    "command": pot["command"],
+                },
+            }
         else:
             row["other"] = None
         rows.append(row)
@@ -114,7 +130,21 @@ def _maxwell_view(mx: dict | None) -> dict | None:
         "rule": mx["rule"],
         "coefficients": mx.get("coefficients", ""),
         "words": mx["interpretation"]["words"],
+        "shape_rule": mx.get("shape_rule", ""),
+        "shapes": [
+            {"name": SHAPE_WORDS[k], **v}
+            for k, v in mx["interpretation"]["middle"].get("shapes", {}).items()
+        ],
     }
+
+
+#: the shapes of r over pressure the Maxwell check compares (uq._diagnose.maxwell.shapes)
+SHAPE_WORDS = {
+    "zero": "zero: the relation holds",
+    "constant": "one value at every pressure: a piston-area error alone",
+    "step": "a step between two tested pressures",
+    "fade": "a fade: a straight line in p_u",
+}
 
 
 def write_diagnose_report(res, out_dir, *, figure_format: str = "png") -> Path:
@@ -126,9 +156,13 @@ def write_diagnose_report(res, out_dir, *, figure_format: str = "png") -> Path:
     out.mkdir(parents=True, exist_ok=True)
     doc = res.document
     name = f"{FIGURE}.{figure_format}"
+    warnings = (doc.get("sampling") or {}).get("warnings") or []
+    fig = _residual_figure(res)
+    if warnings:
+        stamp_unconverged(fig, "the final model's sampler")
     figure = Figure(
         name,
-        encode(_residual_figure(res), figure_format),
+        encode(fig, figure_format),
         "force and volume residuals of the traditional and the final model",
     )
     write_bytes_atomic(out / name, figure.data)
@@ -143,5 +177,6 @@ def write_diagnose_report(res, out_dir, *, figure_format: str = "png") -> Path:
         maxwell=_maxwell_view(doc.get("maxwell")),
         summary=summary_text(doc),
         figure=figure,
+        sampling_warnings=warnings,
     )
     return write_text_atomic(out / "diagnose.html", page)

@@ -70,6 +70,29 @@ def encode(fig, figure_format: str = "png") -> bytes:
     return buf.getvalue()
 
 
+#: what a page or figure drawn from a posterior whose convergence rules failed says it is
+NOT_CONVERGED = "NOT CONVERGED"
+
+
+def stamp_unconverged(fig, what: str) -> None:
+    """Mark ``fig`` as drawn from a posterior whose convergence rules failed (``what``: which fit,
+    e.g. "the 6 bar test"): NOT CONVERGED across it and, under it, which fit and why it is not a
+    result, so that the figure cannot pass for a result, also when copied without its page (issue
+    29). Both are translucent, over the axes, clear of the labels."""
+    common = dict(ha="center", va="center", rotation=20, color="#c00000", zorder=1000)
+    width_in = float(fig.get_size_inches()[0])  # the stamp fits the figure: 44 pt on 7.2 in
+    big = min(44.0, 6.0 * width_in)
+    fig.text(0.5, 0.55, NOT_CONVERGED, fontsize=big, fontweight="bold", alpha=0.25, **common)
+    fig.text(
+        0.5,
+        0.41,
+        f"{what}:\nthe sampler's convergence rules failed; not a result",
+        fontsize=min(9.0, 1.6 * width_in),
+        alpha=0.6,
+        **common,
+    )
+
+
 def _png(fig) -> bytes:
     """The figure as PNG bytes at ``DPI``; the figure is closed."""
     return encode(fig, "png")
@@ -109,6 +132,12 @@ def _escape(value):
     return Markup(html.escape(str(value)))
 
 
+def _fmt(value, spec: str) -> str:
+    """``format(value, spec)``; a quantity the JSON leaves undefined (None, e.g. a Pareto k ArviZ
+    could not estimate) prints as "undefined"."""
+    return "undefined" if value is None else format(value, spec)
+
+
 @functools.cache
 def _environment():
     env = Environment(
@@ -120,7 +149,7 @@ def _environment():
         lstrip_blocks=True,
         keep_trailing_newline=True,
     )
-    env.filters["fmt"] = format  # {{ x|fmt(".1f") }} is f"{x:.1f}"
+    env.filters["fmt"] = _fmt  # {{ x|fmt(".1f") }} is f"{x:.1f}"
     env.filters["sig4"] = sig4
     return env
 

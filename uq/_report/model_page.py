@@ -20,7 +20,7 @@ import numpy as np
 from uq._inference.summary import band
 from uq._io.files import write_bytes_atomic, write_text_atomic
 from uq._models.registry import CUBICS
-from uq._report.html import Figure, check_format, encode, pyplot, render
+from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
 
 def figure_residual_overlay(fit, model: str | None = None):
@@ -199,11 +199,20 @@ def comparison_rows(comparison: dict, name: str, what: str) -> list[dict]:
     ]
 
 
-def write_figures(figs: dict, out: Path, figure_format: str) -> dict:
+def unconverged_words(result: dict, what: str) -> str:
+    """ "" when the model's sampler passed its convergence rules, else which fit failed, in words
+    (``what``: the model in words, ``fit.words``; for the page's banner and the figures' stamps)."""
+    return "" if result.get("converged", True) else f"{what}'s sampler"
+
+
+def write_figures(figs: dict, out: Path, figure_format: str, unconverged: str = "") -> dict:
     """Encode ``figs`` (stem -> (matplotlib figure, alt text)) as ``figure_format``, write each
-    beside the page; returns stem -> :class:`Figure`."""
+    beside the page; returns stem -> :class:`Figure`. ``unconverged``: which fit failed its
+    convergence rules, in words; every figure is then stamped NOT CONVERGED."""
     figures = {}
     for stem, (fig, alt) in figs.items():
+        if unconverged:
+            stamp_unconverged(fig, unconverged)
         name = f"{stem}.{figure_format}"
         figures[stem] = Figure(name, encode(fig, figure_format), alt)
         write_bytes_atomic(out / name, figures[stem].data)
@@ -226,6 +235,7 @@ def write_model_page(fit, result: dict, out_dir, *, figure_format: str = "png") 
         {f"{fit.name}_force": (figure_residual_overlay(fit), f"readings against {what}'s band")},
         out,
         figure_format,
+        unconverged_words(result, what),
     )
     comp = result.get("comparison")
     page = render(
@@ -240,5 +250,6 @@ def write_model_page(fit, result: dict, out_dir, *, figure_format: str = "png") 
         preference=preference(comp, fit.name, what),
         order_selection=result.get("order_selection") or [],
         noise=noise_rows(result.get("noise") or {}),
+        not_converged=unconverged_words(result, what),
     )
     return write_text_atomic(out / f"{fit.name}.html", page)

@@ -26,6 +26,7 @@ from uq._report.model_page import (
     figure_residual_overlay,
     noise_rows,
     preference,
+    unconverged_words,
     write_figures,
 )
 
@@ -106,7 +107,7 @@ def write_surface_report(
     }
     if not fit.force_only:  # the spread needs the volume
         figs["surface_spread"] = (figure_spread(fit), "spread traditional minus measured")
-    figures = write_figures(figs, out, figure_format)
+    figures = write_figures(figs, out, figure_format, unconverged_words(result, fit.words))
     comp = result.get("comparison")
     page = render(
         "surface.html",
@@ -119,5 +120,6 @@ def write_surface_report(
         noise=noise_rows(result["noise"]),
         figures=figures,
         volume_omitted=fit.omitted_reason,
+        not_converged=unconverged_words(result, fit.words),
     )
     return write_text_atomic(out / "surface.html", page)

@@ -30,6 +30,7 @@ from uq._report.model_page import (
     figure_residual_overlay,
     noise_rows,
     preference,
+    unconverged_words,
     write_figures,
 )
 
@@ -202,6 +203,7 @@ def write_thermo_report(
         },
         out,
         figure_format,
+        unconverged_words(result, fit.words),
     )
     comp = result.get("comparison")
     page = render(
@@ -216,5 +218,6 @@ def write_thermo_report(
         maxwell_share=float(region["excludes_one"].mean()),
         piston=piston_words(result["implied_piston_area_m2"], result["piston_area_m2"]),
         figures=figures,
+        not_converged=unconverged_words(result, fit.words),
     )
     return write_text_atomic(out / PAGE, page)

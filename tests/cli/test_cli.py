@@ -37,11 +37,13 @@ def no_fitting(monkeypatch):
     import uq._diagnose.engine
     import uq._drivers.calibrate
     import uq._models.cubic_fit
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
     import uq._models.thermo_likelihood
 
     monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
     monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.discrepancy, "fit_discrepancy", forbidden)
     monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
     monkeypatch.setattr(uq._drivers.calibrate, "calibrate", forbidden)
     monkeypatch.setattr(uq._diagnose.engine, "diagnose", forbidden)
@@ -130,11 +132,15 @@ def test_bad_usage_exits_2_with_one_line_before_any_work(row, tmp_path, capsys, 
 def test_margin_prob_refused_before_reading_or_fitting(monkeypatch, capsys):
     """The issue's example: --prob 1.5 used to fail only after 30 s of fitting."""
     import uq._cli.common
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
 
     calls = []
     monkeypatch.setattr(
         uq._models.surface_likelihood, "fit_surface", lambda *a, **k: calls.append("fit")
+    )
+    monkeypatch.setattr(
+        uq._models.discrepancy, "fit_discrepancy", lambda *a, **k: calls.append("fit")
     )
     monkeypatch.setattr(uq._cli.common, "load", lambda *a, **k: calls.append("load"))
     assert run(["margin", N50, "--height-mm", 112, "--load-N", 13020, "--prob", 1.5]) == 2

@@ -372,6 +372,7 @@ def test_saved_fit_refuses_what_a_fit_refuses(extra, words, surface_saved, capsy
 def no_fitting(monkeypatch):
     import uq._cli.common
     import uq._models.cubic_fit
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
 
     def forbidden(*a, **k):
@@ -380,6 +381,7 @@ def no_fitting(monkeypatch):
     for mod, name in (
         (uq._models.cubic_fit, "fit_campaign"),
         (uq._models.surface_likelihood, "fit_surface"),
+        (uq._models.discrepancy, "fit_discrepancy"),
         (uq._cli.common, "load"),
     ):
         monkeypatch.setattr(mod, name, forbidden)

@@ -352,7 +352,7 @@ def command_design(args) -> int:
         }
     _print_sealed(rec, model, doc)
     _sheet_and_json(
-        args, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
+        args, rec, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
     )
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
     record_misfit(args, check)
@@ -377,10 +377,9 @@ def _advice():
     return CLI_ADVICE
 
 
-def _reconstructed(path) -> bool:
-    from uq._report.campaign import read_comments
-
-    return any("RECONSTRUCTED" in c.upper() for c in read_comments(path))
+def _reconstructed(rec) -> bool:
+    """The recordings' comments (read with them) say they are reconstructed."""
+    return any("RECONSTRUCTED" in c.upper() for c in rec.comments)
 
 
 FORCE_ONLY_WHY = (
@@ -436,13 +435,15 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
     )
     print(f"  {FORCE_ONLY_WHY}")
     _print_check(check)
-    _sheet_and_json(args, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    _sheet_and_json(
+        args, rec, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
+    )
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
     record_misfit(args, check)
     return 0
 
 
-def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
+def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
     """The data sheet (``--out``), the timing line and the JSON, for both kinds of campaign."""
     from uq._io.files import emit_json
 
@@ -453,7 +454,7 @@ def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
             doc,
             args.out,
             curves=curves,
-            reconstructed=_reconstructed(args.file),
+            reconstructed=_reconstructed(rec),
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")

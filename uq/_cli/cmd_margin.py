@@ -323,7 +323,7 @@ def _queries_from(args) -> list[dict]:
 
 
 def _check_ranges(
-    q: dict, height_range_m, pressure_range_bar, model_word: str = "the surface model"
+    q: dict, height_range_m, pressure_range_bar, model_word: str = "the model"
 ) -> None:
     """Heights and pressures outside the tested ranges, refused before any fitting or answering (no extrapolation)."""
     lo, hi = height_range_m

@@ -37,11 +37,13 @@ def no_fitting(monkeypatch):
     import uq._diagnose.engine
     import uq._drivers.calibrate
     import uq._models.cubic_fit
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
     import uq._models.thermo_likelihood
 
     monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
     monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.discrepancy, "fit_discrepancy", forbidden)
     monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
     monkeypatch.setattr(uq._drivers.calibrate, "calibrate", forbidden)
     monkeypatch.setattr(uq._diagnose.engine, "diagnose", forbidden)
@@ -130,11 +132,15 @@ def test_bad_usage_exits_2_with_one_line_before_any_work(row, tmp_path, capsys, 
 def test_margin_prob_refused_before_reading_or_fitting(monkeypatch, capsys):
     """The issue's example: --prob 1.5 used to fail only after 30 s of fitting."""
     import uq._cli.common
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
 
     calls = []
     monkeypatch.setattr(
         uq._models.surface_likelihood, "fit_surface", lambda *a, **k: calls.append("fit")
+    )
+    monkeypatch.setattr(
+        uq._models.discrepancy, "fit_discrepancy", lambda *a, **k: calls.append("fit")
     )
     monkeypatch.setattr(uq._cli.common, "load", lambda *a, **k: calls.append("load"))
     assert run(["margin", N50, "--height-mm", 112, "--load-N", 13020, "--prob", 1.5]) == 2
@@ -428,6 +434,20 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         ],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
         "batch": ["batch", d / "batch.csv", "--out", d / "batch"],
+        "plan": [
+            "plan",
+            csv,
+            "--target",
+            "force@110mm,5bar",
+            "--max-readings",
+            16,
+            "--model",
+            "surface",
+            "--draws",
+            30,
+            "--max-steps",
+            "300",
+        ],
     }
 
 
@@ -435,9 +455,9 @@ def test_every_command_has_a_json_row():
     assert set(_json_rows(Path("."), Path("."), Path("."))) == {c[0] for c in COMMANDS}
 
 
-#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration): their
-#: --json - runs with the slow suite
-HEAVY = ("batch", "diagnose", "calibrate")
+#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration,
+#: test_plan_command): their --json - runs with the slow suite
+HEAVY = ("batch", "diagnose", "calibrate", "plan")
 
 
 @pytest.mark.parametrize(

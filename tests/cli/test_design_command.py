@@ -3,7 +3,10 @@
 One small n50-thermo campaign (5 pressures every 10 mm, written by ``uq simulate``) is fitted once
 by the library with the coverage script's tiny settings (the spring's own orders, 200 sampler
 steps); the command's fit is replaced by that one, so these tests check the command, not the
-sampler. The spring's absolute volume is known, so the answers are checked against the virtual
+sampler. The replaced fitter is the default model's (``registry.default("design")``, the surface
+with a discrepancy in pressure: ``uq._models.discrepancy.fit_discrepancy``), so a command that
+fitted another model than its default would fit for real and fail the tests' speed and answers;
+the discrepancy's own design answers are checked in tests/models/test_discrepancy.py. The spring's absolute volume is known, so the answers are checked against the virtual
 stand's sealed truth (uq._stand.sealed_test.sealed_truth, brentq on the spring's own volume).
 """
 
@@ -59,11 +62,11 @@ def thermo_campaign(tmp_path_factory):
 
 @pytest.fixture
 def given_fit(thermo_campaign, monkeypatch):
-    """The command's surface fit is the fixture's (no sampler run)."""
-    import uq._models.surface_likelihood as likelihood
+    """The command's fit (its default model's fitter) is the fixture's (no sampler run)."""
+    import uq._models.discrepancy as default_model
 
     fit = thermo_campaign[2]
-    monkeypatch.setattr(likelihood, "fit_surface", lambda rec, **k: fit)
+    monkeypatch.setattr(default_model, "fit_discrepancy", lambda rec, **k: fit)
     return fit
 
 
@@ -71,6 +74,7 @@ def given_fit(thermo_campaign, monkeypatch):
 def no_fitting(monkeypatch):
     """Every fit fails the test: bad input must be refused before any fitting."""
     import uq._models.cubic_fit
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
     import uq._models.thermo_likelihood
 
@@ -78,6 +82,7 @@ def no_fitting(monkeypatch):
         raise AssertionError("a fit started before the options were validated")
 
     monkeypatch.setattr(uq._models.surface_likelihood, "fit_surface", forbidden)
+    monkeypatch.setattr(uq._models.discrepancy, "fit_discrepancy", forbidden)
     monkeypatch.setattr(uq._models.thermo_likelihood, "fit_thermo", forbidden)
     monkeypatch.setattr(uq._models.cubic_fit, "fit_campaign", forbidden)
 
@@ -91,12 +96,12 @@ def _truth(x_m, **kw):
 @pytest.fixture(scope="module")
 def sheet(thermo_campaign, tmp_path_factory):
     """One ``uq design --json --out`` run on the campaign: (its JSON, the sheet folder, stdout)."""
-    import uq._models.surface_likelihood as likelihood
+    import uq._models.discrepancy as default_model
 
     d, path, fit, v_c = thermo_campaign
     out = tmp_path_factory.mktemp("sheet")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(likelihood, "fit_surface", lambda rec, **k: fit)
+        mp.setattr(default_model, "fit_discrepancy", lambda rec, **k: fit)
         import contextlib
         import io
 
@@ -116,6 +121,8 @@ def sheet(thermo_campaign, tmp_path_factory):
                     4,
                     "--charges-bar",
                     "3,5,7,9",
+                    "--polytropic",
+                    1,  # the truth's (slow strokes); the default is the dynamic 1.3..1.4
                     "--draws",
                     500,
                     "--json",
@@ -141,6 +148,12 @@ def test_json_has_the_contract_keys_and_states_the_volume_assumption(sheet, ther
         assert e["q05"] < e["mean"] < e["q95"] and e["sd"] > 0
     words = " ".join(res["assumptions"])
     assert "ASSUMED: the volume at 112 mm does not change with pressure" in words
+    # with an honest width from the recordings (issue 29): 0 +- sd L/bar, drawn per draw
+    assert res["dvdp_l_per_bar"] == 0.0 and res["dvdp_sd_from"] == "recordings"
+    assert res["dvdp_sd_l_per_bar"] > 0 and "give or take" in words
+    check = res["model_check"]
+    assert check["available"] and check["model"] == res["model"]
+    assert [r["pressure_bar"] for r in check["by_pressure"]] == [1.0, 3.0, 5.0, 7.0, 9.0]
     assert "measured by the user" in words and "isothermal" in words
     assert res["transmissibility"]["forcing_Hz"] == 4.0
 

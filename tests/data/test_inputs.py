@@ -621,7 +621,7 @@ def test_declared_conventions_read_as_the_paper_format():
 def test_units_from_column_suffixes():
     from uq._data import units
 
-    # pint's factors, cleaned of float noise: the paper's units read bit for bit as before
+    # the units' definitions to 15 digits (pint's factors before): the paper's units read bit for bit as before
     assert units.factor("height", "mm") == 1e-3 and units.factor("volume", "l") == 1e-3
     assert (
         units.factor("height", "in") == 0.0254 and units.factor("force", "lbf") == 4.4482216152605

@@ -113,6 +113,8 @@ def test_saved_fit_gives_the_same_answer(which, request, tmp_path, capsys):
     assert_same(json.loads(out.read_text()), original)
     text = capsys.readouterr().out
     assert "no refit" in text and "answered by the" in text
+    # the check at the tested points made when the fit was saved, with the answer (issue 29)
+    assert original["model_check"]["available"] and "the model at the tested points" in text
     assert original["model"]["name"] == ("surface" if which == "surface_saved" else "cubics")
     assert "usable_stroke" in original and "force_at_pressure" in original
 
@@ -370,6 +372,7 @@ def test_saved_fit_refuses_what_a_fit_refuses(extra, words, surface_saved, capsy
 def no_fitting(monkeypatch):
     import uq._cli.common
     import uq._models.cubic_fit
+    import uq._models.discrepancy
     import uq._models.surface_likelihood
 
     def forbidden(*a, **k):
@@ -378,6 +381,7 @@ def no_fitting(monkeypatch):
     for mod, name in (
         (uq._models.cubic_fit, "fit_campaign"),
         (uq._models.surface_likelihood, "fit_surface"),
+        (uq._models.discrepancy, "fit_discrepancy"),
         (uq._cli.common, "load"),
     ):
         monkeypatch.setattr(mod, name, forbidden)
@@ -467,6 +471,7 @@ def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
     fit, original, _ = surface_saved
     out = tmp_path / "d.json"
     argv = ["margin", "--fit", fit, *QUERY, *DESIGN, "--volume-l", "3.0", "--json", out]
+    argv += ["--polytropic", "1", "--dvdp-sd-l-per-bar", "0"]  # the closed form's n and dV/dp_u
     assert run([*argv, *UNCONV]) == 0
     text = capsys.readouterr().out
     res = json.loads(out.read_text())

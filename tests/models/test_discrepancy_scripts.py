@@ -23,7 +23,7 @@ def test_between_coverage_tiny(tmp_path):
     proc = _run("scripts/between_coverage.py", "--tiny", "--out", tmp_path)
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((tmp_path / "coverage.json").read_text())
-    assert doc["replications"] == 1 and doc["grids"] == ["1-3-5"]
+    assert doc["replications"] == {"n50-kink/1-3-5": 1} and doc["grids"] == ["1-3-5"]
     assert {r["model"] for r in doc["rows"]} == {"discrepancy", "surface", "cubics"}
     assert {(r["pressure_bar"], r["height_mm"]) for r in doc["rows"]} == {
         (p, h) for p in (2.0, 4.0) for h in (90.0, 150.0)

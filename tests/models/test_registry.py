@@ -240,6 +240,33 @@ def test_unknown_model_names_the_known_ones():
         registry.entry("nope")
 
 
+def test_the_default_model_is_the_discrepancy_surface_but_for_uq_surface():
+    """Issue 29: margins, design, the report's model page, export and plan answer with the surface
+    with a discrepancy in pressure; ``uq surface`` keeps fitting the smooth surface; the command
+    lines offer the default and every other model by name."""
+    from uq._cli.main import build_parser
+
+    assert registry.DEFAULT_MODEL == registry.DISCREPANCY
+    for command in ("margin", "design", "report", "export", "plan"):
+        assert registry.default(command) == registry.DISCREPANCY, command
+    assert registry.default("surface") == registry.SURFACE
+
+    def model_option(command):
+        (option,) = [
+            a for a in build_parser([command])._uq_commands[command]._actions if a.dest == "model"
+        ]
+        return option
+
+    for command, default in (("design", registry.DISCREPANCY), ("surface", registry.SURFACE)):
+        option = model_option(command)
+        assert option.default == default, command
+        assert set(registry.names(over_all_tests=True)) <= set(option.choices), command
+    option = model_option("report")  # with --surface; None: registry.default("report")
+    assert option.default is None
+    assert set(option.choices) == set(registry.names(over_all_tests=True))
+    assert registry.DISCREPANCY in model_option("margin").choices
+
+
 def test_a_saved_model_is_loaded_and_queried_without_jax(n50_surface, n50_fit, tmp_path):
     """The fitted objects are numpy: a saved surface and the saved cubics are loaded and answer a
     margin and the sealed spring in a fresh interpreter that imports no JAX, ArviZ or optimistix."""

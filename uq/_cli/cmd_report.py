@@ -6,11 +6,13 @@ import sys
 import time
 
 from uq._cli.common import (
+    add_output_units,
     add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
     load,
+    output_units,
     positive_int,
     record_convergence,
     settings_from,
@@ -19,7 +21,8 @@ from uq._cli.common import (
 from uq._derived.bands import campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
-from uq._report.campaign import MIN_DRAWS, omitted_lines, read_comments, write_report
+from uq._models import registry
+from uq._report.campaign import MIN_DRAWS, omitted_lines, write_report
 from uq._report.html import FIGURE_FORMATS
 
 
@@ -50,7 +53,16 @@ def configure_report(p) -> None:
     p.add_argument(
         "--surface",
         action="store_true",
-        help="also fit the surface model and write surface.html beside the report (adds about 30 s)",
+        help=f"also fit a model over all tests (--model, default the {registry.default('report')} "
+        "model), compare it with the per-pressure cubics and write its page beside the report "
+        "(MODEL.html; adds a few minutes on data/n50: docs/discrepancy.md)",
+    )
+    p.add_argument(
+        "--model",
+        choices=registry.names(over_all_tests=True),
+        default=None,
+        help=f"with --surface: which model over all tests (default {registry.default('report')}; "
+        f"{registry.help_words(over_all_tests=True)})",
     )
     p.add_argument(
         "--reference",
@@ -61,6 +73,7 @@ def configure_report(p) -> None:
         "auto (default): the paper's tables for the bundled N-50 reconstruction, nothing otherwise",
     )
     add_stand(p)
+    add_output_units(p)
     add_pressure_ar1(p)
 
 
@@ -84,6 +97,8 @@ def command_report(args) -> int:
     stand = stand_from(args)
     reference = _reference(args.reference)
     rec = load(args)
+    if args.model is not None and not args.surface:
+        raise InputError(f"option --model {args.model}: only with --surface (the model it fits)")
     if args.surface:  # refused before fitting: what the surface model cannot yet do without
         from uq._data.recordings import COMMAND_NEEDS, require
 
@@ -98,7 +113,12 @@ def command_report(args) -> int:
         from uq._derived.comparison import fit_both
 
         surface, _, comparison = fit_both(
-            rec, seed=args.seed, settings=settings, stand=stand, cubic_fit=cf
+            rec,
+            seed=args.seed,
+            settings=settings,
+            stand=stand,
+            cubic_fit=cf,
+            model=args.model or registry.default("report"),
         )
     t_fit = time.perf_counter() - t0
     cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
@@ -107,12 +127,13 @@ def command_report(args) -> int:
         args.out,
         bands=cb,
         seed=args.seed,
-        comments=read_comments(args.file),
+        comments=list(rec.comments),
         surface=surface,
         comparison=comparison,
         jobs=None,  # per-test figures in worker processes, one per CPU
         figure_format=args.figures,
         reference=reference,
+        units=output_units(rec, "input") if args.units == "input" else None,
     )
     t_all = time.perf_counter() - t0
     print(

@@ -2,13 +2,15 @@
 
 Which model answers. Two descriptions of a campaign can answer "at which overpressure does
 the element carry W at height x": a model over all tests (the registry's default,
-``uq._models.registry.DEFAULT_MODEL``: the pressure-coupled surface, smooth in pressure) and the
+``uq._models.registry.DEFAULT_MODEL``: the surface with a discrepancy in pressure,
+``uq._models.discrepancy``, whose band between tested pressures widens by what the data say a
+smooth surface misses) and the
 per-pressure cubics (eqs. 8, 9 of the paper, one independent curve per tested pressure,
 interpolated between them: ``uq._models.cubic_interpolation``). ``uq margin`` fits both and
 compares them by PSIS-LOO (``uq._derived.comparison``: the ELPD difference with its SE, Pareto k of
 both). The model over all tests answers unless the cubics are better by more than 2 SE with every
-Pareto k <= 0.7; an indistinguishable or refused comparison keeps it (the surface's coverage is
-proven by simulation for truths in its class: reports/surface-coverage/, the default orders). The
+Pareto k <= 0.7; an indistinguishable or refused comparison keeps it (its coverage between
+tested pressures, on springs smooth and not smooth in pressure: reports/between-coverage/). The
 JSON says which model answered and why (``model``), with the comparison's numbers. Any fitted
 model (:class:`uq._models.fitted.FittedModel`) answers a query given to :func:`margin` directly.
 

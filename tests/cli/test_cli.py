@@ -34,7 +34,11 @@ def no_fitting(monkeypatch):
     def forbidden(*a, **k):
         raise AssertionError("a fit started before the options were validated")
 
+    # modules that bind a fitter by name at import are imported first: imported while it is
+    # patched, they would keep the patched one for the rest of the session
+    import uq._derived.comparison  # noqa: F401
     import uq._diagnose.engine
+    import uq._drivers.batch  # noqa: F401
     import uq._drivers.calibrate
     import uq._models.cubic_fit
     import uq._models.discrepancy
@@ -88,8 +92,8 @@ def _bad_usage_rows(tmp: Path):
         ),  # 5 noise parameters: emcee needs >= 10, a multiple of 4
         (
             ["margin", N50, "--height-mm", 112, "--load-N", 13000, "--walkers", 8],
-            ["--walkers", "12"],
-        ),
+            ["--walkers", "16"],
+        ),  # the default model (the discrepancy surface) samples 8 parameters: >= 16 walkers
         (["diagnose", N50, "--report", afile], ["--report"]),
         (["diagnose", N50, "--json", tmp], ["--json"]),
         (["calibrate", "--truth", "prior,bogus"], ["--truth", "bogus"]),

@@ -187,6 +187,96 @@ def report_block(summarise: Callable[[], str]) -> Block:
     return Block("report", summarise=summarise)
 
 
+EXPORT = "reports/export"  # scripts/export_n50.py
+
+
+def _cut(line: str, width: int = 150) -> str:
+    return line if len(line) <= width else line[: width - 4] + " ..."
+
+
+def export_text(
+    name: str, start: str | None = None, lines: int = 12, pick=None
+) -> Callable[[], str]:
+    """Lines of a committed export (reports/export/NAME), as a code block: from the first line
+    that starts with ``start`` (or the top), ``lines`` of them, or the lines ``pick`` keeps."""
+
+    def make() -> str:
+        path = ROOT / EXPORT / name
+        if not path.exists():
+            return f"(no export yet: {EXPORT}/{name} is missing; python scripts/export_n50.py)\n"
+        text = path.read_text().splitlines()
+        if pick is not None:
+            text = [ln for ln in text if pick(ln)]
+        elif start is not None:
+            text = text[next(i for i, ln in enumerate(text) if ln.startswith(start)) :]
+        shown = [_cut(ln) for ln in text[:lines]]
+        if len(text) > lines:
+            shown.append(f"... ({len(text) - lines} more lines)")
+        return body_of([f"{EXPORT}/{name}:", *shown])
+
+    return make
+
+
+def export_csv_summary() -> str:
+    """The table's first rows, the contract's nine columns, and the names of the others."""
+    path = ROOT / EXPORT / "n50.csv"
+    if not path.exists():
+        return f"(no export yet: {EXPORT}/n50.csv is missing; python scripts/export_n50.py)\n"
+    rows = [ln.split(",") for ln in path.read_text().splitlines()]
+    shown = [",".join(r[:9]) for r in rows[:4]]
+    return body_of(
+        [
+            f"{EXPORT}/n50.csv, the first rows, the contract's columns ({len(rows) - 1} rows):",
+            *shown,
+            f"... then the columns {', '.join(rows[0][9:])}",
+        ]
+    )
+
+
+def export_xlsx_summary() -> str:
+    import openpyxl
+
+    path = ROOT / EXPORT / "n50.xlsx"
+    if not path.exists():
+        return f"(no export yet: {EXPORT}/n50.xlsx is missing; python scripts/export_n50.py)\n"
+    book = openpyxl.load_workbook(path, read_only=True)
+    rows = list(book["force_N q50"].iter_rows(values_only=True))
+    shown = [
+        " | ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in r[:7]) + " | ..."
+        for r in rows[:4]
+    ]
+    rows = list(book["provenance"].iter_rows(values_only=True))[1:]
+    provenance = [f"{k}: {v}" for k, v in rows[:5]] + ["..."]
+    provenance += [f"{k}: {v}" for k, v in rows if k == "note"]
+    return body_of(
+        [
+            f"{EXPORT}/n50.xlsx: {len(book.sheetnames)} sheets: {', '.join(book.sheetnames[:6])}, ..., "
+            f"{book.sheetnames[-1]}",
+            "sheet 'force_N q50' (the first rows and columns):",
+            *shown,
+            "sheet 'provenance' (the first rows, and the notes):",
+            *provenance,
+        ]
+    )
+
+
+def export_json_summary() -> str:
+    path = ROOT / EXPORT / "n50.json"
+    if not path.exists():
+        return f"(no export yet: {EXPORT}/n50.json is missing; python scripts/export_n50.py)\n"
+    doc = json.loads(path.read_text())
+    point = doc["grid"][len(doc["heights_m"]) * 5 + 9]
+    lines = json.dumps(
+        {k: point[k] for k in ("pressure_bar", "height_m", "force_N", "feff_m2")}, indent=1
+    )
+    return body_of(
+        [
+            f"{EXPORT}/n50.json: model {doc['model']['label']}; one of {len(doc['grid'])} grid points:"
+        ]
+        + [_cut(ln) for ln in lines.splitlines()]
+    )
+
+
 def shown(args: str, lines: list[str], keep: int | None) -> list[str]:
     """The lines a block shows for one command: ``$ uq ARGS`` and its output (maybe cut short)."""
     if keep is not None and len(lines) > keep:
@@ -640,6 +730,48 @@ def scaling_bench_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def plan_proof_summary(rel: str) -> Callable[[], str]:
+    """scripts/plan_proof.py: achieved against predicted sd, coverage, plan against uniform grid."""
+
+    def make() -> str:
+        d = _load(rel)
+        if d is None:
+            return f"(no results: {rel} is missing)\n"
+        lo, hi = d["binomial_region_95"]
+        lines = [
+            f"From `{rel}` (`{d['command']}`; {d['replications']} replications):",
+            "",
+            f"- 90 % intervals holding the truth: {d['covered']} of {d['intervals']} (exact binomial "
+            f"95 % region {lo}-{hi}).",
+            f"- Achieved over predicted posterior sd: mean {d['ratio_mean']:.2f}, range "
+            f"{d['ratio_min']:.2f}-{d['ratio_max']:.2f}.",
+            f"- Fits converged: {d['converged']['plan']} of {d['replications']} after the plan, "
+            f"{d['converged']['uniform']} after the uniform grid.",
+            "",
+            "| scenario | target | replications | achieved / predicted sd: mean (range) | truth covered "
+            "| uniform grid's sd over the plan's | plan better |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for t in d["by_target"]:
+            lines.append(
+                f"| {t['scenario']} | `{t['spec']}` | {t['n']} | {t['ratio_mean']:.2f} "
+                f"({t['ratio_min']:.2f}-{t['ratio_max']:.2f}) | {t['covered']}/{t['n']} | "
+                f"{t['uniform_over_plan_sd']:.2f} | {t['plan_better']}/{t['n']} |"
+            )
+        lines += [
+            "",
+            "Flagged (a mean ratio outside 0.8-1.25, a replication outside 0.6-1.6, coverage "
+            "below its binomial region, a model choice that changed):",
+            "",
+        ]
+        lines += [f"- {w}" for w in d.get("poor", [])] or ["- none"]
+        if d.get("model_choice"):
+            lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def n50_bands_summary(rel: str) -> Callable[[], str]:
     """scripts/n50_bands.py: the three models' 90 % force bands on data/n50 against Table 1's curves."""
 
@@ -801,6 +933,9 @@ BLOCKS: dict[str, Block] = {
         "0.1,1,2,3,4,5,6,7,8,9,10 --x-max-mm 155 --x-min-mm 65 --step-mm 5 --piston-area-cm2 54.82"
     ),
     "fit-bad-csv": run_block("fit docs/examples/bad-cell.csv", statuses=(2,)),
+    "fit-bluehill-sign": run_block(
+        "fit data/n50-bluehill/recordings.csv --columns height=Position,force=Load", statuses=(2,)
+    ),
     "fit-n50": run_block(f"fit {DATA} --json reports/n50-fit.json"),
     "check-n50": run_block(
         "check reports/n50-fit.json --against fits/n50/table1_points.json", requires=("fit-n50",)
@@ -832,6 +967,9 @@ BLOCKS: dict[str, Block] = {
     "sealed-coverage": report_block(
         sealed_coverage_summary("reports/sealed-coverage/coverage.json")
     ),
+    "sealed-coverage-user": report_block(
+        sealed_coverage_summary("reports/sealed-coverage-user/coverage.json")
+    ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),
     "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),
@@ -856,6 +994,13 @@ BLOCKS: dict[str, Block] = {
         surface_coverage_summary("reports/surface-coverage/coverage.json")
     ),
     "diagnose-proof": report_block(diagnose_proof_summary("reports/diagnose-proof/summary.json")),
+    "plan-example": run_block(
+        "simulate --spring n50-smooth --pressures 2,5,8 --seed 3 --out pilot.csv",
+        "plan pilot.csv --target force@110mm,6.5bar --target pressure_for@110mm,9000N "
+        "--max-readings 60 --model surface --json plan.json --template next-tests.csv --plot plan.png",
+        slow=True,
+    ),
+    "plan-proof": report_block(plan_proof_summary("reports/plan-proof/proof.json")),
     "diagnose-power": report_block(diagnose_power_summary("reports/diagnose-power/power.json")),
     "noise-check": report_block(noise_check_summary("reports/noise-check/results.json")),
     "n50-bands": report_block(n50_bands_summary("reports/between-coverage/n50-bands.json")),
@@ -863,6 +1008,41 @@ BLOCKS: dict[str, Block] = {
     "between-coverage": report_block(
         between_coverage_summary("reports/between-coverage/coverage.json")
     ),
+    "export-csv": report_block(export_csv_summary),
+    "export-xlsx": report_block(export_xlsx_summary),
+    "export-simscape": report_block(
+        export_text(
+            "n50.m",
+            pick=lambda ln: (
+                ln.startswith(
+                    (
+                        "% Parameterization",
+                        "airspring.height",
+                        "airspring.pressure",
+                        "airspring.load.q",
+                    )
+                )
+                or ln.startswith("% model:")
+            ),
+            lines=9,
+        )
+    ),
+    "export-teimorbit": report_block(export_text("n50_q50.tpf", start="$----", lines=34)),
+    "export-sealed": report_block(
+        export_text(
+            "n50-sealed.m",
+            pick=lambda ln: ln.startswith(
+                (
+                    "airspring.sealed.height",
+                    "airspring.sealed.load.q50",
+                    "airspring.sealed.stiffness.q50",
+                    "airspring.sealed.rate.q50",
+                )
+            ),
+            lines=4,
+        )
+    ),
+    "export-json": report_block(export_json_summary),
 }
 
 

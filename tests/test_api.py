@@ -57,7 +57,8 @@ def test_notebook_one_liner(tmp_path):
 def test_simulate_equals_the_cli_csv_read_back(tmp_path):
     """uq.simulate gives the readings `uq simulate` writes and read_recordings reads, bit for bit."""
     from uq._cli.main import main
-    from uq._report.campaign import read_comments
+    from uq._data.rows import leading_comments
+    from uq._io.files import sha256_of
 
     csv = tmp_path / "r.csv"
     assert (
@@ -85,7 +86,8 @@ def test_simulate_equals_the_cli_csv_read_back(tmp_path):
         for field in ("height_m", "force_N", "piston_m", "compression", "step"):
             assert (getattr(a, field) == getattr(b, field)).all(), field
     assert in_memory.comments[:2] == from_file.comments[:2]  # the lines that say what made them
-    assert from_file.comments == tuple(read_comments(csv))
+    assert from_file.comments == tuple(leading_comments(csv.read_text().splitlines()))
+    assert from_file.sha256 == sha256_of(csv)  # taken when read: the bytes the fit is of
 
 
 def test_write_report_refuses_too_few_draws(tmp_path):

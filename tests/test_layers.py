@@ -286,8 +286,17 @@ def test_no_model_name_literal_outside_the_models():
 
 #: optional heavy dependencies a function may import where it needs them (with a "# reason:"), and
 #: ArviZ and xarray (a second of import between them), which only some commands need: `uq fit`
-#: imports neither (issue 32)
-LATE_IMPORTS = {"matplotlib", "dask", "distributed", "pandas", "arviz", "xarray"}
+#: imports neither (issue 32); openpyxl and scipy.io: only uq export's workbook and MAT-file
+LATE_IMPORTS = {
+    "matplotlib",
+    "dask",
+    "distributed",
+    "pandas",
+    "arviz",
+    "xarray",
+    "openpyxl",
+    "scipy",
+}
 #: modules other engineers rewrite this round (the reader; the sampler's speed): their
 #: function-level imports move when that work lands (tracked in the round's issues)
 PENDING = {

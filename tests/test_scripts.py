@@ -13,7 +13,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import openpyxl
 import pytest
+import scipy.io
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -26,10 +28,12 @@ RUN_BY = {
     "scripts/diagnose_power.py": "test_diagnose_power_tiny",
     "scripts/readme_numbers.py": "tests/test_docs.py (--check, and every run block rerun)",
     "scripts/docs_figure.py": "test_docs_figure_from_a_small_report",
+    "scripts/export_n50.py": "test_export_n50_from_a_saved_model",
     "scripts/mkdocs_hooks.py": "tests/test_docs.py::test_api_reference_lists_every_public_name "
     "(and the mkdocs build of scripts/test.sh)",
     "scripts/sbc_piston_exact.py": "test_sbc_piston_exact_few_replications",
     "scripts/margin_coverage.py": "test_margin_coverage_tiny",
+    "scripts/plan_proof.py": "test_plan_proof_tiny",
     "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
@@ -335,3 +339,40 @@ def test_margin_coverage_tiny(tmp_path):
     assert {r["model"] for r in doc["rows"]} == {"surface", "cubics", "chosen"}
     assert all(r["covered"] + r["refused"] <= 1 for r in doc["rows"])
     assert "coarse pressure grids" in (tmp_path / "summary.md").read_text()
+
+
+def test_export_n50_from_a_saved_model(n50_surface, tmp_path):
+    """reports/export/'s script, exporting the shared surface fit saved (no fit of its own)."""
+    saved = tmp_path / "surface.nc"
+    n50_surface.save(saved)
+    out = tmp_path / "export"
+    proc = _run("scripts/export_n50.py", "--out", out, "--saved", saved, "--draws", 200)
+    assert proc.returncode == 0, proc.stderr
+    stats = ("mean", "q05", "q50", "q95")
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["README.md", "n50.csv", "n50_provenance.csv", "n50.xlsx", "n50.json", "n50.m", "n50.mat"]
+        + [f"n50_{s}.tpf" for s in stats]
+        + ["n50-sealed.m"]
+        + [f"n50_sealed_{s}.tpf" for s in stats]
+    )
+    committed = ROOT / "reports" / "export" / "n50.csv"
+    assert (out / "n50.csv").read_text().splitlines()[0] == committed.read_text().splitlines()[0]
+    # every file says that data/n50 is reconstructed, not measured
+    said = "not measured data: the recordings are the paper's N-50 spring reconstructed from its Table 1"
+    for name in ("n50_provenance.csv", "n50.json", "n50.m", "n50_q50.tpf", "n50_sealed_q50.tpf"):
+        assert said in (out / name).read_text(), name
+    sheet = openpyxl.load_workbook(out / "n50.xlsx")["provenance"]
+    assert any(said in str(v) for row in sheet.iter_rows(values_only=True) for v in row)
+    assert said in scipy.io.loadmat(out / "n50.mat", simplify_cells=True)["airspring"]["notes"]
+    assert "reconstructed from its Table 1" in (out / "README.md").read_text()
+
+
+@pytest.mark.slow  # about 2.5 min; the claims it measures are carried by tests/derived/test_plan.py
+def test_plan_proof_tiny(tmp_path):
+    """One replication of one scenario with tiny settings: the JSON and the summary page."""
+    proc = _run("scripts/plan_proof.py", "--tiny", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "proof.json").read_text())
+    assert doc["replications"] == 1 and doc["intervals"] == 2
+    assert all(t["sd_achieved"] > 0 and t["sd_predicted"] > 0 for t in doc["rows"][0]["targets"])
+    assert "uq plan on the virtual stand" in (tmp_path / "summary.md").read_text()

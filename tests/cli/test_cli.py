@@ -311,7 +311,8 @@ def test_out_has_one_meaning():
         for action in _subparser(name)._actions:
             if "--out" in action.option_strings:
                 kind = OUTPUT_KIND_BY_COMMAND.get((name, "out"), OUTPUT_KIND["out"])
-                assert action.metavar == ("FILE.csv" if kind == "file" else "DIR"), name
+                file = "PATH" if name == "export" else "FILE.csv"  # export: any format's file
+                assert action.metavar == (file if kind == "file" else "DIR"), name
                 assert ("file" if kind == "file" else "folder") in action.help, name
 
 
@@ -434,6 +435,22 @@ def _json_rows(d: Path, csv: Path, fit: Path):
         ],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
         "batch": ["batch", d / "batch.csv", "--out", d / "batch"],
+        "plan": [
+            "plan",
+            csv,
+            "--target",
+            "force@110mm,5bar",
+            "--max-readings",
+            16,
+            "--model",
+            "surface",
+            "--draws",
+            30,
+            "--max-steps",
+            "300",
+        ],
+        "export": ["export", csv, "--out", d / "e.csv", "--draws", "200", "--max-steps", "300"]
+        + ["--allow-unconverged"],
     }
 
 
@@ -441,9 +458,9 @@ def test_every_command_has_a_json_row():
     assert set(_json_rows(Path("."), Path("."), Path("."))) == {c[0] for c in COMMANDS}
 
 
-#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration): their
-#: --json - runs with the slow suite
-HEAVY = ("batch", "diagnose", "calibrate")
+#: commands whose own tests read their --json (test_batch, test_diagnose, test_calibration,
+#: test_plan_command, tests/cli/test_export_command.py): their --json - runs with the slow suite
+HEAVY = ("batch", "diagnose", "calibrate", "plan", "export")
 
 
 @pytest.mark.parametrize(

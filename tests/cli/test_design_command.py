@@ -121,6 +121,8 @@ def sheet(thermo_campaign, tmp_path_factory):
                     4,
                     "--charges-bar",
                     "3,5,7,9",
+                    "--polytropic",
+                    1,  # the truth's (slow strokes); the default is the dynamic 1.3..1.4
                     "--draws",
                     500,
                     "--json",
@@ -146,6 +148,12 @@ def test_json_has_the_contract_keys_and_states_the_volume_assumption(sheet, ther
         assert e["q05"] < e["mean"] < e["q95"] and e["sd"] > 0
     words = " ".join(res["assumptions"])
     assert "ASSUMED: the volume at 112 mm does not change with pressure" in words
+    # with an honest width from the recordings (issue 29): 0 +- sd L/bar, drawn per draw
+    assert res["dvdp_l_per_bar"] == 0.0 and res["dvdp_sd_from"] == "recordings"
+    assert res["dvdp_sd_l_per_bar"] > 0 and "give or take" in words
+    check = res["model_check"]
+    assert check["available"] and check["model"] == res["model"]
+    assert [r["pressure_bar"] for r in check["by_pressure"]] == [1.0, 3.0, 5.0, 7.0, 9.0]
     assert "measured by the user" in words and "isothermal" in words
     assert res["transmissibility"]["forcing_Hz"] == 4.0
 
@@ -230,6 +238,7 @@ def test_summary_is_short_and_the_sheet_is_complete(sheet):
     # the fixture's short chains: the sheet opens with the banner (issue 29)
     assert res["source"]["converged"] is False and "NOT CONVERGED: surface model" in page
     assert "ASSUMED: the volume at 112 mm" in page
+    assert "the model at the tested points" in page and "inside their 90% predictive" in page
     assert page.count("data:image/png;base64,") == 3
 
 

@@ -621,7 +621,7 @@ def test_declared_conventions_read_as_the_paper_format():
 def test_units_from_column_suffixes():
     from uq._data import units
 
-    # pint's factors, cleaned of float noise: the paper's units read bit for bit as before
+    # the units' definitions to 15 digits (pint's factors before): the paper's units read bit for bit as before
     assert units.factor("height", "mm") == 1e-3 and units.factor("volume", "l") == 1e-3
     assert (
         units.factor("height", "in") == 0.0254 and units.factor("force", "lbf") == 4.4482216152605
@@ -945,19 +945,13 @@ def test_remove_stale_keeps_the_users_files(tmp_path):
     ]
 
 
-def test_report_removes_stale_figures_of_an_earlier_run(tmp_path):
+def test_report_removes_stale_figures_of_an_earlier_run(small_cubics, tmp_path):
+    """The shared small campaign's fit (tests/conftest.py: 1, 3, 5, 8 bar), reported over a folder
+    holding an earlier run's figures of other tests and a file of the user's."""
     from uq._derived.bands import campaign_bands
-    from uq._inference.sampler import Settings
-    from uq._models.cubic_fit import fit_campaign
     from uq._report.campaign import write_report
 
-    csv = tmp_path / "r.csv"
-    csv.write_text(
-        write_recordings_csv(simulate("n50", seed=2, layout=Layout(pressures_bar=(3.0,))))
-    )
-    fit = fit_campaign(
-        read_recordings(csv), seed=1, settings=Settings(n_walkers=8, n_ensembles=2, max_steps=400)
-    )
+    fit = small_cubics
     out = tmp_path / "rep"
     out.mkdir()
     for name in ("test_7bar.png", "surface_spread.png", "surface.html", "my_photo.png"):

@@ -358,6 +358,10 @@ def _check_fit(cf, tmp_path: Path, tag: str) -> bool:
     return rc == 0
 
 
+@pytest.mark.slow  # six campaign fits; fast: the rule's false-failure rate on posterior draws
+# (test_rule_false_failure_rate_on_gaussian_draws, and with stored estimates of an independent
+# campaign, test_false_failure_rate_with_stored_estimates_from_an_independent_campaign) and a
+# real fit checked against Table 1 (tests/test_docs.py reruns docs' `uq check` on data/n50)
 def test_correct_fits_pass_on_seeded_simulations(tmp_path):
     """6 seeded 3-pressure campaigns fitted with reduced settings: at most 1 failure (P <= 0.0015)."""
     from uq._inference.sampler import Settings

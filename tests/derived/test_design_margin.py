@@ -85,14 +85,18 @@ def test_stroke_to_a_force_limit_is_the_isothermal_closed_form():
     p, _, _ = _closed(m, v_c)
     p_lim = limit / m.A
     s_true = v_c * (1 - (p * BAR + P_ATM) / (p_lim + P_ATM)) / m.A
-    res = design_margin(m, X_C, W, SealedDesign(X_C, 5.0, 3.0), 0.95, force_limit_N=limit)
+    res = design_margin(
+        m, X_C, W, SealedDesign(X_C, 5.0, 3.0, polytropic=1.0), 0.95, force_limit_N=limit
+    )
     st = res["stroke_to_force_limit"]
     assert st["direction"].startswith("compression") and st["prob_reached_in_tested_range"] == 1.0
     # linear between the grid's 2 mm heights: within 0.1 % of the closed form
     assert st["stroke_m"]["mean"] == pytest.approx(s_true.mean(), rel=1e-3)
     assert st["stroke_for_prob_m"] == pytest.approx(np.quantile(s_true, 0.05), rel=1e-3)
     # rebound: a limit below the load is reached as the spring extends
-    res = design_margin(m, X_C, W, SealedDesign(X_C, 5.0, 3.0), 0.95, force_limit_N=9000.0)
+    res = design_margin(
+        m, X_C, W, SealedDesign(X_C, 5.0, 3.0, polytropic=1.0), 0.95, force_limit_N=9000.0
+    )
     p_lim = 9000.0 / m.A
     s_true = -v_c * (1 - (p * BAR + P_ATM) / (p_lim + P_ATM)) / m.A
     st = res["stroke_to_force_limit"]
@@ -102,7 +106,12 @@ def test_stroke_to_a_force_limit_is_the_isothermal_closed_form():
 
 def test_a_limit_beyond_the_tested_range_is_said_not_reached():
     res = design_margin(
-        Cylinders(), X_C, W, SealedDesign(X_C, 5.0, 3.0), 0.95, force_limit_N=240000.0
+        Cylinders(),
+        X_C,
+        W,
+        SealedDesign(X_C, 5.0, 3.0, polytropic=1.0),
+        0.95,
+        force_limit_N=240000.0,
     )
     st = res["stroke_to_force_limit"]
     assert st["prob_reached_in_tested_range"] == 0.0
@@ -115,14 +124,16 @@ def test_given_dvdp_softens_as_the_gas_law_says():
     v_c, vp = 3.0e-3, 0.02e-3 / BAR  # 0.02 L/bar
     p, _, _ = _closed(m, v_c)
     k = (p * BAR + P_ATM) * m.A**2 / (v_c + (p * BAR + P_ATM) * vp)
-    res = design_margin(m, X_C, W, SealedDesign(X_C, 5.0, 3.0, dvdp_l_per_bar=0.02), 0.95)
+    res = design_margin(
+        m, X_C, W, SealedDesign(X_C, 5.0, 3.0, polytropic=1.0, dvdp_l_per_bar=0.02), 0.95
+    )
     assert res["rate_N_per_m"]["mean"] == pytest.approx(k.mean(), rel=1e-6)
     assert "GIVEN" in " ".join(res["assumptions"])
 
 
 def test_refusals():
     m = Cylinders()
-    d = SealedDesign(X_C, 5.0, 3.0)
+    d = SealedDesign(X_C, 5.0, 3.0, polytropic=1.0)
     from uq._cli.main import PARAM_OPTIONS
 
     with pytest.raises(InputError, match="max_frequency_Hz") as exc:
@@ -160,7 +171,7 @@ def test_the_margins_coarse_grid_agrees_with_the_design_grid():
     from uq._derived.design import DesignGrid
 
     m = Balloons()
-    d = SealedDesign(X_C, 5.0, 3.0, polytropic=1.4)
+    d = SealedDesign(X_C, 5.0, 3.0, polytropic=1.4, dvdp_sd_l_per_bar=0.0)  # the grids alone
     kw = dict(max_frequency_Hz=2.0, force_limit_N=18000.0)
     coarse = design_margin(m, X_C, W, d, 0.95, **kw)
     fine = design_margin(m, X_C, W, d, 0.95, grid=DesignGrid(m, X_C), **kw)

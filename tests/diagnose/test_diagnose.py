@@ -49,9 +49,12 @@ def test_clean_control_stays_quiet():
     assert res["final"]["elpd_loo"] == res["baseline"]["elpd_loo"]
 
 
-@pytest.mark.parametrize(
-    "name,value", [pytest.param("hysteresis", 0.02, marks=pytest.mark.slow), ("thermal_drift", 2.0)]
-)
+# both slow (a whole diagnosis each, about a minute on 2 loaded cores); fast: a mechanism named
+# with its magnitude by test_volume_excess_is_named_with_its_magnitude and the catalogue test,
+# thermal_drift named by test_mechanism_is_provisional_while_noise_check_fails, hysteresis by
+# test_cli_json_and_report; every mechanism's interval coverage by test_proof_results_committed
+@pytest.mark.slow
+@pytest.mark.parametrize("name,value", [("hysteresis", 0.02), ("thermal_drift", 2.0)])
 def test_visible_mechanism_is_named_with_its_magnitude(name, value):
     res = _run(_rec({name: value}, layout=SMALL))
     assert res["mismatch_detected"] is True

@@ -8,8 +8,9 @@ import re
 import pytest
 
 from uq._cli.main import main
+from uq._data.rows import leading_comments
 from uq._derived.bands import campaign_bands
-from uq._report.campaign import read_comments, write_report
+from uq._report.campaign import write_report
 
 
 def _check_page(out, n_tests):
@@ -99,7 +100,7 @@ def test_comments_are_read_only_from_the_top(tmp_path):
     f.write_text(
         "# RECONSTRUCTED by the stand\n#  second\npressure_bar,height_mm\n# not a header comment\n"
     )
-    assert read_comments(f) == ["RECONSTRUCTED by the stand", "second"]
+    assert leading_comments(f.read_text().splitlines()) == ["RECONSTRUCTED by the stand", "second"]
 
 
 @pytest.fixture(scope="module")
@@ -242,7 +243,7 @@ def test_paper_columns_only_for_the_paper_spring_or_a_given_reference(n50_fit, t
     from uq._derived.check import reference_from_points
     from uq._report.campaign import _reference, _table1, _table2
 
-    ours = read_comments(n50_fit.recordings.path)
+    ours = list(n50_fit.recordings.comments)
     assert is_n50_reconstruction(ours)
     assert _reference("auto", ours).is_paper
     assert _reference("auto", ["# my spring, measured on 2026-11-20"]) is None

@@ -10,13 +10,16 @@ from uq._cli.common import (
     DEFAULT_PISTON_AREA_CM2,
     DEFAULT_SEED,
     add_json,
+    add_output_units,
     add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
     boolean,
+    column_map,
     compression,
     load,
+    output_units,
     positive_float,
     positive_int,
     pressure_ar1,
@@ -24,6 +27,7 @@ from uq._cli.common import (
     seed,
     settings_from,
     stand_from,
+    units_row,
     walkers,
 )
 from uq._io.errors import InputError
@@ -121,6 +125,13 @@ def configure_simulate(p) -> None:
         action="store_true",
         help="write compression as negative force (a load frame's convention)",
     )
+    g.add_argument(
+        "--instrument",
+        choices=("bluehill",),
+        help="write an instrument's export instead: bluehill, an Instron Bluehill RawData file "
+        "(title rows, header Time,Position,Load,Pressure, a units row, the compression pass of each "
+        "test with its measured pressure, no piston, compression negative; docs/recordings.md)",
+    )
     add_json(p)
 
 
@@ -167,6 +178,7 @@ def _pressures(text: str) -> tuple[float, ...]:
 
 def command_simulate(args) -> int:
     from uq._data.recordings import write_recordings_csv
+    from uq._data.writing import write_bluehill_csv
     from uq._io.files import emit_json, write_text_atomic
     from uq._physics.mechanisms import parse_effects
     from uq._stand import shapes
@@ -179,6 +191,7 @@ def command_simulate(args) -> int:
             f"options --x-min-mm/--x-max-mm: need 0 < x_min < x_max, got {args.x_min_mm:g}, {args.x_max_mm:g}"
         )
     pressures = _pressures(args.pressures)
+    _check_instrument(args)
     volume_at = _volume_at(args, pressures)
     layout = Layout(pressures, args.x_max_mm * 1e-3, args.x_min_mm * 1e-3, args.step_mm * 1e-3)
     tests = simulate(
@@ -189,7 +202,7 @@ def command_simulate(args) -> int:
         piston_area_m2=args.piston_area_cm2 * 1e-4,
         stand=stand,
     )
-    if args.record_pressure:
+    if args.record_pressure or args.instrument:
         tests = shapes.record_pressure(tests, args.seed, stand)
     if args.catalogue:
         tests = shapes.catalogue(
@@ -220,7 +233,9 @@ def command_simulate(args) -> int:
     described = _shape_comment(args, volume_at, stand)
     if described:
         comment = comment + "\n" + described
-    text = write_recordings_csv(
+    text = (
+        write_bluehill_csv(tests, comment, units=units) if args.instrument == "bluehill" else None
+    ) or write_recordings_csv(
         tests,
         comment,
         units=units,
@@ -257,11 +272,37 @@ def command_simulate(args) -> int:
                 "volume_at_bar": volume_at if args.catalogue and not args.force_only else None,
                 "record_pressure": args.record_pressure,
                 "compression_negative": bool(args.compression_negative),
+                "instrument": args.instrument,
             },
         },
         args.json,
     )
     return 0
+
+
+def _check_instrument(args) -> None:
+    """An instrument's export has its own shape: the shape options it sets itself are refused."""
+    if not args.instrument:
+        return
+    clash = [
+        o
+        for o, given in (
+            ("--catalogue", args.catalogue),
+            ("--force-only", args.force_only),
+            ("--record-pressure", args.record_pressure),
+            ("--compression-negative", args.compression_negative),
+        )
+        if given
+    ]
+    if clash:
+        raise InputError(
+            f"option --instrument {args.instrument}: writes its own shape (one compression pass per test, "
+            f"measured pressure, no piston, compression negative); drop {clash[0]}"
+        )
+    if args.units and "volume" in args.units:
+        raise InputError(
+            f"option --units: --instrument {args.instrument} writes no volume column; drop {args.units['volume']}"
+        )
 
 
 def _volume_at(args, pressures: tuple[float, ...]) -> float | None:
@@ -292,6 +333,8 @@ def _shape_options(args, volume_at) -> str:
         words.append(f"--record-pressure {args.record_pressure}")
     if args.compression_negative:
         words.append("--compression-negative")
+    if args.instrument:
+        words.append(f"--instrument {args.instrument}")
     return " ".join(words)
 
 
@@ -323,6 +366,12 @@ def _shape_comment(args, volume_at, stand) -> str:
         )
     if args.compression_negative:
         lines.append("Force: compression written negative (read with --compression negative).")
+    if args.instrument == "bluehill":
+        lines.append(
+            "Shape: an Instron Bluehill RawData export, the compression pass of each test with its "
+            "measured pressure, compression negative; read with --columns height=Position,force=Load "
+            "--compression negative."
+        )
     return "\n".join(lines)
 
 
@@ -342,6 +391,13 @@ def configure_fit(p) -> None:
         metavar="FILE.toml",
         help="fit definition (e.g. fits/n50/fit.toml): recordings, stand constants, sampler; options given on the command line win",
     )
+    p.add_argument(
+        "--csv",
+        metavar="PATH",
+        help="write the coefficient table: one row per test and coefficient, posterior mean, sd, "
+        "5/50/95 %% quantiles, R-hat and ESS",
+    )
+    add_output_units(p)
 
 
 #: fit.toml keys -> (option dest, parser of the option); paths are relative to the TOML file.
@@ -355,6 +411,9 @@ CONFIG_KEYS = {
         "absolute_pressure": ("absolute_pressure", boolean),
         "p_atm_bar": ("p_atm_bar", positive_float),
         "pressure_tolerance_bar": ("pressure_tolerance_bar", positive_float),
+        "columns": ("columns", column_map),
+        "units_row": ("units_row", units_row),
+        "header_row": ("header_row", positive_int),
     },
     "sampling": {
         "seed": ("seed", seed),
@@ -432,6 +491,40 @@ def _bars(pressures) -> str:
     return ", ".join(f"{p:g}" for p in pressures) + " bar"
 
 
+def _units_words(which: str) -> str:
+    return (
+        "units of the recordings, u = x - x0 in their height unit"
+        if which == "input"
+        else "SI, u = x - x0 in m, as uq fit --json"
+    )
+
+
+def _print_fit_table(rec, result: dict, units) -> None:
+    """The per-test summary, in the units asked for (``--units``): the force's a_P with its 90 %
+    interval, b_L, the deviation measures and the worst R-hat and ESS."""
+    h, f = units.shown("height"), units.shown("force")
+    x0 = units.value("height", rec.x0_m)
+    a_scale = units.coefficient("force", 0)[0]
+    b_scale = units.coefficient("piston", 1)[0]
+    print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {x0:g} {h}")
+    print(
+        f"{'p_u ' + units.shown('pressure'):>8} {'a_P ' + f:>10} {'90% interval':>23} {'b_L':>8} "
+        f"{'s_P ' + f:>8} {'eps_P %':>8}  R-hat  ESS"
+    )
+    for t in result["tests"]:
+        a = {k: v * a_scale for k, v in t["force"]["a_P"].items() if k in ("mean", "q05", "q95")}
+        blocks = t["force"] | t.get("piston", {})
+        b = f"{t['piston']['b_L']['mean'] * b_scale:>8.3f}" if "piston" in t else f"{'-':>8}"
+        rmax = max(v["r_hat"] for v in blocks.values())
+        emin = min(v["ess_bulk"] for v in blocks.values())
+        p = units.value("pressure", t["pressure_bar"])
+        flag = "" if t["convergence"]["converged"] else "  NOT CONVERGED"
+        print(
+            f"{p:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b} "
+            f"{t['s_P_N'] * a_scale:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}{flag}"
+        )
+
+
 def command_fit(args) -> int:
     if args.file is None:
         raise InputError(
@@ -450,21 +543,8 @@ def command_fit(args) -> int:
         pressure_ar1=args.pressure_ar1,
     )
     result = cf.to_json()
-    print(f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; x0 = {rec.x0_m * 1e3:g} mm")
-    print(
-        f"{'p_u bar':>8} {'a_P N':>10} {'90% interval':>23} {'b_L':>8} {'s_P N':>8} {'eps_P %':>8}  R-hat  ESS"
-    )
-    for t in result["tests"]:
-        a = t["force"]["a_P"]
-        blocks = t["force"] | t.get("piston", {})
-        b = f"{t['piston']['b_L']['mean']:>8.3f}" if "piston" in t else f"{'-':>8}"
-        rmax = max(v["r_hat"] for v in blocks.values())
-        emin = min(v["ess_bulk"] for v in blocks.values())
-        flag = "" if t["convergence"]["converged"] else "  NOT CONVERGED"
-        print(
-            f"{t['pressure_bar']:>8g} {a['mean']:>10.1f} [{a['q05']:>10.1f}, {a['q95']:>10.1f}] {b} "
-            f"{t['s_P_N']:>8.2f} {t['eps_P_pct']:>8.2f}  {rmax:.3f} {emin:.0f}{flag}"
-        )
+    units = output_units(rec, args.units)
+    _print_fit_table(rec, result, units)
     for line in omitted_lines(rec, result):
         print(line)
     for t in result["tests"]:
@@ -491,6 +571,14 @@ def command_fit(args) -> int:
         print(f"WARNING: {w}", file=sys.stderr)
     for w in result["model_warnings"]:
         print(f"WARNING (model): {w}", file=sys.stderr)
+    if args.csv:
+        from uq._derived.export import JSON_UNITS, coefficient_table
+        from uq._io.files import write_text_atomic
+        from uq._io.tables import csv_text
+
+        header, rows = coefficient_table(cf, JSON_UNITS if args.units == "si" else units)
+        write_text_atomic(args.csv, csv_text(header, rows))
+        print(f"coefficient table: {args.csv} ({len(rows)} rows, {_units_words(args.units)})")
     if args.out:  # the posteriors and fit.json whole or not at all (a full disk leaves none)
         with staged_folder(args.out, last=("fit.json",)) as stage:
             paths = cf.save_posteriors(stage)

@@ -15,12 +15,26 @@ import sys
 import time
 from types import SimpleNamespace
 
-from uq._cli.common import option_type, record_convergence
+from uq._cli.common import add_misfit, option_type, record_convergence, record_misfit
 from uq._models import registry
 
+#: the default polytropic exponent: the natural frequency is a dynamic quantity (docs/design.md)
+DEFAULT_POLYTROPIC = (1.3, 1.4)
 POLYTROPIC_HELP = (
     "polytropic exponent n: 1 isothermal (slow strokes) .. 1.4 adiabatic (fast strokes), or a range "
-    "LO..HI (n drawn uniformly per posterior draw: the stroke's heat exchange unknown)"
+    "LO..HI (n drawn uniformly per posterior draw: the stroke's heat exchange unknown); default "
+    "1.3..1.4, the oscillation at the natural frequency (near adiabatic; manufacturers use 1.38); "
+    "give 1 for slow load changes"
+)
+DVDP_HELP = (
+    "how the volume at the design height changes with pressure, L/bar (isobaric tests cannot tell; "
+    "default 0 give or take --dvdp-sd-l-per-bar, an assumption every output states), or 'model' "
+    "for a model's own"
+)
+DVDP_SD_HELP = (
+    "sd of --dvdp-l-per-bar, L/bar, drawn per posterior draw (default: with the default 0, the "
+    "largest change of dV/dp_u between the design height and the tested heights that the "
+    "recordings show; with a value given, 0 unless given; 0 makes the assumption exact)"
 )
 
 
@@ -114,20 +128,17 @@ def configure_design(p) -> None:
         default=0.0,
         help="standard deviation of --volume-l, litres (drawn per posterior draw; default 0: exact)",
     )
-    g.add_argument("--polytropic", type=polytropic, default=1.0, help=POLYTROPIC_HELP)
+    g.add_argument(
+        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
+    )
     g.add_argument(
         "--reservoir-l",
         type=nonnegative_float,
         default=0.0,
         help="extra reservoir volume joined to the element, litres",
     )
-    g.add_argument(
-        "--dvdp-l-per-bar",
-        type=dvdp,
-        default=0.0,
-        help="how the volume at the design height changes with pressure, L/bar (isobaric tests cannot "
-        "tell; default 0, an assumption every output states), or 'model' for the thermodynamic model's own",
-    )
+    g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
+    g.add_argument("--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP)
     g.add_argument(
         "--forcing-hz",
         type=positive_float,
@@ -177,6 +188,7 @@ def configure_design(p) -> None:
         help="format of the data sheet's figures (default png)",
     )
     add_stand(p)
+    add_misfit(p)
 
 
 def _planned(rec, model: str):
@@ -195,10 +207,16 @@ def _planned(rec, model: str):
 
 def sealed_design(args, height_m: float, charge_bar: float, forcing_Hz: float | None = None):
     """The sealed spring the options describe (``--volume-l``, ``--volume-sd-l``, ``--polytropic``,
-    ``--reservoir-l``, ``--dvdp-l-per-bar``), closed at ``height_m`` with ``charge_bar`` (uq design,
-    and uq margin's design margins)."""
+    ``--reservoir-l``, ``--dvdp-l-per-bar``, ``--dvdp-sd-l-per-bar``), closed at ``height_m`` with
+    ``charge_bar`` (uq design, and uq margin's design margins). Without ``--dvdp-l-per-bar`` the
+    assumption is 0 with the sd the recordings give (or ``--dvdp-sd-l-per-bar``); a value given
+    is exact unless ``--dvdp-sd-l-per-bar`` gives its sd."""
     from uq._derived.design import SealedDesign
 
+    dvdp_value = getattr(args, "dvdp_l_per_bar", None)
+    sd = getattr(args, "dvdp_sd_l_per_bar", None)
+    if dvdp_value is not None and sd is None:
+        sd = 0.0  # a value the user gives is theirs: exact unless they give its sd
     return SealedDesign(
         height_m,
         charge_bar,
@@ -206,10 +224,11 @@ def sealed_design(args, height_m: float, charge_bar: float, forcing_Hz: float | 
         volume_sd_l=args.volume_sd_l,
         polytropic=args.polytropic,
         reservoir_l=args.reservoir_l,
-        dvdp_l_per_bar=args.dvdp_l_per_bar,
+        dvdp_l_per_bar=0.0 if dvdp_value is None else dvdp_value,
         forcing_Hz=forcing_Hz,
         p_atm_bar=getattr(args, "p_atm_bar", 1.01325),
         seed=args.seed,
+        dvdp_sd_l_per_bar=sd,
     )
 
 
@@ -286,6 +305,8 @@ def command_design(args) -> int:
 
     from uq._cli.common import load, settings_from, stand_from
     from uq._derived import design as D
+    from uq._derived.comparison import fit_both
+    from uq._derived.model_check import predictive_check
 
     t0 = time.perf_counter()
     entry = registry.entry(args.model)
@@ -307,14 +328,13 @@ def command_design(args) -> int:
     if not rec.has_piston:
         return _force_only(args, rec, stand, settings, heights, pressures, t0)
     comparison = None
-    if args.no_compare or not entry.over_all_tests:
-        fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
-    else:  # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
-        from uq._derived.comparison import fit_both
-
-        fit, _, comparison = fit_both(
-            rec, seed=args.seed, settings=settings, stand=stand, model=args.model
+    fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+    if not args.no_compare and entry.over_all_tests:
+        # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
+        _, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
+    check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
     model = fit.on_draws(args.draws)
     design = _design_from(args)
     grid = D.DesignGrid(model, x_c)
@@ -322,6 +342,7 @@ def command_design(args) -> int:
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
     doc["tested_pressures_bar"] = tested
     doc["comparison"] = comparison
+    doc["model_check"] = check
     doc["source"] = _source(args, rec, fit)
     curves = None
     if args.out:
@@ -331,9 +352,10 @@ def command_design(args) -> int:
         }
     _print_sealed(rec, model, doc)
     _sheet_and_json(
-        args, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
+        args, rec, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
     )
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
+    record_misfit(args, check)
     return 0
 
 
@@ -355,10 +377,9 @@ def _advice():
     return CLI_ADVICE
 
 
-def _reconstructed(path) -> bool:
-    from uq._report.campaign import read_comments
-
-    return any("RECONSTRUCTED" in c.upper() for c in read_comments(path))
+def _reconstructed(rec) -> bool:
+    """The recordings' comments (read with them) say they are reconstructed."""
+    return any("RECONSTRUCTED" in c.upper() for c in rec.comments)
 
 
 FORCE_ONLY_WHY = (
@@ -371,9 +392,11 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
     """A campaign without piston readings: the per-pressure cubics (``uq fit``'s force-only
     cubic per test), interpolated in pressure, give the isobaric loads."""
     from uq._derived import design as D
+    from uq._derived.model_check import predictive_check
     from uq._inference.summary import estimate
 
     fit = registry.fit(registry.CUBICS, rec, seed=args.seed, settings=settings, stand=stand)
+    check = predictive_check(fit, seed=args.seed)
     model = fit.on_draws(args.draws)
     x_c = args.height_mm * 1e-3
     load = model.force_draws([x_c], [args.charge_bar])[:, 0]
@@ -399,6 +422,7 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
         "isobaric": D.isobaric_table(model, pressures, heights, x_c),
         "tested_pressures_bar": sorted({t.pressure_bar for t in rec.tests}),
         "comparison": None,  # the per-pressure cubics answer: no other model fitted to rank against
+        "model_check": check,
         "source": _source(args, rec, fit),
     }
     e = doc["load_N"]
@@ -410,12 +434,16 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
         f"[{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
     )
     print(f"  {FORCE_ONLY_WHY}")
-    _sheet_and_json(args, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    _print_check(check)
+    _sheet_and_json(
+        args, rec, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
+    )
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
+    record_misfit(args, check)
     return 0
 
 
-def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
+def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
     """The data sheet (``--out``), the timing line and the JSON, for both kinds of campaign."""
     from uq._io.files import emit_json
 
@@ -426,7 +454,7 @@ def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
             doc,
             args.out,
             curves=curves,
-            reconstructed=_reconstructed(args.file),
+            reconstructed=_reconstructed(rec),
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")
@@ -436,6 +464,16 @@ def _sheet_and_json(args, doc: dict, curves, timing: str) -> None:
 
 def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
     return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
+
+
+def _print_check(check: dict) -> None:
+    """The model's posterior-predictive check at the tested pressures (uq._derived.model_check)."""
+    from uq._derived.model_check import table, words
+
+    print(f"  the model at the tested points ({check['model']}): {words(check)}")
+    if check["misses"]:  # the per-pressure table where it matters
+        for line in table(check):
+            print(f"  {line}")
 
 
 def _print_sealed(rec, model, doc) -> None:
@@ -475,5 +513,6 @@ def _print_sealed(rec, model, doc) -> None:
         "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
         + (words(c) if c else "not ranked (--no-compare, or the cubics answered)")
     )
+    _print_check(doc["model_check"])
     for w in doc["source"]["warnings"]:
         print(f"  warning: {w}", file=sys.stderr)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uq._cli.common import add_stand, record_convergence, stand_from
+from uq._cli.common import add_misfit, add_stand, record_convergence, record_misfit, stand_from
 from uq._derived.margin import AUTO, load_answer, margin, model_choices
 from uq._io.errors import InputError
 from uq._io.files import sha256_of
@@ -63,13 +63,21 @@ def configure_margin(p) -> None:
         "tolerance_pct (empty cells take the options' values); the JSON is a list, one result a row",
     )
     add_stand(p)
+    add_misfit(p)
     _configure_design_margins(p)
 
 
 def _configure_design_margins(p) -> None:
     """Design margins on the sealed spring (uq._derived.design.design_margin): the element carries
     --load-N at --height-mm, charged and closed there."""
-    from uq._cli.cmd_design import POLYTROPIC_HELP, dvdp, polytropic
+    from uq._cli.cmd_design import (
+        DEFAULT_POLYTROPIC,
+        DVDP_HELP,
+        DVDP_SD_HELP,
+        POLYTROPIC_HELP,
+        dvdp,
+        polytropic,
+    )
     from uq._cli.common import nonnegative_float, positive_float
 
     g = p.add_argument_group(
@@ -107,17 +115,14 @@ def _configure_design_margins(p) -> None:
     g.add_argument(
         "--volume-sd-l", type=nonnegative_float, default=0.0, help="its standard deviation, litres"
     )
-    g.add_argument("--polytropic", type=polytropic, default=1.0, help=POLYTROPIC_HELP)
+    g.add_argument(
+        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
+    )
     g.add_argument(
         "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir volume, litres"
     )
-    g.add_argument(
-        "--dvdp-l-per-bar",
-        type=dvdp,
-        default=0.0,
-        help="how the volume at --height-mm changes with pressure, L/bar (default 0, an assumption the "
-        "answer states)",
-    )
+    g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
+    g.add_argument("--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP)
 
 
 DESIGN_OPTIONS = ("max_frequency_hz", "rate_target_N_per_m", "force_limit_N")
@@ -400,6 +405,9 @@ def _check_usage(args) -> None:
 
 def command_margin(args) -> int:
     from uq._cli.common import load
+    from uq._derived.model_check import predictive_check, unavailable
+    from uq._derived.model_check import table as check_table
+    from uq._derived.model_check import words as check_words
     from uq._io.files import emit_json
 
     _check_usage(args)
@@ -416,6 +424,10 @@ def command_margin(args) -> int:
             _check_ranges(q, ans.height_range_m, ans.pressure_range_bar, "the model")
         diagnostics = {"warnings": meta["warnings"], "converged": meta["converged"]}
         source, rec = args.fit, None
+        # the check made when the fit was saved (uq margin --save-fit), else none: no readings
+        check = meta.get("model_check") or unavailable(
+            ans, "a saved fit keeps no readings' replicates: fit the recordings to check it"
+        )
     else:
         from uq._cli.common import settings_from
 
@@ -432,6 +444,7 @@ def command_margin(args) -> int:
             _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
         ans, info, diagnostics = _fit_and_choose(args, rec, stand)
         source = rec.path
+        check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points
     # every answer before anything is written; with a queries file each row gets its own answer
     # or its own refusal (a row the model cannot answer does not abort the others)
     results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]
@@ -452,14 +465,22 @@ def command_margin(args) -> int:
             model_info=info,
             converged=diagnostics["converged"],
             warnings=diagnostics["warnings"],
+            model_check=check,
         )
         print(
             f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"
         )
+    for r in results:
+        if "refused" not in r:  # a refused row keeps its four keys (docs/formats.md)
+            r["model_check"] = check
     if args.queries:
         _print_table(source, ans, info, queries, results)
     elif queries:
         _print_one(source, ans, info, queries[0], results[0])
+    print(f"  the model at the tested points: {check_words(check)}")
+    if check["misses"]:  # the per-pressure table where it matters
+        for line in check_table(check):
+            print(f"  {line}")
     for q, r in zip(queries, results, strict=True):
         if "design" in r:
             _print_design(q, r["design"], len(queries) > 1)
@@ -475,6 +496,7 @@ def command_margin(args) -> int:
     if queries or args.json is not None:
         emit_json(results if args.queries else results[0], args.json)
     record_convergence(args, diagnostics["converged"], "the fit the answers come from")
+    record_misfit(args, check)
     return 0
 
 

@@ -6,11 +6,13 @@ import sys
 import time
 
 from uq._cli.common import (
+    add_output_units,
     add_pressure_ar1,
     add_recordings,
     add_sampling,
     add_stand,
     load,
+    output_units,
     positive_int,
     record_convergence,
     settings_from,
@@ -20,7 +22,7 @@ from uq._derived.bands import campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
 from uq._models import registry
-from uq._report.campaign import MIN_DRAWS, omitted_lines, read_comments, write_report
+from uq._report.campaign import MIN_DRAWS, omitted_lines, write_report
 from uq._report.html import FIGURE_FORMATS
 
 
@@ -71,6 +73,7 @@ def configure_report(p) -> None:
         "auto (default): the paper's tables for the bundled N-50 reconstruction, nothing otherwise",
     )
     add_stand(p)
+    add_output_units(p)
     add_pressure_ar1(p)
 
 
@@ -124,12 +127,13 @@ def command_report(args) -> int:
         args.out,
         bands=cb,
         seed=args.seed,
-        comments=read_comments(args.file),
+        comments=list(rec.comments),
         surface=surface,
         comparison=comparison,
         jobs=None,  # per-test figures in worker processes, one per CPU
         figure_format=args.figures,
         reference=reference,
+        units=output_units(rec, "input") if args.units == "input" else None,
     )
     t_all = time.perf_counter() - t0
     print(

@@ -64,6 +64,23 @@ def probability(text: str) -> float:
     return value
 
 
+def column_map(text: str) -> str:
+    """A column map (``force_N=Load,height_mm=Position``), checked before any file is read."""
+    from uq._data import column_map as _column_map  # pure Python: the units' table, no numpy
+
+    try:
+        _column_map.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def units_row(text: str) -> str:
+    if text not in ("auto", "yes", "no"):  # uq._data.rows.UNITS_ROW_MODES (tested equal)
+        raise argparse.ArgumentTypeError(f"expected auto, yes or no, got '{text}'")
+    return text
+
+
 def choice_list(*allowed: str):
     """A comma-separated list of names from ``allowed`` (checked at parse time, before any work)."""
 
@@ -135,6 +152,49 @@ def add_recordings(p: argparse.ArgumentParser, file_optional: bool = False) -> N
         help="how far a reading's measured pressure may lie from its test's set pressure "
         "(default max(0.05 bar, 2 %% of the pressure))",
     )
+    g.add_argument(
+        "--columns",
+        type=column_map,
+        default=None,
+        metavar="MAP",
+        help="which of the file's columns is which recordings column, for an instrument's export: "
+        "force_N=Load,height_mm=Position,... (force=Load: the unit from the units row)",
+    )
+    g.add_argument(
+        "--units-row",
+        type=units_row,
+        default="auto",
+        metavar="auto|yes|no",
+        help="a row of units under the header, (bar),(mm),(N),...: auto detects one in brackets "
+        "(and says so), yes takes the row under the header as units, no reads it as data",
+    )
+    g.add_argument(
+        "--header-row",
+        type=positive_int,
+        default=None,
+        metavar="N",
+        help="the header's row in the file, under a title (default: the first row, or the first "
+        "naming recordings columns below a title, which a note then names)",
+    )
+
+
+def add_output_units(p: argparse.ArgumentParser) -> None:
+    """``--units si|input``: tables and labels in the contract's units or in the recordings' own."""
+    p.add_argument(
+        "--units",
+        choices=("si", "input"),  # uq._data.units.OUTPUT_CHOICES (tested equal)
+        default="si",
+        help="units of the tables and labels: si (bar, mm, N; coefficients in SI as the JSON) or "
+        "input, the units the recordings came in (pressure_psi, height_in, force_lbf give psi, in, "
+        "lbf); JSON stays SI",
+    )
+
+
+def output_units(rec, which: str):
+    """The :class:`uq._data.units.OutputUnits` of ``--units`` for recordings ``rec``."""
+    from uq._data.units import OutputUnits
+
+    return OutputUnits.of(getattr(rec, "units", None), which)
 
 
 def add_sampling(p: argparse.ArgumentParser) -> None:
@@ -188,10 +248,32 @@ def record_convergence(args, converged: bool, what: str) -> None:
         args.unconverged_fits = [*getattr(args, "unconverged_fits", []), what]
 
 
+def add_misfit(p: argparse.ArgumentParser) -> None:
+    """``--allow-misfit`` for the commands that check their model at the tested points before
+    answering (``uq design``, ``uq margin``; uq._derived.model_check)."""
+    p.add_argument(
+        "--allow-misfit",
+        action="store_true",
+        help="exit status 0 when the model that answers misses the readings it was fitted to (its "
+        "posterior-predictive check at the tested pressures fails): the answer is still printed and "
+        "written with the check; without it the exit status is 1",
+    )
+
+
+def record_misfit(args, check: dict) -> None:
+    """Tell the command line that the model behind this command's answer missed its readings
+    (``check``: :func:`uq._derived.model_check.predictive_check`); :func:`convergence_status`
+    turns it into the exit status."""
+    if check.get("misses"):
+        bars = ", ".join(f"{p:g}" for p in check["missed_pressures_bar"])
+        args.misfits = [*getattr(args, "misfits", []), f"{check['model']} at {bars} bar"]
+
+
 def convergence_status(args, name: str, status: int) -> int:
     """The exit-status policy for fits that failed their convergence rules (one place for every
     command): a command that finished (``status`` 0) with such a fit exits 1 with one line on
     stderr saying so, or 0 with ``--allow-unconverged``; any other status stands."""
+    status = misfit_status(args, name, status)
     failed = getattr(args, "unconverged_fits", [])
     if status != 0 or not failed:
         return status
@@ -243,9 +325,17 @@ def load(args, min_points: int = 6, needs=None):
         absolute_pressure=getattr(args, "absolute_pressure", False),
         p_atm_bar=getattr(args, "p_atm_bar", DEFAULT_P_ATM_BAR),
         pressure_tolerance_bar=getattr(args, "pressure_tolerance_bar", None),
+        columns=getattr(args, "columns", None),
+        units_row=getattr(args, "units_row", "auto"),
+        header_row=getattr(args, "header_row", None),
+        on_note=_note,  # what the reader decided by itself (a units row, a title), said at once
     )
     require(rec, COMMAND_NEEDS.get(getattr(args, "_name", ""), ()) if needs is None else needs)
     return rec
+
+
+def _note(text: str) -> None:
+    sys.stderr.write(f"note: {text}\n")
 
 
 def positive(name: str, value: float) -> float:
@@ -360,3 +450,24 @@ def stand_from(args, model: bool = True):
             "them\n"
         )
     return stand
+
+
+def misfit_status(args, name: str, status: int) -> int:
+    """The exit-status policy for an answer whose model missed its readings (``record_misfit``):
+    exit 1 with one line on stderr, or 0 with ``--allow-misfit``; any other status stands."""
+    missed = getattr(args, "misfits", [])
+    if status != 0 or not missed:
+        return status
+    what = "; ".join(missed)
+    if getattr(args, "allow_misfit", False):
+        sys.stderr.write(
+            f"uq {name}: the model misses the readings ({what}), accepted with --allow-misfit: "
+            "exit 0; the answer carries the check\n"
+        )
+        return 0
+    sys.stderr.write(
+        f"uq {name}: the model misses the readings ({what}): its posterior-predictive check at the "
+        "tested pressures fails, so the answer printed and written is not to be trusted there; "
+        "exit 1. Use a model that follows them (see --model), or pass --allow-misfit to accept it\n"
+    )
+    return 1

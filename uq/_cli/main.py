@@ -74,9 +74,19 @@ COMMANDS = [
         "locate the mismatch with the traditional model, name and model the missing physics",
     ),
     (
+        "export",
+        "uq._cli.cmd_export",
+        "the characteristic as tables for other tools (CSV, xlsx, Simscape, TeimOrbit, JSON) with quantiles",
+    ),
+    (
         "calibrate",
         "uq._cli.cmd_calibrate",
         "coverage of the credible intervals on simulated campaigns with known truth",
+    ),
+    (
+        "plan",
+        "uq._cli.cmd_plan",
+        "where to measure next: the readings that make chosen quantities' sd smallest for the stand time",
     ),
     (
         "batch",
@@ -88,8 +98,15 @@ COMMANDS = [
 #: What each output option names: "file" (the file to write, '-' = stdout for --json) or "dir"
 #: (the folder to write into). --out is always "where this command writes": the file for
 #: simulate (--out FILE.csv), the folder for every other command.
-OUTPUT_KIND = {"json": "file", "report": "dir", "out": "dir"}
-OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file"}
+OUTPUT_KIND = {
+    "json": "file",
+    "report": "dir",
+    "out": "dir",
+    "csv": "file",
+    "template": "file",
+    "plot": "file",
+}
+OUTPUT_KIND_BY_COMMAND = {("simulate", "out"): "file", ("export", "out"): "file"}
 
 #: the library's parameter names (``InputError.param``) and the options that set them
 PARAM_OPTIONS = {
@@ -109,6 +126,9 @@ PARAM_OPTIONS = {
     "compression": "--compression",
     "p_atm_bar": "--p-atm-bar",
     "pressure_tolerance_bar": "--pressure-tolerance-bar",
+    "columns": "--columns",
+    "units_row": "--units-row",
+    "header_row": "--header-row",
     "stand": "--stand",
     "scheduler": "--scheduler",
     "spring_name": "--spring",
@@ -133,6 +153,10 @@ PARAM_OPTIONS = {
     "pressure": "--pressure",
     "ar1": "--pressure-ar1",
     "reps": "--reps",
+    "target": "--target",
+    "candidates_bar": "--pressures-bar",
+    "heights_m": "--heights-mm",
+    "model": "--model",
 }
 
 EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (

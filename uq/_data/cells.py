@@ -12,11 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uq._data import column_map as _column_map
 from uq._data import units as _units
 from uq._data.rows import DELIMITERS, Table
 from uq._io.errors import InputError, where
 
 BRANCHES = ("compression", "rebound")
+#: The first comment of a recordings template ``uq plan --template`` writes: its empty force and
+#: piston cells are readings still to be made, and the reader says so.
+PLANNED_MARK = "uq plan template"
 
 # ----------------------------------------------------------------------------- plausibility
 # Ranges no air spring on a stand like the paper's leaves; wide on purpose, so other springs,
@@ -100,27 +104,102 @@ def is_column(name: str) -> bool:
     return q is not None and _units.known(*q)
 
 
-def columns(table: Table) -> dict[str, Column]:
-    """The recordings columns of the header, by quantity (one line naming the defect)."""
+def column_test(mapping: dict | None):
+    """:func:`is_column`, also true for the sources of a column map and for headers that name a
+    quantity without a unit (``Pressure``: its unit comes from a units row): what finds the header
+    below a title and the CSV delimiter."""
+    mapping = mapping or {}
+    return lambda name: (
+        is_column(name) or name in mapping or _column_map.bare_quantity(name) is not None
+    )
+
+
+def _identify(table: Table, i: int, h: str, mapping: dict) -> tuple[str, str | None, str] | None:
+    """(quantity, suffix or None, what named it) of header column ``i``, or None (an extra column)."""
+    if h in mapping:
+        q, suffix, target = mapping[h]
+        return q, suffix, f"`columns` {target}={h}"
+    if h in ("branch", "step"):
+        return h, None, "name"
+    split = _units.split_name(h)
+    if split is not None:
+        return split[0], split[1], "name"
+    if table.units is not None and table.units[i] and _column_map.bare_quantity(h):
+        return _column_map.bare_quantity(h), None, "name"
+    return None
+
+
+def _unit_from_row(
+    table: Table, i: int, h: str, q: str, suffix: str | None, named: str
+) -> str | None:
+    """The column's suffix: its name's (or the map's), checked against the units row, or the
+    units row's when the name gives none."""
+    written = table.units[i] if table.units is not None else ""
+    if q in ("branch", "step") or not written:
+        if suffix is None and q not in ("branch", "step"):
+            via = f" ({named})" if named != "name" else ""
+            why = (
+                "the file has no units row under the header"
+                if table.units is None
+                else "its cell in the units row is empty"
+            )
+            raise InputError(
+                f"{where(table.name, table.units_row or table.header_row, h)}: no unit for the "
+                f"{q.replace('_', ' ')}{via}: {why}; give it in the map ({', '.join(_units.names(q))})"
+            )
+        return suffix
+    said = _units.suffix_of(q, written)
+    if said is None:
+        raise InputError(
+            f"{where(table.name, table.units_row, h)}: unknown unit '{written}' for the "
+            f"{q.replace('_', ' ')}; one of {', '.join(_units.shown(s) for s in _units.QUANTITIES[q][1])}"
+        )
+    if suffix is not None and said != suffix:
+        raise InputError(
+            f"{where(table.name, table.units_row, h)}: the units row says {written} but {named} "
+            f"says {_units.shown(suffix)}; correct one of them"
+        )
+    return said
+
+
+def columns(table: Table, column_map: dict | None = None) -> dict[str, Column]:
+    """The recordings columns of the header, by quantity (one line naming the defect).
+
+    ``column_map``: source header -> (quantity, suffix or None, target) (uq._data.column_map); a
+    units row (``table.units``) gives the unit of columns whose name or map gives none and must
+    agree with the others.
+    """
     name, header_row, header = table.name, table.header_row, table.header
+    mapping = dict(column_map or {})
     seen: set[str] = set()
     for h in header:
         if h in seen and h:  # unnamed columns (Excel pads with them) are ignored like extra ones
             raise InputError(f"{where(name, header_row)}: column '{h}' appears twice in the header")
         seen.add(h)
+    absent = [f"{t}={s}" for s, (_, _, t) in mapping.items() if s not in seen]
+    if absent:
+        raise InputError(
+            f"{where(name, header_row)}: `columns` {absent[0]}: no column '{absent[0].split('=', 1)[1]}' "
+            f"in the header (header has: {', '.join(header)})"
+        )
     found: dict[str, Column] = {}
     unknown: dict[str, list[tuple[str, str]]] = {}
     for i, h in enumerate(header):
-        if h in ("branch", "step"):
-            found[h] = Column(h, h, i)
+        ident = _identify(table, i, h, mapping)
+        if ident is None:
             continue
-        split = _units.split_name(h)
-        if split is None:
+        q, suffix, named = ident
+        if q in ("branch", "step"):
+            if q in found:
+                raise InputError(
+                    f"{where(name, header_row)}: columns '{found[q].name}' and '{h}' both give the {q}; keep one"
+                )
+            found[q] = Column(q, h, i)
             continue
-        q, suffix = split
-        if not _units.known(q, suffix):
+        if suffix is not None and not _units.known(q, suffix):
             unknown.setdefault(q, []).append((h, suffix))
             continue
+        suffix = _unit_from_row(table, i, h, q, suffix, named)
         if q in found:
             raise InputError(
                 f"{where(name, header_row)}: columns '{found[q].name}' and '{h}' both give the "
@@ -143,7 +222,8 @@ def columns(table: Table) -> dict[str, Column]:
             others = ", ".join(_units.names(q)[1:])
             raise InputError(
                 f"{where(name, header_row)}: missing column '{_units.names(q)[0]}' (or another unit: {others}; "
-                f"header has: {', '.join(header)}){hint}"
+                f"header has: {', '.join(header)}){hint}; or name the file's column with `columns` "
+                f"({_units.names(q)[0]}=NAME)"
             )
     if "piston" in found and "volume" in found:
         raise InputError(
@@ -153,10 +233,21 @@ def columns(table: Table) -> dict[str, Column]:
     if ("branch" in found) != ("step" in found):
         have, missing = ("branch", "step") if "branch" in found else ("step", "branch")
         raise InputError(
-            f"{where(name, header_row)}: column '{have}' without '{missing}': give both or neither "
+            f"{where(name, header_row)}: column '{found[have].name}' without '{missing}': give both or neither "
             "(both: the recording order; neither: one pass in unknown order)"
         )
     return found
+
+
+def units_note(table: Table, cols: dict[str, Column]) -> str | None:
+    """One line saying which units the units row gave, or None without one."""
+    if table.units is None:
+        return None
+    used = [c for c in sorted(cols.values(), key=lambda c: c.index) if c.suffix is not None]
+    given = ", ".join(f"{c.name} in {c.unit}" for c in used if table.units[c.index])
+    return f"{where(table.name, table.units_row)}: a units row under the header" + (
+        f": {given}" if given else ""
+    )
 
 
 @dataclass
@@ -174,6 +265,28 @@ class Readings:
     step: np.ndarray | None
 
 
+def _refuse_unfilled(table: Table, cols: dict[str, Column]) -> None:
+    """A ``uq plan`` template with readings not yet made: one line naming the first empty cell and
+    how many planned readings are still empty."""
+    if not any(c.startswith(PLANNED_MARK) for c in table.comments):
+        return
+    measured = [cols[q] for q in ("force", "piston") if q in cols]
+    empty = [
+        (row, c.name)
+        for row, fields in table.body
+        for c in measured
+        if c.index >= len(fields) or not str(fields[c.index]).strip()
+    ]
+    if empty:
+        rows = len({r for r, _ in empty})
+        row, name = empty[0]
+        raise InputError(
+            f"{where(table.name, row, name)}: empty: a reading planned by uq plan and not measured "
+            f"yet ({rows} planned reading{'s' if rows > 1 else ''} still empty); fill in "
+            f"{' and '.join(c.name for c in measured)} at the stand"
+        )
+
+
 def parse(table: Table, cols: dict[str, Column], pressure_offset_bar: float) -> Readings:
     """Every data row parsed, converted and checked against the ranges above, in file order.
 
@@ -188,6 +301,7 @@ def parse(table: Table, cols: dict[str, Column], pressure_offset_bar: float) -> 
         if c.index < len(fields)
     )
     n = len(table.body)
+    _refuse_unfilled(table, cols)
     values = {q: np.empty(n) for q in cols if q not in ("branch", "step")}
     comp = np.empty(n, bool) if "branch" in cols else None
     step = np.empty(n, int) if "step" in cols else None

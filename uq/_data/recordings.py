@@ -29,11 +29,21 @@ from pathlib import Path
 import numpy as np
 
 from uq._data import checks
+from uq._data import column_map as _column_map
 from uq._data import units as _units
 from uq._data.cells import BRANCHES as BRANCHES
-from uq._data.cells import MIN_LARGEST_HEIGHT_MM, Column, Readings, columns, is_column, parse
+from uq._data.cells import (
+    MIN_LARGEST_HEIGHT_MM,
+    Column,
+    Readings,
+    column_test,
+    columns,
+    parse,
+    units_note,
+)
 from uq._data.pressure_groups import PressureColumns, group
-from uq._data.rows import Table, read_table, table_from_text
+from uq._data.rows import UNITS_ROW_MODES as UNITS_ROW_MODES
+from uq._data.rows import Table, check_shape_options, read_table, table_from_text
 from uq._data.rows import leading_comments as leading_comments
 from uq._data.writing import write_recordings_csv as write_recordings_csv
 from uq._io.errors import InputError, where
@@ -117,6 +127,15 @@ class Recordings:
     sheet                  the workbook sheet read, None for CSV
     conventions            "compression": "positive" or "negative" (as the file wrote force);
                            "pressure": "gauge", or "absolute" (converted with "p_atm_bar")
+    comments               the file's leading ``#`` lines without the ``#``, then the title rows
+                           above a header found lower down (what made the recordings, if it says)
+    sha256                 the SHA-256 of the file's bytes as read (of the CSV text for recordings
+                           made in memory: a simulated campaign's is that of the file ``uq
+                           simulate`` writes), the recordings' provenance; None when unknown
+    columns                quantity -> the file's header of its column (``{"force": "Load"}``
+                           when a column map named it)
+    notes                  what the reader decided by itself, one line each (a header found below
+                           a title, a units row under the header): the command line prints them
     """
 
     path: str
@@ -124,7 +143,6 @@ class Recordings:
     x0_m: float = DEFAULT_X0_MM * 1e-3
     piston_area_m2: float = DEFAULT_PISTON_AREA_CM2 * 1e-4
     extra_columns: tuple[str, ...] = field(default=())
-    #: the file's leading ``#`` lines, without the ``#`` (what made the recordings, if it says)
     comments: tuple[str, ...] = field(default=())
     units: dict = field(default_factory=lambda: dict(_units.PAPER_UNITS))
     pressure_measured: bool = False
@@ -132,6 +150,9 @@ class Recordings:
     conventions: dict = field(
         default_factory=lambda: {"compression": "positive", "pressure": "gauge"}
     )
+    sha256: str | None = None
+    columns: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = field(default=())
 
     def __repr__(self) -> str:
         p = ", ".join(f"{t.pressure_bar:g}" for t in self.tests)
@@ -280,6 +301,10 @@ def read_recordings(
     absolute_pressure: bool = False,
     p_atm_bar: float = DEFAULT_P_ATM_BAR,
     pressure_tolerance_bar: float | None = None,
+    columns: dict | str | None = None,
+    units_row: str = "auto",
+    header_row: int | None = None,
+    on_note=None,
 ) -> Recordings:
     """Read and validate recordings (docs/formats.md section 1).
 
@@ -299,6 +324,15 @@ def read_recordings(
     p_atm_bar : atmospheric pressure (bar) for ``absolute_pressure``.
     pressure_tolerance_bar : how far a reading's measured pressure may lie from its test's set
         pressure (bar); default max(0.05 bar, 2 % of the pressure). See uq._data.pressure_groups.
+    columns : a column map, which of the file's columns is which recordings column:
+        ``{"force_N": "Load", "height_mm": "Extension"}`` or the text ``"force_N=Load,..."``; a
+        quantity without unit (``"force": "Load"``) takes its unit from the units row.
+    units_row : "auto" (a row of units in brackets under the header, ``(bar),(mm),(N)``, is
+        detected and noted in ``Recordings.notes``), "yes" (the row under the header gives the
+        units) or "no".
+    header_row : the header's row in the file (rows above it are a title, kept with the
+        comments); by default the first row, or the first naming a recordings column under a
+        title of up to 20 rows (noted in ``Recordings.notes``).
 
     Raises
     ------
@@ -309,11 +343,17 @@ def read_recordings(
     """
     check_stand_options(piston_area_cm2, x0_mm)
     check_reading_options(compression, p_atm_bar, pressure_tolerance_bar)
+    check_shape_options(header_row, units_row)
+    mapping = column_map(columns)
     path = str(path)
-    table = read_table(path, is_column, sheet)
+    table = read_table(
+        path, column_test(mapping), sheet, header_row=header_row, units_row=units_row
+    )
     return _recordings(
         table,
         path,
+        mapping,
+        on_note,
         piston_area_cm2=piston_area_cm2,
         x0_mm=x0_mm,
         min_points=min_points,
@@ -322,6 +362,17 @@ def read_recordings(
         p_atm_bar=p_atm_bar,
         pressure_tolerance_bar=pressure_tolerance_bar,
     )
+
+
+def column_map(columns: dict | str | None) -> dict:
+    """The ``columns`` parameter as source -> (quantity, suffix or None, target) (uq._data.column_map);
+    a bad map is one line naming the parameter."""
+    if columns is None:
+        return {}
+    try:
+        return _column_map.parse(columns)
+    except ValueError as exc:
+        raise InputError(f"columns: {exc}", param="columns") from None
 
 
 def recordings_from_text(
@@ -335,15 +386,26 @@ def recordings_from_text(
     absolute_pressure: bool = False,
     p_atm_bar: float = DEFAULT_P_ATM_BAR,
     pressure_tolerance_bar: float | None = None,
+    columns: dict | str | None = None,
+    units_row: str = "auto",
+    header_row: int | None = None,
+    on_note=None,
 ) -> Recordings:
     """:func:`read_recordings` on CSV text already in memory; ``name`` stands for the file in
-    messages and becomes ``Recordings.path``."""
+    messages and becomes ``Recordings.path``; ``Recordings.sha256`` is that of the text's UTF-8
+    (what a file holding the text has)."""
     check_stand_options(piston_area_cm2, x0_mm)
     check_reading_options(compression, p_atm_bar, pressure_tolerance_bar)
+    check_shape_options(header_row, units_row)
+    mapping = column_map(columns)
     name = str(name)
     return _recordings(
-        table_from_text(text, name, is_column),
+        table_from_text(
+            text, name, column_test(mapping), header_row=header_row, units_row=units_row
+        ),
         name,
+        mapping,
+        on_note,
         piston_area_cm2=piston_area_cm2,
         x0_mm=x0_mm,
         min_points=min_points,
@@ -357,6 +419,8 @@ def recordings_from_text(
 def _recordings(
     table: Table,
     path: str,
+    mapping: dict,
+    on_note,
     *,
     piston_area_cm2: float,
     x0_mm: float,
@@ -367,7 +431,13 @@ def _recordings(
     pressure_tolerance_bar: float | None,
 ) -> Recordings:
     name = table.name
-    cols = columns(table)
+    notes = list(table.notes)
+    for note in notes:
+        (on_note or _ignore)(note)
+    cols = columns(table, mapping)
+    if table.units is not None:
+        notes.append(units_note(table, cols))
+        (on_note or _ignore)(notes[-1])
     if not table.body:
         raise InputError(f"{name}: no data rows after the header")
     r = parse(table, cols, -p_atm_bar if absolute_pressure else 0.0)
@@ -439,6 +509,9 @@ def _recordings(
         piston_area_m2=piston_area_cm2 * 1e-4,
         extra_columns=extra,
         comments=tuple(table.comments),
+        sha256=table.sha256,
+        columns={q: c.name for q, c in cols.items()},
+        notes=tuple(notes),
         units={q: c.suffix for q, c in cols.items() if c.suffix is not None},
         pressure_measured=measured,
         sheet=table.sheet,
@@ -448,6 +521,10 @@ def _recordings(
             **({"p_atm_bar": p_atm_bar} if absolute_pressure else {}),
         },
     )
+
+
+def _ignore(note: str) -> None:
+    pass
 
 
 def _outlier_columns(t: PressureTest, cols: dict[str, Column]) -> list:

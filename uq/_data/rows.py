@@ -4,39 +4,63 @@ Two sources give the same :class:`Table`, so one set of checks and messages serv
 
 * CSV text: UTF-8 with or without BOM (Excel's "CSV UTF-8") or UTF-16 with BOM; columns
   separated by ',' or, when the header splits better that way, ';' or tab (then a decimal
-  comma is understood as well); ``#`` lines are comments.
-* A workbook (.xlsx through openpyxl, .ods through odfpy, both read by pandas): one sheet is one
-  campaign. Rows are numbered as the spreadsheet shows them; a row whose first filled cell starts
-  with ``#`` is a comment; numbers are read as the spreadsheet holds them (no decimal-comma
-  guessing: a number typed as text with a comma is refused).
+  comma is understood as well); ``#`` lines are comments. Tokenised by the standard library's
+  csv module, one file line at a time (a quoted field may not run over a line end).
+* A workbook (.xlsx through openpyxl, .ods through odfpy, both read by pandas, imported only
+  here): one sheet is one campaign. Rows are numbered as the spreadsheet shows them; a row whose
+  first filled cell starts with ``#`` is a comment; numbers are read as the spreadsheet holds
+  them (no decimal-comma guessing: a number typed as text with a comma is refused).
 
-Every defect of the file itself (encoding, quotes, a missing or unknown sheet) raises
-:class:`InputError` naming the file and the row.
+Instrument exports (an Instron Bluehill RawData file, a logger's CSV) put other rows around the
+header, and both sources understand them the same way:
+
+* **a title above the header** (``Text Inputs : Specimen label,...``, a sheet's caption): the
+  header is the first row holding a recordings column; when the first row holds none, the first
+  of the next MAX_TITLE_ROWS rows that holds one is taken and a note says so, or the
+  header's row is given (``header_row``). The rows above it are the title, kept with the comments;
+* **a units row under the header** (``(bar),(mm),(N),...``): with ``units_row`` "auto" (the
+  default) the row under the header is one when each of its filled cells is a unit in
+  parentheses or brackets, and a note says so; "yes": the row under the header is the units
+  row (brackets optional); "no": never (the row is data).
+
+Every defect of the file itself (encoding, quotes, a missing or unknown sheet, a header row that
+is not there) raises :class:`InputError` naming the file and the row.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import math
+import re
 import warnings
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from uq._io.errors import InputError, where
 
 DELIMITERS = {",": "','", ";": "';'", "\t": "tab"}
 WORKBOOK_SUFFIXES = (".xlsx", ".xlsm", ".ods")
+UNITS_ROW_MODES = ("auto", "yes", "no")
+#: How many rows under a title the header is looked for when the first row holds no column.
+MAX_TITLE_ROWS = 20
+#: A units row's cell: a unit in parentheses or brackets, as instrument software writes it.
+_BRACKETED = re.compile(r"^\s*[(\[](.*)[)\]]\s*$")
 
 
 @dataclass(frozen=True)
 class Table:
     """The rows of one campaign: the header and the data rows, each with its file row number.
 
-    ``fields`` are strings; a missing field (a CSV row shorter than the header) is not a string.
-    ``sep`` is the CSV delimiter, None for a workbook. ``name`` stands for the file in messages
-    (a workbook's adds the sheet).
+    ``fields`` are strings; a missing field (a CSV row shorter than the header) is absent from
+    the row's list. ``sep`` is the CSV delimiter, None for a workbook. ``name`` stands for the
+    file in messages (a workbook's adds the sheet). ``title``: the rows above the header that
+    are not comments, as text; ``units``: the units row's cells (brackets removed, one per
+    header column, '' where empty) and ``units_row`` its row, or None; ``notes``: what the
+    reading decided by itself (a header found below a title, a units row), one line each;
+    ``sha256``: of the file's bytes (of the text's UTF-8 for text given in memory).
     """
 
     name: str
@@ -46,23 +70,63 @@ class Table:
     sep: str | None
     comments: list[str] = field(default_factory=list)
     sheet: str | None = None
+    title: list[str] = field(default_factory=list)
+    units: list[str] | None = None
+    units_row: int | None = None
+    notes: list[str] = field(default_factory=list)
+    sha256: str | None = None
 
 
-def read_table(path: str, is_column, sheet: str | None = None) -> Table:
+def check_shape_options(header_row: int | None, units_row: str) -> None:
+    """Validate ``header_row`` and ``units_row`` (names the parameter on failure)."""
+    if header_row is not None and (
+        isinstance(header_row, bool) or not isinstance(header_row, int) or header_row < 1
+    ):
+        raise InputError(
+            f"header_row: expected the header's row number (1, 2, ...), got {header_row!r}",
+            param="header_row",
+        )
+    if units_row not in UNITS_ROW_MODES:
+        raise InputError(
+            f"units_row: expected auto, yes or no, got {units_row!r}", param="units_row"
+        )
+
+
+def read_table(
+    path: str,
+    is_column,
+    sheet: str | None = None,
+    *,
+    header_row: int | None = None,
+    units_row: str = "auto",
+) -> Table:
     """The rows of the file at ``path``: a workbook (by content, whatever its name) or CSV text.
 
-    ``is_column(name)``: whether a header name is a recordings column (chooses the CSV delimiter).
-    ``sheet``: the workbook sheet to read; required when a workbook has more than one.
+    ``is_column(name)``: whether a header name is a recordings column (finds the header and
+    chooses the CSV delimiter). ``sheet``: the workbook sheet to read; required when a workbook
+    has more than one. ``header_row``, ``units_row``: see the module docstring.
     """
+    check_shape_options(header_row, units_row)
     raw = _read_bytes(path)
+    digest = hashlib.sha256(raw).hexdigest()
     kind = _workbook_kind(path, raw)
     if kind is not None:
-        return _workbook_table(path, raw, kind, sheet)
+        rows, comments, chosen = _workbook_rows(path, raw, kind, sheet)
+        name = f"{path}, sheet '{chosen}'"
+        table = _layout(name, rows, comments, None, is_column, header_row, units_row)
+        return _with(table, sheet=chosen, sha256=digest)
     if sheet is not None:
         raise InputError(
             f"sheet: {sheet!r}: {path} is CSV text, not a workbook (.xlsx, .ods)", param="sheet"
         )
-    return table_from_text(_decode(path, raw), path, is_column)
+    table = table_from_text(
+        _decode(path, raw), path, is_column, header_row=header_row, units_row=units_row
+    )
+    return _with(table, sha256=digest)
+
+
+def _with(table: Table, **changes) -> Table:
+    return replace(table, **changes)
 
 
 def _read_bytes(path: str) -> bytes:
@@ -126,8 +190,12 @@ def _column_letter(i: int) -> str:
     return out
 
 
-def _workbook_table(path: str, raw: bytes, engine: str, sheet: str | None) -> Table:
-    import pandas as pd
+def _workbook_rows(
+    path: str, raw: bytes, engine: str, sheet: str | None
+) -> tuple[list[tuple[int, list]], list[str], str]:
+    """The sheet's filled rows that are not comments (row number, cell texts), its leading
+    comments, and the sheet's name."""
+    import pandas as pd  # reason: heavy; only a workbook needs pandas (and openpyxl or odfpy)
 
     try:
         with warnings.catch_warnings():
@@ -157,7 +225,6 @@ def _workbook_table(path: str, raw: bytes, engine: str, sheet: str | None) -> Ta
         raise InputError(
             f"{path}: cannot read the workbook ({type(exc).__name__}: {' '.join(str(exc).split())})"
         ) from None
-    name = f"{path}, sheet '{chosen}'"
     # pandas keeps blank rows and columns before the data, so index i is the sheet's row i + 1.
     rows = [
         (int(i) + 1, [_cell_text(v) for v in values])
@@ -165,29 +232,19 @@ def _workbook_table(path: str, raw: bytes, engine: str, sheet: str | None) -> Ta
     ]
     rows = [(r, f) for r, f in rows if any(c.strip() for c in f)]
     comments: list[str] = []
-    body: list[tuple[int, list]] = []
-    header_row, header = None, []
+    kept: list[tuple[int, list]] = []
     for r, fields in rows:
         first = next(c.strip() for c in fields if c.strip())
         if first.startswith("#"):
-            if header_row is None:
+            if not kept:
                 comments.append(first.lstrip("#").strip())
             continue
-        if header_row is None:
-            header_row = r
-            width = max(i for i, c in enumerate(fields) if c.strip()) + 1
-            header = [c.strip() for c in fields[:width]]
-            continue
-        beyond = [i for i, c in enumerate(fields) if i >= width and c.strip()]
-        if beyond:
-            raise InputError(
-                f"{where(name, r)}: a value in column {_column_letter(beyond[0])}, right of the header's last column "
-                f"('{header[-1]}'); name the column in the header or clear the cell"
-            )
-        body.append((r, fields[:width]))
-    if header_row is None:
-        raise InputError(f"{name}: empty sheet, expected a header row and data rows")
-    return Table(name, header_row, header, body, None, comments, chosen)
+        kept.append((r, fields))
+    if not kept:
+        raise InputError(
+            f"{path}, sheet '{chosen}': empty sheet, expected a header row and data rows"
+        )
+    return kept, comments, chosen
 
 
 # ----------------------------------------------------------------------------- CSV text
@@ -221,8 +278,16 @@ def leading_comments(lines) -> list[str]:
     return out
 
 
-def table_from_text(text: str, name: str, is_column) -> Table:
+def table_from_text(
+    text: str,
+    name: str,
+    is_column,
+    *,
+    header_row: int | None = None,
+    units_row: str = "auto",
+) -> Table:
     """The rows of CSV text; ``name`` stands for the file in messages."""
+    check_shape_options(header_row, units_row)
     lines = text.splitlines()
     numbered = [
         (i + 1, line)
@@ -231,65 +296,155 @@ def table_from_text(text: str, name: str, is_column) -> Table:
     ]
     if not numbered:
         raise InputError(f"{name}: empty file, expected a header row and data rows")
-    sep = _delimiter(numbered[0][1], is_column)
-    table = _split(name, numbered, sep)
-    (header_row, header_fields), body = table[0], table[1:]
-    header = [str(h).strip() for h in header_fields if isinstance(h, str)]
-    body = [
-        (row, fields)
-        for row, fields in body
-        if any(isinstance(f, str) and f.strip() for f in fields)
-    ]
-    return Table(name, header_row, header, body, sep, leading_comments(lines))
+    k = _header_index(
+        name, [(n, line) for n, line in numbered], lambda line: _hits(line, is_column), header_row
+    )
+    sep = _delimiter(numbered[k][1], is_column)
+    rows = [(n, _fields(name, n, line, sep)) for n, line in numbered]
+    table = _layout(name, rows, leading_comments(lines), sep, is_column, header_row, units_row, k)
+    return _with(table, sha256=hashlib.sha256(text.encode("utf-8")).hexdigest())
+
+
+def _hits(header_line: str, is_column, sep: str | None = None) -> int:
+    """How many recordings columns ``header_line`` names, split by ``sep`` (by the best
+    delimiter when None)."""
+    if sep is None:
+        return max(_hits(header_line, is_column, s) for s in DELIMITERS)
+    names = {h.strip().strip('"').strip() for h in header_line.split(sep)}
+    return sum(1 for n in names if is_column(n))
 
 
 def _delimiter(header_line: str, is_column) -> str:
     """The delimiter that splits the header into the most recordings columns (',' on a tie)."""
-
-    def hits(sep: str) -> int:
-        names = {h.strip().strip('"').strip() for h in header_line.split(sep)}
-        return sum(1 for n in names if is_column(n))
-
-    return max(DELIMITERS, key=hits)  # max keeps the first of equals: ','
+    return max(DELIMITERS, key=lambda sep: _hits(header_line, is_column, sep))  # first of equals
 
 
-def _split(path: str, numbered: list[tuple[int, str]], sep: str) -> list[tuple[int, list]]:
-    """Tokenise the rows with pandas' CSV reader; each row as (file line, fields).
-
-    Every line is prefixed with its file line number as an extra first field, so rows keep
-    their line numbers through the reader, also those it sets aside for too many fields.
-    Short rows come back padded with NaN, which the caller counts as missing fields.
-    """
-    import pandas as pd
-
-    text = "\n".join(f"{n}{sep}{line}" for n, line in numbered)
-    extra: list[list[str]] = []
+def _fields(path: str, row: int, line: str, sep: str) -> list[str]:
+    """One line's fields (the csv module's rules: quotes, doubled quotes, ``sep``)."""
     try:
-        df = pd.read_csv(
-            io.StringIO(text),
-            sep=sep,
-            header=None,
-            dtype=str,
-            keep_default_na=False,
-            na_filter=False,
-            engine="python",
-            skip_blank_lines=False,
-            quoting=csv.QUOTE_MINIMAL,
-            on_bad_lines=lambda fields: extra.append(fields) or None,
-        )
-    except (pd.errors.ParserError, csv.Error) as exc:
+        (fields,) = list(csv.reader([line + "\n"], delimiter=sep, quotechar='"', strict=False))
+    except csv.Error as exc:
         raise InputError(
-            f"{path}: cannot split the rows into columns ({' '.join(str(exc).split())})"
+            f"{where(path, row)}: cannot split the row into columns ({' '.join(str(exc).split())})"
         ) from None
-    rows = [(r[0], list(r[1:])) for r in df.itertuples(index=False, name=None)] + [
-        (r[0], list(r[1:])) for r in extra
-    ]
+    if any("\n" in f for f in fields):
+        raise InputError(f'{where(path, row)}: a quote (") opened on this line is not closed on it')
+    return fields
+
+
+# ----------------------------------------------------------------------------- header, title, units
+
+
+def _header_index(name: str, rows: list[tuple[int, object]], hits, header_row: int | None) -> int:
+    """Index in ``rows`` of the header: the given row, the first row when it names a column, else
+    the first of the next MAX_TITLE_ROWS rows naming one (the first row when none does)."""
+    if header_row is not None:
+        for k, (n, _) in enumerate(rows):
+            if n == header_row:
+                return k
+        last = rows[-1][0]
+        what = f"beyond the last row ({last})" if header_row > last else "blank or a comment"
+        raise InputError(
+            f"header_row: {header_row}: row {header_row} of {name} is {what}; give the row of the "
+            "column names",
+            param="header_row",
+        )
+    if hits(rows[0][1]) > 0:
+        return 0
+    for k in range(1, min(len(rows), MAX_TITLE_ROWS + 1)):
+        if hits(rows[k][1]) > 0:
+            return k
+    return 0
+
+
+def _units_cells(fields: list[str], mode: str) -> list[str] | None:
+    """The unit of each cell of the row under the header, or None when it is not a units row."""
+    filled = [f for f in fields if f.strip()]
+    if mode == "no" or not filled:
+        return None
+    if mode == "auto" and not all(_BRACKETED.match(f) for f in filled):
+        return None
     out = []
-    for line, fields in rows:
-        if not str(line).isdigit() or any("\n" in str(f) for f in fields if isinstance(f, str)):
-            first = next((n for n, ln in numbered if ln.count('"') % 2), numbered[0][0])
-            raise InputError(
-                f'{where(path, first)}: a quote (") opened on this line is not closed on it'
-            )
-        out.append((int(line), fields))
-    return sorted(out, key=lambda r: r[0])
+    for f in fields:
+        m = _BRACKETED.match(f)
+        out.append((m.group(1) if m else f).strip())
+    return out
+
+
+def _layout(
+    name: str,
+    rows: list[tuple[int, list]],
+    comments: list[str],
+    sep: str | None,
+    is_column,
+    header_row: int | None,
+    units_row: str,
+    found: int | None = None,
+) -> Table:
+    """Split filled, non-comment ``rows`` into title, header, units row and body.
+
+    ``header_row``: the header's row as given (None: found); ``found``: the header's index when
+    the caller has chosen it (CSV text chooses it before tokenising, by the delimiter); otherwise
+    it is chosen here the same way.
+    """
+    if found is None:
+        found = _header_index(
+            name, rows, lambda f: sum(1 for c in f if is_column(c.strip())), header_row
+        )
+    k = found
+    header_at, header_fields = rows[k]
+    workbook = sep is None
+    if workbook:
+        width = max(i for i, c in enumerate(header_fields) if c.strip()) + 1
+        header = [c.strip() for c in header_fields[:width]]
+    else:
+        header = [str(h).strip() for h in header_fields]
+    notes: list[str] = []
+    title = [", ".join(c.strip() for c in f if c.strip()) for _, f in rows[:k]]
+    if k and header_row is None:
+        span = f"row {rows[0][0]}" if k == 1 else f"rows {rows[0][0]}-{rows[k - 1][0]}"
+        notes.append(
+            f"{name}: the header is row {header_at} ({span} above it: a title, kept with the comments)"
+        )
+    body_rows = rows[k + 1 :]
+    units, units_at = None, None
+    if body_rows:
+        cells = _units_cells(body_rows[0][1], units_row)
+        if cells is not None:
+            units_at = body_rows[0][0]
+            units = (cells + [""] * len(header))[: len(header)]
+            body_rows = body_rows[1:]
+    elif units_row == "yes":
+        raise InputError(
+            f"{where(name, header_at)}: `units_row` yes, but the header is the last row: no units row under it"
+        )
+    if units_row == "yes" and units is None:
+        raise InputError(
+            f"{where(name, body_rows[0][0])}: `units_row` yes, but the row under the header is empty"
+        )
+    body = []
+    for r, fields in body_rows:
+        if workbook:
+            beyond = [i for i, c in enumerate(fields) if i >= width and c.strip()]
+            if beyond:
+                raise InputError(
+                    f"{where(name, r)}: a value in column {_column_letter(beyond[0])}, right of the header's last column "
+                    f"('{header[-1]}'); name the column in the header or clear the cell"
+                )
+            fields = fields[:width]
+        elif not any(f.strip() for f in fields):
+            continue  # a row of nothing but separators (Excel's padding), like a blank line
+        body.append((r, fields))
+    return Table(
+        name,
+        header_at,
+        header,
+        body,
+        sep,
+        list(comments) + title,
+        None,
+        title,
+        units,
+        units_at,
+        notes,
+    )

@@ -7,6 +7,9 @@ made and read back in the tests.
 
 from __future__ import annotations
 
+import csv
+import io
+
 from uq._data import units as _units
 
 #: Printed decimals per (quantity, unit): 0.001 mm, 0.01 N and their equivalents (about 1e-3
@@ -122,3 +125,63 @@ def write_recordings_csv(
                 ]
             out.append(",".join(cells))
     return "\n".join(out) + "\n"
+
+
+#: The column names of the Bluehill-shaped export (uq simulate --instrument bluehill): Bluehill's
+#: own channel names for time and load, and the names a method gives the frame's position (set
+#: to read the distance between the flanges) and an auxiliary pressure transducer.
+BLUEHILL_HEADER = {"time": "Time", "height": "Position", "force": "Load", "pressure": "Pressure"}
+BLUEHILL_UNITS = {"pressure": "bar", "height": "mm", "force": "kN"}
+#: Seconds between two readings (a step and its dwell), for the export's Time column.
+BLUEHILL_DWELL_S = 20.0
+
+
+def write_bluehill_csv(
+    tests: list[dict], header_comment: str = "", *, units: dict | None = None
+) -> str:
+    """Recordings in the shape of an Instron Bluehill RawData export (docs/recordings.md).
+
+    What such a file looks like (an exported ``Specimen_RawData_1.csv``): title rows ``Text Inputs
+    : ...`` and ``General : ...`` (here one per line of ``header_comment``), a blank line, the
+    header ``Time,Position,Load,Pressure``, a units row ``(s),(mm),(kN),(bar)``, then one row per
+    reading in recording order, compressive load negative (the frame's convention). A load frame
+    records no piston and no branch or step, so each test is written as its compression pass
+    only (one pass per pressure, heights decreasing), with each reading's measured pressure
+    (``measured_pressure_bar`` of the tests, else the set value). ``units``: pressure, height and
+    force units (uq._data.units suffixes); Bluehill's usual bar, mm and kN when not given.
+
+    Read it with ``--columns height=Position,force=Load --compression negative``: the header below
+    the title and the units row are found and noted.
+    """
+    u = dict(BLUEHILL_UNITS) | dict(units or {})
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    lines = [ln for ln in header_comment.splitlines() if ln.strip()]
+    w.writerow(["Text Inputs : Specimen label", "N-50 air spring (RECONSTRUCTED)"])
+    for i, line in enumerate(lines, 1):
+        w.writerow([f"Text Inputs : Note {i}", line])
+    out.write("\n")
+    w.writerow([BLUEHILL_HEADER[q] for q in ("time", "height", "force", "pressure")])
+    w.writerow(["(s)"] + [f"({_units.shown(u[q])})" for q in ("height", "force", "pressure")])
+    k = 0
+    for t in tests:
+        measured = t.get("measured_pressure_bar")
+        for i in range(len(t["height_m"])):
+            if not t["compression"][i]:
+                continue
+            p = measured[i] if measured is not None else t["pressure_bar"]
+            cells = [
+                f"{k * BLUEHILL_DWELL_S:.5f}",
+                f"{t['height_m'][i] / _units.factor('height', u['height']):.{_DECIMALS[('height', u['height'])]}f}",
+                f"{-t['force_N'][i] / _units.factor('force', u['force']):.{_DECIMALS[('force', u['force'])]}f}",
+                _pressure_text(p, u["pressure"]),
+            ]
+            w.writerow(cells)
+            k += 1
+    return out.getvalue()
+
+
+def _pressure_text(p_bar: float, suffix: str) -> str:
+    """A measured pressure as the writers print it: to 1 Pa in bar, to 15 digits in other units."""
+    v = p_bar / _units.factor("pressure", suffix)
+    return f"{v:.{_MEASURED_BAR_DECIMALS}f}" if suffix == "bar" else f"{v:.15g}"

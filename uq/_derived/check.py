@@ -3,7 +3,9 @@
 RESULT is the JSON of ``uq fit --json`` (docs/formats.md section 2), which carries per test the
 posterior mean of each coefficient and the posterior covariance of each coefficient block
 (``covariance: {force: 4x4, piston: 4x4}``, SI, paper basis). POINTS holds point estimates
-in the same units (e.g. ``fits/n50/table1_points.json``, Table 1 of the paper).
+in the same units (e.g. ``fits/n50/table1_points.json``, Table 1 of the paper), or is itself a
+``uq fit --json`` result: a reference batch of the same part, whose posterior means are the
+point estimates and whose posterior covariances their own covariance C (below).
 
 The rule
 --------
@@ -125,37 +127,87 @@ def _tests(doc: dict, path: str) -> list[tuple[float, dict, str]]:
     return out
 
 
+def points_kind(doc: dict) -> str:
+    """ "fit result" when POINTS is a ``uq fit --json`` document (its coefficients are estimate
+    objects ``{"mean", "sd", ...}``), else "point estimates" (plain numbers)."""
+    tests = doc.get("tests") if isinstance(doc, dict) else None
+    for t in tests if isinstance(tests, list) else []:
+        for block in BLOCKS:
+            b = t.get(block) if isinstance(t, dict) else None
+            if isinstance(b, dict) and any(isinstance(v, dict) for v in b.values()):
+                return FIT_RESULT
+    return POINT_ESTIMATES
+
+
+POINT_ESTIMATES, FIT_RESULT = "point estimates", "fit result"
+
+
 def read_points(doc: dict, path: str) -> list[dict]:
     """POINTS -> [{"pressure_bar", "label", "force": (4,), "piston": (4,), "cov": {block: (4, 4)}}].
 
     ``cov`` holds the blocks whose optional ``covariance`` the test carries (the stored
     estimate's own sampling covariance, SI, paper basis); a block without one is exact.
+
+    POINTS may also be a ``uq fit --json`` result (another batch of the same part, the reference
+    batch): each coefficient's posterior mean is its point estimate and the fit's posterior
+    covariance of the block its own covariance (required, as in RESULT); a piston block made
+    from a volume column keeps its ``"piston_from"``, so its arbitrary a_L is left out.
     """
     tests = _tests(doc, path)
     if not tests:
         raise InputError(f"{path}: 'tests' is empty: nothing to check")
+    fit = points_kind(doc) == FIT_RESULT
     out = []
     for p, t, label in tests:
         row = {"pressure_bar": p, "label": label, "cov": {}}
+        if fit and isinstance(t.get("piston_from"), str):
+            row["piston_from"] = t["piston_from"]
         for block, names in BLOCKS.items():
             if block == "piston" and block not in t:  # a force-only stand's estimates
                 continue
             b = _get(t, block, path, f"{label}.{block}")
             row[block] = np.array(
                 [
-                    _number(b[n], path, f"{label}.{block}.{n}")
+                    _point(b[n], path, f"{label}.{block}.{n}", fit)
                     if n in b
                     else _missing(path, f"{label}.{block}.{n}")
                     for n in names
                 ]
             )
-        if "covariance" in t:
-            cov = _get(t, "covariance", path, f"{label}.covariance")
+        if fit or "covariance" in t:
+            cov = _get(
+                t,
+                "covariance",
+                path,
+                f"{label}.covariance",
+                hint=(
+                    " (a fit result as the stored estimates needs its posterior covariance, which a "
+                    "fit's JSON carries; fit again with this version)"
+                    if fit
+                    else ""
+                ),
+            )
             for block in BLOCKS:
-                if block in cov:
+                if block in cov and block in row:
                     row["cov"][block] = _matrix(cov, block, path, f"{label}.covariance.{block}")
+                elif fit and block in row:
+                    _missing(path, f"{label}.covariance.{block}")
         out.append(row)
     return out
+
+
+def _point(value, path: str, key: str, fit: bool) -> float:
+    """A point estimate: a number, or the posterior mean of a fit result's estimate object."""
+    if not fit:
+        return _number(value, path, key)
+    if not isinstance(value, dict):
+        raise InputError(
+            f'{path}: {key}: expected an estimate object {{"mean", ...}} as in the rest of this '
+            f"fit result, got {json.dumps(value)[:40]}"
+        )
+    if "mean" not in value:
+        raise InputError(f"{path}: {key}.mean: missing")
+    return _number(value["mean"], path, f"{key}.mean")
 
 
 def reference_from_points(path: str | Path) -> Reference:
@@ -280,8 +332,11 @@ def check(
     alpha: float = DEFAULT_ALPHA,
     result_path: str = "RESULT",
     points_path: str = "POINTS",
+    kind: str = POINT_ESTIMATES,
 ) -> dict:
-    """Apply the rule of the module docstring; returns the machine-readable verdict."""
+    """Apply the rule of the module docstring; returns the machine-readable verdict.
+
+    ``kind``: what POINTS is (:func:`points_kind`), said in the verdict."""
     if not 0.0 < alpha < 1.0:
         raise InputError(f"alpha: expected a probability in (0, 1), got {alpha:g}", param="alpha")
     matched = []
@@ -308,7 +363,7 @@ def check(
     n_blocks = len(pairs)
     thr = threshold(alpha, n_blocks)
     blocks = [
-        _block(pt, res[block], block, alpha, n_blocks, _checked(res, block))
+        _block(pt, res[block], block, alpha, n_blocks, _checked(res, block, pt))
         for pt, res, block in pairs
     ]
     exact = [f"{b['pressure_bar']:g} bar {b['block']}" for b in blocks if not b["point_covariance"]]
@@ -323,7 +378,8 @@ def check(
         "df": 4,
         "threshold2": thr,
         "threshold": math.sqrt(thr),
-        "point_uncertainty": _assumption(exact, n_blocks),
+        "points_kind": kind,
+        "point_uncertainty": _assumption(exact, n_blocks, kind),
         "blocks_treated_as_exact": exact,
         "agree": all(b["agree"] for b in blocks),
         "n_disagree": sum(not b["agree"] for b in blocks),
@@ -337,7 +393,12 @@ def _not_checked(pt: dict, block: str, why: str) -> dict:
     return {"pressure_bar": pt["pressure_bar"], "block": block, "reason": why}
 
 
-def _assumption(exact: list[str], n_blocks: int) -> str:
+def _assumption(exact: list[str], n_blocks: int, kind: str = POINT_ESTIMATES) -> str:
+    if kind == FIT_RESULT:
+        return (
+            "included: the stored estimates are a `uq fit --json` result (another batch): its posterior "
+            "means, with its posterior covariance added to this one's"
+        )
     if not exact:
         return "included: every block's distance uses posterior covariance + the stored estimate's covariance"
     what = "all blocks" if len(exact) == n_blocks else ", ".join(exact)
@@ -350,10 +411,11 @@ def _assumption(exact: list[str], n_blocks: int) -> str:
 VOLUME_REFERENCE = "the arbitrary reference of L = -V/S (a piston block made from a volume column)"
 
 
-def _checked(res: dict, block: str) -> np.ndarray:
+def _checked(res: dict, block: str, pt: dict | None = None) -> np.ndarray:
     """The coefficients of ``block`` the check compares: all four, but b_L..d_L of a piston block
-    made from a volume column (its a_L is the arbitrary reference of L = -V/S)."""
-    return np.arange(1, 4) if block == "piston" and "piston_from" in res else np.arange(4)
+    made from a volume column on either side (its a_L is the arbitrary reference of L = -V/S)."""
+    from_volume = "piston_from" in res or "piston_from" in (pt or {})
+    return np.arange(1, 4) if block == "piston" and from_volume else np.arange(4)
 
 
 def _block(pt: dict, r: dict, block: str, alpha: float, n_blocks: int, idx: np.ndarray) -> dict:
@@ -441,20 +503,28 @@ def check_documents(
     if isinstance(points, str | Path):
         points_name = str(points)
         points = load_json(points, "POINTS")
+    points = plain(points)  # the values a JSON file of the same documents would hold
     return check(
         read_result(plain(result), result_name),
-        read_points(plain(points), points_name),
+        read_points(points, points_name),
         alpha=alpha,
         result_path=result_name,
         points_path=points_name,
+        kind=points_kind(points),
     )
 
 
 def check_files(result_path: str, points_path: str, alpha: float = DEFAULT_ALPHA) -> dict:
     result = read_result(load_json(result_path, "RESULT"), str(result_path))
-    points = read_points(load_json(points_path, "POINTS"), str(points_path))
+    doc = load_json(points_path, "POINTS")
+    points = read_points(doc, str(points_path))
     return check(
-        result, points, alpha=alpha, result_path=str(result_path), points_path=str(points_path)
+        result,
+        points,
+        alpha=alpha,
+        result_path=str(result_path),
+        points_path=str(points_path),
+        kind=points_kind(doc),
     )
 
 

@@ -10,8 +10,10 @@ rate and natural frequency. Per posterior draw of the model:
    and dP/dx from a not-a-knot spline in height (exact for cubics in x: the surface model is one);
 2. the absolute volume (uq._physics.volume): V_c drawn per posterior draw from the user's value and
    sd, the isobaric increments integrated in height, and at x_c the stated assumption on dV/dp_u
-   (0 unless told: the documented default, docs/design.md), a given value, or the model's own (``dvdp="model"``, only for a
-   model offering ``volume_pressure_draws``);
+   (0 unless told, with an honest width: Normal(0, sd) per posterior draw, the sd from the
+   recordings, :func:`dvdp_prior_sd`; the documented default, docs/design.md), a given value (with
+   the sd the user gives), or the model's own (``dvdp="model"``, only for a model offering
+   ``volume_pressure_draws``);
 3. the sealed path and its rate (uq._physics.sealed: the gas law with the casing's dV/dp_u),
    the natural frequency sqrt(k g / P) / (2 pi), transmissibility of an undamped single degree of
    freedom at a forcing frequency.
@@ -70,9 +72,13 @@ class SealedDesign:
     charge_bar      charge overpressure p_c there (--charge-bar)
     volume_l        internal volume at x_c and p_c, measured (--volume-l)
     volume_sd_l     its standard deviation, drawn per posterior draw (--volume-sd-l)
-    polytropic      n, or (lo, hi): n uniform in lo..hi per draw (--polytropic)
+    polytropic      n, or (lo, hi): n uniform in lo..hi per draw (--polytropic; default
+                    ``DYNAMIC_POLYTROPIC``, 1.3..1.4: the natural frequency is a dynamic quantity)
     reservoir_l     extra reservoir joined to the element (--reservoir-l)
     dvdp_l_per_bar  dV/dp_u at x_c: 0 (the documented default), a value, or "model"
+    dvdp_sd_l_per_bar  its sd, drawn per posterior draw (--dvdp-sd-l-per-bar): None (the default)
+                    takes it from the recordings (:func:`dvdp_prior_sd`) for the default value 0
+                    and 0 for a value given; 0 makes the value exact
     forcing_Hz      forcing frequency for transmissibility and isolation (--forcing-hz)
     """
 
@@ -80,12 +86,13 @@ class SealedDesign:
     charge_bar: float
     volume_l: float
     volume_sd_l: float = 0.0
-    polytropic: float | tuple[float, float] = 1.0
+    polytropic: float | tuple[float, float] = (1.3, 1.4)
     reservoir_l: float = 0.0
     dvdp_l_per_bar: float | str = 0.0
     forcing_Hz: float | None = None
     p_atm_bar: float = 1.01325
     seed: int = 0
+    dvdp_sd_l_per_bar: float | None = None
 
     @property
     def polytropic_range(self) -> tuple[float, float]:
@@ -144,6 +151,12 @@ def check_design(model, design: SealedDesign) -> None:
         raise InputError(
             "dvdp_l_per_bar: expected a finite number of litres per bar", param="dvdp_l_per_bar"
         )
+    sd = design.dvdp_sd_l_per_bar
+    if sd is not None and not (np.isfinite(sd) and sd >= 0):
+        raise InputError(
+            f"dvdp_sd_l_per_bar: expected a standard deviation >= 0 in litres per bar, got {sd:g}",
+            param="dvdp_sd_l_per_bar",
+        )
     if design.forcing_Hz is not None and not (
         np.isfinite(design.forcing_Hz) and design.forcing_Hz > 0
     ):
@@ -201,6 +214,7 @@ class DesignGrid:
         self.dforce_dx = CubicSpline(self.heights, self.force, axis=1).derivative()(self.heights)
         self.n_draws = self.force.shape[0]
         self._volumes = {}
+        self._prior_sd = {}
         self.dvdp_at_c = None
         if model.has_dvdp:
             self.dvdp_at_c = np.asarray(
@@ -221,22 +235,44 @@ class DesignGrid:
         n = np.full(self.n_draws, lo) if lo == hi else rng.uniform(lo, hi, self.n_draws)
         return v_c, n
 
+    def dvdp_sd(self, design: SealedDesign) -> tuple[float, str]:
+        """The sd (L/bar) of dV/dp_u at x_c the design draws, and where it comes from ("given",
+        or "recordings": :func:`dvdp_prior_sd` of the model at the design's charge); 0 for the
+        model's own dV/dp_u (its draws carry their uncertainty)."""
+        if design.dvdp_l_per_bar == "model":
+            return 0.0, "model"
+        if design.dvdp_sd_l_per_bar is not None:
+            return float(design.dvdp_sd_l_per_bar), "given"
+        if float(design.dvdp_l_per_bar) != 0.0:  # a value the user gives: exact unless its sd is
+            return 0.0, "given"
+        key = ("sd", float(design.charge_bar))
+        if key not in self._prior_sd:
+            self._prior_sd[key] = dvdp_prior_sd(self.model, self.height_m, design.charge_bar)
+        return self._prior_sd[key], "recordings"
+
     def volume(self, design: SealedDesign, v_c: np.ndarray):
         """V(x, p_u) on the grid, (S, H, Pn) m^3, and its statement (uq._physics.volume); kept for
         the next call with the same volume inputs (a chart's charges share it)."""
         key = (design.charge_bar, design.volume_l, design.volume_sd_l, design.dvdp_l_per_bar)
-        key += (design.seed, float(np.sum(v_c)))
+        key += (design.dvdp_sd_l_per_bar, design.seed, float(np.sum(v_c)))
         if key not in self._volumes:
             self._volumes = {key: self._volume(design, v_c)}
         return self._volumes[key]
 
     def _volume(self, design: SealedDesign, v_c: np.ndarray):
         d = design.dvdp_l_per_bar
-        dvdp, words = (
-            (self.dvdp_at_c, self.model.dvdp_words)
-            if d == "model"
-            else (float(d) / L_PER_M3 / BAR_PA, "")
-        )
+        sd_l, source = self.dvdp_sd(design)
+        prior = None
+        if d == "model":
+            dvdp, words = self.dvdp_at_c, self.model.dvdp_words
+        elif sd_l > 0:  # Normal(value, sd) per posterior draw, seeded apart from V_c and n
+            rng = np.random.default_rng([design.seed, DVDP_STREAM])
+            per_draw = (float(d) + sd_l * rng.standard_normal(self.n_draws)) / L_PER_M3 / BAR_PA
+            dvdp = np.repeat(per_draw[:, None], self.pressures_pa.size, axis=1)
+            words = ""
+            prior = (float(d), sd_l, DVDP_SD_WORDS[source])
+        else:
+            dvdp, words = float(d) / L_PER_M3 / BAR_PA, ""
         return absolute_volume_grid(
             self.heights,
             self.pressures_pa,
@@ -247,7 +283,50 @@ class DesignGrid:
             volume_sd_m3=design.volume_sd_l / L_PER_M3,
             dvdp_m3_per_pa=dvdp,
             dvdp_words=words,
+            dvdp_prior_l_per_bar=prior,
         )
+
+
+#: the seed stream of the dV/dp_u draws (apart from V_c's and n's, which stay as they were)
+DVDP_STREAM = 29
+#: where the sd of dV/dp_u at x_c comes from, in words for the statement
+DVDP_SD_WORDS = {
+    "recordings": "the sd is the rms change of dV/dp_u from the design height over the tested "
+    "heights, as the recordings show it at the charge pressure (docs/design.md section 2)",
+    "given": "the sd as given",
+}
+#: heights over the tested range on which dvdp_prior_sd integrates the area's pressure slope
+PRIOR_HEIGHTS = 61
+
+
+def dvdp_prior_sd(model, height_m: float, charge_bar: float) -> float:
+    """The sd (L/bar) of the default assumption on dV/dp_u at the design height: the root mean
+    square over the tested heights x of dV/dp_u(x, p_c) - dV/dp_u(x_c, p_c), from the
+    posterior-mean volume-derived area (``model.volume_area_draws``).
+
+    Isobaric tests cannot give dV/dp_u at one height, but they give how it changes with height:
+    d/dx (dV/dp_u) = d/dp_u (dV/dx), the pressure slope of the volume-derived area, so
+    dV/dp_u(x) - dV/dp_u(x_c) = int_{x_c}^{x} d(dV/dx)/dp_u dx' (uq._physics.volume). The default
+    takes the volume at x_c not to change with pressure (the contract's assumption); where the
+    casing's volume does not change with pressure is what the tests cannot tell, so the height x*
+    where it does not is taken anywhere over the tested heights, uniformly: dV/dp_u(x_c) =
+    -[dV/dp_u(x*) - dV/dp_u(x_c)], whose root mean square over x* is this sd (the Normal(0, sd)
+    the design draws has that second moment). The pressure slope is the central difference over
+    +-5 % of the tested pressure range (within it). A model whose area does not depend on
+    pressure gives 0 (its statement says so)."""
+    (hlo, hhi), (plo, phi) = model.height_range_m, model.pressure_range_bar
+    xs = np.union1d(np.linspace(hlo, hhi, PRIOR_HEIGHTS), [height_m])
+    dp = 0.05 * (phi - plo)
+    p_lo, p_hi = max(plo, charge_bar - dp), min(phi, charge_bar + dp)
+    if not p_hi > p_lo:
+        return 0.0
+    a_lo = np.asarray(model.volume_area_draws(xs, np.full(xs.shape, p_lo)), float).mean(axis=0)
+    a_hi = np.asarray(model.volume_area_draws(xs, np.full(xs.shape, p_hi)), float).mean(axis=0)
+    slope = (a_hi - a_lo) / ((p_hi - p_lo) * BAR_PA)  # d(dV/dx)/dp_u, m^2/Pa
+    anti = CubicSpline(xs, slope).antiderivative()
+    uniform = np.linspace(hlo, hhi, PRIOR_HEIGHTS)  # x* uniform over the tested heights
+    change = anti(uniform) - anti(height_m)  # dV/dp_u(x*) - dV/dp_u(x_c), m^3/Pa
+    return float(np.sqrt(np.mean(change**2)) * L_PER_M3 * BAR_PA)
 
 
 def sealed_draws(
@@ -340,6 +419,8 @@ def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) ->
         "natural_frequency_Hz": estimate(freq),
         "volume_sd_l": design.volume_sd_l,
         "dvdp_l_per_bar": design.dvdp_l_per_bar,
+        "dvdp_sd_l_per_bar": grid.dvdp_sd(design)[0],
+        "dvdp_sd_from": grid.dvdp_sd(design)[1],
         "model": model.label,
         "n_draws": int(load.size),
         "level": LEVEL,
@@ -560,6 +641,7 @@ def design_margin(
         dvdp_l_per_bar=design.dvdp_l_per_bar,
         p_atm_bar=design.p_atm_bar,
         seed=design.seed,
+        dvdp_sd_l_per_bar=design.dvdp_sd_l_per_bar,
     )
     check_design(model, design)
     if grid is None:
@@ -592,6 +674,8 @@ def design_margin(
         else list(design.polytropic_range),
         "reservoir_l": design.reservoir_l,
         "dvdp_l_per_bar": design.dvdp_l_per_bar,
+        "dvdp_sd_l_per_bar": grid.dvdp_sd(design)[0],
+        "dvdp_sd_from": grid.dvdp_sd(design)[1],
         "assumptions": [
             f"each posterior draw charged at {height_m * 1e3:g} mm to the overpressure at which it carries "
             f"{load_N:g} N there, then closed",

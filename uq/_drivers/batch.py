@@ -67,6 +67,9 @@ OPTIONS = {
     "absolute_pressure": boolean,
     "p_atm_bar": positive_float,
     "pressure_tolerance_bar": positive_float,
+    "columns": str,  # a column map, checked by the reader (uq._data.column_map)
+    "units_row": str,  # auto, yes or no, checked by the reader
+    "header_row": positive_int,
 }
 DEFAULT_SEED = 20201  # as every command's --seed
 STAMP = "batch.json"
@@ -352,6 +355,9 @@ READING_OPTIONS = (
     "absolute_pressure",
     "p_atm_bar",
     "pressure_tolerance_bar",
+    "columns",
+    "units_row",
+    "header_row",
 )
 
 

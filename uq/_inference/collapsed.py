@@ -158,6 +158,23 @@ def _loo_row(theta, fn, data):
     return fn(theta, data)
 
 
+def replicates(model: CollapsedModel, posterior: Posterior, n_draws: int, seed: int = 0):
+    """Posterior-predictive replicates of the readings ``posterior`` was fitted to (the model's
+    ``predict``: the mean plus the reading noise of each draw) on at most ``n_draws`` of its draws,
+    thinned evenly: {name: (S, n)} as numpy, or None when the model has no ``predict`` or the
+    posterior keeps no data. Deterministic for ``seed``."""
+    if model.predict is None or posterior.data is None:
+        return None
+    C, D, nt = posterior.theta.shape
+    rows = posterior.theta.reshape(C * D, nt)
+    beta = np.asarray(posterior.beta).reshape(C * D, -1)
+    step = max(1, int(np.ceil(C * D / max(int(n_draws), 1))))
+    rows, beta = rows[::step], beta[::step]
+    keys = row_keys(jax.random.PRNGKey(seed), rows.shape[0])
+    out = map_rows(_predict_row, (rows, beta, keys), (posterior.data,), static=(model.predict,))
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
 LOO_DRAWS = 2000  # draws of theta for the integrated leave-one-out densities
 
 

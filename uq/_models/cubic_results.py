@@ -24,6 +24,7 @@ from uq._io.netcdf import write_netcdf_atomic
 from uq._models.cubic_interpolation import LABEL as CUBICS_LABEL
 from uq._models.cubic_interpolation import NAME as CUBICS_NAME
 from uq._models.cubic_interpolation import CubicInterpolation, TestsVerdict
+from uq._models.fitted import thin_rows
 from uq._models.residual_order import order_warnings
 from uq._physics.cubic import cubic
 
@@ -296,6 +297,20 @@ class CampaignFit:
     @property
     def convergence(self) -> TestsVerdict:
         return TestsVerdict(tuple(self.tests))
+
+    def predictive_force_draws(self, n_draws: int, seed: int = 0) -> list[np.ndarray] | None:
+        """Each test's posterior-predictive replicates of its force readings, (S, n_t) on at most
+        ``n_draws`` draws thinned evenly (the fit's ``posterior_predictive`` group; ``seed`` is
+        not used: the replicates were drawn with the fit's), in the order of ``tests``; None when a
+        test's posterior keeps no replicates."""
+        out = []
+        for t in self.tests:
+            idata = t.posterior.idata
+            if idata is None or "posterior_predictive" not in idata.groups():
+                return None
+            a = np.asarray(idata.posterior_predictive["force_N"])
+            out.append(thin_rows(a.reshape(-1, a.shape[-1]), n_draws))
+        return out
 
     @property
     def seconds(self) -> float:

@@ -260,6 +260,25 @@ class LinearFit:
         is of: its module's ``collapsed_model(data)`` (imported now: JAX), for refits."""
         return resolve(f"{self.likelihood}:collapsed_model")(self.posterior.data)
 
+    def predictive_force_draws(self, n_draws: int, seed: int = 0) -> list[np.ndarray] | None:
+        """Posterior-predictive replicates of every force reading, one (S, n_t) array per test of
+        ``recordings`` in its order (the likelihood's ``predict``: the mean force plus the
+        reading noise of each draw; JAX is imported now), for the check of the model at the
+        tested points (``uq._derived.model_check``); None for a loaded model (no readings, no
+        noise draws) or a likelihood without replicates."""
+        if self.posterior is None or self.recordings is None or self.posterior.data is None:
+            return None
+        model = self.collapsed()
+        reps = resolve("uq._inference.collapsed:replicates")(model, self.posterior, n_draws, seed)
+        if reps is None or "force_N" not in reps or model.observed is None:
+            return None
+        tests = self.recordings.tests
+        observed = np.asarray(model.observed(self.posterior.data)["force_N"])
+        readings = np.concatenate([t.force_N for t in tests])
+        if observed.shape != readings.shape or not np.array_equal(observed, readings):
+            return None  # not the recordings' readings in their order: no per-test split
+        return np.split(reps["force_N"], np.cumsum([t.force_N.size for t in tests])[:-1], axis=1)
+
     @property
     def loglik_loo(self):
         return self.posterior.loglik_loo

@@ -8,7 +8,10 @@ section 6, has the tables):
   ``recordings_path``, ``recordings_sha256``, ``x0_mm``, ``piston_area_cm2``, ``seed``,
   ``uq_version``, ``written_by``, ``settings_json``, ``stand_json``, ``converged``,
   ``warnings_json`` (the sampler's verdict and warnings), ``max_draws`` (the fixed draws' bound,
-  -1 for none) and whatever else the writer adds (``model_info_json``: why ``uq margin`` chose it);
+  -1 for none), ``recordings_comments_json`` (the recordings' header lines, e.g. that they are
+  reconstructed; exports repeat them) and whatever else the writer adds (``model_info_json``: why
+  ``uq margin`` chose it; ``model_check_json``: its posterior-predictive check at the tested points
+  when it was fitted);
 * group ``posterior``: every named coefficient block as a variable (chain, draw, coefficient) in
   physical units, and the sampled parameters as reported (chain, draw);
 * group ``constant_data``: the model's orders and geometry (``orders``/``orders_field``,
@@ -49,6 +52,11 @@ def provenance_of(recordings, *, seed: int | None, settings=None, stand=None) ->
             "x0_mm": recordings.x0_m * 1e3,
             "piston_area_cm2": recordings.piston_area_m2 * 1e4,
         }
+        if getattr(recordings, "sha256", None):  # the hash taken when read (no second read)
+            out["recordings_sha256"] = recordings.sha256
+        # the file's own header lines (e.g. "RECONSTRUCTED recordings ..."), which every export of
+        # the saved model repeats
+        out["recordings_comments"] = list(getattr(recordings, "comments", ()) or ())
     if settings is not None:
         out["settings"] = asdict(settings)
     if stand is not None:
@@ -80,9 +88,12 @@ def _attrs(model, provenance: dict) -> dict:
         "converged": int(bool(prov.get("converged", conv is None or conv.converged))),
         "warnings_json": json.dumps(list(prov.get("warnings", conv.messages() if conv else []))),
         "max_draws": -1 if model.max_draws is None else int(model.max_draws),
+        "recordings_comments_json": json.dumps(list(prov.get("recordings_comments", []))),
     }
     if prov.get("model_info") is not None:
         attrs["model_info_json"] = dumps_json(prov["model_info"])
+    if prov.get("model_check") is not None:  # uq margin --save-fit: the check at the tested points
+        attrs["model_check_json"] = dumps_json(prov["model_check"])
     return attrs
 
 
@@ -175,8 +186,11 @@ def provenance_from(attrs: dict) -> dict:
     out["stand"] = json.loads(attrs.get("stand_json", "null"))
     out["converged"] = bool(int(attrs.get("converged", 1)))
     out["warnings"] = json.loads(attrs.get("warnings_json", "[]"))
+    out["recordings_comments"] = json.loads(attrs.get("recordings_comments_json", "[]"))
     if "model_info_json" in attrs:
         out["model_info"] = json.loads(attrs["model_info_json"])
+    if "model_check_json" in attrs:
+        out["model_check"] = json.loads(attrs["model_check_json"])
     return out
 
 

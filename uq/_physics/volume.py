@@ -9,8 +9,9 @@ V(x, p_u) - V(x', p_u) between heights of one test, i.e. the volume-derived area
    once per posterior draw (``charge_volume_draws``);
 2. how the volume at one fixed height changes with pressure: isobaric tests compare heights at
    one pressure, never pressures at one height. The documented default (docs/design.md) takes V(x_c, p_u) not to
-   change with p_u; an option gives dV/dp_u there (litres per bar), or a model whose potential
-   fixes it (``dvdp="model"`` in uq._derived.design) supplies its own on the pressure grid.
+   change with p_u, give or take an sd drawn per posterior draw (``dvdp_prior_l_per_bar``); an
+   option gives dV/dp_u there (litres per bar), or a model whose potential fixes it
+   (``dvdp="model"`` in uq._derived.design) supplies its own on the pressure grid.
 
 With these, on a grid of heights and pressures (``relative_volume_grid``, ``absolute_volume_grid``):
 
@@ -71,8 +72,10 @@ def volume_statement(
     height_m: float,
     charge_bar: float,
     dvdp_m3_per_pa,
+    prior_l_per_bar: tuple[float, float, str] | None = None,
 ) -> str:
-    """The volume assumption in words, for every output that depends on it."""
+    """The volume assumption in words, for every output that depends on it. ``prior_l_per_bar``:
+    (value, sd, where the sd comes from) when dV/dp_u at x_c is drawn Normal(value, sd)."""
     head = (
         f"internal volume {volume_m3 * L_PER_M3:.4g} L"
         + (
@@ -83,7 +86,17 @@ def volume_statement(
         + f" at {height_m * 1e3:g} mm and {charge_bar:g} bar, as measured by the user (the stand gives only "
         "volume changes, eq. 5); at other heights the recordings' volume-derived area dV/dx is integrated"
     )
-    if isinstance(dvdp_m3_per_pa, str):
+    if prior_l_per_bar is not None:
+        value, sd, source = prior_l_per_bar
+        drawn = f"1 sd, drawn per posterior draw; isobaric tests cannot tell; {source}"
+        how = (
+            f"ASSUMED: the volume at {height_m * 1e3:g} mm does not change with pressure, give or "
+            f"take {sd:.2g} L per bar (dV/dp_u = 0 +- {sd:.2g} L/bar, {drawn})"
+            if value == 0
+            else f"GIVEN: the volume at {height_m * 1e3:g} mm changes with pressure by "
+            f"{value:.4g} +- {sd:.2g} L per bar ({drawn})"
+        )
+    elif isinstance(dvdp_m3_per_pa, str):
         how = f"how the volume at {height_m * 1e3:g} mm changes with pressure: the model's own dV/dp_u ({dvdp_m3_per_pa})"
     elif dvdp_m3_per_pa == 0:
         how = (
@@ -146,12 +159,14 @@ def absolute_volume_grid(
     volume_sd_m3: float = 0.0,
     dvdp_m3_per_pa=0.0,
     dvdp_words: str = "",
+    dvdp_prior_l_per_bar: tuple[float, float, str] | None = None,
 ) -> AbsoluteVolume:
     """V(x, p_u) = V_c + [V(x, p_u) - V(x_c, p_c)] on the grid, m^3 (S, H, Pn), with its statement.
 
     ``volume_m3``: V_c, a number or its draws (S,) (``charge_volume_draws``); ``volume_sd_m3`` the
     sd they were drawn with (for the statement); ``dvdp_m3_per_pa`` as ``relative_volume_grid``
-    (draws: a model's own dV/dp_u, described by ``dvdp_words``).
+    (draws: a model's own dV/dp_u, described by ``dvdp_words``, or Normal draws of the
+    assumption, described by ``dvdp_prior_l_per_bar`` = (value, sd, where the sd comes from)).
     """
     rel = relative_volume_grid(
         height_m,
@@ -165,6 +180,11 @@ def absolute_volume_grid(
     d = np.asarray(dvdp_m3_per_pa, float)
     words = float(d) if d.ndim == 0 else (dvdp_words or "its draws")
     statement = volume_statement(
-        float(np.mean(v_c)), volume_sd_m3, design_height_m, charge_pa / BAR_PA, words
+        float(np.mean(v_c)),
+        volume_sd_m3,
+        design_height_m,
+        charge_pa / BAR_PA,
+        words,
+        dvdp_prior_l_per_bar,
     )
     return AbsoluteVolume(v_c + rel, statement)

@@ -21,14 +21,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from uq._data.recordings import leading_comments
 from uq._data.reference import Reference, is_n50_reconstruction, paper_reference
 from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.errors import InputError
 from uq._io.files import (
     remove_stale,
-    sha256_of,
     staged_folder,
     write_bytes_atomic,
     write_text_atomic,
@@ -69,12 +67,6 @@ TABLE1_COLUMNS = [
 ]
 PAPER_SCATTER_PCT = {"x0": 8.41, "x_max": 26.3, "x_min": 8.51}
 MIN_DRAWS = 10  # fewer posterior draws give no 90 % band worth drawing
-
-
-def read_comments(path) -> list[str]:
-    """The leading ``#`` lines of a recordings file, without the ``#``."""
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        return leading_comments(fh)
 
 
 # ----------------------------------------------------------------------------- figures
@@ -569,14 +561,23 @@ def _absent(ax, words: str, x, y: float = 0.5) -> None:
 
 
 def encoded_test_figure(
-    t, force_mean, x0_m: float, tb, cb, figure_format: str, piston_m=None, converged=True
+    t,
+    force_mean,
+    x0_m: float,
+    tb,
+    cb,
+    figure_format: str,
+    piston_m=None,
+    converged=True,
+    units=None,
 ) -> bytes:
     """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns), stamped NOT
-    CONVERGED when the test's fit failed its convergence rules."""
+    CONVERGED when the test's fit failed its convergence rules; ``units``: second axes in the
+    recordings' units (``uq report --units input``)."""
     fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m)
     if not converged:
         stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
-    return encode(fig, figure_format)
+    return encode(fig, figure_format, units)
 
 
 def not_converged(cf) -> tuple[str, list[str]]:
@@ -628,7 +629,7 @@ class _TestFigures:
 
     MIN_TESTS = 4  # below this, starting workers costs more than it saves
 
-    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png"):
+    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png", units=None):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
             (
@@ -640,6 +641,7 @@ class _TestFigures:
                 figure_format,
                 _piston(tf),
                 tf.convergence.converged,
+                units,
             )
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
@@ -895,7 +897,8 @@ def _reference(reference, comments) -> Reference | None:
 
 def provenance(rec, stand) -> dict:
     """The footer of a page: uq's version, the date (``SOURCE_DATE_EPOCH`` when set, for
-    reproducible pages), the recordings' file and SHA-256, and the stand description used."""
+    reproducible pages), the recordings' file and SHA-256 (taken when they were read), and the
+    stand description used."""
 
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
     when = (
@@ -903,10 +906,7 @@ def provenance(rec, stand) -> dict:
         if epoch and epoch.isdigit()
         else datetime.datetime.now(datetime.UTC)
     )
-    try:
-        digest = sha256_of(rec.path)
-    except OSError:
-        digest = None
+    digest = getattr(rec, "sha256", None)
     changes = stand.changes()
     return {
         "version": __version__,
@@ -923,16 +923,8 @@ def provenance(rec, stand) -> dict:
 
 
 def _comments(rec, comments) -> list[str]:
-    """The comment lines given, else the recordings', else those read from its file (none if unreadable)."""
-    if comments is not None:
-        return comments
-    comments = list(getattr(rec, "comments", ()))
-    if not comments:
-        try:
-            comments = read_comments(rec.path)
-        except OSError:
-            comments = []
-    return comments
+    """The comment lines given, else the recordings' (read with them)."""
+    return list(getattr(rec, "comments", ())) if comments is None else comments
 
 
 def _draw_figures(
@@ -942,9 +934,10 @@ def _draw_figures(
     test_figures: _TestFigures,
     figure_format: str,
     ref: Reference | None = None,
+    units=None,
 ) -> dict[str, Figure]:
     """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
-    the extension (``"fig2_force"``)."""
+    the extension (``"fig2_force"``); ``units``: second axes in the recordings' units."""
     drawn = [("fig2_force", figure_force(cf, cb), "Figure 2: force vs height")]
     if any(tb.has_volume for tb in cb.tests):
         drawn.append(("fig3_volume", figure_volume(cf, cb), "Figure 3: volume increment vs height"))
@@ -970,7 +963,7 @@ def _draw_figures(
         for _, fig, _ in drawn:
             stamp_unconverged(fig, what)
     figs = {
-        stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
+        stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format, units), alt)
         for stem, fig, alt in drawn
     }
     for i, tf in enumerate(cf.tests):
@@ -997,6 +990,7 @@ def write_report(
     jobs: int | None = 1,
     figure_format: str = "png",
     reference: Reference | str | None = "auto",
+    units=None,
 ) -> Path:
     """Write ``out_dir/report.html`` and its figures, as ``uq report`` does; return the page's path.
 
@@ -1020,7 +1014,9 @@ def write_report(
     spring (their header says so) and nothing otherwise, ``"paper"``, ``None``, or a
     :class:`uq._data.reference.Reference` (``uq report --reference FILE``). The page's footer
     names the uq version, the date (``SOURCE_DATE_EPOCH`` when set), the recordings' SHA-256 and
-    the stand description used.
+    the stand description used. ``units``: a :class:`uq._data.units.OutputUnits`
+    (``uq report --units input``): every figure axis in mm, N, kN, cm² or litres gets a second
+    axis in those units (the recordings' own: psi, in, lbf, ...).
 
     >>> import tempfile, uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -1044,9 +1040,9 @@ def write_report(
                 surface, surface.to_json(comparison), stage, figure_format=figure_format
             ).name
         n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
-        with _TestFigures(cf, cb, n_jobs, figure_format) as test_figures:
+        with _TestFigures(cf, cb, n_jobs, figure_format, units) as test_figures:
             page, names = _write_page(
-                cf, cb, stage, test_figures, comments, surface_page, figure_format, reference
+                cf, cb, stage, test_figures, comments, surface_page, figure_format, reference, units
             )
     # Figures an earlier run wrote (other pressures, a --surface run) must not pass for this run's.
     if surface is not None:  # this run's surface figures, in this run's format
@@ -1068,13 +1064,14 @@ def _write_page(
     surface_page,
     figure_format: str = "png",
     reference: Reference | str | None = "auto",
+    units=None,
 ) -> tuple[Path, set]:
     """report.html (the template ``report.html``) and its figures in ``out``; returns the page and
     the figures' file names."""
     rec = cf.recordings
     comments = _comments(rec, comments)
     ref = _reference(reference, comments)
-    figures = _draw_figures(cf, cb, out, test_figures, figure_format, ref)
+    figures = _draw_figures(cf, cb, out, test_figures, figure_format, ref, units)
     lo, hi = rec.height_range_m
     t1_rows, n_out, n_cmp = _table1(cf, ref)
     page = render(

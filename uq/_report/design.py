@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from uq._derived.comparison import words
+from uq._derived.model_check import words as check_words
 from uq._io.files import dumps_json, remove_stale, staged_folder
 from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
@@ -220,6 +221,15 @@ def chart_rows(doc: dict) -> list[dict]:
     return sorted(rows, key=lambda r: r["charge_bar"])
 
 
+def _check(doc: dict) -> dict | None:
+    """The answering model's posterior-predictive check at the tested points, for the sheet (None
+    for a document written before the check existed)."""
+    c = doc.get("model_check")
+    if not c:
+        return None
+    return {"words": check_words(c), "misses": bool(c.get("misses"))}
+
+
 def ranking(doc: dict) -> dict:
     """Which model answered and how the data rank it (PSIS-LOO against the per-pressure cubics),
     in words, for the sheet."""
@@ -353,6 +363,7 @@ def write_design_sheet(
         curve=doc.get("sealed_curve"),
         chart=chart_rows(doc) if sealed else [],
         ranking=ranking(doc),
+        check=_check(doc),
         untested_charge=not _is_tested(doc, doc["charge_bar"]),
     )
     with staged_folder(out, last=(PAGE,)) as stage:

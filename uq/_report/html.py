@@ -17,6 +17,7 @@ import functools
 import html
 import io
 import math
+import re
 from dataclasses import dataclass
 
 from jinja2 import Environment, PackageLoader, StrictUndefined
@@ -52,14 +53,18 @@ def check_format(figure_format: str) -> str:
     return figure_format
 
 
-def encode(fig, figure_format: str = "png") -> bytes:
-    """The figure as PNG (at ``DPI``) or SVG bytes; the figure is closed.
+def encode(fig, figure_format: str = "png", units=None) -> bytes:
+    """The figure as PNG (at ``DPI``) or SVG bytes; the figure is closed. ``units`` (an
+    :class:`uq._data.units.OutputUnits`, ``uq report --units input``): each axis labelled in mm,
+    N, kN, cm² or litres gets a second axis in those units (:func:`input_unit_axes`).
 
     SVG keeps text as paths (the page looks the same in every browser) and is reproducible: no
     date in its metadata and a fixed salt for its element ids, so one figure gives the same bytes.
     """
     import matplotlib  # reason: optional and heavy, loaded only where used
 
+    if units is not None:
+        input_unit_axes(fig, units)
     buf = io.BytesIO()
     with matplotlib.rc_context({"svg.hashsalt": "airspring-uq", "svg.fonttype": "path"}):
         if figure_format == "svg":
@@ -68,6 +73,43 @@ def encode(fig, figure_format: str = "png") -> bytes:
             fig.savefig(buf, format=check_format(figure_format), dpi=DPI)
     pyplot().close(fig)
     return buf.getvalue()
+
+
+#: A unit as the figures write it in their labels -> (quantity, its factor to the unit inside).
+_LABEL_UNITS = {
+    "mm": ("height", 1e-3),
+    "kN": ("force", 1e3),
+    "N": ("force", 1.0),
+    "cm²": ("area", 1e-4),
+    "dm³ = litre": ("volume", 1e-3),
+}
+_LABEL = re.compile(r"^(?P<what>.*)\((?P<unit>mm|kN|N|cm²|dm³ = litre)\)\s*$")
+
+
+def input_unit_axes(fig, units) -> None:
+    """For each axis of ``fig`` whose label ends in a unit (``height x (mm)``, ``force P (kN)``)
+    that ``units`` writes otherwise, a second axis (top or right) in ``units``' unit, labelled so
+    (``height x (in)``): the figure keeps its scale and shows the recordings' own units too."""
+    for ax in fig.axes:
+        if ax.get_label() == "<colorbar>":
+            continue
+        for which in ("x", "y"):
+            label = ax.get_xlabel() if which == "x" else ax.get_ylabel()
+            m = _LABEL.match(label)
+            if not m:
+                continue
+            quantity, to_si = _LABEL_UNITS[m.group("unit")]
+            scale = to_si / units.factor(quantity)
+            if abs(scale - 1.0) < 1e-12:
+                continue  # the figure already shows this unit
+            functions = (lambda v, s=scale: v * s, lambda v, s=scale: v / s)
+            if which == "x":
+                sec = ax.secondary_xaxis("top", functions=functions)
+                sec.set_xlabel(f"{m.group('what')}({units.shown(quantity)})", fontsize=7)
+            else:
+                sec = ax.secondary_yaxis("right", functions=functions)
+                sec.set_ylabel(f"{m.group('what')}({units.shown(quantity)})", fontsize=7)
+            sec.tick_params(labelsize=7)
 
 
 #: what a page or figure drawn from a posterior whose convergence rules failed says it is

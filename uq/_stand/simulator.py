@@ -324,36 +324,81 @@ def simulate(
     )
     rng = np.random.default_rng(seed)
     heights, comp = layout.heights()
-    steps = np.arange(heights.size)
-    tests = []
-    for p in layout.pressures_bar:
-        n = heights.size
-        x_true = heights + reading_errors(rng, stand.displacement_sd_m, n, stand.error_df)
-        dp_bar = ar1(
-            reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df),
-            stand.pressure_error_corr,
+    return [
+        _test(spring, effects, p, heights, comp, rng, stand, piston_area_m2)
+        for p in layout.pressures_bar
+    ]
+
+
+def _test(spring, effects, p, heights, comp, rng, stand, piston_area_m2) -> dict:
+    """One test at set pressure ``p`` (bar) read at the commanded ``heights`` in recording order
+    (``comp``: on the compression branch), with the stand's errors (module docstring)."""
+    n = heights.size
+    steps = np.arange(n)
+    x_true = heights + reading_errors(rng, stand.displacement_sd_m, n, stand.error_df)
+    dp_bar = ar1(
+        reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df),
+        stand.pressure_error_corr,
+    )
+    e_load = reading_errors(rng, stand.load_cell_rel_sd, n, stand.error_df)
+    e_cal = reading_errors(rng, stand.caliper_sd_m, n, stand.error_df)
+    force, piston = true_curves(spring, effects, x_true, p, comp, steps, piston_area_m2)
+    feff = pressure_lever_m2(spring, effects, x_true, p)
+    force_read = (force + dp_bar * BAR_PA * feff) * (1.0 + e_load)
+    # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_air dp / p_abs.
+    # V_air does not depend on the height (eq. 4: the gas/water boundary moves in the receiver).
+    v_air = stand.gas_volume_at_xmax_m3
+    piston_read = piston - v_air * dp_bar / (p + stand.p_atm_bar) / piston_area_m2 + e_cal
+    return dict(
+        pressure_bar=p,
+        height_m=heights,
+        force_N=force_read,
+        piston_m=piston_read,
+        compression=comp,
+        step=steps,
+        pressure_error_bar=dp_bar,  # the held pressure was p + dp (uq._stand.shapes)
+    )
+
+
+def simulate_planned(
+    spring_name: str,
+    planned: list[dict],
+    *,
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    piston_area_m2: float = PAPER_PISTON_AREA_M2,
+    stand: StandDescription = PAPER_STAND,
+) -> list[dict]:
+    """The virtual stand reading planned tests (the ``tests`` of ``uq plan --json``: dicts with
+    pressure_bar, heights_mm in recording order and optional branches, compression when absent), with
+    the same errors as :func:`simulate`; returns one dict of arrays per test, as :func:`simulate`."""
+    if spring_name not in SPRINGS:
+        raise InputError(
+            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
+            param="spring_name",
         )
-        e_load = reading_errors(rng, stand.load_cell_rel_sd, n, stand.error_df)
-        e_cal = reading_errors(rng, stand.caliper_sd_m, n, stand.error_df)
-        force, piston = true_curves(spring, effects, x_true, p, comp, steps, piston_area_m2)
-        feff = pressure_lever_m2(spring, effects, x_true, p)
-        force_read = (force + dp_bar * BAR_PA * feff) * (1.0 + e_load)
-        # Boyle at the reading: p_abs V = const, so dp shrinks the gas room by V_air dp / p_abs.
-        # V_air does not depend on the height (eq. 4: the gas/water boundary moves in the receiver).
-        v_air = stand.gas_volume_at_xmax_m3
-        piston_read = piston - v_air * dp_bar / (p + stand.p_atm_bar) / piston_area_m2 + e_cal
-        tests.append(
-            dict(
-                pressure_bar=p,
-                height_m=heights,
-                force_N=force_read,
-                piston_m=piston_read,
-                compression=comp,
-                step=steps,
-                pressure_error_bar=dp_bar,  # the held pressure was p + dp (uq._stand.shapes)
-            )
+    spring = (
+        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
+    )
+    rng = np.random.default_rng(seed)
+    return [
+        _test(
+            spring,
+            dict(effects or {}),
+            float(t["pressure_bar"]),
+            np.round(np.asarray(t["heights_mm"], float) * 1e-3, 9),
+            np.array(
+                [
+                    b == "compression"
+                    for b in t.get("branches") or ["compression"] * len(t["heights_mm"])
+                ]
+            ),
+            rng,
+            stand,
+            piston_area_m2,
         )
-    return tests
+        for t in planned
+    ]
 
 
 def recordings_from_tests(tests: list[dict], name: str = "simulated", **fields) -> Recordings:

@@ -1,0 +1,505 @@
+"""Proof of ``uq plan`` on the virtual stand: does a plan deliver the sd it predicts, do the bands
+after it cover the truth, and does it beat a uniform grid of the same size? Writes proof.json and
+summary.md into ``--out`` (default reports/plan-proof/; committed).
+
+    nice -n 10 .venv/bin/python scripts/plan_proof.py [--scenarios A:12,B:10,C:6,D:4] [--keep-rows] [--tiny]
+
+Each replication of a scenario: the virtual stand records a pilot campaign of a known spring
+(uq._stand.simulator); it is fitted as ``uq plan`` fits it (the scenario's registry model, or for ``auto`` the
+model ``uq margin`` would choose); ``uq plan``'s engine plans ``--max-readings`` readings for the
+scenario's targets (uq._derived.plan.make_plan); the stand reads the planned tests
+(``simulate_planned``), and, apart, a uniform grid of the same size (same readings, same number of
+new tests); each combined campaign is fitted with the planning model and the targets' posterior is
+read from its draws as the commands give it (force and F_eff bands, ``uq margin``'s pressure
+needed, ``uq design``'s natural frequency, the casing's magnitude from the volume-derived area).
+Recorded per target: the predicted sd, the achieved posterior sd and its ratio to the prediction,
+whether the equal-tailed 90 % interval holds the truth, and the uniform grid's predicted and
+achieved sd.
+
+Claims (summary.md states each with its numbers): the achieved/predicted sd ratio averages within
+0.8-1.25 with every replication within 0.6-1.6; about 90 % of the intervals hold the truth (the
+exact binomial 95 % region of the count is shown); the plan's achieved sd is below the uniform
+grid's (by how much, per target). Where the prediction is poor, summary.md says which and why.
+
+``--tiny`` (tests): one replication of one scenario, 200 sampler steps, few draws.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from scipy import stats  # noqa: E402
+from scipy.optimize import brentq  # noqa: E402
+
+from uq._data.recordings import recordings_from_text, write_recordings_csv  # noqa: E402
+from uq._data.stand_description import PAPER_STAND  # noqa: E402
+from uq._derived.comparison import fit_both, force_side  # noqa: E402
+from uq._derived.design import DesignGrid, SealedDesign, sealed_draws  # noqa: E402
+from uq._derived.margin import AUTO, choose, pressure_needed  # noqa: E402
+from uq._derived.plan import make_plan, plan_document, uniform_readings  # noqa: E402
+from uq._derived.plan_frames import frames_of  # noqa: E402
+from uq._derived.plan_targets import SealedInputs, parse_target  # noqa: E402
+from uq._inference.sampler import Settings  # noqa: E402
+from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
+from uq._models import registry  # noqa: E402
+from uq._physics.quantities import BAR_PA  # noqa: E402
+from uq._physics.sealed import natural_frequency_Hz  # noqa: E402
+from uq._stand.sealed_test import sealed_truth  # noqa: E402
+from uq._stand.simulator import SPRINGS, Layout, simulate, simulate_planned  # noqa: E402
+
+LEVEL = 0.90
+HEIGHTS_M = np.round(np.arange(0.065, 0.1551, 0.005), 6)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    words: str
+    spring: str
+    pressures_bar: tuple
+    step_m: float
+    targets: tuple
+    model: str = registry.SURFACE  # a registry name, or AUTO: the model uq margin would choose
+    max_readings: int = 60
+    candidates_bar: tuple = (0.1, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10)
+    extra: dict = field(default_factory=dict)
+
+
+SCENARIOS = {
+    "A": Scenario(
+        "A",
+        "smooth spring (in the surface's class), pilot at 2, 5, 8 bar every 5 mm",
+        "n50-smooth",
+        (2.0, 5.0, 8.0),
+        0.005,
+        ("force@110mm,6.5bar", "pressure_for@110mm,9000N"),
+        candidates_bar=(0.1, 1, 3, 4, 6, 6.5, 7, 9, 10),
+    ),
+    "B": Scenario(
+        "B",
+        "spring with one potential (elastic casing, Maxwell exact), pilot at 1, 4, 7, 10 bar every 10 mm",
+        "n50-thermo",
+        (1.0, 4.0, 7.0, 10.0),
+        0.010,
+        ("elastic_casing", "natural_frequency@112mm,5bar", "force@80mm,5.5bar"),
+        candidates_bar=(0.5, 2, 3, 5, 5.5, 6, 8, 9),
+    ),
+    "C": Scenario(
+        "C",
+        "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, the model "
+        "uq margin chooses",
+        "n50",
+        (1.0, 4.0, 7.0, 10.0),
+        0.010,
+        ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
+        model=AUTO,
+        candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
+    ),
+    "D": Scenario(
+        "D",
+        "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, planned "
+        "and fitted with the surface with a discrepancy in pressure",
+        "n50",
+        (1.0, 4.0, 7.0, 10.0),
+        0.010,
+        ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
+        model=registry.DISCREPANCY,
+        candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
+    ),
+}
+
+
+# ----------------------------------------------------------------------------- truth
+
+
+def truth(spring_name: str, target) -> float:
+    """The target's true value for the stand's spring (target units)."""
+    spring = SPRINGS[spring_name]()
+    if target.kind == "force":
+        return float(spring.force_N(np.array(target.height_m), target.pressure_bar))
+    if target.kind == "feff":
+        return float(spring.force_N(np.array(target.height_m), target.pressure_bar)) / (
+            target.pressure_bar * BAR_PA
+        )
+    if target.kind == "pressure_for":
+        lo, hi = 0.1, 10.0
+        x = np.array(target.height_m)
+        p = brentq(lambda pb: float(spring.force_N(x, pb)) - target.load_N, lo, hi, xtol=1e-12)
+        return p * BAR_PA
+    if target.kind == "elastic_casing":
+        p_lo, p_hi = target.pressures_bar
+        x0 = np.array(spring.x0_m)
+        a_lo = float(spring.volume_area_m2(x0, p_lo))
+        a_hi = float(spring.volume_area_m2(x0, p_hi))
+        return (a_hi - a_lo) / (p_hi * a_lo - p_lo * a_hi)
+    if target.kind == "natural_frequency":
+        t = sealed_truth(
+            spring_name,
+            np.array([target.height_m]),
+            height_c_m=target.height_m,
+            charge_bar=target.pressure_bar,
+        )
+        return float(t.natural_frequency_Hz[0])
+    raise ValueError(target.kind)
+
+
+def sealed_inputs(sc: Scenario) -> SealedInputs | None:
+    """The design options of a natural_frequency target: the spring's true internal volume at the
+    design point (what the user measures), isothermal, dV/dp_u = 0 (exact for n50-thermo at x0)."""
+    nf = [
+        parse_target(s, SealedInputs(volume_l=1.0)) for s in sc.targets if s.startswith("natural")
+    ]
+    if not nf:
+        return None
+    t = nf[0]
+    v = sealed_truth(
+        sc.spring, np.array([t.height_m]), height_c_m=t.height_m, charge_bar=t.pressure_bar
+    )
+    return SealedInputs(volume_l=v.volume_c_m3 * 1e3)
+
+
+# ----------------------------------------------------------------------------- fits and answers
+
+
+def fit_model(rec, model: str, seed: int, settings):
+    """(fit, name, why): the registry's model ``model``, or the model uq margin would choose
+    (``AUTO``: the registry's default against the per-pressure cubics)."""
+    if model != AUTO:
+        side = force_side(rec) if model == registry.CUBICS else rec
+        fit = registry.fit(model, side, seed=seed, settings=settings, stand=PAPER_STAND)
+        return fit, fit.name, "given"
+    fit, cub, comparison = fit_both(rec, seed=seed, settings=settings, stand=PAPER_STAND)
+    ans, info = choose(fit, cub, comparison)
+    return ans, ans.name, info["why"]
+
+
+def answer(fit, name: str, target, sealed: SealedInputs | None) -> np.ndarray:
+    """Posterior draws of the target as the commands give it (the FittedModel protocol), target
+    units."""
+    ans = fit
+    if target.kind == "force":
+        return ans.force_draws(np.array(target.height_m), target.pressure_bar)
+    if target.kind == "feff":
+        return ans.force_draws(np.array(target.height_m), target.pressure_bar) / (
+            target.pressure_bar * BAR_PA
+        )
+    if target.kind == "pressure_for":
+        return pressure_needed(ans, target.height_m, target.load_N) * BAR_PA
+    if target.kind == "elastic_casing":
+        p_lo, p_hi = target.pressures_bar
+        x0 = np.array(fit.recordings.x0_m)
+        a_lo = ans.volume_area_draws(x0, p_lo)
+        a_hi = ans.volume_area_draws(x0, p_hi)
+        return (a_hi - a_lo) / (p_hi * a_lo - p_lo * a_hi)
+    if target.kind == "natural_frequency":
+        return natural_frequency_draws(fit, target, sealed)
+    raise ValueError(target.kind)
+
+
+def natural_frequency_draws(fit, target, sealed) -> np.ndarray:
+    """``uq design``'s natural frequency at the design point, per draw (its sealed path there)."""
+    design = SealedDesign(target.height_m, target.pressure_bar, sealed.volume_l)
+    grid = DesignGrid(fit.on_draws(1000), target.height_m)
+    path, _ = sealed_draws(grid, design, target.pressure_bar, [target.height_m])
+    return natural_frequency_Hz(path.rate_N_per_m[:, 0], path.force_N[:, 0])
+
+
+def combined(sc: Scenario, pilot_tests, planned, seed: int):
+    """The pilot's tests and the planned ones read by the stand, as recordings (uq simulate's rounding)."""
+    new = simulate_planned(sc.spring, planned, seed=seed)
+    text = write_recordings_csv(list(pilot_tests) + new, "plan proof: pilot and planned tests")
+    return recordings_from_text(text, f"{sc.name} pilot + plan")
+
+
+# ----------------------------------------------------------------------------- one replication
+
+
+def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -> dict:
+    seed = 1000 * (ord(sc.name) - 64) + rep
+    t0 = time.perf_counter()
+    layout = Layout(pressures_bar=sc.pressures_bar, step_m=sc.step_m)
+    pilot_tests = simulate(sc.spring, seed=seed, layout=layout)
+    pilot = recordings_from_text(
+        write_recordings_csv(pilot_tests, "plan proof pilot"), f"{sc.name} pilot"
+    )
+    sealed = sealed_inputs(sc)
+    targets = [parse_target(s, sealed).with_range(sc.pressures_bar) for s in sc.targets]
+    fit, name, why = fit_model(pilot, sc.model, seed, settings)
+    builder = frames_of(fit, draws)
+    cand = np.array(sc.candidates_bar, float)
+    plan = make_plan(
+        builder, targets, HEIGHTS_M, cand, max_readings=sc.max_readings, draws=search_draws
+    )
+    doc = plan_document(plan)
+    # the uniform grid of the same size, laid out as make_plan compared it
+    _, uni = uniform_readings(plan.n_readings, plan.n_pressure_changes, cand, HEIGHTS_M)
+    uni_tests = [
+        {"pressure_bar": p, "heights_mm": list(np.asarray(h) * 1e3), "branches": _branches(h)}
+        for p, h in uni
+    ]
+    out = {
+        "scenario": sc.name,
+        "rep": rep,
+        "seed": seed,
+        "model": name,
+        "model_why": why,
+        "label_now": plan.label_now,
+        "label_after": plan.label,
+        "n_readings": plan.n_readings,
+        "n_pressure_changes": plan.n_pressure_changes,
+        "tests": doc["tests"],
+        "targets": [],
+    }
+    fits = {}
+    for kind, tests in (("plan", doc["tests"]), ("uniform", uni_tests)):
+        rec = combined(sc, pilot_tests, tests, seed + 500 + (kind == "uniform"))
+        f, n2, why2 = fit_model(rec, sc.model if sc.model != AUTO else name, seed + 7, settings)
+        if sc.model == AUTO and kind == "plan":  # would uq margin still choose it?
+            _, n_auto, why_auto = fit_model(rec, AUTO, seed + 7, settings)
+            out["model_after_auto"] = n_auto
+            out["model_after_why"] = why_auto
+        fits[kind] = (f, n2, _converged(f))
+    out["converged"] = {k: v[2] for k, v in fits.items()}
+    for i, t in enumerate(targets):
+        row = {
+            "spec": t.spec,
+            "unit": t.unit,
+            "truth": truth(sc.spring, t),
+            "sd_now": plan.sd_now[i],
+            "sd_predicted": plan.sd_predicted[i],
+            "sd_uniform_predicted": plan.uniform["sd"][i],
+            "sd_paper_protocol": plan.paper["sd"][i],
+        }
+        for kind, (f, n2, _) in fits.items():
+            d = np.asarray(answer(f, n2, t, sealed), float).ravel()
+            lo, hi = np.quantile(d, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
+            key = "" if kind == "plan" else "uniform_"
+            row[f"{key}mean"] = float(np.mean(d))
+            row[f"{key}sd_achieved"] = float(np.std(d))
+            row[f"{key}covered"] = bool(lo <= row["truth"] <= hi)
+        row["ratio"] = row["sd_achieved"] / row["sd_predicted"]
+        out["targets"].append(row)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def _branches(h) -> list[str]:
+    h = np.asarray(h)
+    n_down = int(np.argmin(h)) + 1 if h.size else 0
+    return ["compression"] * n_down + ["rebound"] * (h.size - n_down)
+
+
+def _converged(fit) -> bool:
+    c = getattr(fit, "converged", None)
+    return bool(fit.convergence.converged if c is None else c)
+
+
+# ----------------------------------------------------------------------------- summary
+
+
+def binomial_region(n: int, level: float = LEVEL, conf: float = 0.95) -> tuple[int, int]:
+    """The central ``conf`` region of a Binomial(n, level) count."""
+    return int(stats.binom.ppf((1 - conf) / 2, n, level)), int(
+        stats.binom.isf((1 - conf) / 2, n, level)
+    )
+
+
+def summarise(rows: list[dict], command: str) -> dict:
+    by: dict[tuple, list] = {}
+    for r in rows:
+        for t in r["targets"]:
+            by.setdefault((r["scenario"], t["spec"]), []).append(t)
+    targets = []
+    for (sc, spec), ts in by.items():
+        ratio = np.array([t["ratio"] for t in ts])
+        n = len(ts)
+        covered = sum(t["covered"] for t in ts)
+        gain = np.array([t["uniform_sd_achieved"] / t["sd_achieved"] for t in ts])
+        targets.append(
+            {
+                "scenario": sc,
+                "spec": spec,
+                "unit": ts[0]["unit"],
+                "n": n,
+                "ratio_mean": float(ratio.mean()),
+                "ratio_min": float(ratio.min()),
+                "ratio_max": float(ratio.max()),
+                "covered": int(covered),
+                "uniform_covered": int(sum(t["uniform_covered"] for t in ts)),
+                "sd_predicted_mean": float(np.mean([t["sd_predicted"] for t in ts])),
+                "sd_achieved_mean": float(np.mean([t["sd_achieved"] for t in ts])),
+                "uniform_sd_achieved_mean": float(np.mean([t["uniform_sd_achieved"] for t in ts])),
+                "uniform_over_plan_sd": float(np.exp(np.mean(np.log(gain)))),
+                "plan_better": int(np.sum(gain > 1)),
+            }
+        )
+    poor = []
+    for t in targets:
+        lo, hi = binomial_region(t["n"])
+        why = []
+        if not 0.8 <= t["ratio_mean"] <= 1.25:
+            why.append(f"achieved/predicted {t['ratio_mean']:.2f} on average")
+        if t["ratio_min"] < 0.6 or t["ratio_max"] > 1.6:
+            why.append(f"a replication at {t['ratio_min']:.2f}-{t['ratio_max']:.2f}")
+        if t["covered"] < lo:
+            why.append(f"{t['covered']}/{t['n']} covered, below the binomial region {lo}-{hi}")
+        if why:
+            poor.append(f"{t['scenario']} `{t['spec']}`: " + "; ".join(why))
+    auto = [r for r in rows if "model_after_auto" in r]
+    choice = None
+    if auto:
+        n = sum(r["model_after_auto"] != r["model"] for r in auto)
+        choice = (
+            f"model choice (`auto`): planned with {', '.join(sorted({r['model'] for r in auto}))}; "
+            f"after the new data PSIS-LOO chose another model in {n} of {len(auto)} replications"
+        )
+        if n:
+            poor.append(choice)
+    n_all = sum(t["n"] for t in targets)
+    cov_all = sum(t["covered"] for t in targets)
+    ratios = np.array([t["ratio"] for r in rows for t in r["targets"]])
+    lo, hi = binomial_region(n_all)
+    return {
+        "command": command,
+        "level": LEVEL,
+        "replications": len(rows),
+        "intervals": n_all,
+        "covered": cov_all,
+        "binomial_region_95": [lo, hi],
+        "ratio_mean": float(ratios.mean()) if ratios.size else None,
+        "ratio_min": float(ratios.min()) if ratios.size else None,
+        "ratio_max": float(ratios.max()) if ratios.size else None,
+        "ratio_claims": {
+            "mean_within_0.8_1.25": bool(0.8 <= ratios.mean() <= 1.25) if ratios.size else None,
+            "each_within_0.6_1.6": bool(np.all((ratios >= 0.6) & (ratios <= 1.6)))
+            if ratios.size
+            else None,
+        },
+        "by_target": targets,
+        "poor": poor,
+        "model_choice": choice,
+        "converged": {k: int(sum(r["converged"][k] for r in rows)) for k in ("plan", "uniform")},
+        "rows": rows,
+    }
+
+
+def markdown(doc: dict) -> str:
+    lines = [
+        "# uq plan on the virtual stand",
+        "",
+        f"Made by `{doc['command']}`: {doc['replications']} replications.",
+        "",
+        f"- Intervals holding the truth: {doc['covered']} of {doc['intervals']} at 90 % "
+        f"(exact binomial 95 % region {doc['binomial_region_95'][0]}-{doc['binomial_region_95'][1]}).",
+        f"- Achieved over predicted posterior sd: mean {doc['ratio_mean']:.2f}, range "
+        f"{doc['ratio_min']:.2f}-{doc['ratio_max']:.2f} (claims: mean in 0.8-1.25, each in 0.6-1.6).",
+        f"- Fits converged: plan {doc['converged']['plan']}, uniform grid {doc['converged']['uniform']} "
+        f"of {doc['replications']}.",
+        "",
+        "| scenario | target | n | achieved / predicted sd (mean, range) | covered | uniform grid's sd / plan's | plan better |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for t in doc["by_target"]:
+        lines.append(
+            f"| {t['scenario']} | `{t['spec']}` | {t['n']} | {t['ratio_mean']:.2f} "
+            f"({t['ratio_min']:.2f}-{t['ratio_max']:.2f}) | {t['covered']}/{t['n']} | "
+            f"{t['uniform_over_plan_sd']:.2f} | {t['plan_better']}/{t['n']} |"
+        )
+    lines += ["", "Where the prediction is poor (flagged from the rows above):", ""]
+    lines += [f"- {w}" for w in doc["poor"]] or ["- none"]
+    if doc.get("model_choice"):
+        lines += ["", f"{doc['model_choice'][0].upper()}{doc['model_choice'][1:]}."]
+    lines += ["", "Scenarios:", ""]
+    for name in sorted({r["scenario"] for r in doc["rows"]}):
+        sc = SCENARIOS[name]
+        lines.append(
+            f"- {name}: {sc.words}; targets {', '.join(sc.targets)}; at most {sc.max_readings} readings."
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument(
+        "--scenarios",
+        default="A:12,B:10,C:6",
+        help="scenarios and their replications, NAME:REPS,...",
+    )
+    ap.add_argument("--draws", type=int, default=100, help="theta draws of the frames")
+    ap.add_argument("--search-draws", type=int, default=50)
+    ap.add_argument("--tiny", action="store_true", help="one replication of scenario A, 200 steps")
+    ap.add_argument(
+        "--summary-only",
+        action="store_true",
+        help="recompute the summary (proof.json's, summary.md) from the rows of the proof.json in "
+        "--out (no replication run)",
+    )
+    ap.add_argument(
+        "--keep-rows",
+        action="store_true",
+        help="keep the rows of the scenarios not run from the proof.json in --out (their command "
+        "is kept in 'commands')",
+    )
+    ap.add_argument("--out", default=str(ROOT / "reports" / "plan-proof"))
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    if args.summary_only:
+        old = json.loads((out / "proof.json").read_text())
+        doc = summarise(old["rows"], old["command"])
+        write_text_atomic(out / "proof.json", dumps_json(doc))
+        write_text_atomic(out / "summary.md", markdown(doc))
+        return 0
+    settings = Settings()
+    plan = []
+    for item in (s.strip() for s in args.scenarios.split(",") if s.strip()):
+        name, _, n = item.partition(":")
+        if name not in SCENARIOS:
+            ap.error(f"--scenarios: unknown scenario '{name}'; expected {', '.join(SCENARIOS)}")
+        plan.append((name, int(n) if n else 1))
+    if args.tiny:
+        plan = [(plan[0][0], 1)]
+        settings = Settings(n_walkers=16, n_ensembles=2, max_steps=200)
+        args.draws, args.search_draws = 20, 10
+    command = "python scripts/plan_proof.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    rows, commands = [], []
+    if args.keep_rows and (out / "proof.json").exists():
+        old = json.loads((out / "proof.json").read_text())
+        run_now = {name for name, _ in plan}
+        rows = [r for r in old["rows"] if r["scenario"] not in run_now]
+        commands = [c for c in old.get("commands", [old["command"]]) if c != command.strip()]
+    commands.append(command.strip())
+    for name, reps in plan:
+        sc = SCENARIOS[name]
+        if args.tiny:
+            sc = Scenario(**{**sc.__dict__, "max_readings": 16})
+        for rep in range(reps):
+            row = replicate(sc, rep, settings, args.draws, args.search_draws)
+            rows.append(row)
+            print(
+                f"{name}{rep}: {row['model']} {row['n_readings']} readings, "
+                + "; ".join(
+                    f"{t['spec']} ratio {t['ratio']:.2f} covered {t['covered']} uniform/plan "
+                    f"{t['uniform_sd_achieved'] / t['sd_achieved']:.2f}"
+                    for t in row["targets"]
+                )
+                + f" ({row['seconds']:.0f} s)",
+                flush=True,
+            )
+            doc = summarise(rows, "; ".join(commands)) | {"commands": commands}
+            write_text_atomic(out / "proof.json", dumps_json(doc))
+            write_text_atomic(out / "summary.md", markdown(doc))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -238,6 +238,7 @@ def test_summary_is_short_and_the_sheet_is_complete(sheet):
     # the fixture's short chains: the sheet opens with the banner (issue 29)
     assert res["source"]["converged"] is False and "NOT CONVERGED: surface model" in page
     assert "ASSUMED: the volume at 112 mm" in page
+    assert "the model at the tested points" in page and "inside their 90% predictive" in page
     assert page.count("data:image/png;base64,") == 3
 
 

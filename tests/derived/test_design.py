@@ -368,9 +368,11 @@ def test_docs_example_runs():
     scope: dict = {}
     exec(compile(code, "docs/design.md", "exec"), scope)
     f = scope["doc"]["natural_frequency_Hz"]
-    # the page's comment shows these to three decimals; the sampler's Monte Carlo moves the last one
-    assert abs(float(f["mean"]) - 2.223) < 0.003
-    assert abs(float(f["q05"]) - 2.218) < 0.003 and abs(float(f["q95"]) - 2.229) < 0.003
+    # the page's comment shows these to three decimals; the sampler's Monte Carlo moves the last
+    # one, and the interval's ends (n uniform in 1.3..1.4 and dV/dp_u drawn, the defaults) more
+    assert abs(float(f["mean"]) - 2.435) < 0.005
+    assert abs(float(f["q05"]) - 2.363) < 0.01 and abs(float(f["q95"]) - 2.515) < 0.01
+    assert f["q05"] < 2.445 < f["q95"]  # the stand's truth at the manufacturers' n = 1.38
 
 
 def test_isobaric_volume_increment_is_the_closed_form_at_every_table_height():

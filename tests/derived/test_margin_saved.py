@@ -554,3 +554,37 @@ def test_queries_row_the_model_cannot_answer_gets_its_own_refusal(surface_saved,
     captured = capsys.readouterr()
     assert re.search(r"^\s+3\s+110\s+9e\+06\s+refused: ", captured.out, re.M)
     assert "1 of 3 queries refused (rows 3)" in captured.err
+
+
+def test_an_answer_whose_model_misses_its_readings_exits_1_unless_allowed(
+    surface_saved, tmp_path, monkeypatch, capsys
+):
+    """The command's wiring of the check (issue 29): a saved fit whose check at the tested points
+    missed (made to by patching what the file says) still answers, with the check in its JSON and
+    the per-pressure table on stdout, and exits 1; --allow-misfit exits 0."""
+    import uq._cli.cmd_margin as cmd
+
+    fit = surface_saved[0]
+    real = cmd.load_answer
+
+    def missing(path):
+        ans, info, meta = real(path)
+        check = dict(meta["model_check"], misses=True, missed_pressures_bar=[5.0])
+        check["by_pressure"] = [
+            dict(r, misses=r["pressure_bar"] == 5.0) for r in check["by_pressure"]
+        ]
+        check["words"] = "the model MISSES the readings at 5 bar"
+        return ans, info, dict(meta, model_check=check)
+
+    monkeypatch.setattr(cmd, "load_answer", missing)
+    out = tmp_path / "m.json"
+    assert run(["margin", "--fit", fit, *QUERY, "--json", out, *UNCONV]) == 1
+    captured = capsys.readouterr()
+    assert (
+        "MISSES the readings at 5 bar" in captured.out
+        and "MISSES" in captured.out.split("p_bar")[-1]
+    )
+    assert "misses the readings" in captured.err and "--allow-misfit" in captured.err
+    res = json.loads(out.read_text())
+    assert res["model_check"]["misses"] and "pressure_bar_needed" in res  # answered all the same
+    assert run(["margin", "--fit", fit, *QUERY, *UNCONV, "--allow-misfit"]) == 0

@@ -471,7 +471,8 @@ def command_margin(args) -> int:
             f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"
         )
     for r in results:
-        r["model_check"] = check
+        if "refused" not in r:  # a refused row keeps its four keys (docs/formats.md)
+            r["model_check"] = check
     if args.queries:
         _print_table(source, ans, info, queries, results)
     elif queries:

@@ -54,8 +54,8 @@ def configure_report(p) -> None:
         "--surface",
         action="store_true",
         help=f"also fit a model over all tests (--model, default the {registry.default('report')} "
-        "model), compare it with the per-pressure cubics and write its page beside the report "
-        "(MODEL.html; adds a few minutes on data/n50: docs/discrepancy.md)",
+        "model), compare it with the per-pressure cubics and write its page beside the report, "
+        "linked from it (adds minutes on data/n50: docs/discrepancy.md)",
     )
     p.add_argument(
         "--model",

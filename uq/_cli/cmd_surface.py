@@ -55,6 +55,7 @@ def command_surface(args) -> int:
     from uq._cli.common import load, settings_from
     from uq._derived.comparison import fit_both
     from uq._derived.margin import describe
+    from uq._derived.model_check import predictive_check
     from uq._inference.convergence import CLI_ADVICE
     from uq._io.files import emit_json
     from uq._report.pages import write_model_page
@@ -97,6 +98,8 @@ def command_surface(args) -> int:
             model_info=describe(fit, comparison, why),
             comparison=comparison,
             warnings=fit.convergence.messages(CLI_ADVICE),
+            # the check at the tested points, for uq margin --fit to repeat (docs/design.md 8)
+            model_check=predictive_check(fit, seed=args.seed),
         )
         print(f"  saved fit: {path} (uq margin --fit answers from it)")
     # printed, not in the JSON: reruns give identical bytes

@@ -616,6 +616,12 @@ FORCE_MODEL = MODEL._replace(
 )
 
 
+def collapsed_model(data) -> CollapsedModel:
+    """The likelihood whose data ``data`` is (a fit's ``posterior.data``), for refits and
+    replicates (``LinearFit.collapsed``): the force-only one without piston readings."""
+    return MODEL if has_piston(data) else FORCE_MODEL
+
+
 # ----------------------------------------------------------------------------- fit
 
 

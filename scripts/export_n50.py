@@ -11,7 +11,7 @@ files and JSON, and the closed spring (``--sealed``, charged at 112 mm to 5 bar 
 for Simscape's stiffness parameterisation and TeimOrbit files. Every command is run as a user runs
 it (``uq ...``); SOURCE_DATE_EPOCH fixes the date the files carry.
 
-    python scripts/export_n50.py                       # reports/export/ (about two minutes)
+    python scripts/export_n50.py                       # reports/export/ (the fit: 10 min on 2 cores)
     python scripts/export_n50.py --out /tmp/x --saved s.nc --draws 200   # the tests' run: no fit
 """
 

@@ -404,9 +404,7 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
         "height_m": x_c,
         "charge_bar": args.charge_bar,
         "volume_l": args.volume_l,
-        "polytropic": args.polytropic
-        if not isinstance(args.polytropic, tuple)
-        else list(args.polytropic),
+        **D.polytropic_keys(args.polytropic),
         "reservoir_l": args.reservoir_l,
         "load_N": estimate(load),
         "rate_N_per_m": None,
@@ -477,8 +475,8 @@ def _print_check(check: dict) -> None:
 
 
 def _print_sealed(rec, model, doc) -> None:
-    n = doc["polytropic"]
-    n_words = f"n = {n:g}" if not isinstance(n, list) else f"n in {n[0]:g}..{n[1]:g}"
+    lo, hi = doc["polytropic_range"]
+    n_words = f"n = {lo:g}" if lo == hi else f"n in {lo:g}..{hi:g}"
     res = f", reservoir {doc['reservoir_l']:g} L" if doc["reservoir_l"] else ""
     print(
         f"{rec.path}: {model.label}, {len(rec.tests)} tests, {rec.n_points} readings; sealed at "

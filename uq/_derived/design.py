@@ -400,6 +400,14 @@ def _at_design(grid: DesignGrid, design: SealedDesign, charge_bar: float):
     return load, rate, natural_frequency_Hz(rate, load, where), statement
 
 
+def polytropic_keys(polytropic) -> dict:
+    """The polytropic exponent (a value or a range (lo, hi)) as the JSON gives it: ``polytropic``
+    a number, as the contract has it (the value, or the mean of a range's uniform draws), and
+    ``polytropic_range`` [lo, hi] (lo = hi for one value)."""
+    lo, hi = polytropic if isinstance(polytropic, tuple | list) else (polytropic, polytropic)
+    return {"polytropic": lo if lo == hi else (lo + hi) / 2, "polytropic_range": [lo, hi]}
+
+
 def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
     """The contract's ``uq design --json`` keys at the design height (docs/formats.md), each
     estimate {"mean", "sd", "q05", "q95"}, with the transmissibility at ``design.forcing_Hz`` and
@@ -407,12 +415,11 @@ def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) ->
     check_design(model, design)
     grid = grid or DesignGrid(model, design.height_m)
     load, rate, freq, statement = _at_design(grid, design, design.charge_bar)
-    lo, hi = design.polytropic_range
     out = {
         "height_m": design.height_m,
         "charge_bar": design.charge_bar,
         "volume_l": design.volume_l,
-        "polytropic": lo if lo == hi else [lo, hi],
+        **polytropic_keys(design.polytropic_range),
         "reservoir_l": design.reservoir_l,
         "load_N": estimate(load),
         "rate_N_per_m": estimate(rate),
@@ -669,9 +676,7 @@ def design_margin(
         "natural_frequency_Hz": estimate(freq),
         "volume_l": design.volume_l,
         "volume_sd_l": design.volume_sd_l,
-        "polytropic": design.polytropic_range[0]
-        if design.polytropic_range[0] == design.polytropic_range[1]
-        else list(design.polytropic_range),
+        **polytropic_keys(design.polytropic_range),
         "reservoir_l": design.reservoir_l,
         "dvdp_l_per_bar": design.dvdp_l_per_bar,
         "dvdp_sd_l_per_bar": grid.dvdp_sd(design)[0],

@@ -296,6 +296,11 @@ def test_every_default_is_shown_in_help(name):
             f"{name} {action.option_strings[0]}: default {action.default!r} not shown: {text!r}"
         )
         value = shown.group(1)
+        if isinstance(action.default, tuple):  # a range LO..HI (uq design's --polytropic)
+            value, action_default = value.split(".."), [str(v) for v in action.default]
+            assert value == action_default, f"{name} {action.option_strings[0]}: {value!r}"
+            checked += 1
+            continue
         try:
             same = float(value) == float(action.default)
         except (TypeError, ValueError):

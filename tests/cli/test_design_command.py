@@ -302,7 +302,9 @@ def test_polytropic_range_reservoir_and_given_dvdp(thermo_campaign, given_fit, t
     ):
         assert run([*base, *extra, "--json", tmp_path / f"{name}.json", "--quiet"]) == 0
         out[name] = json.loads((tmp_path / f"{name}.json").read_text())
-    assert out["range"]["polytropic"] == pytest.approx(1.2) and out["range"]["polytropic_range"] == [1.0, 1.4]
+    assert out["range"]["polytropic"] == pytest.approx(1.2) and out["range"][
+        "polytropic_range"
+    ] == [1.0, 1.4]
     assert "uniform in 1..1.4" in " ".join(out["range"]["assumptions"])
     k = {n: out[n]["rate_N_per_m"]["mean"] for n in out}
     tr = _truth([0.112], charge_bar=5.0, polytropic=1.4, reservoir_m3=0.002)

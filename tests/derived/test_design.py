@@ -164,7 +164,11 @@ def test_volume_uncertainty_and_polytropic_range_are_propagated():
     want = -P_x + n * (5 * BAR + 101325.0) * A * A / v_c
     assert np.allclose(path.rate_N_per_m[:, 0], want, rtol=1e-6)
     out = design_point(m, d)
-    assert out["polytropic"] == pytest.approx(1.2) and out["polytropic_range"] == [1.0, 1.4] and "uniform" in out["assumptions"][1]
+    assert (
+        out["polytropic"] == pytest.approx(1.2)
+        and out["polytropic_range"] == [1.0, 1.4]
+        and "uniform" in out["assumptions"][1]
+    )
 
 
 def test_dvdp_prior_sd_is_the_change_of_the_compliance_over_the_tested_heights():

@@ -297,8 +297,10 @@ def test_every_default_is_shown_in_help(name):
         )
         value = shown.group(1)
         if isinstance(action.default, tuple):  # a range LO..HI (uq design's --polytropic)
-            value, action_default = value.split(".."), [str(v) for v in action.default]
-            assert value == action_default, f"{name} {action.option_strings[0]}: {value!r}"
+            lo_hi = re.match(r"([\d.]+)\.\.(\d+(?:\.\d+)?)", value)
+            assert lo_hi and tuple(map(float, lo_hi.groups())) == action.default, (
+                f"{name} {action.option_strings[0]}: help says {value!r}, parser {action.default!r}"
+            )
             checked += 1
             continue
         try:

@@ -101,11 +101,13 @@ def test_saved_force_surface_answers_and_refuses_design_margins(tmp_path, capsys
         run(["margin", CATALOGUE, *QUICK, *argv, "--save-fit", fit, "--json", tmp_path / "a.json"])
         == 0
     )
-    assert run(["margin", "--fit", fit, *argv, "--json", tmp_path / "b.json"]) == 0
+    # QUICK's short chains: the saved fit is unconverged too, and says so on every answer
+    saved_argv = [*argv, "--allow-unconverged"]
+    assert run(["margin", "--fit", fit, *saved_argv, "--json", tmp_path / "b.json"]) == 0
     capsys.readouterr()
     fresh, saved = (json.loads((tmp_path / n).read_text()) for n in ("a.json", "b.json"))
-    assert saved["model"]["label"].endswith("force only)")
+    assert "force only" in saved["model"]["label"]
     assert saved["pressure_bar_needed"] == pytest.approx(fresh["pressure_bar_needed"], rel=1e-12)
-    assert run(["margin", "--fit", fit, *argv, "--volume-l", 5, "--max-frequency-hz", 2]) == 2
+    assert run(["margin", "--fit", fit, *saved_argv, "--volume-l", 5, "--max-frequency-hz", 2]) == 2
     err = one_line(capsys.readouterr().err)
     assert "fitted to the force alone" in err

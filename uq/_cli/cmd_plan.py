@@ -66,7 +66,7 @@ pressures_grid.__name__, heights_grid.__name__ = "list or range", "list or range
 
 
 def configure_plan(p) -> None:
-    from uq._cli.cmd_design import POLYTROPIC_HELP, polytropic
+    from uq._cli.cmd_design import DEFAULT_POLYTROPIC, POLYTROPIC_HELP, polytropic
     from uq._cli.common import (
         add_json,
         add_recordings,
@@ -156,7 +156,9 @@ def configure_plan(p) -> None:
     d.add_argument(
         "--volume-sd-l", type=nonnegative_float, default=0.0, help="its standard deviation, litres"
     )
-    d.add_argument("--polytropic", type=polytropic, default=1.0, help=POLYTROPIC_HELP)
+    d.add_argument(
+        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
+    )
     d.add_argument(
         "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir volume, litres"
     )

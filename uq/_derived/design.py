@@ -31,7 +31,7 @@ thermodynamic model), ``volume_pressure_draws`` (dV/dp_u, m^3/Pa). ``uq design``
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -93,6 +93,15 @@ class SealedDesign:
     p_atm_bar: float = 1.01325
     seed: int = 0
     dvdp_sd_l_per_bar: float | None = None
+
+    def __repr__(self) -> str:
+        """One line: the design point and every option not at its default."""
+        shown = [
+            f"{f.name}={getattr(self, f.name)!r}"
+            for f in fields(self)
+            if f.default is MISSING or getattr(self, f.name) != f.default
+        ]
+        return f"SealedDesign({', '.join(shown)})"
 
     @property
     def polytropic_range(self) -> tuple[float, float]:

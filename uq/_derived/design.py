@@ -409,12 +409,12 @@ def _at_design(grid: DesignGrid, design: SealedDesign, charge_bar: float):
     return load, rate, natural_frequency_Hz(rate, load, where), statement
 
 
-def polytropic_keys(polytropic) -> dict:
+def polytropic_keys(polytropic) -> tuple[float, list[float]]:
     """The polytropic exponent (a value or a range (lo, hi)) as the JSON gives it: ``polytropic``
     a number, as the contract has it (the value, or the mean of a range's uniform draws), and
-    ``polytropic_range`` [lo, hi] (lo = hi for one value)."""
+    ``polytropic_range`` [lo, hi] (lo = hi for one value), a key after the contract's."""
     lo, hi = polytropic if isinstance(polytropic, tuple | list) else (polytropic, polytropic)
-    return {"polytropic": lo if lo == hi else (lo + hi) / 2, "polytropic_range": [lo, hi]}
+    return (lo if lo == hi else (lo + hi) / 2), [lo, hi]
 
 
 def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) -> dict:
@@ -428,11 +428,12 @@ def design_point(model, design: SealedDesign, grid: DesignGrid | None = None) ->
         "height_m": design.height_m,
         "charge_bar": design.charge_bar,
         "volume_l": design.volume_l,
-        **polytropic_keys(design.polytropic_range),
+        "polytropic": polytropic_keys(design.polytropic_range)[0],
         "reservoir_l": design.reservoir_l,
         "load_N": estimate(load),
         "rate_N_per_m": estimate(rate),
         "natural_frequency_Hz": estimate(freq),
+        "polytropic_range": polytropic_keys(design.polytropic_range)[1],
         "volume_sd_l": design.volume_sd_l,
         "dvdp_l_per_bar": design.dvdp_l_per_bar,
         "dvdp_sd_l_per_bar": grid.dvdp_sd(design)[0],
@@ -685,7 +686,8 @@ def design_margin(
         "natural_frequency_Hz": estimate(freq),
         "volume_l": design.volume_l,
         "volume_sd_l": design.volume_sd_l,
-        **polytropic_keys(design.polytropic_range),
+        "polytropic": polytropic_keys(design.polytropic_range)[0],
+        "polytropic_range": polytropic_keys(design.polytropic_range)[1],
         "reservoir_l": design.reservoir_l,
         "dvdp_l_per_bar": design.dvdp_l_per_bar,
         "dvdp_sd_l_per_bar": grid.dvdp_sd(design)[0],

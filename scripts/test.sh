@@ -22,4 +22,6 @@ fi
 site="$(mktemp -d)"
 trap 'rm -rf "$site"' EXIT
 .venv/bin/mkdocs build --strict --quiet --site-dir "$site"
-.venv/bin/python -m pytest -q "$@"
+# Two workers (pytest-xdist): the suite's tests are independent and most of their time is one
+# core's (a fit, a figure, a subprocess), so the machine's two cores halve the wall time.
+.venv/bin/python -m pytest -q -n 2 "$@"

@@ -21,6 +21,13 @@ from uq._io.errors import InputError
 QUICK = ["--max-steps", "200", "--walkers", "8", "--allow-unconverged"]
 
 
+def _sigint_as_at_a_terminal() -> None:
+    """In the child before exec: Ctrl-C's default disposition. A shell that starts the test run in
+    the background (``cmd &`` without job control) makes SIGINT ignored, and an ignored SIGINT is
+    inherited, so a child would never see the interrupt these tests send."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _env(**extra) -> dict:
     # No bytecode: under a file-size limit Python writes truncated .pyc files (a short write is
     # not an error to it), which break every later import of the module. No compilation cache:
@@ -142,7 +149,13 @@ def test_ctrl_c_in_uq_report_prints_one_line_and_exits_130(campaign, tmp_path):
     env = _env(UQ_CACHE_DIR=str(tmp_path / "cache"))
     argv = _uq("report", campaign, "--out", tmp_path / "rep", "--draws", 50, *QUICK)
     proc = subprocess.Popen(
-        argv, process_group=0, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+        argv,
+        process_group=0,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=_sigint_as_at_a_terminal,
     )
     try:
         # the figure workers are started (resource tracker + workers) and are still importing
@@ -255,7 +268,12 @@ def test_ctrl_c_inside_a_finaliser_still_stops_the_command():
         """
     )
     proc = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=_env(), timeout=60
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=60,
+        preexec_fn=_sigint_as_at_a_terminal,
     )
     assert proc.stdout.split() == ["delivered"] and "Exception ignored" not in proc.stderr, (
         proc.stdout + proc.stderr

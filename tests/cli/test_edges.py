@@ -21,11 +21,19 @@ from uq._io.errors import InputError
 QUICK = ["--max-steps", "200", "--walkers", "8", "--allow-unconverged"]
 
 
-def _sigint_as_at_a_terminal() -> None:
-    """In the child before exec: Ctrl-C's default disposition. A shell that starts the test run in
-    the background (``cmd &`` without job control) makes SIGINT ignored, and an ignored SIGINT is
-    inherited, so a child would never see the interrupt these tests send."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+#: Ctrl-C's default disposition, then the command: a shell that starts the test run in the
+#: background (``cmd &`` without job control) makes SIGINT ignored, an ignored SIGINT is
+#: inherited, and a child would never see the interrupt these tests send. (Not ``preexec_fn``: it
+#: forks a process that has JAX's threads, which JAX warns about.)
+SIGINT_DEFAULT = (
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])"
+)
+
+
+def _as_at_a_terminal(argv: list) -> list:
+    """``argv`` (``[python, ...]``) started with SIGINT's default disposition."""
+    return [sys.executable, "-c", SIGINT_DEFAULT, *argv[1:]]
 
 
 def _env(**extra) -> dict:
@@ -149,13 +157,12 @@ def test_ctrl_c_in_uq_report_prints_one_line_and_exits_130(campaign, tmp_path):
     env = _env(UQ_CACHE_DIR=str(tmp_path / "cache"))
     argv = _uq("report", campaign, "--out", tmp_path / "rep", "--draws", 50, *QUICK)
     proc = subprocess.Popen(
-        argv,
+        _as_at_a_terminal(argv),
         process_group=0,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=env,
-        preexec_fn=_sigint_as_at_a_terminal,
     )
     try:
         # the figure workers are started (resource tracker + workers) and are still importing
@@ -268,12 +275,11 @@ def test_ctrl_c_inside_a_finaliser_still_stops_the_command():
         """
     )
     proc = subprocess.run(
-        [sys.executable, "-c", code],
+        _as_at_a_terminal([sys.executable, "-c", code]),
         capture_output=True,
         text=True,
         env=_env(),
         timeout=60,
-        preexec_fn=_sigint_as_at_a_terminal,
     )
     assert proc.stdout.split() == ["delivered"] and "Exception ignored" not in proc.stderr, (
         proc.stdout + proc.stderr

@@ -1,12 +1,20 @@
-"""Proof of issue 22 item 5: the 90 % bands of sealed force, rate and natural frequency cover the
-virtual stand's truth. Writes reports/sealed-coverage/coverage.json.
+"""Proof of issue 22 item 5 and issue 29 item 2: the 90 % bands of sealed force, rate and natural
+frequency cover the virtual stand's truth. Writes coverage.json into ``--out`` (default
+reports/sealed-coverage).
 
-    .venv/bin/python scripts/sealed_coverage.py --reps 100 [--out reports/sealed-coverage] [--tiny]
+    .venv/bin/python scripts/sealed_coverage.py --reps 100 [--out DIR] [--tiny]
+        [--spring n50-thermo|n50-kink|n50-knee|n50-ripple] [--model discrepancy|surface]
+        [--grid paper|7] [--scenarios tested|between] [--resume]
 
-Each replication: the virtual stand records an isobaric campaign of the n50-thermo spring (force
-and volume from one potential, absolute volume known: uq._stand.simulator.ThermoSpring) with its
-error budget; the surface model is fitted to it (uq._models.surface, the default orders, which
-nest the spring's class Orders(3, 1, 2, 2, 1)); then, for each scenario below, the stand closes
+Each replication: the virtual stand records an isobaric campaign of the spring (default
+n50-thermo: force and volume from one potential, absolute volume known,
+uq._stand.simulator.ThermoSpring; n50-kink, n50-knee, n50-ripple add a term not smooth in pressure
+to that potential, uq._stand.not_smooth) with its error budget, at the paper's pressures or at
+seven from 1 to 10 bar (``--grid 7``); the model is fitted to it as ``uq design`` fits it
+(``--model``, default ``uq design``'s: the surface with a discrepancy in pressure; the default
+orders, which nest n50-thermo's class Orders(3, 1, 2, 2, 1)); then, for each scenario below
+(``--scenarios between``: charges half-way between the 7-pressure grid's tested pressures, where
+issue 29 found the surface's intervals missing the truth), the stand closes
 the spring at (x_c, p_c) and runs a sealed test at x_c - 16 mm, x_c, x_c + 16 mm
 (uq._stand.sealed_test.simulate_sealed), and uq._derived.design gives the posterior of the sealed
 force and rate at those heights and the natural frequency at x_c. Covered: the stand's truth lies
@@ -30,6 +38,7 @@ about 1 when the design answers are calibrated.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -43,7 +52,9 @@ from uq._data.stand_description import PAPER_STAND  # noqa: E402
 from uq._derived.design import DesignGrid, SealedDesign, sealed_draws  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
-from uq._models.surface import DEFAULT_ORDERS, Orders  # noqa: E402
+from uq._models.discrepancy import fit_discrepancy  # noqa: E402
+from uq._models.registry import DEFAULT_MODEL  # noqa: E402
+from uq._models.surface import Orders  # noqa: E402
 from uq._models.surface_likelihood import fit_surface  # noqa: E402
 from uq._physics.sealed import natural_frequency_Hz  # noqa: E402
 from uq._stand.sealed_test import simulate_sealed  # noqa: E402
@@ -61,6 +72,24 @@ SCENARIOS = (
     ("100 mm, 3 bar, dynamic (n = 1.38), 1.5 L reservoir", 0.100, 3.0, 1.38, 1.5, 0.05, (1.3, 1.4)),
     ("130 mm, 7 bar, n = 1.2, 0.5 L reservoir", 0.130, 7.0, 1.2, 0.5, 0.0, (1.0, 1.4)),
 )
+#: the same three kinds of use at charges half-way between the 7-pressure grid's tested pressures
+BETWEEN = (
+    ("x0, 4.75 bar, isothermal", 0.112, 4.75, 1.0, 0.0, 0.0, 1.0),
+    (
+        "100 mm, 3.25 bar, dynamic (n = 1.38), 1.5 L reservoir",
+        0.100,
+        3.25,
+        1.38,
+        1.5,
+        0.05,
+        (1.3, 1.4),
+    ),
+    ("130 mm, 7.75 bar, n = 1.2, 0.5 L reservoir", 0.130, 7.75, 1.2, 0.5, 0.0, (1.0, 1.4)),
+)
+SCENARIO_SETS = {"tested": SCENARIOS, "between": BETWEEN}
+GRIDS = {"paper": Layout().pressures_bar, "7": (1.0, 2.5, 4.0, 5.5, 7.0, 8.5, 10.0)}
+SPRINGS = ("n50-thermo", "n50-kink", "n50-knee", "n50-ripple")
+FITS = {"discrepancy": fit_discrepancy, "surface": fit_surface}
 QUANTITIES = ("force_below", "force_above", "rate_below", "rate_at", "rate_above", "frequency_at")
 TINY = dict(
     layout=Layout(pressures_bar=(1.0, 3.0, 5.0, 7.0, 9.0), step_m=0.01),
@@ -68,7 +97,8 @@ TINY = dict(
     settings=Settings(max_steps=200),
     max_draws=400,
 )
-FULL = dict(layout=Layout(), orders=DEFAULT_ORDERS, settings=Settings(), max_draws=1000)
+#: ``uq design``'s: the orders the campaign gets by default (orders=None), default sampler settings
+FULL = dict(orders=None, settings=Settings(), max_draws=1000)
 
 
 def binomial_acceptance(n: int, level: float, alpha: float, n_tails: int) -> tuple[int, int]:
@@ -87,7 +117,7 @@ def _interval(draws):
     return float(np.quantile(draws, a)), float(np.quantile(draws, 1 - a))
 
 
-def scenario_rows(model, scenario, seed: int) -> dict:
+def scenario_rows(model, scenario, seed: int, spring: str = SPRING) -> dict:
     """One scenario on one fitted campaign: covered or not per quantity, and the readings' z-scores."""
     name, x_c, p_c, n, v_r_l, sd_l, user_n = scenario
     grid = DesignGrid(model, x_c)
@@ -96,7 +126,7 @@ def scenario_rows(model, scenario, seed: int) -> dict:
         [int(np.argmin(np.abs(grid.heights - x))) for x in (x_c - OFFSET_M, x_c, x_c + OFFSET_M)]
     ]
     test = simulate_sealed(
-        SPRING,
+        spring,
         height_c_m=x_c,
         charge_bar=p_c,
         polytropic=n,
@@ -143,44 +173,93 @@ def scenario_rows(model, scenario, seed: int) -> dict:
     return row
 
 
-def replicate(seed: int, layout, orders, settings, max_draws) -> list[dict]:
-    rec = simulate_recordings(SPRING, seed=seed, layout=layout)
-    fit = fit_surface(rec, orders, seed=seed, settings=settings, max_draws=max_draws)
-    model = fit.on_draws(max_draws)
-    rows = [scenario_rows(model, sc, seed) for sc in SCENARIOS]
+def replicate(
+    seed: int,
+    layout,
+    orders,
+    settings,
+    max_draws,
+    *,
+    spring=SPRING,
+    model=DEFAULT_MODEL,
+    scenarios=SCENARIOS,
+) -> list[dict]:
+    rec = simulate_recordings(spring, seed=seed, layout=layout)
+    fit = FITS[model](rec, orders, seed=seed, settings=settings, max_draws=max_draws)
+    answer = fit.on_draws(max_draws)
+    rows = [scenario_rows(answer, sc, seed, spring) for sc in scenarios]
     for r in rows:
         r["converged"] = bool(fit.convergence.converged)
     return rows
 
 
-def run(reps: int, *, first_seed: int = 5000, tiny: bool = False) -> dict:
-    cfg = TINY if tiny else FULL
-    seconds, rows = [], []
-    for i in range(reps):
+def run(
+    reps: int,
+    *,
+    first_seed: int = 5000,
+    tiny: bool = False,
+    spring: str = SPRING,
+    model: str = DEFAULT_MODEL,
+    grid: str = "paper",
+    scenarios: str = "tested",
+    partial: Path | None = None,
+    command: str | None = None,
+) -> dict:
+    """``reps`` replications from ``first_seed``; with ``partial`` (a JSON file), the replications
+    found there for the same configuration are kept and each new one is written there as it ends."""
+    cfg = dict(TINY if tiny else FULL)
+    cfg["layout"] = TINY["layout"] if tiny else Layout(pressures_bar=GRIDS[grid])
+    chosen = SCENARIO_SETS[scenarios]
+    config = {"spring": spring, "model": model, "grid": grid, "scenarios": scenarios, "tiny": tiny}
+    config["first_seed"] = first_seed
+    state = {"config": config, "rows": [], "seconds": []}
+    if partial is not None and partial.exists():
+        saved = json.loads(partial.read_text())
+        if saved.get("config") == config:
+            state = saved
+    rows, seconds = state["rows"], state["seconds"]
+    for i in range(len(seconds), reps):
         t0 = time.perf_counter()
-        rows += replicate(first_seed + i, **cfg)
+        rows += replicate(first_seed + i, **cfg, spring=spring, model=model, scenarios=chosen)
         seconds.append(time.perf_counter() - t0)
+        if partial is not None:
+            write_text_atomic(partial, dumps_json(state))
         print(f"replication {i + 1}/{reps}: {seconds[-1]:.1f} s", flush=True)
-    n_counts = len(SCENARIOS) * len(QUANTITIES)
+    reps = len(seconds)
+    n_counts = len(chosen) * len(QUANTITIES)
     counts, verdicts = {}, []
-    for sc in SCENARIOS:
+    for sc in chosen:
         ok = [r for r in rows if r["scenario"] == sc[0] and r["evaluable"]]
         lo, hi = binomial_acceptance(len(ok), LEVEL, ALPHA, 2 * n_counts) if ok else (0, 0)
         c = {q: sum(r[q]["covered"] for r in ok) for q in QUANTITIES}
         counts[sc[0]] = {"evaluable": len(ok), "acceptance": [lo, hi], "covered": c}
         verdicts += [lo <= v <= hi for v in c.values()] if ok else [False]
     z = np.concatenate([r["reading_z"] for r in rows if r["evaluable"]])
+    widths = {}  # mean width of the 90 % interval over |truth|, per scenario and quantity
+    for sc in chosen:
+        ok = [r for r in rows if r["scenario"] == sc[0] and r["evaluable"]]
+        if ok:
+            widths[sc[0]] = {
+                q: float(np.mean([np.diff(r[q]["interval"])[0] / abs(r[q]["truth"]) for r in ok]))
+                for q in QUANTITIES
+            }
     return {
-        "command": "python scripts/sealed_coverage.py --reps "
-        + str(reps)
-        + (" --tiny" if tiny else ""),
+        "command": command
+        or "python scripts/sealed_coverage.py --reps " + str(reps) + (" --tiny" if tiny else ""),
         "replications": reps,
         "level": LEVEL,
         "false_failure_rate": ALPHA,
         "acceptance_rule": f"exact binomial per count, Bonferroni over {n_counts} counts (two tails each)",
-        "spring": SPRING,
-        "truth_class": f"{TRUTH_ORDERS.label} (nested in the model's orders)",
-        "model_orders": cfg["orders"].label,
+        "spring": spring,
+        "model": model,
+        "truth_class": (
+            f"{TRUTH_ORDERS.label} (nested in the model's orders)"
+            if spring == SPRING
+            else "not smooth in pressure (uq._stand.not_smooth): in no surface's class"
+        ),
+        "model_orders": cfg["orders"].label
+        if cfg["orders"] is not None
+        else "the default for the campaign (uq design's)",
         "layout": str(cfg["layout"]),
         "settings": str(cfg["settings"]),
         "max_draws": cfg["max_draws"],
@@ -200,13 +279,14 @@ def run(reps: int, *, first_seed: int = 5000, tiny: bool = False) -> dict:
                     strict=True,
                 )
             )
-            for sc in SCENARIOS
+            for sc in chosen
         ],
         "checkpoints": f"x_c - {OFFSET_M * 1e3:g} mm, x_c, x_c + {OFFSET_M * 1e3:g} mm",
         "counts": counts,
+        "relative_width": widths,
         "passed": bool(all(verdicts)),
         "reading_z_rms": float(np.sqrt(np.mean(z**2))),
-        "converged": sum(r["converged"] for r in rows) // len(SCENARIOS),
+        "converged": sum(r["converged"] for r in rows) // len(chosen),
         "dvdp_at_design": "uq design's default: 0 +- the sd from the recordings (dvdp_prior_sd)",
         "dvdp_true_over_sd": {
             sc[0]: [
@@ -214,7 +294,7 @@ def run(reps: int, *, first_seed: int = 5000, tiny: bool = False) -> dict:
                 for r in rows
                 if r["scenario"] == sc[0] and r["evaluable"] and r["dvdp_sd_l_per_bar"] > 0
             ]
-            for sc in SCENARIOS
+            for sc in chosen
         },
         "seconds_per_replication": {
             "first (JAX compilation included)": seconds[0],
@@ -234,11 +314,46 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--tiny", action="store_true", help="tiny settings (tests): 5 pressures, 200 steps"
     )
+    ap.add_argument("--spring", choices=SPRINGS, default=SPRING, help=f"default {SPRING}")
+    ap.add_argument(
+        "--model",
+        choices=sorted(FITS),
+        default=DEFAULT_MODEL,
+        help=f"default {DEFAULT_MODEL} (uq design's)",
+    )
+    ap.add_argument(
+        "--grid", choices=sorted(GRIDS), default="paper", help="tested pressures (default paper)"
+    )
+    ap.add_argument(
+        "--scenarios", choices=sorted(SCENARIO_SETS), default="tested", help="default tested"
+    )
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the replications of --out's partial.json made with the same options",
+    )
     args = ap.parse_args(argv)
     if args.reps < 1:
         ap.error("--reps: at least 1")
-    res = run(args.reps, first_seed=args.first_seed, tiny=args.tiny)
-    path = write_text_atomic(Path(args.out) / "coverage.json", dumps_json(res))
+    out = Path(args.out)
+    command = "python scripts/sealed_coverage.py " + " ".join(
+        a for a in (argv if argv is not None else sys.argv[1:]) if a not in ("--resume",)
+    )
+    partial = out / "partial.json"
+    if not args.resume and partial.exists():
+        partial.unlink()
+    res = run(
+        args.reps,
+        first_seed=args.first_seed,
+        tiny=args.tiny,
+        spring=args.spring,
+        model=args.model,
+        grid=args.grid,
+        scenarios=args.scenarios,
+        partial=partial,
+        command=command.strip(),
+    )
+    path = write_text_atomic(out / "coverage.json", dumps_json(res))
     print(
         f"wrote {path}: {'passed' if res['passed'] else 'FAILED'}; rms z of the sealed readings {res['reading_z_rms']:.2f}"
     )

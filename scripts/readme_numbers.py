@@ -439,7 +439,8 @@ def sealed_coverage_summary(rel: str) -> Callable[[], str]:
             return f"(no results: {rel} is missing)\n"
         lines = [
             f"From `{rel}` (`{d['command']}`; spring `{d['spring']}`, {d['replications']} replications, "
-            f"model orders {d['model_orders']}; {d['acceptance_rule']}, false failure < {d['false_failure_rate']:g}): "
+            + (f"model `{d['model']}`, " if "model" in d else "")
+            + f"model orders {d['model_orders']}; {d['acceptance_rule']}, false failure < {d['false_failure_rate']:g}): "
             f"**{'passed' if d['passed'] else 'FAILED'}**; rms z of the sealed readings against the widened band "
             f"{d['reading_z_rms']:.2f}; {d['converged']} of {d['replications']} fits converged.",
             "",
@@ -454,6 +455,18 @@ def sealed_coverage_summary(rel: str) -> Callable[[], str]:
                 f"{v}" + ("" if lo <= v <= hi else " (out)") for v in c["covered"].values()
             )
             lines.append(f"| {name} | {c['evaluable']} | {lo}-{hi} | {cells} |")
+        if d.get("relative_width"):
+            lines += [
+                "",
+                "Mean width of the 90 % intervals, in % of the truth:",
+                "",
+                "| scenario | " + " | ".join(next(iter(d["relative_width"].values()))) + " |",
+                "| --- |" + " --- |" * len(next(iter(d["relative_width"].values()))),
+            ]
+            for name, w in d["relative_width"].items():
+                lines.append(
+                    f"| {name} | " + " | ".join(f"{100 * v:.1f}" for v in w.values()) + " |"
+                )
         return "\n".join(lines) + "\n"
 
     return make
@@ -969,6 +982,12 @@ BLOCKS: dict[str, Block] = {
     ),
     "sealed-coverage-user": report_block(
         sealed_coverage_summary("reports/sealed-coverage-user/coverage.json")
+    ),
+    "sealed-between-kink": report_block(
+        sealed_coverage_summary("reports/sealed-between/n50-kink/coverage.json")
+    ),
+    "sealed-between-knee": report_block(
+        sealed_coverage_summary("reports/sealed-between/n50-knee/coverage.json")
     ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),

@@ -114,7 +114,7 @@ def test_ar1_log_density_equals_the_dense_multivariate_normal(theta, short_ar_da
     dense_kept = _dense_log_marginal(
         Z[keep], y[keep], Sigma[np.ix_(keep, keep)], np.diag(_prior_cov())
     )
-    dh = CP.hold_out(d, held)
+    dh = CP.AR1.hold_out(d, held)
     lp_kept = float(
         CP.ar1_log_prob(jnp.asarray(theta), dh) - CP.ar1_log_prior(jnp.asarray(theta), dh)
     )
@@ -239,7 +239,7 @@ def test_whitening_is_the_inverse_cholesky_factor(theta, short_ar_data):
 
     d = short_ar_data
     _, _, Sigma = _ar1_dense(theta, d)
-    v, uf, ul, rho = CP._paired(jnp.asarray(theta), d)
+    v, uf, ul, _, (_, _, rho) = CP._parts(jnp.asarray(theta), d)
     W, log_det = paired_ar1_whiten(jnp.eye(Sigma.shape[0]), v, uf, ul, rho)
     s = 1.0 / np.sqrt(np.diag(Sigma))  # force (N) and piston (m) rows differ by 10^7 in scale
     Ws = np.asarray(W) / s[None, :]

@@ -54,12 +54,6 @@ def _heights(text: str):
     return _grid(text, "heights in mm")
 
 
-def _nonnegative_number(text: str) -> float:
-    from uq._io.values import nonnegative_float
-
-    return nonnegative_float(text)
-
-
 pressures_grid = option_type(_pressures)
 heights_grid = option_type(_heights)
 pressures_grid.__name__, heights_grid.__name__ = "list or range", "list or range"

@@ -37,7 +37,7 @@ import optimistix as optx
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES, PAPER_PISTON_AREA_M2, PISTON_NAMES
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
 from uq._models.cubic_results import NOISE_NAMES, noise_reference
@@ -216,10 +216,6 @@ def pointwise_loo(theta, d: CubicData):
     )
 
 
-def hold_out(d: CubicData, held) -> CubicData:
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
-
-
 def start(d: CubicData) -> np.ndarray:
     """The residual scales of the least-squares cubics: psi = log force sd, eta = 0, log sigma_L."""
     X, n = np.asarray(d.X), d.force.shape[0]
@@ -263,7 +259,7 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import common_offset
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
@@ -28,7 +28,6 @@ from uq._models.cubic import (
     NOISE_PRIOR_SD,
     SAMPLER_NAMES,
     basis,
-    hold_out,
     least_squares,
     natural_noise,
     noise_prior_mean,
@@ -121,7 +120,7 @@ FORCE_ONLY = CollapsedModel(
     predict=force_predict,
     observed=force_observed,
     pointwise_loo=force_pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 

@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import common_offset
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior
@@ -48,7 +48,6 @@ from uq._models.cubic import (
     SAMPLER_NAMES,
     basis,
     coefficient_prior_sd,
-    hold_out,
     least_squares,
     log_prior_noise,
     natural_noise,
@@ -224,5 +223,5 @@ MEASURED = CollapsedModel(
     predict=measured_predict,
     observed=observed,
     pointwise_loo=measured_pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )

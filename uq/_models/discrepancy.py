@@ -45,7 +45,7 @@ import numpy as np
 
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, fit_collapsed
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import LOG_2PI, gaussian_loglik, posterior_from_moments
 from uq._inference.sampler import Settings, min_walkers_for_independence
@@ -54,7 +54,6 @@ from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
 from uq._models.discrepancy_fit import DiscrepancyFit
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
-from uq._models.saved import provenance_of
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
 
 GP_NAMES = ("log_a_F_m2", "log_a_V_m2", "log_length_bar")
@@ -225,7 +224,7 @@ def force_dev_data(
     """The model's arrays for a campaign without piston readings (force-only, catalogue tables)."""
     base = surface_likelihood.surface_force_data(rec, orders, stand)
     g = surface.geometry_of(rec)
-    x, _, _ = surface_likelihood.force_arrays(rec)
+    x, _, _ = pair.force_arrays(rec)
     idx, p_bar = _tests(rec)
     t = g.t(x)
     m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
@@ -574,10 +573,6 @@ def observed(d) -> dict:
     return out
 
 
-def hold_out(d, held):
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
-
-
 def start(d) -> np.ndarray:
     """Two starts: the prior centres (the amplitudes at their prior mean), and amplitudes 20 times
     smaller (near the smooth surface)."""
@@ -608,7 +603,7 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 FORCE_MODEL = MODEL._replace(
@@ -691,17 +686,17 @@ def fit_discrepancy(
             )
     data = dev_data(rec, orders, stand) if piston else force_dev_data(rec, orders, stand)
     model = MODEL if piston else FORCE_MODEL
-    post = fit_collapsed(
+    return pair.fit_over_tests(
+        DiscrepancyFit,
         model,
         data,
+        rec,
+        orders,
+        surface.geometry_of(rec),
         seed=seed,
-        settings=walkers_for(settings or Settings(), len(model.theta_names)),
+        settings=settings,
         max_draws=max_draws,
-        seeds=[seed],
-        predictive=False,
+        stand=stand,
         desc="discrepancy sampling",
-    )
-    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
-    return DiscrepancyFit.from_posterior(
-        post, rec, orders, surface.geometry_of(rec), stand, provenance=prov
+        sampler_settings=walkers_for(settings or Settings(), len(model.theta_names)),
     )

@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
 from uq._models.pair import (
@@ -122,10 +122,6 @@ def observed(d: ForceData) -> dict:
     return {"force_N": np.asarray(d.F)}
 
 
-def hold_out(d: ForceData, held) -> ForceData:
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
-
-
 def start(d: ForceData) -> np.ndarray:
     return np.asarray(d.prior_mean)
 
@@ -146,5 +142,5 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )

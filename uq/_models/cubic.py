@@ -238,10 +238,12 @@ def report(theta, beta, d: CubicData) -> dict:
     noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
     if _floor(d) is not None:  # a printed volume: the sd of an L reading holds its rounding
         noise[:, 2] = np.hypot(float(d.piston_floor), noise[:, 2])
-    force, piston = to_paper_basis(beta[:, :4]), to_paper_basis(beta[:, 4:])
+    force = to_paper_basis(beta[:, :4])
     out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
-    out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
-    return out | {n: noise[:, i] for i, n in enumerate(NOISE_NAMES)}
+    if noise.shape[1] == 3:  # a piston block (theta (N, 2): the force-only cubic's)
+        piston = to_paper_basis(beta[:, 4:8])
+        out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
+    return out | {n: noise[:, i] for i, n in enumerate(NOISE_NAMES[: noise.shape[1]])}
 
 
 def observed(d: CubicData) -> dict:

@@ -54,7 +54,7 @@ from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
 from uq._models.discrepancy_fit import DiscrepancyFit
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
-from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
+from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 GP_NAMES = ("log_a_F_m2", "log_a_V_m2", "log_length_bar")
 GP_NATURAL = ("a_F_m2", "a_V_m2", "length_bar")
@@ -347,15 +347,9 @@ def pair_moments(noise, d: DevData):
     return H, bvec, yy, 2 * jnp.sum(w), log_det
 
 
-def _force_sigma_y(noise, d: ForceDevData):
-    s0, rel, kp = (jnp.exp(noise[i]) for i in range(3))
-    var = force_noise_var(s0, rel, d.phat) + (kp * d.dp_pa * d.feff_hat) ** 2
-    return jnp.sqrt(var), d.F - d.feff_hat * d.dp_meas
-
-
 def force_moments(noise, d: ForceDevData):
     """The same for the force alone (independent readings, the force surface's noise)."""
-    sigma, y = _force_sigma_y(noise, d)
+    sigma, y = surface_force.sigma_y(noise, d)
     w = d.weight / sigma**2
     nf = d.A.shape[1]
     P = _powers(d, 2 * nf - 2)
@@ -511,7 +505,7 @@ def pointwise(theta, beta, d):
     noise, _, _ = _split(theta, d)
     f, lp = mean_readings(theta, beta, d)
     if not has_piston(d):
-        sigma, y = _force_sigma_y(noise, d)
+        sigma, y = surface_force.sigma_y(noise, d)
         return {"force": gaussian_loglik(y, f, sigma)}
     L11, L21, L22 = pair.cov_factors(noise, d)
     F, L = pair.readings(noise, d)
@@ -529,7 +523,7 @@ def pointwise_loo(theta, d):
     gam, G = gam[d.test], G[d.test]
     zf, zl = _rows(d)
     if not has_piston(d):
-        sigma, y = _force_sigma_y(noise, d)
+        sigma, y = surface_force.sigma_y(noise, d)
         uf = zf / sigma[:, None]
         lev = 1.0 - jnp.einsum("na,nab,nb->n", uf, G, uf)
         r = y / sigma - jnp.sum(uf * gam, 1)
@@ -555,7 +549,7 @@ def predict(theta, beta, key, d):
     noise, _, _ = _split(theta, d)
     f, lp = mean_readings(theta, beta, d)
     if not has_piston(d):
-        sigma, y = _force_sigma_y(noise, d)
+        sigma, y = surface_force.sigma_y(noise, d)
         return {"force_N": f + (d.F - y) + sigma * jax.random.normal(key, d.F.shape)}
     L11, L21, L22 = pair.cov_factors(noise, d)
     z = jax.random.normal(key, (2, d.F.shape[0]))

@@ -15,7 +15,7 @@ from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 from uq._models import pair, surface_force
-from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, PairData, noise_prior_mean, pair_data
+from uq._models.pair import NOISE_NAMES, PairData, noise_prior_mean, pair_data
 from uq._models.surface import (
     CANDIDATES,
     MAX_DRAWS,
@@ -41,43 +41,22 @@ def log_prob(theta, d: PairData):
     return pair.log_prior(theta, d) + pair.posterior(theta, d).log_marginal
 
 
-def draw_linear(theta, key, d: PairData):
-    """One exact coefficient draw given the noise theta."""
-    return pair.draw(theta, key, d)
-
-
 def pointwise(theta, beta, d: PairData):
     return {"reading": pair.pointwise(theta, beta, d)}
 
 
-def predict(theta, beta, key, d: PairData):
-    return pair.predict(theta, beta, key, d)
-
-
-def pointwise_loo(theta, d: PairData):
-    return pair.pointwise_loo(theta, d)
-
-
-def start(d: PairData) -> np.ndarray:
-    return np.asarray(d.prior_mean)
-
-
-def report(theta, beta, d: PairData) -> dict:
-    noise = np.exp(np.asarray(theta))
-    return {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES)}
-
-
+#: the pair likelihood's own draws, replicates and leave-one-out densities (no travel factor)
 MODEL = CollapsedModel(
     name="pressure-coupled surface",
     theta_names=NOISE_NAMES,
     log_prob=log_prob,
-    draw_linear=draw_linear,
+    draw_linear=pair.draw,
     pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
+    start=surface_force.start,
+    report=surface_force.report,
+    predict=pair.predict,
     observed=pair.observed,
-    pointwise_loo=pointwise_loo,
+    pointwise_loo=pair.pointwise_loo,
     hold_out=hold_out_by_weight,
 )
 

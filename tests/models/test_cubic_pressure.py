@@ -188,10 +188,10 @@ def test_measured_log_density_equals_the_dense_reference():
     d = CP.measured_data(t, 0.112, "budget", PAPER_STAND, AREA)[0]
     theta = jnp.asarray([np.log(30.0), 0.2, np.log(2e-5)])
     Z, yc, prior_sd = (np.asarray(a) for a in CP._measured_design(d))
-    sigma_f, sigma_L, _ = CP._measured_noise(theta, d)
+    sigma_f, sigma_L, _ = CP.noise_sds(theta, d)
     D = np.diag(np.r_[np.asarray(sigma_f) ** 2, np.full(d.force.shape, float(sigma_L) ** 2)])
     dense = _dense_log_marginal(Z, yc, D, prior_sd**2)
-    prior = float(CP.log_prior_noise(CP._measured_noise(theta, d)[2], d.prior_mean))
+    prior = float(CP.log_prior_noise(CP.noise_sds(theta, d)[2], d.prior_mean))
     assert float(CP.measured_log_prob(theta, d)) - prior == pytest.approx(dense, abs=1e-6)
     # the corrected readings take the holding error out: the force moves by lever * dp, the
     # piston by V dp / (p_abs S), with the stand's lever and gas volume

@@ -49,34 +49,21 @@ EXPORT_OPTIONS = {
 }
 
 
-def _parsed(parse, what: str):
+def _parsed(parse: str, what: str):
+    """An option type checking its text with ``uq._derived.export``'s function ``parse`` (imported
+    when an option is parsed) and keeping the text."""
+
     def parse_option(text: str):
+        from uq._derived import export
+
         try:
-            parse(text)
+            getattr(export, parse)(text)
         except ValueError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
         return text
 
     parse_option.__name__ = what
     return parse_option
-
-
-def _heights(text):
-    from uq._derived.export import parse_heights_mm
-
-    return parse_heights_mm(text)
-
-
-def _pressures(text):
-    from uq._derived.export import parse_pressures_bar
-
-    return parse_pressures_bar(text)
-
-
-def _quantiles(text):
-    from uq._derived.export import parse_quantiles
-
-    return parse_quantiles(text)
 
 
 def configure_export(p) -> None:
@@ -109,20 +96,20 @@ def configure_export(p) -> None:
     )
     p.add_argument(
         "--heights-mm",
-        type=_parsed(_heights, "heights"),
+        type=_parsed("parse_heights_mm", "heights"),
         metavar="LIST|A:B:STEP",
         help="heights of the grid, mm: 65,80,100 or 65:155:5 (default: every tested height)",
     )
     p.add_argument(
         "--pressures-bar",
-        type=_parsed(_pressures, "pressures"),
+        type=_parsed("parse_pressures_bar", "pressures"),
         metavar="LIST",
         help="overpressures of the grid, bar (default: the tested pressures); between tested "
         "pressures the model answers",
     )
     p.add_argument(
         "--quantiles",
-        type=_parsed(_quantiles, "quantiles"),
+        type=_parsed("parse_quantiles", "quantiles"),
         default="0.05,0.5,0.95",
         metavar="LIST",
         help="posterior quantiles written beside the mean",

@@ -156,7 +156,8 @@ def _floor(d):
     return getattr(d, "piston_floor", None)
 
 
-def _noise(theta, d: CubicData):
+def noise_sds(theta, d: CubicData):
+    """(force sd (n,), L sd, natural noise logs (3,)) of a test's readings at theta."""
     nat = natural_noise(theta, jnp.mean(d.ref_force))
     sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), piston_sd(nat[2], _floor(d))
     sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, d.ref_force))
@@ -165,7 +166,7 @@ def _noise(theta, d: CubicData):
 
 def conditional_posteriors(theta, d: CubicData):
     """The Gaussian posteriors of the force and the piston coefficients (scaled basis) given theta."""
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     k = d.X.shape[1]
     pf = linear_posterior(d.X, d.force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N), d.weight)
     pl = linear_posterior(
@@ -177,7 +178,7 @@ def conditional_posteriors(theta, d: CubicData):
 def log_prob(theta, d: CubicData):
     """Log posterior of the noise parameters, coefficients integrated out; theta (3,)."""
     pf, pl = conditional_posteriors(theta, d)
-    z = (_noise(theta, d)[2] - d.prior_mean) / NOISE_PRIOR_SD
+    z = (noise_sds(theta, d)[2] - d.prior_mean) / NOISE_PRIOR_SD
     return -0.5 * jnp.sum(z**2) + pf.log_marginal + pl.log_marginal
 
 
@@ -189,7 +190,7 @@ def draw_linear(theta, key, d: CubicData):
 
 
 def pointwise(theta, beta, d: CubicData):
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     return {
         "force_N": gaussian_loglik(d.force, d.X @ beta[:4], sigma_f),
         "piston_m": gaussian_loglik(d.piston, d.X @ beta[4:], sigma_L),
@@ -198,7 +199,7 @@ def pointwise(theta, beta, d: CubicData):
 
 def predict(theta, beta, key, d: CubicData):
     """A replicate of the test's readings: the mean curves plus the model's reading noise."""
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     kf, kl = jax.random.split(key)
     n = d.force.shape[0]
     return {
@@ -209,7 +210,7 @@ def predict(theta, beta, key, d: CubicData):
 
 def pointwise_loo(theta, d: CubicData):
     """log p(force_i, piston_i | noise, the test's other readings), coefficients integrated out, (n,)."""
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     k = d.X.shape[1]
     return loo_given_noise(d.X, d.force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N)) + loo_given_noise(
         d.X, d.piston, jnp.full(d.piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M)

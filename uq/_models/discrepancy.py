@@ -174,26 +174,35 @@ def _tests(rec: Recordings):
     return idx, p
 
 
+def _spans(rec: Recordings, orders: surface.Orders, Xf, Xl):
+    """(t, test index, tested pressures, n_k, A, D): every test's span maps of the surface's force
+    (and piston, ``Xl``; None: force only) design and of the deviations' rows, (T, m, k) lists."""
+    g = surface.geometry_of(rec)
+    x, _, _ = pair.force_arrays(rec)
+    idx, p_bar = _tests(rec)
+    t = g.t(x)
+    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
+    piston = Xl is not None
+    A, D = [], []
+    for i, pb in enumerate(p_bar):
+        rows = idx == i
+        Zf, Zl = z_rows(t[rows], pb * BAR_PA, m_t, piston)
+        Zl, Xl_i = (Zl, Xl[rows]) if piston else (None, None)
+        what = "surface's design" if piston else "force surface's design"
+        A.append(span_map(Zf, Zl, Xf[rows], Xl_i, what))
+        f, dl, el = deviation_rows(t[rows], pb * BAR_PA, n_k, g.area_m2 if piston else None)
+        if piston:
+            f, dl = np.concatenate([f, np.zeros_like(f)], axis=1), np.concatenate([dl, el], axis=1)
+        D.append(span_map(Zf, Zl, f, dl, "deviations' rows"))
+    return t, idx, p_bar, n_k, A, D
+
+
 def dev_data(
     rec: Recordings, orders: surface.Orders, stand: StandDescription = PAPER_STAND
 ) -> DevData:
     """The model's arrays for a campaign with piston readings."""
     base = surface_likelihood.surface_data(rec, orders, stand)
-    g = surface.geometry_of(rec)
-    x, _, _, _, _ = pair.arrays(rec)
-    idx, p_bar = _tests(rec)
-    t = g.t(x)
-    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
-    Xf, Xl = np.asarray(base.Xf), np.asarray(base.Xl)
-    A, D = [], []
-    for i, pb in enumerate(p_bar):
-        rows = idx == i
-        Zf, Zl = z_rows(t[rows], pb * BAR_PA, m_t, True)
-        A.append(span_map(Zf, Zl, Xf[rows], Xl[rows], "surface's design"))
-        f, dl, el = deviation_rows(t[rows], pb * BAR_PA, n_k, g.area_m2)
-        Xdf = np.concatenate([f, np.zeros_like(f)], axis=1)
-        Xdl = np.concatenate([dl, el], axis=1)
-        D.append(span_map(Zf, Zl, Xdf, Xdl, "deviations' rows"))
+    t, idx, p_bar, n_k, A, D = _spans(rec, orders, np.asarray(base.Xf), np.asarray(base.Xl))
     rate = gp.amplitude_rate(reference_area(base.feff_hat))
     return DevData(
         jnp.asarray(t),
@@ -223,19 +232,7 @@ def force_dev_data(
 ) -> ForceDevData:
     """The model's arrays for a campaign without piston readings (force-only, catalogue tables)."""
     base = surface_likelihood.surface_force_data(rec, orders, stand)
-    g = surface.geometry_of(rec)
-    x, _, _ = pair.force_arrays(rec)
-    idx, p_bar = _tests(rec)
-    t = g.t(x)
-    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
-    X = np.asarray(base.X)
-    A, D = [], []
-    for i, pb in enumerate(p_bar):
-        rows = idx == i
-        Zf, _ = z_rows(t[rows], pb * BAR_PA, m_t, False)
-        A.append(span_map(Zf, None, X[rows], None, "force surface's design"))
-        f, _, _ = deviation_rows(t[rows], pb * BAR_PA, n_k, None)
-        D.append(span_map(Zf, None, f, None, "deviations' rows"))
+    t, idx, p_bar, n_k, A, D = _spans(rec, orders, np.asarray(base.X), None)
     return ForceDevData(
         jnp.asarray(t),
         jnp.asarray(idx),

@@ -114,7 +114,7 @@ def test_ar1_log_density_equals_the_dense_multivariate_normal(theta, short_ar_da
     dense_kept = _dense_log_marginal(
         Z[keep], y[keep], Sigma[np.ix_(keep, keep)], np.diag(_prior_cov())
     )
-    dh = CP.hold_out(d, held)
+    dh = CP.AR1.hold_out(d, held)
     lp_kept = float(
         CP.ar1_log_prob(jnp.asarray(theta), dh) - CP.ar1_log_prior(jnp.asarray(theta), dh)
     )
@@ -188,10 +188,10 @@ def test_measured_log_density_equals_the_dense_reference():
     d = CP.measured_data(t, 0.112, "budget", PAPER_STAND, AREA)[0]
     theta = jnp.asarray([np.log(30.0), 0.2, np.log(2e-5)])
     Z, yc, prior_sd = (np.asarray(a) for a in CP._measured_design(d))
-    sigma_f, sigma_L, _ = CP._measured_noise(theta, d)
+    sigma_f, sigma_L, _ = CP.noise_sds(theta, d)
     D = np.diag(np.r_[np.asarray(sigma_f) ** 2, np.full(d.force.shape, float(sigma_L) ** 2)])
     dense = _dense_log_marginal(Z, yc, D, prior_sd**2)
-    prior = float(CP.log_prior_noise(CP._measured_noise(theta, d)[2], d.prior_mean))
+    prior = float(CP.log_prior_noise(CP.noise_sds(theta, d)[2], d.prior_mean))
     assert float(CP.measured_log_prob(theta, d)) - prior == pytest.approx(dense, abs=1e-6)
     # the corrected readings take the holding error out: the force moves by lever * dp, the
     # piston by V dp / (p_abs S), with the stand's lever and gas volume
@@ -239,7 +239,7 @@ def test_whitening_is_the_inverse_cholesky_factor(theta, short_ar_data):
 
     d = short_ar_data
     _, _, Sigma = _ar1_dense(theta, d)
-    v, uf, ul, rho = CP._paired(jnp.asarray(theta), d)
+    v, uf, ul, _, (_, _, rho) = CP._parts(jnp.asarray(theta), d)
     W, log_det = paired_ar1_whiten(jnp.eye(Sigma.shape[0]), v, uf, ul, rho)
     s = 1.0 / np.sqrt(np.diag(Sigma))  # force (N) and piston (m) rows differ by 10^7 in scale
     Ws = np.asarray(W) / s[None, :]

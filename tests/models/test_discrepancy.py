@@ -12,7 +12,7 @@ from uq._inference.float64 import jnp
 from uq._inference.linear import linear_posterior
 from uq._models import discrepancy as dm
 from uq._models import discrepancy_gp as gp
-from uq._models import pair, surface, surface_likelihood
+from uq._models import pair, surface, surface_force, surface_likelihood
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 from uq._stand.shapes import catalogue_recordings
 from uq._stand.simulator import Layout, recordings_from_tests, simulate
@@ -118,7 +118,7 @@ def test_collapsed_density_equals_dense_and_brute_force(which, tiny, tiny_force)
         F, L = (np.asarray(v) for v in pair.readings(noise, d))
         X, y, cov = np.vstack([XF, XL]), np.concatenate([F, L]), pair_cov(noise, d)
     else:
-        sigma, y = (np.asarray(v) for v in dm._force_sigma_y(noise, d))
+        sigma, y = (np.asarray(v) for v in surface_force.sigma_y(noise, d))
         X, cov = XF, np.diag(sigma**2)
     brute = brute_log_density(y, X, cov)
     assert fast == pytest.approx(brute, abs=1e-6)
@@ -147,7 +147,7 @@ def test_leave_one_out_equals_brute_force(which, tiny, tiny_force):
         F, L = (np.asarray(v) for v in pair.readings(noise, d))
         X, y, cov = np.vstack([XF, XL]), np.concatenate([F, L]), pair_cov(noise, d)
     else:
-        sigma, y = (np.asarray(v) for v in dm._force_sigma_y(noise, d))
+        sigma, y = (np.asarray(v) for v in surface_force.sigma_y(noise, d))
         X, cov = XF, np.diag(sigma**2)
     C = X @ X.T + cov
     for i in (0, n // 2, n - 1):

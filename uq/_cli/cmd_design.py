@@ -15,7 +15,14 @@ import sys
 import time
 from types import SimpleNamespace
 
-from uq._cli.common import add_misfit, option_type, record_convergence, record_misfit
+from uq._cli.common import (
+    add_misfit,
+    nonnegative_float,
+    option_type,
+    positive_float,
+    record_convergence,
+    record_misfit,
+)
 from uq._models import registry
 
 #: the default polytropic exponent: the natural frequency is a dynamic quantity (docs/design.md)
@@ -88,16 +95,27 @@ number_list = option_type(_number_list)
 polytropic.__name__, dvdp.__name__, number_list.__name__ = "value or range", "L/bar", "list"
 
 
-def configure_design(p) -> None:
-    from uq._cli.common import (
-        add_json,
-        add_recordings,
-        add_sampling,
-        add_stand,
-        nonnegative_float,
-        positive_float,
-        positive_int,
+def add_sealed_options(
+    g, volume_help: str, volume_sd_help: str, reservoir_help: str, with_dvdp=True
+):
+    """The closed spring's volume options (--volume-l, --volume-sd-l, --polytropic, --reservoir-l
+    and, ``with_dvdp``, --dvdp-l-per-bar and --dvdp-sd-l-per-bar), as uq design, export and plan
+    take them."""
+    g.add_argument("--volume-l", type=positive_float, help=volume_help)
+    g.add_argument("--volume-sd-l", type=nonnegative_float, default=0.0, help=volume_sd_help)
+    g.add_argument(
+        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
     )
+    g.add_argument("--reservoir-l", type=nonnegative_float, default=0.0, help=reservoir_help)
+    if with_dvdp:
+        g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
+        g.add_argument(
+            "--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP
+        )
+
+
+def configure_design(p) -> None:
+    from uq._cli.common import add_json, add_recordings, add_sampling, add_stand, positive_int
 
     add_recordings(p)
     add_sampling(p)
@@ -115,30 +133,14 @@ def configure_design(p) -> None:
         required=True,
         help="charge overpressure p_c at the design height, bar",
     )
-    g.add_argument(
-        "--volume-l",
-        type=positive_float,
-        help="internal volume at the design height and charge pressure, litres, MEASURED (e.g. by "
+    add_sealed_options(
+        g,
+        "internal volume at the design height and charge pressure, litres, MEASURED (e.g. by "
         "filling the element with water: the stand gives only volume changes); required for the "
         "sealed outputs",
+        "standard deviation of --volume-l, litres (drawn per posterior draw; default 0: exact)",
+        "extra reservoir volume joined to the element, litres",
     )
-    g.add_argument(
-        "--volume-sd-l",
-        type=nonnegative_float,
-        default=0.0,
-        help="standard deviation of --volume-l, litres (drawn per posterior draw; default 0: exact)",
-    )
-    g.add_argument(
-        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
-    )
-    g.add_argument(
-        "--reservoir-l",
-        type=nonnegative_float,
-        default=0.0,
-        help="extra reservoir volume joined to the element, litres",
-    )
-    g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
-    g.add_argument("--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP)
     g.add_argument(
         "--forcing-hz",
         type=positive_float,

@@ -21,7 +21,6 @@ from uq._cli.common import (
     add_recordings,
     add_sampling,
     add_stand,
-    nonnegative_float,
     positive_float,
     positive_int,
     say,
@@ -50,10 +49,15 @@ EXPORT_OPTIONS = {
 }
 
 
-def _parsed(parse, what: str):
+def _parsed(parse: str, what: str):
+    """An option type checking its text with ``uq._derived.export``'s function ``parse`` (imported
+    when an option is parsed) and keeping the text."""
+
     def parse_option(text: str):
+        from uq._derived import export
+
         try:
-            parse(text)
+            getattr(export, parse)(text)
         except ValueError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
         return text
@@ -62,33 +66,8 @@ def _parsed(parse, what: str):
     return parse_option
 
 
-def _heights(text):
-    from uq._derived.export import parse_heights_mm
-
-    return parse_heights_mm(text)
-
-
-def _pressures(text):
-    from uq._derived.export import parse_pressures_bar
-
-    return parse_pressures_bar(text)
-
-
-def _quantiles(text):
-    from uq._derived.export import parse_quantiles
-
-    return parse_quantiles(text)
-
-
 def configure_export(p) -> None:
-    from uq._cli.cmd_design import (  # uq design's options and defaults: the same closed spring
-        DEFAULT_POLYTROPIC,
-        DVDP_HELP,
-        DVDP_SD_HELP,
-        POLYTROPIC_HELP,
-        dvdp,
-        polytropic,
-    )
+    from uq._cli.cmd_design import add_sealed_options  # the same closed spring as uq design
 
     add_recordings(p)
     p.set_defaults(file=None)
@@ -117,20 +96,20 @@ def configure_export(p) -> None:
     )
     p.add_argument(
         "--heights-mm",
-        type=_parsed(_heights, "heights"),
+        type=_parsed("parse_heights_mm", "heights"),
         metavar="LIST|A:B:STEP",
         help="heights of the grid, mm: 65,80,100 or 65:155:5 (default: every tested height)",
     )
     p.add_argument(
         "--pressures-bar",
-        type=_parsed(_pressures, "pressures"),
+        type=_parsed("parse_pressures_bar", "pressures"),
         metavar="LIST",
         help="overpressures of the grid, bar (default: the tested pressures); between tested "
         "pressures the model answers",
     )
     p.add_argument(
         "--quantiles",
-        type=_parsed(_quantiles, "quantiles"),
+        type=_parsed("parse_quantiles", "quantiles"),
         default="0.05,0.5,0.95",
         metavar="LIST",
         help="posterior quantiles written beside the mean",
@@ -157,20 +136,12 @@ def configure_export(p) -> None:
     )
     g.add_argument("--height-mm", type=positive_float, help="design height x_c, mm")
     g.add_argument("--charge-bar", type=positive_float, help="charge overpressure at x_c, bar")
-    g.add_argument(
-        "--volume-l", type=positive_float, help="internal volume at x_c and the charge, litres"
+    add_sealed_options(
+        g,
+        "internal volume at x_c and the charge, litres",
+        "sd of --volume-l, litres",
+        "extra reservoir, litres",
     )
-    g.add_argument(
-        "--volume-sd-l", type=nonnegative_float, default=0.0, help="sd of --volume-l, litres"
-    )
-    g.add_argument(
-        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
-    )
-    g.add_argument(
-        "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir, litres"
-    )
-    g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
-    g.add_argument("--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP)
     add_sampling(p)
     _export_allow_unconverged_help(p)
     add_stand(p)
@@ -239,33 +210,17 @@ def _check_usage(args) -> None:
         raise InputError("give the recordings (FILE.csv) or a saved model (SAVED.nc) to export")
     if Path(args.file).is_dir():  # uq surface --out's folder: the model saved in it
         args.file = _saved_in(Path(args.file))
-    if args.sealed:
-        missing = [
-            o
-            for o, v in (
-                ("--height-mm", args.height_mm),
-                ("--charge-bar", args.charge_bar),
-                ("--volume-l", args.volume_l),
-            )
-            if v is None
-        ]
-        if missing:
-            raise InputError(
-                f"option --sealed: needs {', '.join(missing)} (where the spring is closed, at which "
-                "charge, with what volume inside)"
-            )
-    else:
-        given = [
-            o
-            for o, v in (
-                ("--height-mm", args.height_mm),
-                ("--charge-bar", args.charge_bar),
-                ("--volume-l", args.volume_l),
-            )
-            if v is not None
-        ]
-        if given:
-            raise InputError(f"option {given[0]}: only with --sealed (the closed spring)")
+    closed = (("--height-mm", args.height_mm), ("--charge-bar", args.charge_bar))
+    closed += (("--volume-l", args.volume_l),)
+    missing = [o for o, v in closed if v is None]
+    if args.sealed and missing:
+        raise InputError(
+            f"option --sealed: needs {', '.join(missing)} (where the spring is closed, at which "
+            "charge, with what volume inside)"
+        )
+    given = [o for o, v in closed if v is not None]
+    if not args.sealed and given:
+        raise InputError(f"option {given[0]}: only with --sealed (the closed spring)")
     if args.format == "teimorbit" or Path(args.out).suffix.lower() == ".tpf":
         if str(args.out) == "-":
             raise InputError("option --out: teimorbit writes one file per statistic; give a path")

@@ -70,15 +70,8 @@ def configure_margin(p) -> None:
 def _configure_design_margins(p) -> None:
     """Design margins on the sealed spring (uq._derived.design.design_margin): the element carries
     --load-N at --height-mm, charged and closed there."""
-    from uq._cli.cmd_design import (
-        DEFAULT_POLYTROPIC,
-        DVDP_HELP,
-        DVDP_SD_HELP,
-        POLYTROPIC_HELP,
-        dvdp,
-        polytropic,
-    )
-    from uq._cli.common import nonnegative_float, positive_float
+    from uq._cli.cmd_design import add_sealed_options
+    from uq._cli.common import positive_float
 
     g = p.add_argument_group(
         "design margins on the sealed spring (docs/design.md): charged at --height-mm to carry "
@@ -106,23 +99,13 @@ def _configure_design_margins(p) -> None:
         help="stroke from the design height along the sealed curve until the force reaches this "
         "(compression if above the load, rebound if below), and the stroke held with probability --prob",
     )
-    g.add_argument(
-        "--volume-l",
-        type=positive_float,
-        help="internal volume at --height-mm carrying --load-N, litres, measured (e.g. by filling with "
+    add_sealed_options(
+        g,
+        "internal volume at --height-mm carrying --load-N, litres, measured (e.g. by filling with "
         "water); required by the design margins",
+        "its standard deviation, litres",
+        "extra reservoir volume, litres",
     )
-    g.add_argument(
-        "--volume-sd-l", type=nonnegative_float, default=0.0, help="its standard deviation, litres"
-    )
-    g.add_argument(
-        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
-    )
-    g.add_argument(
-        "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir volume, litres"
-    )
-    g.add_argument("--dvdp-l-per-bar", type=dvdp, default=None, help=DVDP_HELP)
-    g.add_argument("--dvdp-sd-l-per-bar", type=nonnegative_float, default=None, help=DVDP_SD_HELP)
 
 
 DESIGN_OPTIONS = ("max_frequency_hz", "rate_target_N_per_m", "force_limit_N")

@@ -54,19 +54,13 @@ def _heights(text: str):
     return _grid(text, "heights in mm")
 
 
-def _nonnegative_number(text: str) -> float:
-    from uq._io.values import nonnegative_float
-
-    return nonnegative_float(text)
-
-
 pressures_grid = option_type(_pressures)
 heights_grid = option_type(_heights)
 pressures_grid.__name__, heights_grid.__name__ = "list or range", "list or range"
 
 
 def configure_plan(p) -> None:
-    from uq._cli.cmd_design import DEFAULT_POLYTROPIC, POLYTROPIC_HELP, polytropic
+    from uq._cli.cmd_design import add_sealed_options
     from uq._cli.common import (
         add_json,
         add_recordings,
@@ -148,19 +142,12 @@ def configure_plan(p) -> None:
         "vs the paper's protocol",
     )
     d = p.add_argument_group("natural_frequency targets: the sealed spring, as uq design")
-    d.add_argument(
-        "--volume-l",
-        type=positive_float,
-        help="internal volume at the target's height and pressure, litres, measured",
-    )
-    d.add_argument(
-        "--volume-sd-l", type=nonnegative_float, default=0.0, help="its standard deviation, litres"
-    )
-    d.add_argument(
-        "--polytropic", type=polytropic, default=DEFAULT_POLYTROPIC, help=POLYTROPIC_HELP
-    )
-    d.add_argument(
-        "--reservoir-l", type=nonnegative_float, default=0.0, help="extra reservoir volume, litres"
+    add_sealed_options(
+        d,
+        "internal volume at the target's height and pressure, litres, measured",
+        "its standard deviation, litres",
+        "extra reservoir volume, litres",
+        with_dvdp=False,  # exact here: the plan's dV/dp_u has no sd
     )
     d.add_argument(
         "--dvdp-l-per-bar",

@@ -121,15 +121,20 @@ def _print_comparison(name: str, c: dict) -> None:
     )
 
 
-def _print_thermo(rec, fit, res, comparison) -> None:
+def _print_head(rec, fit, what: str) -> None:
+    """The model's first line and its order selection's candidates."""
     print(
-        f"{rec.path}: thermodynamic model over {len(rec.tests)} tests, {rec.n_points} readings "
+        f"{rec.path}: {what} over {len(rec.tests)} tests, {rec.n_points} readings "
         f"({fit.orders_label}; {fit.n_coefficients} coefficients)"
     )
     for row in fit.selection:
         print(
             f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}"
         )
+
+
+def _print_thermo(rec, fit, res, comparison) -> None:
+    _print_head(rec, fit, "thermodynamic model")
     for pb, r in res["at_x0"].items():
         f, m = r["force_N"], r["maxwell_ratio"]
         print(
@@ -152,14 +157,7 @@ def _print_thermo(rec, fit, res, comparison) -> None:
 
 
 def _print_surface(rec, fit, res, comparison, what: str = "surface model") -> None:
-    print(
-        f"{rec.path}: {what} over {len(rec.tests)} tests, {rec.n_points} readings "
-        f"({fit.orders_label}; {fit.n_coefficients} coefficients)"
-    )
-    for row in fit.selection:
-        print(
-            f"  candidate {row['orders']}: elpd_loo {row['elpd_loo']:.1f}, diff {row['elpd_diff']:.1f} +- {row['dse']:.1f}"
-        )
+    _print_head(rec, fit, what)
     for pb, r in res["at_x0"].items():
         f, s = r["force_N"], r.get("spread_N")
         spread = (

@@ -338,12 +338,6 @@ def _note(text: str) -> None:
     sys.stderr.write(f"note: {text}\n")
 
 
-def positive(name: str, value: float) -> float:
-    if not value > 0:
-        raise InputError(f"option {name}: expected a positive number, got {value:g}")
-    return value
-
-
 def say(text: str, json_target: str | None) -> None:
     """Print the human summary; to stderr when the JSON goes to stdout, so both stay readable."""
     (sys.stderr if json_target == "-" else sys.stdout).write(text + "\n")

@@ -49,8 +49,7 @@ from uq._data.writing import write_recordings_csv as write_recordings_csv
 from uq._io.errors import InputError, where
 from uq._physics.quantities import BAR_PA
 
-#: The paper's full format (what ``uq simulate`` writes by default).
-REQUIRED_COLUMNS = ("pressure_bar", "height_mm", "force_N", "piston_mm", "branch", "step")
+#: How a file may sign compression (``compression``).
 COMPRESSION_CONVENTIONS = ("positive", "negative")
 
 #: Default stand constants (the paper's): piston area S = 54.82 cm^2, basis height x0 = 112 mm.

@@ -31,7 +31,7 @@ thermodynamic model), ``volume_pressure_draws`` (dV/dp_u, m^3/Pa). ``uq design``
 from __future__ import annotations
 
 import itertools
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, fields, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -648,18 +648,7 @@ def design_margin(
             "of the posterior; choose a load further inside",
             param="load_N",
         )
-    design = SealedDesign(
-        height_m,
-        float(np.mean(p_need)),
-        design.volume_l,
-        volume_sd_l=design.volume_sd_l,
-        polytropic=design.polytropic,
-        reservoir_l=design.reservoir_l,
-        dvdp_l_per_bar=design.dvdp_l_per_bar,
-        p_atm_bar=design.p_atm_bar,
-        seed=design.seed,
-        dvdp_sd_l_per_bar=design.dvdp_sd_l_per_bar,
-    )
+    design = replace(design, height_m=height_m, charge_bar=float(np.mean(p_need)), forcing_Hz=None)
     check_design(model, design)
     if grid is None:
         lo, hi = model.height_range_m

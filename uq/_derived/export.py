@@ -507,12 +507,16 @@ def json_document(grid: ExportGrid) -> dict:
     return doc
 
 
+#: how the Simscape block relates its stiffness vector to the load (the sealed.stiffness fields)
+RELATION = ": load ./ height, the block's relation"
+
+
 def simscape_fields(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, object, str]]:
     """The struct ``airspring`` for the Simscape Air Spring block: ``height`` (the block's Height
     vector), ``pressure``, and per statistic ``load.<stat>`` (heights x pressures: column k is the
     Load vector at pressure k), ``feff.<stat>``; with a sealed spring, ``sealed.*`` for the
     stiffness parameterisation."""
-    h, f = units.shown("height"), units.shown("force")
+    h = units.shown("height")
     fields = [
         ("height", units.value("height", grid.heights_m), f"Height vector ({h})"),
         (
@@ -537,26 +541,14 @@ def simscape_fields(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, obj
         fields.append(
             ("sealed.height", units.value("height", s["heights_m"]), f"Height vector ({h})")
         )
-        for stat, values in s["force"].items():
-            fields.append(
-                ("sealed.load." + stat, units.value("force", values), f"Load vector ({f}), {stat}")
-            )
-        for stat, values in s["stiffness"].items():
-            fields.append(
-                (
-                    "sealed.stiffness." + stat,
-                    units.value("stiffness", values),
-                    f"Stiffness vector ({units.shown('stiffness')}), {stat}: load ./ height, the block's relation",
-                )
-            )
-        for stat, values in s["rate"].items():
-            fields.append(
-                (
-                    "sealed.rate." + stat,
-                    units.value("stiffness", values),
-                    f"vertical rate -dP/dx ({units.shown('stiffness')}), {stat}",
-                )
-            )
+        for key, name, kind, words, note in (
+            ("force", "load", "force", "Load vector", ""),
+            ("stiffness", "stiffness", "stiffness", "Stiffness vector", RELATION),
+            ("rate", "rate", "stiffness", "vertical rate -dP/dx", ""),
+        ):
+            for stat, values in s[key].items():
+                value, unit = units.value(kind, values), units.shown(kind)
+                fields.append((f"sealed.{name}.{stat}", value, f"{words} ({unit}), {stat}{note}"))
     fields += [
         ("source", str(grid.provenance.get("recordings_path", "")), ""),
         ("sha256", str(grid.provenance.get("recordings_sha256", "")), ""),

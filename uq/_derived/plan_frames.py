@@ -40,7 +40,7 @@ import numpy as np
 from uq._derived.plan_search import MIN_TEST_READINGS, Frame
 from uq._inference.float64 import jax, jnp
 from uq._io.errors import InputError
-from uq._models import cubic, pair, registry, surface, surface_likelihood, thermo
+from uq._models import cubic, pair, registry, surface, thermo
 from uq._models import discrepancy as dev
 from uq._models import discrepancy_gp as gp
 from uq._models.cubic_results import CampaignFit
@@ -123,7 +123,7 @@ class PairFrames:
         self.force_only = not rec.has_piston
         self.tested = np.array([t.pressure_bar for t in rec.tests], float)
         if self.force_only:
-            self.x, self.p, _ = surface_likelihood.force_arrays(rec)
+            self.x, self.p, _ = pair.force_arrays(rec)
             self.test_index = np.concatenate(
                 [np.full(t.n_points, i) for i, t in enumerate(rec.tests)]
             )
@@ -339,27 +339,13 @@ class DiscrepancyFrames(PairFrames):
     L the Cholesky factor of the Matern 3/2 correlation of the frame's pressures at the draw's
     length scale. Rows therefore depend on the draw: (S, n, k)."""
 
-    def __init__(self, rec, data, theta, stand, orders, geometry, reference):
-        super().__init__(rec, data, theta, stand, orders, geometry, reference, SurfaceFit)
-        self.model_class, self.name = DiscrepancyFit, DiscrepancyFit.name
+    def __init__(self, rec, data, theta, stand, orders, geometry, reference, model=DiscrepancyFit):
+        super().__init__(rec, data, theta, stand, orders, geometry, reference, model)
         n_noise = 3 if self.force_only else 5
         n_blocks = 1 if self.force_only else 2
         self.amplitudes = np.exp(self.theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
         self.length = np.exp(self.theta[:, n_noise + n_blocks])  # (S,)
         self.scales = np.asarray(data.s, float)  # s_k
-
-    @classmethod
-    def of_fit(cls, fit, draws: int = DRAWS):
-        th = np.asarray(fit.posterior.theta)
-        return cls(
-            fit.recordings,
-            fit.posterior.data,
-            _thin(th.reshape(-1, th.shape[-1]), draws),
-            fit.stand,
-            fit.orders,
-            fit.geometry,
-            fit_reference(fit),
-        )
 
     def label(self, orders) -> str:
         base = surface.force_label(orders) if self.force_only else orders.label

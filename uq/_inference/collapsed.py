@@ -92,14 +92,14 @@ class CollapsedModel(NamedTuple):
 
 
 @functools.partial(jax.jit, static_argnums=0)
-def _log_prob_rows(fn, thetas, data):
-    return jax.vmap(lambda th: _finite(fn(th, data)))(thetas)
-
-
-@functools.partial(jax.jit, static_argnums=0)
 def _log_prob_problems(fn, thetas, data):
     """thetas (K, W, D), data with a leading K axis -> (K, W)."""
     return jax.vmap(lambda ths, d: jax.vmap(lambda th: _finite(fn(th, d)))(ths))(thetas, data)
+
+
+def hold_out_by_weight(data, held):
+    """``hold_out`` of a model whose data carry ``weight`` (n,): the readings ``held`` weigh 0."""
+    return data._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
 
 
 def _finite(lp):

@@ -37,7 +37,7 @@ import optimistix as optx
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES, PAPER_PISTON_AREA_M2, PISTON_NAMES
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
 from uq._models.cubic_results import NOISE_NAMES, noise_reference
@@ -156,7 +156,8 @@ def _floor(d):
     return getattr(d, "piston_floor", None)
 
 
-def _noise(theta, d: CubicData):
+def noise_sds(theta, d: CubicData):
+    """(force sd (n,), L sd, natural noise logs (3,)) of a test's readings at theta."""
     nat = natural_noise(theta, jnp.mean(d.ref_force))
     sigma0, rel, sigma_L = jnp.exp(nat[0]), jnp.exp(nat[1]), piston_sd(nat[2], _floor(d))
     sigma_f = jnp.sqrt(force_noise_var(sigma0, rel, d.ref_force))
@@ -165,7 +166,7 @@ def _noise(theta, d: CubicData):
 
 def conditional_posteriors(theta, d: CubicData):
     """The Gaussian posteriors of the force and the piston coefficients (scaled basis) given theta."""
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     k = d.X.shape[1]
     pf = linear_posterior(d.X, d.force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N), d.weight)
     pl = linear_posterior(
@@ -177,7 +178,7 @@ def conditional_posteriors(theta, d: CubicData):
 def log_prob(theta, d: CubicData):
     """Log posterior of the noise parameters, coefficients integrated out; theta (3,)."""
     pf, pl = conditional_posteriors(theta, d)
-    z = (_noise(theta, d)[2] - d.prior_mean) / NOISE_PRIOR_SD
+    z = (noise_sds(theta, d)[2] - d.prior_mean) / NOISE_PRIOR_SD
     return -0.5 * jnp.sum(z**2) + pf.log_marginal + pl.log_marginal
 
 
@@ -189,7 +190,7 @@ def draw_linear(theta, key, d: CubicData):
 
 
 def pointwise(theta, beta, d: CubicData):
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     return {
         "force_N": gaussian_loglik(d.force, d.X @ beta[:4], sigma_f),
         "piston_m": gaussian_loglik(d.piston, d.X @ beta[4:], sigma_L),
@@ -198,7 +199,7 @@ def pointwise(theta, beta, d: CubicData):
 
 def predict(theta, beta, key, d: CubicData):
     """A replicate of the test's readings: the mean curves plus the model's reading noise."""
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     kf, kl = jax.random.split(key)
     n = d.force.shape[0]
     return {
@@ -209,15 +210,11 @@ def predict(theta, beta, key, d: CubicData):
 
 def pointwise_loo(theta, d: CubicData):
     """log p(force_i, piston_i | noise, the test's other readings), coefficients integrated out, (n,)."""
-    sigma_f, sigma_L, _ = _noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     k = d.X.shape[1]
     return loo_given_noise(d.X, d.force, sigma_f, jnp.full(k, FORCE_PRIOR_SD_N)) + loo_given_noise(
         d.X, d.piston, jnp.full(d.piston.shape, sigma_L), jnp.full(k, PISTON_PRIOR_SD_M)
     )
-
-
-def hold_out(d: CubicData, held) -> CubicData:
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
 
 
 def start(d: CubicData) -> np.ndarray:
@@ -242,10 +239,12 @@ def report(theta, beta, d: CubicData) -> dict:
     noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
     if _floor(d) is not None:  # a printed volume: the sd of an L reading holds its rounding
         noise[:, 2] = np.hypot(float(d.piston_floor), noise[:, 2])
-    force, piston = to_paper_basis(beta[:, :4]), to_paper_basis(beta[:, 4:])
+    force = to_paper_basis(beta[:, :4])
     out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
-    out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
-    return out | {n: noise[:, i] for i, n in enumerate(NOISE_NAMES)}
+    if noise.shape[1] == 3:  # a piston block (theta (N, 2): the force-only cubic's)
+        piston = to_paper_basis(beta[:, 4:8])
+        out |= {n: piston[:, i] for i, n in enumerate(PISTON_NAMES)}
+    return out | {n: noise[:, i] for i, n in enumerate(NOISE_NAMES[: noise.shape[1]])}
 
 
 def observed(d: CubicData) -> dict:
@@ -263,7 +262,7 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 

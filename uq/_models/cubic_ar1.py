@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import (
     ar1_precision,
@@ -43,7 +43,6 @@ from uq._models.cubic import (
     SAMPLER_NAMES,
     CubicData,
     coefficient_prior_sd,
-    hold_out,
     log_prior_noise,
     natural_noise,
     noise_prior_mean,
@@ -117,41 +116,29 @@ def ar1_data(test, x0_m: float, noise: str, stand: StandDescription, area_m2: fl
     return ar, lsq_f, lsq_l, ref
 
 
+def _parts(theta, d: AR1Data):
+    """(v (2n,), uf (n,), ul (n,), nat (3,), (k_p, V, rho)) at theta (6,): the independent
+    variances and each reading's loading on the holding-error series z (force, piston)."""
+    nat = natural_noise(theta[:3], jnp.mean(d.ref_force))
+    a2 = force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)
+    n = d.force.shape[0]
+    kp, V, rho = jnp.exp(theta[3]), jnp.exp(theta[4]), jnp.tanh(theta[5])
+    v = jnp.concatenate([a2, jnp.full(n, jnp.exp(2.0 * nat[2]))])
+    uf, ul = d.lever * d.hold_sd * kp, jnp.full(n, -V * d.boyle * d.hold_sd * kp)
+    return v, uf, ul, nat, (kp, V, rho)
+
+
 def ar1_parts(theta, d: AR1Data):
     """(v (2n,), U (2n, n), Q (n, n), log det Q, nat (3,), (k_p, V, rho)) at theta (6,)."""
-    nat = natural_noise(theta[:3], jnp.mean(d.ref_force))
-    a2 = force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)
-    n = d.force.shape[0]
-    kp, V, rho = jnp.exp(theta[3]), jnp.exp(theta[4]), jnp.tanh(theta[5])
-    b = d.lever * d.hold_sd * kp
-    c = -V * d.boyle * d.hold_sd * kp
-    v = jnp.concatenate([a2, jnp.full(n, jnp.exp(2.0 * nat[2]))])
-    U = jnp.concatenate([jnp.diag(b), c * jnp.eye(n)], axis=0)
-    Q, ldQ = ar1_precision(rho, n)
-    return v, U, Q, ldQ, nat, (kp, V, rho)
-
-
-def _paired(theta, d: AR1Data):
-    """(v (2n,), uf (n,), ul (n,), rho): the independent variances and each reading's loading on
-    the holding-error series z (force, piston)."""
-    nat = natural_noise(theta[:3], jnp.mean(d.ref_force))
-    a2 = force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)
-    n = d.force.shape[0]
-    kp, V, rho = jnp.exp(theta[3]), jnp.exp(theta[4]), jnp.tanh(theta[5])
-    v = jnp.concatenate([a2, jnp.full(n, jnp.exp(2.0 * nat[2]))])
-    return v, d.lever * d.hold_sd * kp, jnp.full(n, -V * d.boyle * d.hold_sd * kp), rho
+    v, uf, ul, nat, params = _parts(theta, d)
+    Q, ldQ = ar1_precision(params[2], uf.size)
+    return v, jnp.concatenate([jnp.diag(uf), jnp.diag(ul)], axis=0), Q, ldQ, nat, params
 
 
 def _ar1_post(theta, d: AR1Data):
     """The coefficients' posterior given theta: the whitened O(n) form (``paired_ar1_posterior``),
     checked against the dense ``latent_posterior`` and a dense Cholesky factor in the tests."""
-    nat = natural_noise(theta[:3], jnp.mean(d.ref_force))
-    a2 = force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force)
-    n = d.force.shape[0]
-    kp, V, rho = jnp.exp(theta[3]), jnp.exp(theta[4]), jnp.tanh(theta[5])
-    v = jnp.concatenate([a2, jnp.full(n, jnp.exp(2.0 * nat[2]))])
-    uf = d.lever * d.hold_sd * kp
-    ul = jnp.full(n, -V * d.boyle * d.hold_sd * kp)
+    v, uf, ul, nat, (kp, V, rho) = _parts(theta, d)
     Z = stack_design(d.X)
     y = jnp.concatenate([d.force, d.piston])
     w = jnp.concatenate([d.weight, d.weight])
@@ -207,7 +194,7 @@ def _split_pair(P, r, blocks):
 def ar1_pointwise(theta, beta, d: AR1Data):
     """log p(reading_i | coefficients, noise, the test's other readings), split into force and
     piston by the chain rule (the errors are correlated: the readings do not factorise)."""
-    v, uf, ul, rho = _paired(theta, d)
+    v, uf, ul, _, (_, _, rho) = _parts(theta, d)
     r = jnp.concatenate([d.force, d.piston]) - stack_design(d.X) @ beta
     f, p = _split_pair(paired_ar1_precision(v, uf, ul, rho), r, d.blocks)
     return {"force_N": f, "piston_m": p}
@@ -215,7 +202,7 @@ def ar1_pointwise(theta, beta, d: AR1Data):
 
 def ar1_pointwise_loo(theta, d: AR1Data):
     """log p(force_i, piston_i | noise, the test's other readings), coefficients integrated out."""
-    v, uf, ul, rho = _paired(theta, d)
+    v, uf, ul, _, (_, _, rho) = _parts(theta, d)
     Z = stack_design(d.X)
     y = jnp.concatenate([d.force, d.piston])
     P0 = paired_ar1_precision(v, uf, ul, rho)
@@ -226,7 +213,7 @@ def ar1_pointwise_loo(theta, d: AR1Data):
 
 def ar1_predict(theta, beta, key, d: AR1Data):
     """A replicate: mean curves, a fresh AR(1) holding-error series, independent reading noise."""
-    v, uf, ul, rho = _paired(theta, d)
+    v, uf, ul, _, (_, _, rho) = _parts(theta, d)
     n = d.force.shape[0]
     k1, k2 = jax.random.split(key)
     z = ar1_series(rho, jax.random.normal(k1, (n,)))
@@ -287,7 +274,7 @@ AR1 = CollapsedModel(
     predict=ar1_predict,
     observed=observed,
     pointwise_loo=ar1_pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 

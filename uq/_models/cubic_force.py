@@ -17,9 +17,8 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.recordings import PressureTest
-from uq._data.reference import FORCE_NAMES
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import common_offset
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
@@ -28,14 +27,14 @@ from uq._models.cubic import (
     NOISE_PRIOR_SD,
     SAMPLER_NAMES,
     basis,
-    hold_out,
     least_squares,
     natural_noise,
     noise_prior_mean,
+    report,
 )
-from uq._models.cubic_results import FORCE_NOISE_NAMES, noise_reference
+from uq._models.cubic_results import noise_reference
 from uq._physics.cubic import cubic
-from uq._physics.quantities import BAR_PA, force_noise_var, to_paper_basis
+from uq._physics.quantities import BAR_PA, force_noise_var
 
 FORCE_SAMPLER_NAMES = SAMPLER_NAMES[:2]
 
@@ -97,10 +96,7 @@ def force_start(d: ForceData) -> np.ndarray:
 
 
 def force_report(theta, beta, d: ForceData) -> dict:
-    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
-    force = to_paper_basis(beta[:, :4])
-    out = {n: force[:, i] for i, n in enumerate(FORCE_NAMES)}
-    out |= {n: noise[:, i] for i, n in enumerate(FORCE_NOISE_NAMES)}
+    out = report(theta, beta, d)
     if beta.shape[1] > 4:
         out["pressure_offset_Pa"] = float(d.offset_mean) + beta[:, 4]
     return out
@@ -121,7 +117,7 @@ FORCE_ONLY = CollapsedModel(
     predict=force_predict,
     observed=force_observed,
     pointwise_loo=force_pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 

@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import common_offset
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior
@@ -48,11 +48,10 @@ from uq._models.cubic import (
     SAMPLER_NAMES,
     basis,
     coefficient_prior_sd,
-    hold_out,
     least_squares,
     log_prior_noise,
-    natural_noise,
     noise_prior_mean,
+    noise_sds,
     observed,
     report,
     stack_design,
@@ -61,7 +60,7 @@ from uq._models.cubic import (
 from uq._models.cubic_results import noise_reference
 from uq._models.pair import block_loo
 from uq._physics.cubic import cubic
-from uq._physics.quantities import BAR_PA, force_noise_var
+from uq._physics.quantities import BAR_PA
 
 VOLUME_PRIOR_REL_SD = 0.5  # the measured model's V - V_s ~ N(0, (0.5 V_s)^2)
 
@@ -131,14 +130,8 @@ def _measured_design(d: MeasuredData):
     return Z, y, prior_sd
 
 
-def _measured_noise(theta, d: MeasuredData):
-    nat = natural_noise(theta, jnp.mean(d.ref_force))
-    sigma_f = jnp.sqrt(force_noise_var(jnp.exp(nat[0]), jnp.exp(nat[1]), d.ref_force))
-    return sigma_f, jnp.exp(nat[2]), nat
-
-
 def _measured_post(theta, d: MeasuredData):
-    sigma_f, sigma_L, nat = _measured_noise(theta, d)
+    sigma_f, sigma_L, nat = noise_sds(theta, d)
     Z, y, prior_sd = _measured_design(d)
     sd = jnp.concatenate([sigma_f, jnp.full(d.force.shape, sigma_L)])
     w = jnp.concatenate([d.weight, d.weight])
@@ -155,7 +148,7 @@ def measured_draw(theta, key, d: MeasuredData):
 
 
 def measured_pointwise(theta, beta, d: MeasuredData):
-    sigma_f, sigma_L, _ = _measured_noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     Z, y, _ = _measured_design(d)
     mu = Z @ beta
     n = d.force.shape[0]
@@ -167,7 +160,7 @@ def measured_pointwise(theta, beta, d: MeasuredData):
 
 def measured_predict(theta, beta, key, d: MeasuredData):
     """A replicate of the readings as read, at the measured pressures."""
-    sigma_f, sigma_L, _ = _measured_noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     Z, y, _ = _measured_design(d)
     n = d.force.shape[0]
     mu = Z @ beta
@@ -180,7 +173,7 @@ def measured_predict(theta, beta, key, d: MeasuredData):
 
 def measured_pointwise_loo(theta, d: MeasuredData):
     """log p(force_i, piston_i | noise, the other readings), coefficients integrated out."""
-    sigma_f, sigma_L, _ = _measured_noise(theta, d)
+    sigma_f, sigma_L, _ = noise_sds(theta, d)
     Z, y, prior_sd = _measured_design(d)
     sd = jnp.concatenate([sigma_f, jnp.full(d.force.shape, sigma_L)])
     Zw, yw = Z / sd[:, None], y / sd
@@ -224,5 +217,5 @@ MEASURED = CollapsedModel(
     predict=measured_predict,
     observed=observed,
     pointwise_loo=measured_pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )

@@ -93,15 +93,7 @@ class PressureFit:
 
     @classmethod
     def of(
-        cls,
-        test,
-        x0_m,
-        lsq_force,
-        lsq_piston,
-        posterior,
-        ref_force_N,
-        noise_model,
-        variant: str = "plain",
+        cls, test, x0_m, lsq_force, lsq_piston, posterior, ref_force_N, noise_model, variant="plain"
     ):
         post = posterior.reported
         has_piston = lsq_piston is not None
@@ -109,28 +101,15 @@ class PressureFit:
         def stack(names):
             return np.stack([np.asarray(post[n]) for n in names], axis=-1)
 
-        force = stack(FORCE_NAMES)
-        piston = stack(PISTON_NAMES) if has_piston else None
         noise = stack(NOISE_NAMES if has_piston else FORCE_NOISE_NAMES)
-        piston_m = np.asarray(posterior.data.piston, float) if has_piston else None
-        source = None
-        if has_piston:
-            source = "piston" if test.piston_m is not None else "volume"
+        fields = (test, x0_m, lsq_force, lsq_piston, posterior, ref_force_N, noise_model)
+        if not has_piston:
+            return cls(*fields, stack(FORCE_NAMES), None, noise, {}, variant, None, None)
+        source = "piston" if test.piston_m is not None else "volume"
+        piston_m = np.asarray(posterior.data.piston, float)
+        # the recording-order check ({}) is uq._models.cubic_fit.with_order_check's
         return cls(
-            test,
-            x0_m,
-            lsq_force,
-            lsq_piston,
-            posterior,
-            ref_force_N,
-            noise_model,
-            force,
-            piston,
-            noise,
-            {},  # the recording-order check: uq._models.cubic_fit.with_order_check
-            variant,
-            source,
-            piston_m,
+            *fields, stack(FORCE_NAMES), stack(PISTON_NAMES), noise, {}, variant, source, piston_m
         )
 
     @property

@@ -45,7 +45,7 @@ import numpy as np
 
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, fit_collapsed
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import LOG_2PI, gaussian_loglik, posterior_from_moments
 from uq._inference.sampler import Settings, min_walkers_for_independence
@@ -54,8 +54,7 @@ from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
 from uq._models.discrepancy_fit import DiscrepancyFit
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
-from uq._models.saved import provenance_of
-from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
+from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 GP_NAMES = ("log_a_F_m2", "log_a_V_m2", "log_length_bar")
 GP_NATURAL = ("a_F_m2", "a_V_m2", "length_bar")
@@ -175,26 +174,35 @@ def _tests(rec: Recordings):
     return idx, p
 
 
+def _spans(rec: Recordings, orders: surface.Orders, Xf, Xl):
+    """(t, test index, tested pressures, n_k, A, D): every test's span maps of the surface's force
+    (and piston, ``Xl``; None: force only) design and of the deviations' rows, (T, m, k) lists."""
+    g = surface.geometry_of(rec)
+    x, _, _ = pair.force_arrays(rec)
+    idx, p_bar = _tests(rec)
+    t = g.t(x)
+    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
+    piston = Xl is not None
+    A, D = [], []
+    for i, pb in enumerate(p_bar):
+        rows = idx == i
+        Zf, Zl = z_rows(t[rows], pb * BAR_PA, m_t, piston)
+        Zl, Xl_i = (Zl, Xl[rows]) if piston else (None, None)
+        what = "surface's design" if piston else "force surface's design"
+        A.append(span_map(Zf, Zl, Xf[rows], Xl_i, what))
+        f, dl, el = deviation_rows(t[rows], pb * BAR_PA, n_k, g.area_m2 if piston else None)
+        if piston:
+            f, dl = np.concatenate([f, np.zeros_like(f)], axis=1), np.concatenate([dl, el], axis=1)
+        D.append(span_map(Zf, Zl, f, dl, "deviations' rows"))
+    return t, idx, p_bar, n_k, A, D
+
+
 def dev_data(
     rec: Recordings, orders: surface.Orders, stand: StandDescription = PAPER_STAND
 ) -> DevData:
     """The model's arrays for a campaign with piston readings."""
     base = surface_likelihood.surface_data(rec, orders, stand)
-    g = surface.geometry_of(rec)
-    x, _, _, _, _ = pair.arrays(rec)
-    idx, p_bar = _tests(rec)
-    t = g.t(x)
-    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
-    Xf, Xl = np.asarray(base.Xf), np.asarray(base.Xl)
-    A, D = [], []
-    for i, pb in enumerate(p_bar):
-        rows = idx == i
-        Zf, Zl = z_rows(t[rows], pb * BAR_PA, m_t, True)
-        A.append(span_map(Zf, Zl, Xf[rows], Xl[rows], "surface's design"))
-        f, dl, el = deviation_rows(t[rows], pb * BAR_PA, n_k, g.area_m2)
-        Xdf = np.concatenate([f, np.zeros_like(f)], axis=1)
-        Xdl = np.concatenate([dl, el], axis=1)
-        D.append(span_map(Zf, Zl, Xdf, Xdl, "deviations' rows"))
+    t, idx, p_bar, n_k, A, D = _spans(rec, orders, np.asarray(base.Xf), np.asarray(base.Xl))
     rate = gp.amplitude_rate(reference_area(base.feff_hat))
     return DevData(
         jnp.asarray(t),
@@ -224,19 +232,7 @@ def force_dev_data(
 ) -> ForceDevData:
     """The model's arrays for a campaign without piston readings (force-only, catalogue tables)."""
     base = surface_likelihood.surface_force_data(rec, orders, stand)
-    g = surface.geometry_of(rec)
-    x, _, _ = surface_likelihood.force_arrays(rec)
-    idx, p_bar = _tests(rec)
-    t = g.t(x)
-    m_t, n_k = span_degree(orders), deviation_degree(orders) + 1
-    X = np.asarray(base.X)
-    A, D = [], []
-    for i, pb in enumerate(p_bar):
-        rows = idx == i
-        Zf, _ = z_rows(t[rows], pb * BAR_PA, m_t, False)
-        A.append(span_map(Zf, None, X[rows], None, "force surface's design"))
-        f, _, _ = deviation_rows(t[rows], pb * BAR_PA, n_k, None)
-        D.append(span_map(Zf, None, f, None, "deviations' rows"))
+    t, idx, p_bar, n_k, A, D = _spans(rec, orders, np.asarray(base.X), None)
     return ForceDevData(
         jnp.asarray(t),
         jnp.asarray(idx),
@@ -348,15 +344,9 @@ def pair_moments(noise, d: DevData):
     return H, bvec, yy, 2 * jnp.sum(w), log_det
 
 
-def _force_sigma_y(noise, d: ForceDevData):
-    s0, rel, kp = (jnp.exp(noise[i]) for i in range(3))
-    var = force_noise_var(s0, rel, d.phat) + (kp * d.dp_pa * d.feff_hat) ** 2
-    return jnp.sqrt(var), d.F - d.feff_hat * d.dp_meas
-
-
 def force_moments(noise, d: ForceDevData):
     """The same for the force alone (independent readings, the force surface's noise)."""
-    sigma, y = _force_sigma_y(noise, d)
+    sigma, y = surface_force.sigma_y(noise, d)
     w = d.weight / sigma**2
     nf = d.A.shape[1]
     P = _powers(d, 2 * nf - 2)
@@ -512,7 +502,7 @@ def pointwise(theta, beta, d):
     noise, _, _ = _split(theta, d)
     f, lp = mean_readings(theta, beta, d)
     if not has_piston(d):
-        sigma, y = _force_sigma_y(noise, d)
+        sigma, y = surface_force.sigma_y(noise, d)
         return {"force": gaussian_loglik(y, f, sigma)}
     L11, L21, L22 = pair.cov_factors(noise, d)
     F, L = pair.readings(noise, d)
@@ -530,7 +520,7 @@ def pointwise_loo(theta, d):
     gam, G = gam[d.test], G[d.test]
     zf, zl = _rows(d)
     if not has_piston(d):
-        sigma, y = _force_sigma_y(noise, d)
+        sigma, y = surface_force.sigma_y(noise, d)
         uf = zf / sigma[:, None]
         lev = 1.0 - jnp.einsum("na,nab,nb->n", uf, G, uf)
         r = y / sigma - jnp.sum(uf * gam, 1)
@@ -556,7 +546,7 @@ def predict(theta, beta, key, d):
     noise, _, _ = _split(theta, d)
     f, lp = mean_readings(theta, beta, d)
     if not has_piston(d):
-        sigma, y = _force_sigma_y(noise, d)
+        sigma, y = surface_force.sigma_y(noise, d)
         return {"force_N": f + (d.F - y) + sigma * jax.random.normal(key, d.F.shape)}
     L11, L21, L22 = pair.cov_factors(noise, d)
     z = jax.random.normal(key, (2, d.F.shape[0]))
@@ -572,10 +562,6 @@ def observed(d) -> dict:
     if has_piston(d):
         out["piston_m"] = np.asarray(d.L)
     return out
-
-
-def hold_out(d, held):
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
 
 
 def start(d) -> np.ndarray:
@@ -608,7 +594,7 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 FORCE_MODEL = MODEL._replace(
@@ -691,17 +677,17 @@ def fit_discrepancy(
             )
     data = dev_data(rec, orders, stand) if piston else force_dev_data(rec, orders, stand)
     model = MODEL if piston else FORCE_MODEL
-    post = fit_collapsed(
+    return pair.fit_over_tests(
+        DiscrepancyFit,
         model,
         data,
+        rec,
+        orders,
+        surface.geometry_of(rec),
         seed=seed,
-        settings=walkers_for(settings or Settings(), len(model.theta_names)),
+        settings=settings,
         max_draws=max_draws,
-        seeds=[seed],
-        predictive=False,
+        stand=stand,
         desc="discrepancy sampling",
-    )
-    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
-    return DiscrepancyFit.from_posterior(
-        post, rec, orders, surface.geometry_of(rec), stand, provenance=prov
+        sampler_settings=walkers_for(settings or Settings(), len(model.theta_names)),
     )

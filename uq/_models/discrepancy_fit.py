@@ -114,14 +114,7 @@ class DiscrepancyFit(SurfaceFit):
     def from_posterior(cls, posterior, recordings, orders, geometry, stand, *, provenance=None):
         """The fit from the driver's posterior: the surface's standardised coefficients times their
         scales, and the deviations at the tested pressures a s_k chol(R(l)) z of every draw."""
-        shell = cls(
-            orders,
-            geometry,
-            np.zeros((1, 1, 0)),
-            {},
-            np.asarray(recordings.pressures_bar, float),
-            (0.0, 0.0),
-        )
+        shell = cls.shell(orders, geometry, recordings.pressures_bar)
         scales = np.concatenate([np.full(len(b.names), b.scale) for b in shell.surface_layout()])
         ks = scales.size
         beta = np.asarray(posterior.beta)
@@ -144,19 +137,7 @@ class DiscrepancyFit(SurfaceFit):
         coefficients = np.concatenate(
             [beta[..., :ks] * scales, np.concatenate(blocks, axis=1).reshape(C, D, -1)], axis=-1
         )
-        return cls(
-            orders,
-            geometry,
-            coefficients,
-            reported,
-            shell.tested_pressures_bar,
-            tuple(float(v) for v in recordings.height_range_m),
-            recordings,
-            posterior,
-            stand,
-            posterior.convergence,
-            dict(provenance or {}),
-        )
+        return shell.fitted(coefficients, posterior, recordings, stand, provenance)
 
     # ---- the draws between tested pressures
     @functools.cached_property

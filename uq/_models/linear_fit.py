@@ -154,20 +154,30 @@ class LinearFit:
     ) -> LinearFit:
         """The fit of ``recordings`` from the driver's posterior (standardised coefficients
         ``posterior.beta`` times each block's scale)."""
-        shell = cls(orders, geometry, np.zeros((1, 1, 0)), {}, _pressures(recordings), (0.0, 0.0))
+        shell = cls.shell(orders, geometry, recordings.pressures_bar)
         scales = np.concatenate([np.full(len(b.names), b.scale) for b in shell.block_layout()])
-        return cls(
-            orders,
-            geometry,
-            np.asarray(posterior.beta) * scales,
-            {n: np.asarray(v) for n, v in posterior.reported.items()},
-            _pressures(recordings),
-            tuple(float(v) for v in recordings.height_range_m),
-            recordings,
-            posterior,
-            stand,
-            posterior.convergence,
-            dict(provenance or {}),
+        beta = np.asarray(posterior.beta) * scales
+        return shell.fitted(beta, posterior, recordings, stand, provenance)
+
+    @classmethod
+    def shell(cls, orders, geometry, tested_pressures_bar) -> LinearFit:
+        """A fit without draws: what its block layout and columns need."""
+        tested = np.asarray(tested_pressures_bar, float)
+        return cls(orders, geometry, np.zeros((1, 1, 0)), {}, tested, (0.0, 0.0))
+
+    def fitted(self, coefficients, posterior, recordings, stand, provenance) -> LinearFit:
+        """This shell with the driver's posterior of ``recordings``: ``coefficients`` (C, D, k)
+        in physical units, the reported parameters, the verdict and the provenance."""
+        return dataclasses.replace(
+            self,
+            coefficients=coefficients,
+            reported={n: np.asarray(v) for n, v in posterior.reported.items()},
+            height_range_m=tuple(float(v) for v in recordings.height_range_m),
+            recordings=recordings,
+            posterior=posterior,
+            stand=stand,
+            convergence=posterior.convergence,
+            provenance=dict(provenance or {}),
         )
 
     # ---- the protocol
@@ -397,13 +407,10 @@ class LinearFit:
     def from_saved(cls, attrs: dict, groups: dict) -> LinearFit:
         """The model a file of :meth:`save` holds (no recordings, no posterior)."""
         post, const = groups["posterior"], groups["constant_data"]
-        shell = cls(
+        shell = cls.shell(
             _params(cls, const, "orders"),
             _params(cls, const, "geometry"),
-            np.zeros((1, 1, 0)),
-            {},
-            np.asarray(const["tested_pressure_bar"].values, float),
-            (0.0, 0.0),
+            const["tested_pressure_bar"].values,
         )
         blocks = [np.asarray(post[b.name].values, float) for b in shell.block_layout()]
         layout = {b.name for b in shell.block_layout()}
@@ -419,10 +426,6 @@ class LinearFit:
             max_draws=saved.max_draws_of(attrs),
             document=json.loads(str(const["json_document"].values)),
         )
-
-
-def _pressures(recordings) -> np.ndarray:
-    return np.asarray(recordings.pressures_bar, float)
 
 
 def _params(cls, const, what: str) -> Params:

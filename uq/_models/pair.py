@@ -41,6 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
+from uq._inference.collapsed import fit_collapsed
 from uq._inference.float64 import jax, jnp
 from uq._inference.latent import common_offset
 from uq._inference.linear import (
@@ -52,6 +53,7 @@ from uq._inference.linear import (
     weighted_gram,
 )
 from uq._inference.loo import loglik_idata
+from uq._models.saved import provenance_of
 from uq._physics.quantities import BAR_PA, force_noise_var
 
 NOISE_NAMES = ("log_s0_N", "log_rel_load", "log_k_p", "log_sL_m", "log_V0_m3")
@@ -253,23 +255,65 @@ def pointwise_loo(noise, d: PairData, scale=1.0):
     return block_loo(X, y, d.F.size, post.chol, post.mean) - jnp.log(L11) - jnp.log(L22)
 
 
-def hold_out(d: PairData, held) -> PairData:
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
-
-
 def observed(d: PairData) -> dict:
     return {"force_N": np.asarray(d.F), "piston_m": np.asarray(d.L)}
+
+
+def force_arrays(rec):
+    """Every force reading of a campaign: height (m), set pressure (bar), force (N)."""
+    x = np.concatenate([t.height_m for t in rec.tests])
+    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in rec.tests])
+    return x, p, np.concatenate([t.force_N for t in rec.tests])
 
 
 def arrays(rec):
     """Every reading of a campaign: height (m), set pressure (bar), force, piston, test index."""
     tests = rec.tests
-    x = np.concatenate([t.height_m for t in tests])
-    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in tests])
-    F = np.concatenate([t.force_N for t in tests])
     L = np.concatenate([t.piston_m for t in tests])
     idx = np.concatenate([np.full(t.n_points, i) for i, t in enumerate(tests)])
-    return x, p, F, L, idx
+    return (*force_arrays(rec), L, idx)
+
+
+def reference_fit(Xf, F, Xl=None, L=None) -> np.ndarray:
+    """The coefficients of a weighted least-squares fit of the force (and the piston), whose
+    curves are the plug-in references of the noise terms: force sd 0.5 % + 20 N, piston sd 1 mm."""
+    wf = 1.0 / (0.005 * np.abs(F) + 20.0)
+    if Xl is None:
+        return np.linalg.lstsq(Xf * wf[:, None], F * wf, rcond=None)[0]
+    wl = np.full_like(L, 1.0 / 1e-3)
+    A = np.concatenate([Xf * wf[:, None], Xl * wl[:, None]])
+    return np.linalg.lstsq(A, np.concatenate([F * wf, L * wl]), rcond=None)[0]
+
+
+def fit_over_tests(
+    cls,
+    model,
+    data,
+    rec,
+    orders,
+    geometry,
+    *,
+    seed,
+    settings,
+    max_draws,
+    stand,
+    desc,
+    sampler_settings=None,
+):
+    """``cls.from_posterior`` of the one driver's fit of ``model`` to ``data`` (one problem, the
+    seed's exact draws, no replicates until asked for), with the fit's provenance."""
+    post = fit_collapsed(
+        model,
+        data,
+        seed=seed,
+        settings=sampler_settings or settings,
+        max_draws=max_draws,
+        seeds=[seed],
+        predictive=False,  # 2 x n replicates per draw: made when asked for, not on every fit
+        desc=desc,
+    )
+    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
+    return cls.from_posterior(post, rec, orders, geometry, stand, provenance=prov)
 
 
 def select_orders(fitter, rec, candidates, *, seed: int, settings, stand):

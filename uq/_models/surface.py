@@ -437,12 +437,7 @@ def summary(fit: SurfaceFit, comparison: dict | None = None, advice: str = CLI_A
         if not fit.force_only:
             ref[f"{pb:g}"]["spread_N"] = estimate(some.spread_draws(x0, pb))
     basis = "t = (x - x0) / 0.05 m; F_p = sum c_kl t^k q^l; E = sum e_m t^m"
-    out = {
-        "model": fit.name,
-        "x0_m": g.x0_m,
-        "piston_area_m2": g.area_m2,
-        "orders": asdict(fit.orders),
-        "orders_label": fit.orders_label,
+    out = fit.json_head() | {
         "pressure_scaling": {
             "q": "(p_bar - p_mid) / p_half",
             "p_mid_bar": g.p_mid,

@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uq._data.stand_description import StandDescription
-from uq._inference.collapsed import CollapsedModel
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
 from uq._models.pair import (
@@ -81,14 +81,15 @@ def force_data(X, F, phat, lever, p_bar, stand: StandDescription, dp_meas=None) 
     )
 
 
-def _sigma_y(theta, d: ForceData):
+def sigma_y(theta, d: ForceData):
+    """(sd (n,), the readings the mean is fitted to (n,)) of the force surface's noise ``theta[:3]``."""
     s0, rel, kp = (jnp.exp(theta[i]) for i in range(3))
     var = force_noise_var(s0, rel, d.phat) + (kp * d.dp_pa * d.feff_hat) ** 2
     return jnp.sqrt(var), d.F - d.feff_hat * d.dp_meas
 
 
 def _posterior(theta, d: ForceData):
-    sigma, y = _sigma_y(theta, d)
+    sigma, y = sigma_y(theta, d)
     return linear_posterior(d.X, y, sigma, jnp.ones(d.X.shape[1]), d.weight)
 
 
@@ -103,18 +104,18 @@ def draw_linear(theta, key, d: ForceData):
 
 
 def pointwise(theta, beta, d: ForceData):
-    sigma, y = _sigma_y(theta, d)
+    sigma, y = sigma_y(theta, d)
     return {"force": gaussian_loglik(y, d.X @ beta, sigma)}
 
 
 def pointwise_loo(theta, d: ForceData):
     """log p(force_i | noise, the other readings), coefficients integrated out exactly, (n,)."""
-    sigma, y = _sigma_y(theta, d)
+    sigma, y = sigma_y(theta, d)
     return loo_given_noise(d.X, y, sigma, jnp.ones(d.X.shape[1]))
 
 
 def predict(theta, beta, key, d: ForceData):
-    sigma, y = _sigma_y(theta, d)
+    sigma, y = sigma_y(theta, d)
     return {"force_N": d.X @ beta + (d.F - y) + sigma * jax.random.normal(key, d.F.shape)}
 
 
@@ -122,17 +123,15 @@ def observed(d: ForceData) -> dict:
     return {"force_N": np.asarray(d.F)}
 
 
-def hold_out(d: ForceData, held) -> ForceData:
-    return d._replace(weight=jnp.asarray(np.where(np.asarray(held, bool), 0.0, 1.0)))
-
-
-def start(d: ForceData) -> np.ndarray:
+def start(d) -> np.ndarray:
+    """The prior centres of the noise logs (this model's and the surface's)."""
     return np.asarray(d.prior_mean)
 
 
-def report(theta, beta, d: ForceData) -> dict:
+def report(theta, beta, d) -> dict:
+    """The noise parameters in their natural units (this model's three, the surface's five)."""
     noise = np.exp(np.asarray(theta))
-    return {n: noise[:, i] for i, n in enumerate(NATURAL)}
+    return {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES[: noise.shape[1]])}
 
 
 MODEL = CollapsedModel(
@@ -146,5 +145,5 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=observed,
     pointwise_loo=pointwise_loo,
-    hold_out=hold_out,
+    hold_out=hold_out_by_weight,
 )

@@ -11,12 +11,11 @@ import numpy as np
 
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, fit_collapsed
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 from uq._models import pair, surface_force
-from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, PairData, noise_prior_mean, pair_data
-from uq._models.saved import provenance_of
+from uq._models.pair import NOISE_NAMES, PairData, noise_prior_mean, pair_data
 from uq._models.surface import (
     CANDIDATES,
     MAX_DRAWS,
@@ -42,44 +41,23 @@ def log_prob(theta, d: PairData):
     return pair.log_prior(theta, d) + pair.posterior(theta, d).log_marginal
 
 
-def draw_linear(theta, key, d: PairData):
-    """One exact coefficient draw given the noise theta."""
-    return pair.draw(theta, key, d)
-
-
 def pointwise(theta, beta, d: PairData):
     return {"reading": pair.pointwise(theta, beta, d)}
 
 
-def predict(theta, beta, key, d: PairData):
-    return pair.predict(theta, beta, key, d)
-
-
-def pointwise_loo(theta, d: PairData):
-    return pair.pointwise_loo(theta, d)
-
-
-def start(d: PairData) -> np.ndarray:
-    return np.asarray(d.prior_mean)
-
-
-def report(theta, beta, d: PairData) -> dict:
-    noise = np.exp(np.asarray(theta))
-    return {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES)}
-
-
+#: the pair likelihood's own draws, replicates and leave-one-out densities (no travel factor)
 MODEL = CollapsedModel(
     name="pressure-coupled surface",
     theta_names=NOISE_NAMES,
     log_prob=log_prob,
-    draw_linear=draw_linear,
+    draw_linear=pair.draw,
     pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
+    start=surface_force.start,
+    report=surface_force.report,
+    predict=pair.predict,
     observed=pair.observed,
-    pointwise_loo=pointwise_loo,
-    hold_out=pair.hold_out,
+    pointwise_loo=pair.pointwise_loo,
+    hold_out=hold_out_by_weight,
 )
 
 
@@ -92,36 +70,13 @@ def collapsed_model(data) -> CollapsedModel:
 # ----------------------------------------------------------------------------- fit
 
 
-def _reference(o, g, x, p, F, L, idx, n_tests):
-    """Weighted least squares: the reference force and pressure area of the noise terms."""
-    Xf, Xl = designs(o, g, x, p, idx, n_tests)
-    wf = 1.0 / (0.005 * np.abs(F) + 20.0)
-    wl = np.full_like(L, 1.0 / 1e-3)
-    A = np.concatenate([Xf * wf[:, None], Xl * wl[:, None]])
-    y = np.concatenate([F * wf, L * wl])
-    beta, *_ = np.linalg.lstsq(A, y, rcond=None)
-    phat = np.abs(Xf @ beta)
-    nc = (o.K + 1) * (o.Lp + 1)
-    feff = tq_columns(g.t(x), g.q(p), o.K, o.Lp) @ (beta[:nc] * SCALE_C)
-    return beta, phat, np.abs(feff), Xf, Xl
-
-
-def force_arrays(rec: Recordings):
-    """Every force reading of a campaign: height (m), set pressure (bar), force (N)."""
-    x = np.concatenate([t.height_m for t in rec.tests])
-    p = np.concatenate([np.full(t.n_points, t.pressure_bar) for t in rec.tests])
-    F = np.concatenate([t.force_N for t in rec.tests])
-    return x, p, F
-
-
 def surface_force_data(rec: Recordings, orders: Orders, stand: StandDescription):
     """The force surface's arrays (uq._models.surface_force.ForceData): the design, the readings and
     the noise references of a weighted least-squares fit of the force."""
     g = geometry_of(rec)
-    x, p, F = force_arrays(rec)
+    x, p, F = pair.force_arrays(rec)
     X = force_design(orders, g, x, p)
-    w = 1.0 / (0.005 * np.abs(F) + 20.0)
-    beta, *_ = np.linalg.lstsq(X * w[:, None], F * w, rcond=None)
+    beta = pair.reference_fit(X, F)
     nc = (orders.K + 1) * (orders.Lp + 1)
     feff = np.abs(tq_columns(g.t(x), g.q(p), orders.K, orders.Lp) @ (beta[:nc] * SCALE_C))
     return surface_force.force_data(
@@ -133,9 +88,21 @@ def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> Pa
     """The model's arrays for a campaign: designs, readings, the noise references, the Gram plan."""
     g = geometry_of(rec)
     x, p, F, L, idx = pair.arrays(rec)
-    _, phat, feff, Xf, Xl = _reference(orders, g, x, p, F, L, idx, len(rec.tests))
+    Xf, Xl = designs(orders, g, x, p, idx, len(rec.tests))
+    beta = pair.reference_fit(Xf, F, Xl, L)
+    nc = (orders.K + 1) * (orders.Lp + 1)
+    feff = tq_columns(g.t(x), g.q(p), orders.K, orders.Lp) @ (beta[:nc] * SCALE_C)
     return pair_data(
-        Xf, Xl, F, L, phat, feff, p, g.area_m2, stand, pair.measured_deviation(rec, stand)
+        Xf,
+        Xl,
+        F,
+        L,
+        np.abs(Xf @ beta),
+        np.abs(feff),
+        p,
+        g.area_m2,
+        stand,
+        pair.measured_deviation(rec, stand),
     )
 
 
@@ -184,18 +151,19 @@ def fit_surface(
             )
     else:
         data, model = surface_data(rec, orders, stand), MODEL
-    post = fit_collapsed(
+    return pair.fit_over_tests(
+        SurfaceFit,
         model,
         data,
+        rec,
+        orders,
+        geometry_of(rec),
         seed=seed,
         settings=settings,
         max_draws=max_draws,
-        seeds=[seed],
-        predictive=False,  # 2 x 814 replicates per draw: made when asked for, not on every fit
+        stand=stand,
         desc="surface sampling",
     )
-    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
-    return SurfaceFit.from_posterior(post, rec, orders, geometry_of(rec), stand, provenance=prov)
 
 
 def select_orders(

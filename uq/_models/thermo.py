@@ -274,19 +274,18 @@ def summary(fit: ThermoFit, comparison: dict | None = None, advice: str = CLI_AD
             "maxwell_ratio": estimate(some.maxwell_ratio_draws(x0, pb)),
         }
     noise = fit.noise_summary(NATURAL_NAMES + ("travel_factor", "piston_area_m2"))
-    return {
-        "model": "thermodynamic",
-        "x0_m": g.x0_m,
-        "piston_area_m2": g.area_m2,
-        "orders": asdict(fit.orders),
-        "orders_label": fit.orders_label,
-        "basis": "G = 1e4 J sum g_kl t^k s^l, t = (x - x0) / 0.05 m, s = p_u / p_ref; P = -dG/dx, "
-        "V = -dG/dp_u",
-        "p_ref_bar": g.p_ref_bar,
-        "definitions": DEFINITIONS,
-        "stand": asdict(fit.stand),
-        "valid_range": {"height_m": list(fit.height_range_m), "pressure_bar": [plo, phi]},
-        "implied_piston_area_m2": noise["piston_area_m2"],
-        "noise": {k: v for k, v in noise.items() if k in NATURAL_NAMES},
-        "at_x0": at_x0,
-    } | fit.json_tail(comparison, advice)
+    return (
+        fit.json_head()
+        | {
+            "basis": "G = 1e4 J sum g_kl t^k s^l, t = (x - x0) / 0.05 m, s = p_u / p_ref; P = -dG/dx, "
+            "V = -dG/dp_u",
+            "p_ref_bar": g.p_ref_bar,
+            "definitions": DEFINITIONS,
+            "stand": asdict(fit.stand),
+            "valid_range": {"height_m": list(fit.height_range_m), "pressure_bar": [plo, phi]},
+            "implied_piston_area_m2": noise["piston_area_m2"],
+            "noise": {k: v for k, v in noise.items() if k in NATURAL_NAMES},
+            "at_x0": at_x0,
+        }
+        | fit.json_tail(comparison, advice)
+    )

@@ -11,13 +11,12 @@ import numpy as np
 
 from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._inference.collapsed import CollapsedModel, fit_collapsed
+from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jnp
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 from uq._models import pair
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, PairData, pair_data
-from uq._models.saved import provenance_of
 from uq._models.thermo import (
     CANDIDATES,
     MAX_DRAWS,
@@ -89,7 +88,7 @@ MODEL = CollapsedModel(
     predict=predict,
     observed=pair.observed,
     pointwise_loo=pointwise_loo,
-    hold_out=pair.hold_out,
+    hold_out=hold_out_by_weight,
 )
 
 
@@ -108,10 +107,7 @@ def thermo_data(rec: Recordings, orders: ThermoOrders, stand: StandDescription) 
     g = geometry_of(rec)
     x, p, F, L, idx = pair.arrays(rec)
     Xf, Xl = designs(orders, g, x, p, idx, len(rec.tests))
-    wf = 1.0 / (0.005 * np.abs(F) + 20.0)
-    wl = np.full_like(L, 1.0 / 1e-3)
-    A = np.concatenate([Xf * wf[:, None], Xl * wl[:, None]])
-    beta, *_ = np.linalg.lstsq(A, np.concatenate([F * wf, L * wl]), rcond=None)
+    beta = pair.reference_fit(Xf, F, Xl, L)
     phat = np.abs(Xf @ beta)
     lever = np.abs(force_pressure_slope(orders, g, x, p, beta[: orders.n_potential]))
     return pair_data(
@@ -144,18 +140,19 @@ def fit_thermo(
             "together and needs piston_* or volume_*"
         )
     orders = default_orders(len(rec.tests)) if orders is None else orders
-    post = fit_collapsed(
+    return pair.fit_over_tests(
+        ThermoFit,
         MODEL,
         thermo_data(rec, orders, stand),
+        rec,
+        orders,
+        geometry_of(rec),
         seed=seed,
         settings=settings,
         max_draws=max_draws,
-        seeds=[seed],
-        predictive=False,
+        stand=stand,
         desc="thermodynamic sampling",
     )
-    prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
-    return ThermoFit.from_posterior(post, rec, orders, geometry_of(rec), stand, provenance=prov)
 
 
 def select_orders(

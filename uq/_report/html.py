@@ -135,11 +135,6 @@ def stamp_unconverged(fig, what: str) -> None:
     )
 
 
-def _png(fig) -> bytes:
-    """The figure as PNG bytes at ``DPI``; the figure is closed."""
-    return encode(fig, "png")
-
-
 @dataclass(frozen=True)
 class Figure:
     """A figure to embed (base64, so that the page stands alone) under its file name (whose

@@ -81,12 +81,7 @@ from uq._physics.mechanisms import (
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 # The paper's stand (section 3.2); a different stand is a StandDescription (``--stand FILE``).
-P_ATM_BAR = PAPER_STAND.p_atm_bar
-RECEIVER_AIR_M3 = PAPER_STAND.receiver_air_m3
 ELEMENT_VOLUME_AT_XMAX_M3 = PAPER_STAND.element_volume_at_xmax_m3
-LOAD_CELL_REL_SD = PAPER_STAND.load_cell_rel_sd
-DISPLACEMENT_SD_M = PAPER_STAND.displacement_sd_m
-CALIPER_SD_M = PAPER_STAND.caliper_sd_m
 pressure_sd_bar = PAPER_STAND.pressure_sd_bar
 
 

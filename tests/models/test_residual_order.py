@@ -55,7 +55,9 @@ def test_the_null_in_blocks_is_the_null_in_one_array(monkeypatch):
     r1 = ro._lag_one(z[None])[0]
     brute = (1.0 + np.count_nonzero(ro._lag_one(null) >= r1)) / 1001.0
     assert whole == {"lag1": float(r1), "p": float(brute)}
-    monkeypatch.setattr(ro, "NULL_BLOCK_VALUES", 7 * U.size + 3)  # blocks of 7 rows, a short last one
+    monkeypatch.setattr(
+        ro, "NULL_BLOCK_VALUES", 7 * U.size + 3
+    )  # blocks of 7 rows, a short last one
     assert lag_one_check(res, sd, DESIGN, n_null=1000) == whole
 
 

@@ -331,7 +331,24 @@ def load(args, min_points: int = 6, needs=None):
         on_note=_note,  # what the reader decided by itself (a units row, a title), said at once
     )
     require(rec, COMMAND_NEEDS.get(getattr(args, "_name", ""), ()) if needs is None else needs)
+    check_memory(args, rec)
     return rec
+
+
+#: the commands whose peak memory is at least uq fit's for the same campaign (they run its fit,
+#: uq report then its bands and figures): checked against uq._io.memory.FIT before any fitting
+MEMORY_CHECKED = {"fit": "uq fit", "report": "uq report (at least what uq fit needs)"}
+
+
+def check_memory(args, rec) -> None:
+    """Refuse, before any fitting, a campaign whose predicted peak memory exceeds what the
+    machine has available (uq._io.memory; the commands of ``MEMORY_CHECKED``)."""
+    command = MEMORY_CHECKED.get(getattr(args, "_name", ""))
+    if command is None:
+        return
+    from uq._io.memory import check_fits_in_memory
+
+    check_fits_in_memory(args.file, sum(t.n_points for t in rec.tests), command)
 
 
 def _note(text: str) -> None:

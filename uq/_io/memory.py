@@ -1,0 +1,120 @@
+"""Will a campaign fit in this machine's memory? The check every fitting command makes up front.
+
+A command's peak resident memory is linear in the readings of its campaign: a constant (the
+imports, JAX's compiled programs, the retained draws) plus a cost per reading (the readings'
+share of every vmapped log posterior, exact draw and check). :data:`FIT` is that model for
+``uq fit``, measured by ``benchmarks/bench.py --memory`` (which reports the fitted constant and
+slope at three sizes and the model's error at each). Before any fitting, a campaign whose
+predicted peak exceeds the memory the machine has available is refused in one line that names
+the file, the number of readings and the memory it would need (:func:`check_fits_in_memory`),
+instead of the out-of-memory killer ending the command minutes later with no message.
+
+The available memory is the kernel's ``MemAvailable`` (``/proc/meminfo``), lowered to a cgroup's
+limit where one applies (``/sys/fs/cgroup/memory.max``); where neither can be read (not Linux)
+nothing is checked. ``UQ_MEMORY_GB`` overrides it: a number of GB to plan with, or ``off``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import NamedTuple
+
+from uq._io.errors import InputError
+
+GB = 1e9
+ENV = "UQ_MEMORY_GB"
+
+
+class MemoryModel(NamedTuple):
+    """Peak resident memory of a command, ``constant_bytes + bytes_per_reading * readings``."""
+
+    constant_bytes: float
+    bytes_per_reading: float
+
+    def peak_bytes(self, readings: int) -> float:
+        return self.constant_bytes + self.bytes_per_reading * int(readings)
+
+    def largest(self, available_bytes: float) -> int:
+        """The most readings whose predicted peak stays within ``available_bytes``."""
+        return max(0, int((available_bytes - self.constant_bytes) // self.bytes_per_reading))
+
+
+#: ``uq fit`` (the default sampler settings: 4 ensembles of 32 walkers, at most 8000 retained
+#: draws a test), fitted by ``benchmarks/bench.py --memory`` to uq fit's peak RSS on simulated
+#: n50 campaigns of 11 tests at three steps (reports/bench/memory.json), rounded up.
+FIT = MemoryModel(constant_bytes=0.6 * GB, bytes_per_reading=60e3)
+
+
+def _meminfo_available(path: str = "/proc/meminfo") -> float | None:
+    try:
+        with open(path) as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0  # kB
+    except OSError:
+        return None
+    return None
+
+
+def _cgroup_room(root: str = "/sys/fs/cgroup") -> float | None:
+    """What a cgroup v2 memory limit leaves (memory.max - memory.current), None without one."""
+    try:
+        with open(os.path.join(root, "memory.max")) as f:
+            limit = f.read().strip()
+        if limit == "max":
+            return None
+        with open(os.path.join(root, "memory.current")) as f:
+            used = float(f.read().strip())
+    except (OSError, ValueError):
+        return None
+    return max(float(limit) - used, 0.0)
+
+
+def _held_bytes() -> float:
+    """The resident memory this process has held so far (its imports): 0 where unknown."""
+    try:
+        import resource
+    except ImportError:  # not a Unix
+        return 0.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0  # kB on Linux
+
+
+def available_bytes() -> float | None:
+    """The memory a command may still take: ``UQ_MEMORY_GB`` when set (None for ``off``), else
+    MemAvailable lowered to the cgroup's room; None where neither is known."""
+    given = os.environ.get(ENV, "").strip()
+    if given:
+        if given.lower() == "off":
+            return None
+        try:
+            value = float(given)
+        except ValueError:
+            raise InputError(
+                f"{ENV}={given!r}: expected the memory to plan with in GB (e.g. 64) or off"
+            ) from None
+        if not value > 0:
+            raise InputError(f"{ENV}={given!r}: expected a positive number of GB or off")
+        return value * GB
+    known = [a for a in (_meminfo_available(), _cgroup_room()) if a is not None]
+    return min(known) if known else None
+
+
+def check_fits_in_memory(
+    path, readings: int, command: str, model: MemoryModel = FIT, available: float | None = None
+) -> None:
+    """Raise :class:`InputError` (one line: the file, its readings, the memory they need, what is
+    available, how to go on) when ``model``'s predicted peak for ``readings`` exceeds the
+    available memory (``available``, default :func:`available_bytes`; nothing is checked when
+    that is unknown or ``UQ_MEMORY_GB=off``)."""
+    room = available_bytes() if available is None else available
+    if room is None:
+        return
+    need = model.peak_bytes(readings)
+    if need - _held_bytes() <= room:  # what the process holds already is part of the peak
+        return
+    raise InputError(
+        f"{path}: {readings} readings need about {need / GB:.1f} GB of memory for {command} "
+        f"({model.bytes_per_reading / 1e3:.0f} kB a reading + {model.constant_bytes / GB:.1f} GB), "
+        f"{room / GB:.1f} GB are available (at most about {model.largest(room)} readings): fit "
+        f"fewer readings (a coarser height step), or set {ENV} to the GB to plan with (off: no check)"
+    )

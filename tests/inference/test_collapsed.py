@@ -38,9 +38,16 @@ def test_saved_posteriors_work_with_arviz(tmp_path):
     rec = uq.simulate("n50", seed=5, layout=LAYOUT)
     fit = uq.fit_campaign(rec, seed=5, settings=uq.Settings(max_steps=400))
     (path,) = fit.save_posteriors(tmp_path)
+    assert not fit.tests[0].posterior._cache  # made for the file, not kept (memory: issue 32)
     idata = az.from_netcdf(path)
     assert {"posterior", "log_likelihood", "posterior_predictive", "observed_data"} <= set(
         idata.groups()
+    )
+    made = fit.tests[0].posterior.idata  # what a caller made before saving is kept
+    fit.save_posteriors(tmp_path / "again")
+    assert fit.tests[0].posterior._cache["idata"] is made
+    np.testing.assert_array_equal(
+        idata.posterior_predictive["force_N"], made.posterior_predictive["force_N"]
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # ArviZ's own notes on the number of chains

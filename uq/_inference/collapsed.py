@@ -36,6 +36,7 @@ because ``active`` is an array, not a shape.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 import warnings
@@ -509,6 +510,18 @@ class Posterior:
                 {"model": self.model, "method": self.method} | self._attrs,
             )
         return self._cache["idata"]
+
+    @contextlib.contextmanager
+    def transient(self):
+        """A block whose parts made on demand (pointwise terms, replicates, InferenceData) are
+        dropped at its end; parts made before it are kept. For a use of every draw's (draws x
+        readings) arrays that need not outlive it, such as writing the posterior to a file."""
+        held = set(self._cache)
+        try:
+            yield self
+        finally:
+            for name in set(self._cache) - held:
+                del self._cache[name]
 
     @property
     def converged(self) -> bool:

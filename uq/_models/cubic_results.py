@@ -373,12 +373,17 @@ class CampaignFit:
         """One NetCDF file per test (ArviZ InferenceData with posterior, log_likelihood,
         posterior_predictive and observed_data groups), made in memory and written atomically (a
         full disk is a one-line error, not a crash inside HDF5: ``uq._io.netcdf.netcdf_bytes``);
-        returns the paths (``uq fit --out``)."""
+        returns the paths (``uq fit --out``). Each test's InferenceData is made for its file and
+        dropped after it (unless it was made before): the memory of one test's (draws x readings)
+        groups at a time, not of the campaign's."""
         out = Path(out_dir)
-        return [
-            write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
-            for t in self.tests
-        ]
+        paths = []
+        for t in self.tests:
+            with t.posterior.transient():
+                paths.append(
+                    write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
+                )
+        return paths
 
     def __repr__(self) -> str:
         state = "converged" if self.converged else "NOT converged"

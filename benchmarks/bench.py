@@ -843,6 +843,18 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _steps_mm(text: str) -> tuple[float, ...]:
+    try:
+        steps = tuple(float(s) for s in text.split(","))
+    except ValueError:
+        steps = ()
+    if len(steps) < 2 or not all(math.isfinite(s) and s > 0 for s in steps):
+        raise argparse.ArgumentTypeError(
+            f"expected two or more positive steps in mm, comma-separated, got {text}"
+        )
+    return steps
+
+
 def _baseline_walkers(text: str) -> int:
     value = int(text)
     if value < 12 or value % 2:
@@ -923,7 +935,8 @@ def parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--steps-mm",
-        default=",".join(map(str, MEMORY_STEPS_MM)),
+        type=_steps_mm,
+        default=MEMORY_STEPS_MM,
         help="--memory: the height steps of the three (or more) campaigns",
     )
     p.add_argument(
@@ -944,7 +957,7 @@ def measure(args) -> tuple[str, dict]:
     if args.batch:
         return "batch", record | batch_speedup(args.batch, seed=args.seed)
     if args.memory:
-        steps = tuple(float(s) for s in args.steps_mm.split(","))
+        steps = args.steps_mm
         extra = [] if args.max_steps == Settings.max_steps else ["--max-steps", args.max_steps]
         extra += [] if args.walkers == Settings.n_walkers else ["--walkers", args.walkers]
         return "memory", record | memory_model(seed=args.seed, steps_mm=steps, extra=extra)

@@ -19,6 +19,11 @@ from __future__ import annotations
 import os
 from typing import NamedTuple
 
+try:
+    import resource
+except ImportError:  # not a Unix: what the process holds is not known
+    resource = None
+
 from uq._io.errors import InputError
 
 GB = 1e9
@@ -72,9 +77,7 @@ def _cgroup_room(root: str = "/sys/fs/cgroup") -> float | None:
 
 def _held_bytes() -> float:
     """The resident memory this process has held so far (its imports): 0 where unknown."""
-    try:
-        import resource
-    except ImportError:  # not a Unix
+    if resource is None:
         return 0.0
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0  # kB on Linux
 

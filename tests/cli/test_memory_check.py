@@ -53,6 +53,20 @@ def test_a_campaign_too_large_is_refused_in_one_line_before_fitting(
     assert not (tmp_path / "r").exists()
 
 
+def test_fit_out_is_checked_with_one_test_held_at_a_time(machine, no_fitting, capsys, tmp_path):
+    """uq fit --out holds one test's InferenceData at a time: a machine with room for the fit but
+    not for that is refused for --out only (data/n50: 11 tests of 37 readings)."""
+    fit, out = memory.FIT.peak_bytes(407) / GB, memory.FIT_OUT.peak_bytes(407, 37) / GB
+    assert out > fit
+    machine((fit + out) / 2)
+    assert run(["fit", CAMPAIGN, "--out", tmp_path / "o"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "uq fit --out" in line and "largest test" in line and f"{out:.1f} GB" in line
+    assert not (tmp_path / "o").exists()
+    assert run(["fit", CAMPAIGN]) != 2  # without --out it gets to the fit
+    assert "a fit started before the memory check" in capsys.readouterr().err
+
+
 def test_the_override_lets_the_campaign_through(machine, no_fitting, monkeypatch, capsys):
     machine(0.01)
     for value in ("off", "64"):
@@ -75,6 +89,9 @@ def test_the_model_and_the_largest_campaign(monkeypatch):
     assert m.largest(10.5 * GB) == 200_000
     assert m.peak_bytes(m.largest(3.3 * GB)) <= 3.3 * GB < m.peak_bytes(m.largest(3.3 * GB) + 1)
     assert m.largest(0.1 * GB) == 0
+    held = m._replace(bytes_per_test_reading=100e3)  # one test of ten held at a time
+    assert held.peak_bytes(200_000, 20_000) == pytest.approx(12.5 * GB)
+    assert held.largest(12.5 * GB, 0.1) == 200_000
     check_fits_in_memory("f.csv", 200_000, "uq fit", m, available=10.5 * GB)  # exactly fits
     with pytest.raises(InputError, match=r"f\.csv: 200001 readings need about 10\.5 GB"):
         check_fits_in_memory("f.csv", 200_001, "uq fit", m, available=10.5 * GB)

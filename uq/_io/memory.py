@@ -19,35 +19,49 @@ from __future__ import annotations
 import os
 from typing import NamedTuple
 
+from uq._io.errors import InputError
+
 try:
     import resource
 except ImportError:  # not a Unix: what the process holds is not known
     resource = None
-
-from uq._io.errors import InputError
 
 GB = 1e9
 ENV = "UQ_MEMORY_GB"
 
 
 class MemoryModel(NamedTuple):
-    """Peak resident memory of a command, ``constant_bytes + bytes_per_reading * readings``."""
+    """Peak resident memory of a command: ``constant_bytes + bytes_per_reading * readings +
+    bytes_per_test_reading * (readings of the largest test)``. The last term is for what is
+    held one test at a time (``uq fit --out``: one test's InferenceData and NetCDF bytes)."""
 
     constant_bytes: float
     bytes_per_reading: float
+    bytes_per_test_reading: float = 0.0
 
-    def peak_bytes(self, readings: int) -> float:
-        return self.constant_bytes + self.bytes_per_reading * int(readings)
+    def peak_bytes(self, readings: int, largest_test: int = 0) -> float:
+        return (
+            self.constant_bytes
+            + self.bytes_per_reading * int(readings)
+            + self.bytes_per_test_reading * int(largest_test)
+        )
 
-    def largest(self, available_bytes: float) -> int:
-        """The most readings whose predicted peak stays within ``available_bytes``."""
-        return max(0, int((available_bytes - self.constant_bytes) // self.bytes_per_reading))
+    def largest(self, available_bytes: float, test_share: float = 0.0) -> int:
+        """The most readings whose predicted peak stays within ``available_bytes``, for campaigns
+        whose largest test holds ``test_share`` of the readings (the same tests, finer steps)."""
+        per = self.bytes_per_reading + self.bytes_per_test_reading * test_share
+        return max(0, int((available_bytes - self.constant_bytes) // per))
 
 
 #: ``uq fit`` (the default sampler settings: 4 ensembles of 32 walkers, at most 8000 retained
 #: draws a test), fitted by ``benchmarks/bench.py --memory`` to uq fit's peak RSS on simulated
 #: n50 campaigns of 11 tests at three steps (reports/bench/memory.json), rounded up.
 FIT = MemoryModel(constant_bytes=0.6 * GB, bytes_per_reading=60e3)
+#: ``uq fit --out`` (and a ``uq batch`` fit): ``FIT`` and each test's InferenceData in turn, its
+#: pointwise log-likelihoods and replicates of the force and the piston (four float64 values a
+#: retained draw and reading: 256 kB a reading at 8000 draws) and the NetCDF bytes made from them,
+#: measured by ``benchmarks/bench.py --memory --out`` on top of ``FIT``, rounded up.
+FIT_OUT = FIT._replace(bytes_per_test_reading=800e3)
 
 
 def _meminfo_available(path: str = "/proc/meminfo") -> float | None:
@@ -103,21 +117,30 @@ def available_bytes() -> float | None:
 
 
 def check_fits_in_memory(
-    path, readings: int, command: str, model: MemoryModel = FIT, available: float | None = None
+    path,
+    readings: int,
+    command: str,
+    model: MemoryModel = FIT,
+    available: float | None = None,
+    largest_test: int = 0,
 ) -> None:
     """Raise :class:`InputError` (one line: the file, its readings, the memory they need, what is
-    available, how to go on) when ``model``'s predicted peak for ``readings`` exceeds the
-    available memory (``available``, default :func:`available_bytes`; nothing is checked when
-    that is unknown or ``UQ_MEMORY_GB=off``)."""
+    available, how to go on) when ``model``'s predicted peak for ``readings`` (``largest_test`` of
+    them in the largest test) exceeds the available memory (``available``, default
+    :func:`available_bytes`; nothing is checked when that is unknown or ``UQ_MEMORY_GB=off``)."""
     room = available_bytes() if available is None else available
     if room is None:
         return
-    need = model.peak_bytes(readings)
+    need = model.peak_bytes(readings, largest_test)
     if need - _held_bytes() <= room:  # what the process holds already is part of the peak
         return
+    cost = f"{model.bytes_per_reading / 1e3:.0f} kB a reading"
+    if model.bytes_per_test_reading:
+        cost += f", {model.bytes_per_test_reading / 1e3:.0f} kB a reading of the largest test"
+    share = largest_test / readings if readings else 0.0
     raise InputError(
         f"{path}: {readings} readings need about {need / GB:.1f} GB of memory for {command} "
-        f"({model.bytes_per_reading / 1e3:.0f} kB a reading + {model.constant_bytes / GB:.1f} GB), "
-        f"{room / GB:.1f} GB are available (at most about {model.largest(room)} readings): fit "
-        f"fewer readings (a coarser height step), or set {ENV} to the GB to plan with (off: no check)"
+        f"({cost} + {model.constant_bytes / GB:.1f} GB), {room / GB:.1f} GB are available (at "
+        f"most about {model.largest(room, share)} readings): fit fewer readings (a coarser height "
+        f"step), or set {ENV} to the GB to plan with (off: no check)"
     )

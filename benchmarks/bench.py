@@ -389,11 +389,13 @@ def memory_model(*, seed: int, steps_mm=MEMORY_STEPS_MM, extra=()) -> dict:
     ``steps_mm``, the straight line through them (bytes per reading and a constant, least
     squares), and ``uq._io.memory.FIT``, the model the command checks campaigns against, beside
     it: its prediction at each size (it should not be below what was measured), at the 198k
-    readings of a 0.01 mm ramp, and the largest campaign it lets this machine take now."""
+    readings of a 0.01 mm ramp, and the largest campaign it lets this machine take now. Then
+    ``uq fit --out`` at the first step: what it holds beyond the line, per reading of the largest
+    test (one test's InferenceData and NetCDF bytes at a time), against ``FIT_OUT``."""
     import tempfile
 
     from uq._data.recordings import write_recordings_csv
-    from uq._io.memory import FIT, GB, available_bytes
+    from uq._io.memory import FIT, FIT_OUT, GB, available_bytes
     from uq._stand.simulator import Layout, simulate
 
     def readings(step_mm):
@@ -421,6 +423,11 @@ def memory_model(*, seed: int, steps_mm=MEMORY_STEPS_MM, extra=()) -> dict:
                         "fit_model_mb": FIT.peak_bytes(n) / MIB,
                     }
                 )
+            step = steps_mm[0]
+            out = run_child(
+                ["fit", Path(tmp) / f"step{step:g}.csv", "--seed", seed, "--out", Path(tmp) / "o"]
+                + list(extra)
+            )
     finally:
         if old is None:
             os.environ.pop("UQ_MEMORY_GB", None)
@@ -433,6 +440,20 @@ def memory_model(*, seed: int, steps_mm=MEMORY_STEPS_MM, extra=()) -> dict:
         r["line_error_mb"] = float((constant + slope * r["readings"] - m) / MIB)
     ramp = readings(RAMP_STEP_MM)
     room = available_bytes()
+    first = runs[0]
+    per_test = first["readings"] // first["tests"]  # the tests have equal readings
+    held = out["peak_rss_mb"] * MIB - (constant + slope * first["readings"])
+    saving = {
+        "step_mm": steps_mm[0],
+        "readings": first["readings"],
+        "largest_test": per_test,
+        "wall_s": out["wall_s"],
+        "peak_rss_mb": out["peak_rss_mb"],
+        "measured_bytes_per_test_reading": float(held / per_test),
+        "fit_out_model_mb": FIT_OUT.peak_bytes(first["readings"], per_test) / MIB,
+        "model_bytes_per_test_reading": FIT_OUT.bytes_per_test_reading,
+        "ramp_model_gb": FIT_OUT.peak_bytes(ramp, ramp // first["tests"]) / GB,
+    }
     return {
         "workload": f"uq fit (cold process) of simulated n50 campaigns, 11 tests (0.1-10 bar), steps "
         f"{', '.join(format(s, 'g') for s in steps_mm)} mm, seed {seed}",
@@ -452,6 +473,10 @@ def memory_model(*, seed: int, steps_mm=MEMORY_STEPS_MM, extra=()) -> dict:
         },
         "available_gb": None if room is None else room / GB,
         "largest_readings_now": None if room is None else FIT.largest(room),
+        "out": saving,
+        "largest_readings_now_out": None
+        if room is None
+        else FIT_OUT.largest(room, 1 / first["tests"]),
     }
 
 
@@ -800,8 +825,17 @@ def scale_summary(name: str, r: dict) -> str:
             f"the model, {ramp['line_gb']:.1f} GB by the measured line",
             "  available now: unknown"
             if room is None
-            else f"  available now: {room:.1f} GB, so at most {r['largest_readings_now']} readings",
+            else f"  available now: {room:.1f} GB, so at most {r['largest_readings_now']} readings "
+            f"({r['largest_readings_now_out']} with --out)",
         ]
+        o = r["out"]
+        lines.append(
+            f"  uq fit --out at {o['readings']} readings ({o['largest_test']} in the largest test): "
+            f"peak RSS {o['peak_rss_mb']:.0f} MB, {o['measured_bytes_per_test_reading'] / 1e3:.0f} kB "
+            f"a reading of the largest test above the line; model {o['fit_out_model_mb']:.0f} MB "
+            f"({o['model_bytes_per_test_reading'] / 1e3:.0f} kB); the ramp with --out "
+            f"{o['ramp_model_gb']:.1f} GB by the model"
+        )
         return "\n".join(lines)
     if name == "batch":
         s, d = r["serial"], r["dask"]

@@ -768,6 +768,24 @@ def memory_bench_summary(rel: str) -> Callable[[], str]:
                 f"`uq fit` takes is about {r['largest_readings_now']} readings."
             ),
         ]
+        o = r.get("out")
+        if o is not None:
+            lines += [
+                "",
+                f"`uq fit --out` at {o['readings']} readings ({o['largest_test']} in each test): peak "
+                f"RSS {o['peak_rss_mb']:.0f} MB, {o['measured_bytes_per_test_reading'] / 1e3:.0f} kB a "
+                "reading of the largest test above the line (one test's InferenceData and NetCDF "
+                "bytes, and the imports of ArviZ and xarray); the model it is checked against "
+                f"(`uq._io.memory.FIT_OUT`) adds {o['model_bytes_per_test_reading'] / 1e3:.0f} kB a "
+                f"reading of the largest test ({o['fit_out_model_mb']:.0f} MB here): "
+                f"{o['ramp_model_gb']:.1f} GB for the {ramp['step_mm']:g} mm ramp"
+                + (
+                    "."
+                    if room is None
+                    else f", at most about {r['largest_readings_now_out']} readings in tests like "
+                    "these on this machine then."
+                ),
+            ]
         return "\n".join(lines) + "\n"
 
     return make

@@ -380,7 +380,7 @@ def scaling(
     }
 
 
-MEMORY_STEPS_MM = (0.15625, 0.078125, 0.0390625)  # 12683, 25355, 50699 readings in 11 tests
+MEMORY_STEPS_MM = (0.3125, 0.15625, 0.078125)  # 6347, 12683, 25355 readings in 11 tests
 RAMP_STEP_MM = 0.01  # the finest step uq simulate writes (docs/formats.md): 198011 readings
 
 

@@ -752,15 +752,27 @@ def memory_bench_summary(rel: str) -> Callable[[], str]:
                 f"| {x['fit_model_mb']:.0f} MB |"
             )
         room = r["available_gb"]
+        peaks = [x["peak_rss_mb"] for x in r["runs"]]
+        sizes = [x["readings"] for x in r["runs"]]
+        spread = max(peaks) - min(peaks)
         lines += [
             "",
-            f"Measured: {r['measured_bytes_per_reading'] / 1e3:.1f} kB a reading and "
-            f"{r['measured_constant_gb']:.2f} GB. The model `uq fit` and `uq report` check a campaign "
+            f"Measured: the line's slope {r['measured_bytes_per_reading'] / 1e3:.1f} kB a reading and "
+            f"constant {r['measured_constant_gb']:.2f} GB; the peaks lie within {spread:.0f} MB of each "
+            f"other over {max(sizes) - min(sizes)} readings, "
+            f"{spread * 1024**2 / (max(sizes) - min(sizes)) / 1e3:.0f} kB a reading: at these sizes "
+            "what a reading costs is lost in how much a run's constant moves (a run that compiles "
+            "against one that finds its programs cached). The model `uq fit` and `uq report` check a campaign "
             f"against before fitting (`uq._io.memory.FIT`): {m['bytes_per_reading'] / 1e3:.0f} kB a "
             f"reading and {m['constant_gb']:.2f} GB, "
             + ("above every measured peak" if m["covers_every_run"] else "BELOW a measured peak")
             + f". The {ramp['step_mm']:g} mm ramp of `uq simulate` ({ramp['readings']} readings): "
-            f"{ramp['model_gb']:.1f} GB by the model ({ramp['line_gb']:.1f} GB on the measured line)"
+            f"{ramp['model_gb']:.1f} GB by the model"
+            + (
+                f" ({ramp['line_gb']:.1f} GB on the measured line)"
+                if r["measured_bytes_per_reading"] > 0
+                else ""
+            )
             + (
                 "."
                 if room is None

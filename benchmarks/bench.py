@@ -6,6 +6,7 @@ Not part of the installed package: run from the repository root with the project
     .venv/bin/python benchmarks/bench.py --scaling  [--json reports/bench/scaling.json]
     .venv/bin/python benchmarks/bench.py --batch 20 [--json reports/bench/batch.json]
     .venv/bin/python benchmarks/bench.py --margin   [--json reports/bench/margin.json]
+    .venv/bin/python benchmarks/bench.py --memory   [--json reports/bench/memory.json]
 
 The summary goes to stdout (to stderr with ``--json -``); the JSON goes only where ``--json``
 says (the committed records are reports/bench/*.json: pass their path to refresh one).
@@ -218,6 +219,7 @@ def run_baseline(
 # --------------------------------------------------------------------------- memory and scale
 
 MB = 1024.0  # ru_maxrss is in KiB on Linux
+MIB = 1024.0 * 1024.0  # bytes of the "MB" of peak_rss_mb
 SCALING_FACTORS = (1, 4, 16)
 SCALING_BASE_STEP_MM = (
     5.0  # the paper's step: 37 points per test; 1.25 and 0.3125 mm give 4x and 16x
@@ -375,6 +377,106 @@ def scaling(
         "measure": "wall time after a JIT warm-up of the same shape; peak RSS of this process during the fit "
         "(psutil, 10 ms) and the part the fit added",
         "runs": rows,
+    }
+
+
+MEMORY_STEPS_MM = (0.3125, 0.15625, 0.078125)  # 6347, 12683, 25355 readings in 11 tests
+RAMP_STEP_MM = 0.01  # the finest step uq simulate writes (docs/formats.md): 198011 readings
+
+
+def memory_model(*, seed: int, steps_mm=MEMORY_STEPS_MM, extra=()) -> dict:
+    """Peak RSS of ``uq fit`` (cold process) on simulated n50 campaigns of the default 11 tests at
+    ``steps_mm``, the straight line through them (bytes per reading and a constant, least
+    squares), and ``uq._io.memory.FIT``, the model the command checks campaigns against, beside
+    it: its prediction at each size (it should not be below what was measured), at the 198k
+    readings of a 0.01 mm ramp, and the largest campaign it lets this machine take now. Then
+    ``uq fit --out`` at the first step: what it holds beyond the line, per reading of the largest
+    test (one test's InferenceData and NetCDF bytes at a time), against ``FIT_OUT``."""
+    import tempfile
+
+    from uq._data.recordings import write_recordings_csv
+    from uq._io.memory import FIT, FIT_OUT, GB, available_bytes
+    from uq._stand.simulator import Layout, simulate
+
+    def readings(step_mm):
+        layout = Layout(step_m=step_mm * 1e-3)
+        return len(layout.heights()[0]) * len(layout.pressures_bar)
+
+    runs = []
+    old = os.environ.get("UQ_MEMORY_GB")
+    os.environ["UQ_MEMORY_GB"] = "off"  # measure, do not refuse
+    try:
+        with tempfile.TemporaryDirectory(prefix="uq-bench-memory-") as tmp:
+            for step in steps_mm:
+                tests = simulate("n50", seed=seed, layout=Layout(step_m=step * 1e-3))
+                csv = Path(tmp) / f"step{step:g}.csv"
+                csv.write_text(write_recordings_csv(tests, f"bench --memory: step {step:g} mm"))
+                r = run_child(["fit", csv, "--seed", seed, *extra])
+                n = readings(step)
+                runs.append(
+                    {
+                        "step_mm": step,
+                        "readings": n,
+                        "tests": len(tests),
+                        "wall_s": r["wall_s"],
+                        "peak_rss_mb": r["peak_rss_mb"],
+                        "fit_model_mb": FIT.peak_bytes(n) / MIB,
+                    }
+                )
+            step = steps_mm[0]
+            out = run_child(
+                ["fit", Path(tmp) / f"step{step:g}.csv", "--seed", seed, "--out", Path(tmp) / "o"]
+                + list(extra)
+            )
+    finally:
+        if old is None:
+            os.environ.pop("UQ_MEMORY_GB", None)
+        else:
+            os.environ["UQ_MEMORY_GB"] = old
+    n = np.array([r["readings"] for r in runs], float)
+    peak = np.array([r["peak_rss_mb"] for r in runs]) * MIB  # bytes
+    slope, constant = np.polyfit(n, peak, 1) if len(runs) > 1 else (math.nan, peak[0])
+    for r, m in zip(runs, peak, strict=True):
+        r["line_error_mb"] = float((constant + slope * r["readings"] - m) / MIB)
+    ramp = readings(RAMP_STEP_MM)
+    room = available_bytes()
+    first = runs[0]
+    per_test = first["readings"] // first["tests"]  # the tests have equal readings
+    held = out["peak_rss_mb"] * MIB - (constant + slope * first["readings"])
+    saving = {
+        "step_mm": steps_mm[0],
+        "readings": first["readings"],
+        "largest_test": per_test,
+        "wall_s": out["wall_s"],
+        "peak_rss_mb": out["peak_rss_mb"],
+        "measured_bytes_per_test_reading": float(held / per_test),
+        "fit_out_model_mb": FIT_OUT.peak_bytes(first["readings"], per_test) / MIB,
+        "model_bytes_per_test_reading": FIT_OUT.bytes_per_test_reading,
+        "ramp_model_gb": FIT_OUT.peak_bytes(ramp, ramp // first["tests"]) / GB,
+    }
+    return {
+        "workload": f"uq fit (cold process) of simulated n50 campaigns, 11 tests (0.1-10 bar), steps "
+        f"{', '.join(format(s, 'g') for s in steps_mm)} mm, seed {seed}",
+        "runs": runs,
+        "measured_bytes_per_reading": float(slope),
+        "measured_constant_gb": float(constant / GB),
+        "model": {
+            "bytes_per_reading": FIT.bytes_per_reading,
+            "constant_gb": FIT.constant_bytes / GB,
+            "covers_every_run": bool(all(r["fit_model_mb"] >= r["peak_rss_mb"] for r in runs)),
+        },
+        "ramp": {
+            "step_mm": RAMP_STEP_MM,
+            "readings": ramp,
+            "model_gb": FIT.peak_bytes(ramp) / GB,
+            "line_gb": float((constant + slope * ramp) / GB),
+        },
+        "available_gb": None if room is None else room / GB,
+        "largest_readings_now": None if room is None else FIT.largest(room),
+        "out": saving,
+        "largest_readings_now_out": None
+        if room is None
+        else FIT_OUT.largest(room, 1 / first["tests"]),
     }
 
 
@@ -706,6 +808,35 @@ def scale_summary(name: str, r: dict) -> str:
                 f"  cold uq margin --fit (fresh interpreter, imports included): {c['wall_s']:.1f} s",
             ]
         )
+    if name == "memory":
+        m, ramp = r["model"], r["ramp"]
+        lines = [f"bench --memory: {r['workload']}; load average {r['load_average_1min']:.1f}"]
+        for x in r["runs"]:
+            lines.append(
+                f"  {x['readings']:>6} readings: peak RSS {x['peak_rss_mb']:6.0f} MB ({x['wall_s']:.0f} s); "
+                f"the line {x['line_error_mb']:+.0f} MB; uq fit's model {x['fit_model_mb']:.0f} MB"
+            )
+        room = r["available_gb"]
+        lines += [
+            f"  measured: {r['measured_bytes_per_reading'] / 1e3:.1f} kB a reading + "
+            f"{r['measured_constant_gb']:.2f} GB; uq fit's model: {m['bytes_per_reading'] / 1e3:.0f} kB "
+            f"a reading + {m['constant_gb']:.2f} GB (covers every run: {m['covers_every_run']})",
+            f"  a {ramp['step_mm']:g} mm ramp, {ramp['readings']} readings: {ramp['model_gb']:.1f} GB by "
+            f"the model, {ramp['line_gb']:.1f} GB by the measured line",
+            "  available now: unknown"
+            if room is None
+            else f"  available now: {room:.1f} GB, so at most {r['largest_readings_now']} readings "
+            f"({r['largest_readings_now_out']} with --out)",
+        ]
+        o = r["out"]
+        lines.append(
+            f"  uq fit --out at {o['readings']} readings ({o['largest_test']} in the largest test): "
+            f"peak RSS {o['peak_rss_mb']:.0f} MB, {o['measured_bytes_per_test_reading'] / 1e3:.0f} kB "
+            f"a reading of the largest test above the line; model {o['fit_out_model_mb']:.0f} MB "
+            f"({o['model_bytes_per_test_reading'] / 1e3:.0f} kB); the ramp with --out "
+            f"{o['ramp_model_gb']:.1f} GB by the model"
+        )
+        return "\n".join(lines)
     if name == "batch":
         s, d = r["serial"], r["dask"]
         return "\n".join(
@@ -744,6 +875,18 @@ def _positive_int(text: str) -> int:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text}")
     return value
+
+
+def _steps_mm(text: str) -> tuple[float, ...]:
+    try:
+        steps = tuple(float(s) for s in text.split(","))
+    except ValueError:
+        steps = ()
+    if len(steps) < 2 or not all(math.isfinite(s) and s > 0 for s in steps):
+        raise argparse.ArgumentTypeError(
+            f"expected two or more positive steps in mm, comma-separated, got {text}"
+        )
+    return steps
 
 
 def _baseline_walkers(text: str) -> int:
@@ -818,6 +961,18 @@ def parser() -> argparse.ArgumentParser:
         help="instead: one full uq margin query (fit + answer) against the same query and 100 "
         "queries from a saved fit; the campaign is --recordings or the paper's",
     )
+    mode.add_argument(
+        "--memory",
+        action="store_true",
+        help="instead: peak RSS of uq fit at --steps-mm, bytes per reading and a constant, against "
+        "the model uq fit checks campaigns with (uq._io.memory.FIT)",
+    )
+    p.add_argument(
+        "--steps-mm",
+        type=_steps_mm,
+        default=MEMORY_STEPS_MM,
+        help="--memory: the height steps of the three (or more) campaigns",
+    )
     p.add_argument(
         "--queries", type=_positive_int, default=100, help="--margin: queries from the saved fit"
     )
@@ -835,6 +990,11 @@ def measure(args) -> tuple[str, dict]:
         return "scaling", record | r | {"report": report_memory(args.seed)}
     if args.batch:
         return "batch", record | batch_speedup(args.batch, seed=args.seed)
+    if args.memory:
+        steps = args.steps_mm
+        extra = [] if args.max_steps == Settings.max_steps else ["--max-steps", args.max_steps]
+        extra += [] if args.walkers == Settings.n_walkers else ["--walkers", args.walkers]
+        return "memory", record | memory_model(seed=args.seed, steps_mm=steps, extra=extra)
     if args.margin:
         from uq._models import registry
 

@@ -743,6 +743,79 @@ def scaling_bench_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def memory_bench_summary(rel: str) -> Callable[[], str]:
+    """benchmarks/bench.py --memory: uq fit's peak RSS against the readings, the line through them,
+    the model uq fit checks campaigns with, the 0.01 mm ramp, the largest campaign then."""
+
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return _bench_missing(rel, "--memory ")
+        m, ramp = r["model"], r["ramp"]
+        lines = [
+            f"From `{rel}` (`python benchmarks/bench.py --memory`, {r['cores']} cores at load "
+            f"average {r['load_average_1min']:.1f}): {r['workload']}",
+            "",
+            "| readings | peak RSS | the measured line minus the peak | uq fit's model (the check) |",
+            "| --- | --- | --- | --- |",
+        ]
+        for x in r["runs"]:
+            lines.append(
+                f"| {x['readings']} | {x['peak_rss_mb']:.0f} MB | {x['line_error_mb']:+.0f} MB "
+                f"| {x['fit_model_mb']:.0f} MB |"
+            )
+        room = r["available_gb"]
+        peaks = [x["peak_rss_mb"] for x in r["runs"]]
+        sizes = [x["readings"] for x in r["runs"]]
+        spread = max(peaks) - min(peaks)
+        lines += [
+            "",
+            f"Measured: the line's slope {r['measured_bytes_per_reading'] / 1e3:.1f} kB a reading and "
+            f"constant {r['measured_constant_gb']:.2f} GB; the peaks lie within {spread:.0f} MB of each "
+            f"other over {max(sizes) - min(sizes)} readings, "
+            f"{spread * 1024**2 / (max(sizes) - min(sizes)) / 1e3:.0f} kB a reading: at these sizes "
+            "what a reading costs is lost in how much a run's constant moves (a run that compiles "
+            "against one that finds its programs cached). The model `uq fit` and `uq report` check a campaign "
+            f"against before fitting (`uq._io.memory.FIT`): {m['bytes_per_reading'] / 1e3:.0f} kB a "
+            f"reading and {m['constant_gb']:.2f} GB, "
+            + ("above every measured peak" if m["covers_every_run"] else "BELOW a measured peak")
+            + f". The {ramp['step_mm']:g} mm ramp of `uq simulate` ({ramp['readings']} readings): "
+            f"{ramp['model_gb']:.1f} GB by the model"
+            + (
+                f" ({ramp['line_gb']:.1f} GB on the measured line)"
+                if r["measured_bytes_per_reading"] > 0
+                else ""
+            )
+            + (
+                "."
+                if room is None
+                else f"; with the {room:.1f} GB available when measured, the largest campaign "
+                f"`uq fit` takes is about {r['largest_readings_now']} readings."
+            ),
+        ]
+        o = r.get("out")
+        if o is not None:
+            lines += [
+                "",
+                f"`uq fit --out` at {o['readings']} readings ({o['largest_test']} in each test): peak "
+                f"RSS {o['peak_rss_mb']:.0f} MB, {o['measured_bytes_per_test_reading'] / 1e3:.0f} kB a "
+                "reading of the largest test above the line (one test's InferenceData and NetCDF "
+                "bytes, and the imports of ArviZ and xarray); the model it is checked against "
+                f"(`uq._io.memory.FIT_OUT`) adds {o['model_bytes_per_test_reading'] / 1e3:.0f} kB a "
+                f"reading of the largest test ({o['fit_out_model_mb']:.0f} MB here): "
+                f"{o['ramp_model_gb']:.1f} GB for the {ramp['step_mm']:g} mm ramp"
+                + (
+                    "."
+                    if room is None
+                    else f", at most about {r['largest_readings_now_out']} readings in tests like "
+                    "these on this machine then."
+                ),
+            ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def plan_proof_summary(rel: str) -> Callable[[], str]:
     """scripts/plan_proof.py: achieved against predicted sd, coverage, plan against uniform grid."""
 
@@ -996,6 +1069,7 @@ BLOCKS: dict[str, Block] = {
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
     "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),
     "bench-scaling": report_block(scaling_bench_summary("reports/bench/scaling.json")),
+    "bench-memory": report_block(memory_bench_summary("reports/bench/memory.json")),
     "calibration": report_block(calibration_summary("reports/calibration/calibration.json")),
     "calibration-rough-stand": report_block(
         calibration_summary("reports/calibration-rough-stand/calibration.json")

@@ -274,6 +274,8 @@ def test_commands_bench_tiny_run(tmp_path):
         (["--seconds", "-1"], "--seconds"),
         (["--baseline-walkers", "7"], "--baseline-walkers"),
         (["--scaling", "--margin"], "not allowed with"),
+        (["--memory", "--steps-mm", "1"], "--steps-mm"),
+        (["--memory", "--steps-mm", "1,-2"], "--steps-mm"),
     ],
 )
 def test_bench_bad_options_exit_2(argv, words):
@@ -288,6 +290,10 @@ def test_bench_bad_options_exit_2(argv, words):
         (["--scaling", "--factors", "1,2", "--walkers", 8, "--max-steps", 200], "runs"),
         (["--batch", 2], "speedup"),
         (["--margin", "--queries", 3, "--max-steps", 400], "ratio_full_to_saved"),
+        (
+            ["--memory", "--steps-mm", "10,5", "--walkers", 8, "--max-steps", 100],
+            "measured_bytes_per_reading",
+        ),
     ],
 )
 def test_bench_other_measurements_run(argv, key, tmp_path):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import uq
+from uq._models.fitted import thin_rows
 
 LAYOUT = uq.Layout(pressures_bar=(5.0,), step_m=0.005)
 
@@ -37,9 +38,16 @@ def test_saved_posteriors_work_with_arviz(tmp_path):
     rec = uq.simulate("n50", seed=5, layout=LAYOUT)
     fit = uq.fit_campaign(rec, seed=5, settings=uq.Settings(max_steps=400))
     (path,) = fit.save_posteriors(tmp_path)
+    assert not fit.tests[0].posterior._cache  # made for the file, not kept (memory: issue 32)
     idata = az.from_netcdf(path)
     assert {"posterior", "log_likelihood", "posterior_predictive", "observed_data"} <= set(
         idata.groups()
+    )
+    made = fit.tests[0].posterior.idata  # what a caller made before saving is kept
+    fit.save_posteriors(tmp_path / "again")
+    assert fit.tests[0].posterior._cache["idata"] is made
+    np.testing.assert_array_equal(
+        idata.posterior_predictive["force_N"], made.posterior_predictive["force_N"]
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # ArviZ's own notes on the number of chains
@@ -117,3 +125,14 @@ def test_posterior_makes_its_parts_on_demand_and_the_same_whenever():
         np.testing.assert_array_equal(b.loglik[name], idata.log_likelihood[name])
     np.testing.assert_array_equal(a.loglik_loo, b.loglik_loo)
     np.testing.assert_array_equal(a.flat("a_P"), np.asarray(idata.posterior["a_P"]).reshape(-1))
+    # the replicates of the kept draws only (the model check's, without every draw's): the same
+    # numbers as thinning all of them, made before (c) and after (b: from its cache) the full set
+    c = uq._inference.collapsed.fit_collapsed(cubic.MODEL, data, seed=3, settings=quick)
+    for n_draws in (700, 10**6):
+        thin, cached = c.predictive_thinned(n_draws), b.predictive_thinned(n_draws)
+        for name in ("force_N", "piston_m"):
+            full = b.predictive[name].reshape(-1, test.n_points)
+            np.testing.assert_array_equal(thin[name], thin_rows(full, n_draws))
+            np.testing.assert_array_equal(cached[name], thin[name])
+        assert 0 < thin["force_N"].shape[0] <= n_draws
+    assert "predictive" not in c._cache

@@ -40,6 +40,27 @@ def test_p_values_are_uniform_under_independent_errors():
         assert lo <= np.sum(p < level) <= hi, (level, np.sum(p < level))
 
 
+def test_the_null_in_blocks_is_the_null_in_one_array(monkeypatch):
+    """The null vectors are drawn in blocks of rows (bounded memory for any number of readings):
+    the generator's stream, hence lag1 and p, are those of one (n_null, n) array, to the bit."""
+    import uq._models.residual_order as ro
+
+    rng = np.random.default_rng(2)
+    res, sd = _noisy(rng, ar1(rng.standard_normal(U.size), 0.3))
+    whole = lag_one_check(res, sd, DESIGN, n_null=1000)
+    z, W = res / sd, DESIGN / sd[:, None]
+    q = np.linalg.qr(W)[0]
+    null = np.random.default_rng(0).standard_normal((1000, U.size))
+    null -= (null @ q) @ q.T
+    r1 = ro._lag_one(z[None])[0]
+    brute = (1.0 + np.count_nonzero(ro._lag_one(null) >= r1)) / 1001.0
+    assert whole == {"lag1": float(r1), "p": float(brute)}
+    monkeypatch.setattr(
+        ro, "NULL_BLOCK_VALUES", 7 * U.size + 3
+    )  # blocks of 7 rows, a short last one
+    assert lag_one_check(res, sd, DESIGN, n_null=1000) == whole
+
+
 def test_correlated_errors_are_found():
     """AR(1) errors of lag-one correlation 0.8 over 37 readings: p < ALPHA in most tests (44 of 60
     with this seed; at 0.6 the check finds about 40 % at ALPHA and 65 % at 0.01: its power is

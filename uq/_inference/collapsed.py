@@ -36,6 +36,7 @@ because ``active`` is an array, not a shape.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 import warnings
@@ -453,6 +454,28 @@ class Posterior:
             }
         return self._cache["predictive"]
 
+    def predictive_thinned(self, max_draws: int | None) -> dict | None:
+        """The rows of :attr:`predictive` (chains flattened, {name: (S, n)}) that thinning to at
+        most ``max_draws`` keeps (every ceil(N / max_draws)-th draw, ``uq._models.fitted.thin_rows``'
+        rule), the same numbers, computed on those draws only: memory of S, not N, replicates a
+        reading (None when the model has no ``predict`` or the fit asked for no replicates)."""
+        if self._model.predict is None or not self._predictive:
+            return None
+        C, D = self.theta.shape[:2]
+        n = C * D
+        step = int(np.ceil(n / max_draws)) if max_draws and n > max_draws else 1
+        if "predictive" in self._cache:
+            return {k: v.reshape(n, -1)[::step] for k, v in self._cache["predictive"].items()}
+        rows, beta = self._rows()
+        keys = row_keys(self._keys()[1], n)[::step]
+        pred = map_rows(
+            _predict_row,
+            (rows[::step], beta[::step], keys),
+            (self.data,),
+            static=(self._model.predict,),
+        )
+        return {k: np.asarray(v) for k, v in pred.items()}
+
     @property
     def loglik_loo(self) -> np.ndarray | None:
         """(C, D', n) log p(reading_i | theta, other readings) on at most ``LOO_DRAWS`` draws, for
@@ -487,6 +510,18 @@ class Posterior:
                 {"model": self.model, "method": self.method} | self._attrs,
             )
         return self._cache["idata"]
+
+    @contextlib.contextmanager
+    def transient(self):
+        """A block whose parts made on demand (pointwise terms, replicates, InferenceData) are
+        dropped at its end; parts made before it are kept. For a use of every draw's (draws x
+        readings) arrays that need not outlive it, such as writing the posterior to a file."""
+        held = set(self._cache)
+        try:
+            yield self
+        finally:
+            for name in set(self._cache) - held:
+                del self._cache[name]
 
     @property
     def converged(self) -> bool:

@@ -24,7 +24,6 @@ from uq._io.netcdf import write_netcdf_atomic
 from uq._models.cubic_interpolation import LABEL as CUBICS_LABEL
 from uq._models.cubic_interpolation import NAME as CUBICS_NAME
 from uq._models.cubic_interpolation import CubicInterpolation, TestsVerdict
-from uq._models.fitted import thin_rows
 from uq._models.residual_order import order_warnings
 from uq._physics.cubic import cubic
 
@@ -283,12 +282,11 @@ class CampaignFit:
         not used: the replicates were drawn with the fit's), in the order of ``tests``; None when a
         test's posterior keeps no replicates."""
         out = []
-        for t in self.tests:
-            idata = t.posterior.idata
-            if idata is None or "posterior_predictive" not in idata.groups():
+        for t in self.tests:  # on the kept draws only: no (draws x readings) arrays of every draw
+            reps = t.posterior.predictive_thinned(n_draws)
+            if reps is None or "force_N" not in reps:
                 return None
-            a = np.asarray(idata.posterior_predictive["force_N"])
-            out.append(thin_rows(a.reshape(-1, a.shape[-1]), n_draws))
+            out.append(reps["force_N"])
         return out
 
     @property
@@ -354,12 +352,17 @@ class CampaignFit:
         """One NetCDF file per test (ArviZ InferenceData with posterior, log_likelihood,
         posterior_predictive and observed_data groups), made in memory and written atomically (a
         full disk is a one-line error, not a crash inside HDF5: ``uq._io.netcdf.netcdf_bytes``);
-        returns the paths (``uq fit --out``)."""
+        returns the paths (``uq fit --out``). Each test's InferenceData is made for its file and
+        dropped after it (unless it was made before): the memory of one test's (draws x readings)
+        groups at a time, not of the campaign's."""
         out = Path(out_dir)
-        return [
-            write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
-            for t in self.tests
-        ]
+        paths = []
+        for t in self.tests:
+            with t.posterior.transient():
+                paths.append(
+                    write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
+                )
+        return paths
 
     def __repr__(self) -> str:
         state = "converged" if self.converged else "NOT converged"

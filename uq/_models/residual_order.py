@@ -32,6 +32,8 @@ ORDER_UNKNOWN = (
 )
 ALPHA = 1e-3  # per block: 22 blocks in a campaign like data/n50 give a false warning about once in 45 campaigns
 N_NULL = 10000
+#: floats of one block of null vectors (16 MB): the check's memory does not grow with the readings
+NULL_BLOCK_VALUES = 1 << 21
 
 
 def lag_one_check(
@@ -51,10 +53,17 @@ def lag_one_check(
     z = np.asarray(residuals, float) / np.asarray(sd, float)
     W = np.asarray(design, float) / np.asarray(sd, float)[:, None]
     q, _ = np.linalg.qr(W)
-    null = np.random.default_rng(seed).standard_normal((n_null, z.size))
-    null -= (null @ q) @ q.T  # the residuals of a weighted fit to pure noise
     r1 = _lag_one(z[None])[0]
-    p = (1.0 + np.count_nonzero(_lag_one(null) >= r1)) / (n_null + 1.0)
+    rng = np.random.default_rng(seed)
+    # the null vectors in blocks of rows (the generator's stream is the same as in one array): memory
+    # of about NULL_BLOCK_VALUES floats whatever the number of readings, not n_null of them a reading
+    rows = max(1, min(n_null, NULL_BLOCK_VALUES // max(z.size, 1)))
+    above = 0
+    for i in range(0, n_null, rows):
+        null = rng.standard_normal((min(rows, n_null - i), z.size))
+        null -= (null @ q) @ q.T  # the residuals of a weighted fit to pure noise
+        above += np.count_nonzero(_lag_one(null) >= r1)
+    p = (1.0 + above) / (n_null + 1.0)
     return {"lag1": float(r1), "p": float(p)}
 
 

@@ -620,3 +620,34 @@ def test_discrepancy_plan_tests_between_the_pilots_pressures(table1_four):
     need = b.min_test_heights(b.model(np.append(b.tested, 5.5))[0])
     assert len(set(np.round(plan.tests[0]["heights_m"], 9))) >= need == 5
     assert plan.sd_predicted[0] < plan.sd_now[0]
+
+
+def test_discrepancy_builder_on_other_theta_is_the_builder_of_those_draws(table1_four):
+    """``with_theta`` (what scripts/plan_proof.py uses to measure what the new readings teach about
+    theta): the pilot's builder on other draws predicts exactly what a builder made with those
+    draws does, and leaves the original alone. And why it matters for this model: next to a
+    planned test (0.037 bar from it, as the proof's pressure for 12000 N at 120 mm is from its
+    5-bar test) the deviation's conditional variance, which only theta sets, is many times larger
+    at a short length scale than at a long one."""
+    from plan_helpers import discrepancy_builder
+
+    b = discrepancy_builder(table1_four, n_draws=3, length_bar=1.0)
+    other = discrepancy_builder(table1_four, n_draws=2, seed=1, length_bar=0.3)
+    moved = b.with_theta(other.theta)
+    target = [parse_target("force@110mm,5.5bar"), parse_target("force@120mm,4.963bar")]
+    readings = [E.Reading(0, float(h)) for h in HEIGHTS]
+    np.testing.assert_allclose(
+        E.evaluate(moved.frame([5.0]), target, readings),
+        E.evaluate(other.frame([5.0]), target, readings),
+        rtol=1e-9,
+    )
+    np.testing.assert_allclose(moved.length, other.length)
+    assert b.theta.shape[0] == 3 and b.length.shape == (3,)
+    with pytest.raises(ValueError, match="theta must be"):
+        b.with_theta(other.theta[:, :-1])
+    theta = np.repeat(b.theta[:1], 2, axis=0)
+    theta[:, -1] = np.log([0.25, 5.0])  # the length scale, bar
+    extra = b.with_theta(theta).frame([5.0]).extra_force_var(
+        np.array([0.120]), np.array([4.963]), np.array([True])
+    )[:, 0]
+    assert extra[0] > 30 * extra[1]

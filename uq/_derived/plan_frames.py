@@ -33,6 +33,7 @@ geometry, stand and recordings (public attributes of ``uq._models.linear_fit.Lin
 
 from __future__ import annotations
 
+import copy
 from typing import NamedTuple
 
 import numpy as np
@@ -167,6 +168,21 @@ class PairFrames:
         )
         mid, half = (after.max() + after.min()) / 2, max((after.max() - after.min()) / 2, 1e-3)
         return o, surface.Geometry(rec.x0_m, rec.piston_area_m2, float(mid), float(half))
+
+    def with_theta(self, theta):
+        """The same builder (file, references, model) on other draws of theta (S', n_theta): what
+        the plan would predict had the pilot known theta as ``theta`` says (scripts/plan_proof.py
+        gives it the draws of the fit after the plan, to measure what the new readings teach
+        about theta)."""
+        theta = np.asarray(theta, float)
+        if theta.ndim != 2 or theta.shape[1] != self.theta.shape[1]:
+            raise ValueError(f"theta must be (S, {self.theta.shape[1]}), got {theta.shape}")
+        out = copy.copy(self)
+        out._set_theta(theta)
+        return out
+
+    def _set_theta(self, theta) -> None:
+        self.theta = theta
 
     def label(self, orders) -> str:
         words = self.model_class.words.removeprefix("the ")
@@ -342,11 +358,15 @@ class DiscrepancyFrames(PairFrames):
     def __init__(self, rec, data, theta, stand, orders, geometry, reference):
         super().__init__(rec, data, theta, stand, orders, geometry, reference, SurfaceFit)
         self.model_class, self.name = DiscrepancyFit, DiscrepancyFit.name
+        self.scales = np.asarray(data.s, float)  # s_k
+        self._set_theta(self.theta)
+
+    def _set_theta(self, theta) -> None:
+        self.theta = theta
         n_noise = 3 if self.force_only else 5
         n_blocks = 1 if self.force_only else 2
-        self.amplitudes = np.exp(self.theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
-        self.length = np.exp(self.theta[:, n_noise + n_blocks])  # (S,)
-        self.scales = np.asarray(data.s, float)  # s_k
+        self.amplitudes = np.exp(theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
+        self.length = np.exp(theta[:, n_noise + n_blocks])  # (S,)
 
     @classmethod
     def of_fit(cls, fit, draws: int = DRAWS):

@@ -647,7 +647,9 @@ def test_discrepancy_builder_on_other_theta_is_the_builder_of_those_draws(table1
         b.with_theta(other.theta[:, :-1])
     theta = np.repeat(b.theta[:1], 2, axis=0)
     theta[:, -1] = np.log([0.25, 5.0])  # the length scale, bar
-    extra = b.with_theta(theta).frame([5.0]).extra_force_var(
-        np.array([0.120]), np.array([4.963]), np.array([True])
-    )[:, 0]
+    extra = (
+        b.with_theta(theta)
+        .frame([5.0])
+        .extra_force_var(np.array([0.120]), np.array([4.963]), np.array([True]))[:, 0]
+    )
     assert extra[0] > 30 * extra[1]

@@ -407,7 +407,9 @@ APPROXIMATIONS = (
     "readings' values (a preposterior closed form, no simulation)",
     "left out: the spread of the posterior mean over theta (reported now as "
     "sd_now_theta_spread), and that the new readings also move theta (a noise scale poorly known "
-    "from a small pilot changes the band)",
+    "from a small pilot changes the band; the discrepancy's length scale, whose short tail a pilot "
+    "with tests far apart keeps from the prior, can carry most of a target's predicted variance "
+    "next to a planned test, and tests close together then rule it out: docs/plan.md)",
     "pressure_for, natural_frequency and elastic_casing are linearised in the coefficients at the "
     "posterior mean given each theta (the delta method)",
     "the model after the plan is the one the default fit of the combined campaign takes (its orders "

@@ -410,7 +410,7 @@ def theta_lines(doc: dict) -> list[str]:
         "",
         "| scenario | target | replications | the prediction | the after-fit's closed form on its "
         "own theta | the prediction with the after-fit's theta | the prediction at the median "
-        f"theta draw | share of the predicted variance from the top {TAIL:.0%} of theta draws |",
+        f"theta draw | share of the predicted variance from the top {TAIL * 100:.0f} % of theta draws |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
 

@@ -346,12 +346,21 @@ def theta_diagnosis(builder, fit_after, targets, tests, draws: int) -> tuple[lis
     theta = {}
     if hasattr(builder, "length") and hasattr(after, "length"):
         q = (0.05, 0.25, 0.5)
+
+        def slope(b):
+            """The pressure-area deviation's slope in pressure, sqrt(3) a_F / l (m^2/bar: the sd
+            of a Matern 3/2 path's derivative), per draw: next to a tested pressure, at a
+            distance d, the deviation's conditional sd is about d times it."""
+            return np.sqrt(3.0) * b.amplitudes[:, 0] / b.length
+
         theta = {
             "quantiles": list(q),
             "length_bar_pilot": np.quantile(builder.length, q).tolist(),
             "length_bar_after": np.quantile(after.length, q).tolist(),
             "amplitude_m2_pilot": np.quantile(builder.amplitudes, q, axis=0).T.tolist(),
             "amplitude_m2_after": np.quantile(after.amplitudes, q, axis=0).T.tolist(),
+            "slope_rms_m2_per_bar_pilot": float(np.sqrt(np.mean(slope(builder) ** 2))),
+            "slope_rms_m2_per_bar_after": float(np.sqrt(np.mean(slope(after) ** 2))),
         }
     return rows, theta
 
@@ -431,12 +440,18 @@ def theta_lines(doc: dict) -> list[str]:
         pil = np.array([t["length_bar_pilot"] for t in th])
         aft = np.array([t["length_bar_after"] for t in th])
         q = th[0]["quantiles"]
+        sp = np.array([t["slope_rms_m2_per_bar_pilot"] for t in th])
+        sa = np.array([t["slope_rms_m2_per_bar_after"] for t in th])
         lines += [
             "",
             f"Scenario {name}, the discrepancy's length scale (bar), quantiles "
             f"{', '.join(f'{x:g}' for x in q)} averaged over {len(th)} replications: pilot "
             f"{', '.join(f'{x:.2g}' for x in pil.mean(0))}; after the plan "
-            f"{', '.join(f'{x:.2g}' for x in aft.mean(0))}.",
+            f"{', '.join(f'{x:.2g}' for x in aft.mean(0))}. The pressure-area deviation's slope "
+            "in pressure, sqrt(3) a_F / l (rms over the theta draws; next to a tested pressure "
+            "the deviation's conditional sd is about the distance times it): pilot "
+            f"{', '.join(f'{x:.2g}' for x in sp)} m^2/bar, after the plan "
+            f"{', '.join(f'{x:.2g}' for x in sa)} m^2/bar (replication by replication).",
         ]
     return ["", *lines]
 

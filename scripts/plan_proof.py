@@ -435,8 +435,12 @@ def theta_lines(doc: dict) -> list[str]:
         )
     for name in sorted({r["scenario"] for r in doc["rows"] if r.get("theta_after")}):
         th = [
-            r["theta_after"] for r in doc["rows"] if r["scenario"] == name and r.get("theta_after")
+            r["theta_after"]
+            for r in doc["rows"]
+            if r["scenario"] == name and r.get("theta_after", {}).get("slope_rms_m2_per_bar_after")
         ]
+        if not th:
+            continue
         pil = np.array([t["length_bar_pilot"] for t in th])
         aft = np.array([t["length_bar_after"] for t in th])
         q = th[0]["quantiles"]

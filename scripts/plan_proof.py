@@ -50,7 +50,6 @@ from uq._derived.plan import (  # noqa: E402
     make_plan,
     plan_document,
     readings_at,
-    uniform_readings,
 )
 from uq._derived.plan_frames import frames_of  # noqa: E402
 from uq._derived.plan_search import evaluate  # noqa: E402
@@ -248,9 +247,9 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
     )
     doc = plan_document(plan)
     # the uniform grid of the same size, laid out as make_plan compared it
-    _, uni = uniform_readings(plan.n_readings, plan.n_pressure_changes, cand, HEIGHTS_M)
+    uni = zip(plan.uniform["pressures_bar"], plan.uniform["heights_mm"], strict=True)
     uni_tests = [
-        {"pressure_bar": p, "heights_mm": list(np.asarray(h) * 1e3), "branches": _branches(h)}
+        {"pressure_bar": p, "heights_mm": list(h), "branches": _branches(np.asarray(h))}
         for p, h in uni
     ]
     out = {
@@ -309,7 +308,7 @@ def _planned(builder, targets, tests) -> np.ndarray:
     """The targets' variance given each draw of the builder's theta after ``tests`` [(p, heights)]
     (the plan's own frame, as make_plan evaluates it), (S, T)."""
     ps = np.array([p for p, _ in tests], float)
-    frame = builder.frame(ps)
+    frame = builder.frame(ps, new_heights=[h for _, h in tests])
     return evaluate(frame, targets, readings_at(frame, tests))
 
 

@@ -148,9 +148,13 @@ class PairFrames:
         )
 
     # ---- the model after the plan
-    def model(self, after_bar):
+    def model(self, after_bar, new_heights=None):
         """(orders, geometry) of the model fitted to the campaign with tests at ``after_bar``: the
-        fit's own for the file as it is, else what the fit would choose by default."""
+        fit's own for the file as it is, else what the fit would choose by default
+        (:func:`uq._models.surface.orders_for` the combined campaign). ``new_heights``: the
+        planned tests' heights (one array a test) when the layout is known; else a new test is
+        taken to have what the search gives it at least (``MIN_TEST_READINGS`` readings, half as
+        many distinct heights)."""
         after = np.unique(np.asarray(after_bar, float))
         if after.size == self.tested.size and np.allclose(np.sort(self.tested), after):
             return self.orders_now, self.geometry_now
@@ -158,13 +162,16 @@ class PairFrames:
         if self.thermo:
             g = thermo.ThermoGeometry(rec.x0_m, rec.piston_area_m2, float(after.max()))
             return thermo.default_orders(after.size), g
-        heights = min(np.unique(np.round(t.height_m, 9)).size for t in rec.tests)
-        points = min(t.n_points for t in rec.tests)
+        heights = [np.unique(np.round(t.height_m, 9)).size for t in rec.tests]
+        points = [t.n_points for t in rec.tests]
+        if new_heights is None:
+            heights.append(MIN_TEST_READINGS // 2)
+            points.append(MIN_TEST_READINGS)
+        else:
+            heights += [np.unique(np.round(np.asarray(h, float), 9)).size for h in new_heights]
+            points += [np.size(h) for h in new_heights]
         o = surface.default_orders(
-            after.size,
-            min_heights=min(heights, MIN_TEST_READINGS // 2),
-            min_points=min(points, MIN_TEST_READINGS),
-            volume=not self.force_only,
+            after.size, min_heights=min(heights), min_points=min(points), volume=not self.force_only
         )
         mid, half = (after.max() + after.min()) / 2, max((after.max() - after.min()) / 2, 1e-3)
         return o, surface.Geometry(rec.x0_m, rec.piston_area_m2, float(mid), float(half))
@@ -285,13 +292,14 @@ class PairFrames:
         return P, m
 
     # ---- the frame
-    def frame(self, new_bar=(), after_bar=None) -> Frame:
+    def frame(self, new_bar=(), after_bar=None, new_heights=None) -> Frame:
         """The frame with new tests at ``new_bar`` (bar), modelled as the fit of the campaign with
-        tests at ``after_bar`` would be (default: the file's and the new ones)."""
+        tests at ``after_bar`` would be (default: the file's and the new ones), the new tests read
+        at ``new_heights`` when the layout is known (:meth:`model`)."""
         new = np.asarray(new_bar, float).reshape(-1)
         _new_index(new, self.tested)
         after = np.concatenate([self.tested, new]) if after_bar is None else after_bar
-        o, g = self.model(after)
+        o, g = self.model(after, new_heights)
         T0, J = self.tested.size, new.size
         nodes = self.prepare(new)
         P, m = self._pilot(o, g, T0 + J, nodes)
@@ -346,6 +354,13 @@ class PairFrames:
     def key(self, after_bar) -> tuple:
         o, g = self.model(after_bar)
         return (repr(o), repr(g))
+
+    def heights_needed(self, new_bar, new_heights) -> int:
+        """Distinct heights each new test of this layout (tests at ``new_bar`` read at
+        ``new_heights``) needs for the model of the combined campaign to be fitted: that of the
+        orders the campaign gets (:meth:`model`; 0: any)."""
+        after = np.concatenate([self.tested, np.asarray(new_bar, float).reshape(-1)])
+        return self.min_test_heights(self.model(after, new_heights)[0])
 
 
 class DiscrepancyFrames(PairFrames):
@@ -543,7 +558,7 @@ class CubicFrames:
         return np.sqrt(np.mean(np.square(kap), axis=0))
 
     # ---- the frame
-    def frame(self, new_bar=(), after_bar=None) -> Frame:
+    def frame(self, new_bar=(), after_bar=None, new_heights=None) -> Frame:
         new = np.asarray(new_bar, float).reshape(-1)
         _new_index(new, self.tested)
         T0, J, b = self.tested.size, new.size, self.block
@@ -640,6 +655,10 @@ class CubicFrames:
 
     def key(self, after_bar) -> tuple:
         return ()
+
+    def heights_needed(self, new_bar, new_heights) -> int:
+        """A new cubic is fixed by its prior: any heights do."""
+        return 0
 
 
 def frames_of(fit, draws: int = DRAWS):

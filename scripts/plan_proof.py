@@ -46,8 +46,13 @@ from uq._data.stand_description import PAPER_STAND  # noqa: E402
 from uq._derived.comparison import fit_both, force_side  # noqa: E402
 from uq._derived.design import DesignGrid, SealedDesign, sealed_draws  # noqa: E402
 from uq._derived.margin import AUTO, choose, pressure_needed  # noqa: E402
-from uq._derived.plan import make_plan, plan_document, uniform_readings  # noqa: E402
+from uq._derived.plan import (  # noqa: E402
+    make_plan,
+    plan_document,
+    readings_at,
+)
 from uq._derived.plan_frames import frames_of  # noqa: E402
+from uq._derived.plan_search import evaluate  # noqa: E402
 from uq._derived.plan_targets import SealedInputs, parse_target  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
@@ -242,9 +247,9 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
     )
     doc = plan_document(plan)
     # the uniform grid of the same size, laid out as make_plan compared it
-    _, uni = uniform_readings(plan.n_readings, plan.n_pressure_changes, cand, HEIGHTS_M)
+    uni = zip(plan.uniform["pressures_bar"], plan.uniform["heights_mm"], strict=True)
     uni_tests = [
-        {"pressure_bar": p, "heights_mm": list(np.asarray(h) * 1e3), "branches": _branches(h)}
+        {"pressure_bar": p, "heights_mm": list(h), "branches": _branches(np.asarray(h))}
         for p, h in uni
     ]
     out = {
@@ -270,6 +275,8 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
             out["model_after_why"] = why_auto
         fits[kind] = (f, n2, _converged(f))
     out["converged"] = {k: v[2] for k, v in fits.items()}
+    planned = [(t["pressure_bar"], np.asarray(t["heights_mm"]) * 1e-3) for t in doc["tests"]]
+    diag, out["theta_after"] = theta_diagnosis(builder, fits["plan"][0], targets, planned, draws)
     for i, t in enumerate(targets):
         row = {
             "spec": t.spec,
@@ -288,9 +295,73 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
             row[f"{key}sd_achieved"] = float(np.std(d))
             row[f"{key}covered"] = bool(lo <= row["truth"] <= hi)
         row["ratio"] = row["sd_achieved"] / row["sd_predicted"]
+        row |= diag[i]
         out["targets"].append(row)
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+TAIL = 0.10  # the share of theta draws whose contribution to the predicted variance is reported
+
+
+def _planned(builder, targets, tests) -> np.ndarray:
+    """The targets' variance given each draw of the builder's theta after ``tests`` [(p, heights)]
+    (the plan's own frame, as make_plan evaluates it), (S, T)."""
+    ps = np.array([p for p, _ in tests], float)
+    frame = builder.frame(ps, new_heights=[h for _, h in tests])
+    return evaluate(frame, targets, readings_at(frame, tests))
+
+
+def theta_diagnosis(builder, fit_after, targets, tests, draws: int) -> tuple[list, dict]:
+    """What the new readings teach about theta, per target: the prediction's variance per draw of
+    the pilot's theta (its median, and the share of the mean carried by the ``TAIL`` draws that
+    contribute most), the closed form of the fit after the plan on its own theta (the frame
+    against the fit's draws: it should be the achieved sd), and the plan's prediction from the
+    pilot's data with the after-fit's theta (pilot's frame, the after-fit's theta: the whole
+    difference theta makes). And, for the discrepancy model, the length scale's quantiles before
+    and after."""
+    v = _planned(builder, targets, tests)
+    after = frames_of(fit_after, draws)
+    v_after = evaluate(after.frame(), targets)
+    v_theta = (
+        _planned(builder.with_theta(after.theta), targets, tests)
+        if hasattr(builder, "with_theta") and type(after) is type(builder)
+        else None
+    )
+    top = max(1, int(round(TAIL * v.shape[0])))
+    rows = []
+    for i in range(len(targets)):
+        vi = np.sort(v[:, i])[::-1]
+        rows.append(
+            {
+                "sd_predicted_median_theta": float(np.sqrt(np.median(vi))),
+                "tail_share": float(vi[:top].sum() / vi.sum()),
+                "sd_closed_form_after": float(np.sqrt(np.mean(v_after[:, i]))),
+                "sd_predicted_after_theta": None
+                if v_theta is None
+                else float(np.sqrt(np.mean(v_theta[:, i]))),
+            }
+        )
+    theta = {}
+    if hasattr(builder, "length") and hasattr(after, "length"):
+        q = (0.05, 0.25, 0.5)
+
+        def slope(b):
+            """The pressure-area deviation's slope in pressure, sqrt(3) a_F / l (m^2/bar: the sd
+            of a Matern 3/2 path's derivative), per draw: next to a tested pressure, at a
+            distance d, the deviation's conditional sd is about d times it."""
+            return np.sqrt(3.0) * b.amplitudes[:, 0] / b.length
+
+        theta = {
+            "quantiles": list(q),
+            "length_bar_pilot": np.quantile(builder.length, q).tolist(),
+            "length_bar_after": np.quantile(after.length, q).tolist(),
+            "amplitude_m2_pilot": np.quantile(builder.amplitudes, q, axis=0).T.tolist(),
+            "amplitude_m2_after": np.quantile(after.amplitudes, q, axis=0).T.tolist(),
+            "slope_rms_m2_per_bar_pilot": float(np.sqrt(np.mean(slope(builder) ** 2))),
+            "slope_rms_m2_per_bar_after": float(np.sqrt(np.mean(slope(after) ** 2))),
+        }
+    return rows, theta
 
 
 def _branches(h) -> list[str]:
@@ -312,6 +383,80 @@ def binomial_region(n: int, level: float = LEVEL, conf: float = 0.95) -> tuple[i
     return int(stats.binom.ppf((1 - conf) / 2, n, level)), int(
         stats.binom.isf((1 - conf) / 2, n, level)
     )
+
+
+def _theta_summary(ts: list[dict]) -> dict:
+    """The means over replications of theta_diagnosis's ratios (replications that recorded it)."""
+    d = [t for t in ts if t.get("sd_closed_form_after") is not None]
+    if not d:
+        return {}
+
+    def mean_ratio(key):
+        r = [t["sd_achieved"] / t[key] for t in d if t.get(key)]
+        return float(np.mean(r)) if r else None
+
+    return {
+        "theta": {
+            "n": len(d),
+            "ratio_mean": float(np.mean([t["ratio"] for t in d])),
+            "closed_form_after_ratio_mean": mean_ratio("sd_closed_form_after"),
+            "after_theta_ratio_mean": mean_ratio("sd_predicted_after_theta"),
+            "median_theta_ratio_mean": mean_ratio("sd_predicted_median_theta"),
+            "tail_share_mean": float(np.mean([t["tail_share"] for t in d])),
+        }
+    }
+
+
+def theta_lines(doc: dict) -> list[str]:
+    """Markdown of what the new readings teach about theta (the replications that recorded it)."""
+    ts = [t for t in doc["by_target"] if t.get("theta")]
+    if not ts:
+        return []
+    lines = [
+        "What the new readings teach about theta (replications that recorded it; ratios are the "
+        "achieved sd over each):",
+        "",
+        "| scenario | target | replications | the prediction | the after-fit's closed form on its "
+        "own theta | the prediction with the after-fit's theta | the prediction at the median "
+        f"theta draw | share of the predicted variance from the top {TAIL * 100:.0f} % of theta draws |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+
+    def f(x):
+        return "-" if x is None else f"{x:.2f}"
+
+    for t in ts:
+        h = t["theta"]
+        lines.append(
+            f"| {t['scenario']} | `{t['spec']}` | {h['n']} | {f(h['ratio_mean'])} | "
+            f"{f(h['closed_form_after_ratio_mean'])} | {f(h['after_theta_ratio_mean'])} | "
+            f"{f(h['median_theta_ratio_mean'])} | {h['tail_share_mean']:.2f} |"
+        )
+    for name in sorted({r["scenario"] for r in doc["rows"] if r.get("theta_after")}):
+        th = [
+            r["theta_after"]
+            for r in doc["rows"]
+            if r["scenario"] == name and r.get("theta_after", {}).get("slope_rms_m2_per_bar_after")
+        ]
+        if not th:
+            continue
+        pil = np.array([t["length_bar_pilot"] for t in th])
+        aft = np.array([t["length_bar_after"] for t in th])
+        q = th[0]["quantiles"]
+        sp = np.array([t["slope_rms_m2_per_bar_pilot"] for t in th])
+        sa = np.array([t["slope_rms_m2_per_bar_after"] for t in th])
+        lines += [
+            "",
+            f"Scenario {name}, the discrepancy's length scale (bar), quantiles "
+            f"{', '.join(f'{x:g}' for x in q)} averaged over {len(th)} replications: pilot "
+            f"{', '.join(f'{x:.2g}' for x in pil.mean(0))}; after the plan "
+            f"{', '.join(f'{x:.2g}' for x in aft.mean(0))}. The pressure-area deviation's slope "
+            "in pressure, sqrt(3) a_F / l (rms over the theta draws; next to a tested pressure "
+            "the deviation's conditional sd is about the distance times it): pilot "
+            f"{', '.join(f'{x:.2g}' for x in sp)} m^2/bar, after the plan "
+            f"{', '.join(f'{x:.2g}' for x in sa)} m^2/bar (replication by replication).",
+        ]
+    return ["", *lines]
 
 
 def summarise(rows: list[dict], command: str) -> dict:
@@ -341,6 +486,7 @@ def summarise(rows: list[dict], command: str) -> dict:
                 "uniform_sd_achieved_mean": float(np.mean([t["uniform_sd_achieved"] for t in ts])),
                 "uniform_over_plan_sd": float(np.exp(np.mean(np.log(gain)))),
                 "plan_better": int(np.sum(gain > 1)),
+                **_theta_summary(ts),
             }
         )
     poor = []
@@ -419,6 +565,7 @@ def markdown(doc: dict) -> str:
     lines += [f"- {w}" for w in doc["poor"]] or ["- none"]
     if doc.get("model_choice"):
         lines += ["", f"{doc['model_choice'][0].upper()}{doc['model_choice'][1:]}."]
+    lines += theta_lines(doc)
     lines += ["", "Scenarios:", ""]
     for name in sorted({r["scenario"] for r in doc["rows"]}):
         sc = SCENARIOS[name]

@@ -853,6 +853,10 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
         lines += [f"- {w}" for w in d.get("poor", [])] or ["- none"]
         if d.get("model_choice"):
             lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
+        sys.path.insert(0, str(ROOT / "scripts"))
+        from plan_proof import theta_lines  # the proof's own table of what theta learnt
+
+        lines += theta_lines(d)
         return "\n".join(lines) + "\n"
 
     return make

@@ -332,6 +332,10 @@ def test_recording_order_and_uniform_layout():
     ps, tests = P.uniform_readings(20, 2, [0.1, 1, 3, 4, 6, 7, 9, 10], HEIGHTS)
     assert ps.tolist() == [3.0, 7.0]
     assert sum(len(h) for _, h in tests) == 20
+    _, tests = P.uniform_readings(16, 2, [3, 7], HEIGHTS, min_heights=5)
+    for _, h in tests:  # 8 readings a test, 5 of them down: 5 distinct heights, none twice a branch
+        assert h.size == 8 and P.distinct_heights(h) >= 5
+        assert np.all(np.diff(h[:5]) < 0) and np.all(np.diff(h[5:]) > 0)
 
 
 @pytest.mark.parametrize(
@@ -620,3 +624,110 @@ def test_discrepancy_plan_tests_between_the_pilots_pressures(table1_four):
     need = b.min_test_heights(b.model(np.append(b.tested, 5.5))[0])
     assert len(set(np.round(plan.tests[0]["heights_m"], 9))) >= need == 5
     assert plan.sd_predicted[0] < plan.sd_now[0]
+
+
+def test_discrepancy_builder_on_other_theta_is_the_builder_of_those_draws(table1_four):
+    """``with_theta`` (what scripts/plan_proof.py uses to measure what the new readings teach about
+    theta): the pilot's builder on other draws predicts exactly what a builder made with those
+    draws does, and leaves the original alone. And why it matters for this model: next to a
+    planned test (0.037 bar from it, as the proof's pressure for 12000 N at 120 mm is from its
+    5-bar test) the deviation's conditional variance, which only theta sets, is many times larger
+    at a short length scale than at a long one."""
+    from plan_helpers import discrepancy_builder
+
+    b = discrepancy_builder(table1_four, n_draws=3, length_bar=1.0)
+    other = discrepancy_builder(table1_four, n_draws=2, seed=1, length_bar=0.3)
+    moved = b.with_theta(other.theta)
+    target = [parse_target("force@110mm,5.5bar"), parse_target("force@120mm,4.963bar")]
+    readings = [E.Reading(0, float(h)) for h in HEIGHTS]
+    np.testing.assert_allclose(
+        E.evaluate(moved.frame([5.0]), target, readings),
+        E.evaluate(other.frame([5.0]), target, readings),
+        rtol=1e-9,
+    )
+    np.testing.assert_allclose(moved.length, other.length)
+    assert b.theta.shape[0] == 3 and b.length.shape == (3,)
+    with pytest.raises(ValueError, match="theta must be"):
+        b.with_theta(other.theta[:, :-1])
+    theta = np.repeat(b.theta[:1], 2, axis=0)
+    theta[:, -1] = np.log([0.25, 5.0])  # the length scale, bar
+    extra = (
+        b.with_theta(theta)
+        .frame([5.0])
+        .extra_force_var(np.array([0.120]), np.array([4.963]), np.array([True]))[:, 0]
+    )
+    assert extra[0] > 30 * extra[1]
+
+
+def test_every_planned_test_has_the_heights_the_combined_campaigns_orders_need():
+    """Issue 31: the model fitted after the plan takes the orders of the combined campaign (the
+    pilot's three tests and the planned ones: F_p 3x1 becomes F_p 3x3), and the discrepancy refuses
+    a test with fewer distinct heights than those orders need (5 with piston readings). Every test
+    of the plan, and of the uniform grid it is compared with (the same 16 readings over two tests:
+    8 a test, laid out 4 down and 4 up before the fix), holds them, and each is evaluated in the
+    frame of those orders."""
+    from plan_helpers import discrepancy_builder
+
+    from uq._data.recordings import recordings_from_text, write_recordings_csv
+    from uq._models import discrepancy as dev
+    from uq._stand import simulator
+
+    layout = uq.Layout(pressures_bar=(1.0, 4.0, 7.0), step_m=0.015)
+    pilot_tests = simulator.simulate("n50", seed=5, layout=layout)
+    pilot = recordings_from_text(write_recordings_csv(pilot_tests, "pilot"), "pilot")
+    b = discrepancy_builder(pilot, n_draws=3, length_bar=1.0)
+    targets = [parse_target("force@110mm,0.5bar"), parse_target("force@110mm,9bar")]
+    plan = P.make_plan(b, targets, HEIGHTS, [0.5, 5.5, 9.0], max_readings=16, draws=3)
+    assert plan.n_pressure_changes == 2 and plan.heights_added == []
+    layouts = {
+        "plan": [(t["pressure_bar"], np.asarray(t["heights_m"]) * 1e3) for t in plan.tests],
+        "uniform grid": list(
+            zip(plan.uniform["pressures_bar"], plan.uniform["heights_mm"], strict=True)
+        ),
+    }
+    assert plan.uniform["n_readings"] == plan.n_readings == 16
+    for name, tests in layouts.items():
+        planned = [
+            {
+                "pressure_bar": p,
+                "heights_mm": list(h),
+                "branches": ["compression"] * P._n_down(h) + ["rebound"] * (len(h) - P._n_down(h)),
+            }
+            for p, h in tests
+        ]
+        new = simulator.simulate_planned("n50", planned, seed=1)
+        combined = recordings_from_text(write_recordings_csv(pilot_tests + new, name), name)
+        orders = surface.orders_for(combined)
+        assert orders != surface.orders_for(pilot)  # the orders change with the new tests
+        need = dev.min_heights_needed(orders, combined.has_piston)
+        assert need == plan.min_heights_per_test == 5
+        for t in combined.tests:
+            have = np.unique(np.round(t.height_m, 9)).size
+            assert have >= need, f"{name}: the {t.pressure_bar:g}-bar test has {have} heights"
+    frame = b.frame([0.5, 9.0], new_heights=[h * 1e-3 for _, h in layouts["plan"]])
+    assert frame.label == plan.label
+
+
+def test_a_test_short_of_heights_is_completed_and_said():
+    """A layout whose test visits fewer distinct heights than the combined campaign's orders need
+    (a hand-made one: the search never makes it) gets compression readings at the heights it
+    misses, spread evenly, and a note saying so."""
+    from plan_helpers import discrepancy_builder
+
+    b = discrepancy_builder(_first_tests(_table1_small(), 3), n_draws=2)
+    short = [(9.0, np.array([0.155, 0.110, 0.065, 0.110]))]
+    tests, need, notes = P.complete_tests(b, short, HEIGHTS)
+    assert need == 5
+    h = tests[0][1]
+    assert P.distinct_heights(h) == 5 and h.size == 6
+    assert np.all(np.diff(h[:5]) < 0) and h[-1] == 0.110  # the rebound reading stays last
+    assert (
+        len(notes) == 1
+        and "9-bar test: 2 reading(s) on compression added at 125, 95 mm" in notes[0]
+    )
+    with pytest.raises(InputError, match="needs 5 distinct heights"):
+        P.complete_tests(b, short, [0.155, 0.110, 0.065, 0.08])
+
+
+def _table1_small():
+    return uq.simulate("n50", seed=5, layout=uq.Layout(pressures_bar=(1.0, 4.0, 7.0), step_m=0.015))

@@ -346,6 +346,13 @@ def _print(rec, plan, info) -> None:
         if up:
             line += f"; up {' '.join(up)} mm"
         print(line)
+    if plan.min_heights_per_test:
+        print(
+            f"  each new test visits at least {plan.min_heights_per_test} distinct heights: what "
+            "the model after the plan needs per test (fewer and it refuses the campaign)"
+        )
+    for note in plan.heights_added:
+        print(f"  note: {note}")
     if len(plan.tried) > 1:
         print("  plans tried (new tests: readings, predicted sd per target):")
         for t in plan.tried:

@@ -84,10 +84,11 @@ def uniform_pressures(n: int, pressures_bar) -> np.ndarray:
     return np.sort(np.asarray(out))
 
 
-def uniform_readings(n_readings: int, n_tests: int, pressures_bar, heights_m):
+def uniform_readings(n_readings: int, n_tests: int, pressures_bar, heights_m, min_heights: int = 0):
     """A uniform grid of ``n_readings`` readings over ``n_tests`` new tests: the tests' pressures
     spread evenly over ``pressures_bar`` (:func:`uniform_pressures`); in each test its share of the
-    readings at heights spread evenly, down then up (each height at most once per branch).
+    readings at heights spread evenly, down then up (each height at most once per branch), at
+    least ``min_heights`` of them on the way down (distinct heights the model needs in a test).
     Returns (pressures, [(p, heights)])."""
     ps = uniform_pressures(n_tests, pressures_bar)
     share = np.full(ps.size, n_readings // ps.size)
@@ -95,8 +96,9 @@ def uniform_readings(n_readings: int, n_tests: int, pressures_bar, heights_m):
     tests = []
     for p, m in zip(ps, share, strict=True):
         m = int(min(m, MAX_PER_HEIGHT * len(heights_m)))
-        down = spread((m + 1) // 2, heights_m)
-        up = spread(m // 2, heights_m)
+        n_down = min(max((m + 1) // 2, int(min_heights)), m, len(heights_m))
+        down = spread(n_down, heights_m)
+        up = spread(m - n_down, heights_m)
         tests.append((float(p), np.concatenate([down[::-1], up])))
     return ps, tests
 
@@ -110,6 +112,59 @@ def readings_at(frame: Frame, tests) -> list[Reading]:
             raise ValueError(f"the frame has no new test at {p:g} bar")
         out += [Reading(j, float(h)) for h in hs]
     return out
+
+
+def distinct_heights(heights_m) -> int:
+    """How many distinct heights a test's readings visit."""
+    return int(np.unique(np.round(np.asarray(heights_m, float), 9)).size)
+
+
+def complete_tests(builder, tests, heights_m, what: str = "plan"):
+    """``tests`` [(pressure_bar, heights)] with every test holding the distinct heights the model
+    of the combined campaign (the file's tests and these, with the orders that campaign gets:
+    ``builder.heights_needed``) needs per test, so that the campaign read at the stand can be
+    fitted: a test with too few gets readings on compression at heights of ``heights_m`` it does
+    not visit yet, spread evenly (repeated until the orders, which follow the fewest heights in a
+    test, settle). Returns (tests, need, notes): the notes say what was added (none: nothing)."""
+    tests = [(float(p), np.asarray(h, float)) for p, h in tests]
+    heights = np.asarray(heights_m, float)
+    ps = [p for p, _ in tests]
+    added: dict[int, list] = {}
+    for _ in range(heights.size + 1):
+        need = builder.heights_needed(ps, [h for _, h in tests]) if tests else 0
+        short = [i for i, (_, h) in enumerate(tests) if distinct_heights(h) < need]
+        if not short:
+            notes = [
+                f"the {what}'s {tests[i][0]:g}-bar test: {len(a)} reading(s) on compression added "
+                f"at {', '.join(f'{x * 1e3:g}' for x in sorted(a, reverse=True))} mm, so that it "
+                f"has the {need} distinct heights the model of the combined campaign needs per test"
+                for i, a in sorted(added.items())
+            ]
+            return tests, need, notes
+        for i in short:
+            p, h = tests[i]
+            seen = np.round(h, 9)
+            free = heights[~np.isin(np.round(heights, 9), seen)]
+            add = spread(need - distinct_heights(h), free)
+            if add.size < need - distinct_heights(h):
+                raise InputError(
+                    f"heights_m: the {what}'s {p:g}-bar test needs {need} distinct heights for the "
+                    f"model of the combined campaign and only {distinct_heights(h) + add.size} are "
+                    "candidates: give more heights",
+                    param="heights_m",
+                )
+            down = np.sort(np.concatenate([h[: _n_down(h)], add]))[::-1]
+            tests[i] = (p, np.concatenate([down, h[_n_down(h) :]]))
+            added.setdefault(i, []).extend(add.tolist())
+    raise RuntimeError("the orders of the combined campaign did not settle")  # pragma: no cover
+
+
+def _n_down(h) -> int:
+    """Readings of a test laid out down then up (``recording_order``) taken on the way down: the
+    leading run of strictly falling heights."""
+    h = np.asarray(h, float)
+    rise = np.flatnonzero(np.diff(h) >= 0)
+    return h.size if rise.size == 0 else int(rise[0] + 1)
 
 
 def required_tests(targets, tested_bar, candidates_bar) -> np.ndarray:
@@ -173,6 +228,8 @@ class Plan:
     target_sd: list | None = None
     n_draws: int = 0
     tried: list = field(default_factory=list)
+    min_heights_per_test: int = 0
+    heights_added: list = field(default_factory=list)
 
     @property
     def cost(self) -> float:
@@ -211,9 +268,10 @@ def _now(builder, targets):
 
 
 def _layout(builder, targets, tests) -> tuple[list, np.ndarray, Frame]:
-    """Readings of ``tests`` [(pressure_bar, heights)] in their own frame, and the variances."""
+    """Readings of ``tests`` [(pressure_bar, heights)] in their own frame (the orders the combined
+    campaign, laid out so, gets), and the variances."""
     ps = np.array([p for p, _ in tests], float)
-    frame = builder.frame(ps)
+    frame = builder.frame(ps, new_heights=[h for _, h in tests])
     readings = readings_at(frame, tests)
     return readings, evaluate(frame, targets, readings), frame
 
@@ -275,21 +333,26 @@ def _search_tests(builder, targets, cand, heights, n_new, required, scale2, **kw
     return path, tests
 
 
-def _uniform(builder, targets, n_readings, n_tests, cand, heights):
-    """The uniform grid of the plan's size, and at other sizes for the figure."""
-    ps, tests = uniform_readings(n_readings, n_tests, cand, heights)
+def _uniform(builder, targets, n_readings, n_tests, cand, heights, need):
+    """The uniform grid of the plan's size (at least ``need`` distinct heights a test, completed
+    where the combined campaign's orders need more: :func:`complete_tests`), and at other sizes
+    for the figure. Returns (same, curve, notes)."""
+    ps, tests = uniform_readings(n_readings, n_tests, cand, heights, need)
+    tests, _, notes = complete_tests(builder, tests, heights, "uniform grid")
     _, v, _ = _layout(builder, targets, tests)
     same = {
         "n_readings": int(sum(len(h) for _, h in tests)),
         "n_pressure_changes": len(tests),
         "pressures_bar": [float(p) for p in ps],
+        "heights_mm": [[round(x * 1e3, 6) for x in h] for _, h in tests],
         "sd": _sd(v),
     }
     curve = []
     for f in (0.5, 1.0, 2.0, 4.0):
         n = int(round(f * n_readings))
         if MIN_TEST_READINGS * n_tests <= n <= MAX_PER_HEIGHT * heights.size * n_tests:
-            _, tl = uniform_readings(n, n_tests, cand, heights)
+            _, tl = uniform_readings(n, n_tests, cand, heights, need)
+            tl, _, _ = complete_tests(builder, tl, heights, "uniform grid")
             curve.append(
                 {
                     "n_readings": n,
@@ -297,7 +360,7 @@ def _uniform(builder, targets, n_readings, n_tests, cand, heights):
                     "sd": _sd(_layout(builder, targets, tl)[1]),
                 }
             )
-    return same, curve
+    return same, curve, notes
 
 
 def make_plan(
@@ -347,6 +410,8 @@ def make_plan(
         path, tests = _search_tests(builder, targets, cand, heights, n_new, required, scale2, **kw)
         if not path.readings:
             break
+        n_searched = len(tests)
+        tests, need, added = complete_tests(builder, tests, heights)
         readings, v, own = _layout(builder, targets, tests)
         vbar = np.mean(v, axis=0)
         score = objective.score(vbar, len(readings) + cost_per_pressure * len(tests))
@@ -360,18 +425,20 @@ def make_plan(
             }
         )
         if best is None or score < best[0]:
-            best, stale = (score, path, tests, readings, v, own), 0
+            best, stale = (score, path, tests, readings, v, own, need, added), 0
         else:
             stale += 1
-        if stale >= 2 or len(tests) < n_new:
+        if stale >= 2 or n_searched < n_new:
             break
     if best is None:
         raise InputError(
             "no planned reading reduces the targets' variance: the candidate pressures and heights "
             "do not inform them (`candidates_bar`, `heights_m`)"
         )
-    _, path, tests, readings, v, own = best
-    uniform, curve = _uniform(builder, targets, len(readings), len(tests), cand, heights)
+    _, path, tests, readings, v, own, need, added = best
+    uniform, curve, added_uniform = _uniform(
+        builder, targets, len(readings), len(tests), cand, heights, need
+    )
     return Plan(
         model=builder.name,
         label=own.label,
@@ -398,6 +465,8 @@ def make_plan(
         target_sd=None if target_sd is None else [float(t) for t in target_sd],
         n_draws=int(v.shape[0]),
         tried=tried,
+        min_heights_per_test=int(need),
+        heights_added=added + added_uniform,
     )
 
 
@@ -407,12 +476,17 @@ APPROXIMATIONS = (
     "readings' values (a preposterior closed form, no simulation)",
     "left out: the spread of the posterior mean over theta (reported now as "
     "sd_now_theta_spread), and that the new readings also move theta (a noise scale poorly known "
-    "from a small pilot changes the band)",
+    "from a small pilot changes the band; the discrepancy's length scale, whose short tail a pilot "
+    "with tests far apart keeps from the prior, can carry most of a target's predicted variance "
+    "next to a planned test, and tests close together then rule it out: docs/plan.md)",
     "pressure_for, natural_frequency and elastic_casing are linearised in the coefficients at the "
     "posterior mean given each theta (the delta method)",
     "the model after the plan is the one the default fit of the combined campaign takes (its orders "
     "and pressure scaling follow the tests); a different model choice after the new data is not "
     "foreseen",
+    "every planned test (and every test of the uniform grid) visits at least min_heights_per_test "
+    "distinct heights: what the model needs per test with the orders the combined campaign gets; "
+    "readings added to reach it are listed in heights_added",
 )
 
 
@@ -451,6 +525,8 @@ def plan_document(plan: Plan, model_info: dict | None = None) -> dict:
         **({"model_choice": model_info} if model_info else {}),
         "n_readings": plan.n_readings,
         "n_pressure_changes": plan.n_pressure_changes,
+        "min_heights_per_test": plan.min_heights_per_test,
+        "heights_added": list(plan.heights_added),
         "cost_per_pressure_readings": plan.cost_per_pressure,
         "stand_time_readings": plan.cost,
         "tests": tests,

@@ -33,6 +33,7 @@ geometry, stand and recordings (public attributes of ``uq._models.linear_fit.Lin
 
 from __future__ import annotations
 
+import copy
 from typing import NamedTuple
 
 import numpy as np
@@ -147,9 +148,13 @@ class PairFrames:
         )
 
     # ---- the model after the plan
-    def model(self, after_bar):
+    def model(self, after_bar, new_heights=None):
         """(orders, geometry) of the model fitted to the campaign with tests at ``after_bar``: the
-        fit's own for the file as it is, else what the fit would choose by default."""
+        fit's own for the file as it is, else what the fit would choose by default
+        (:func:`uq._models.surface.orders_for` the combined campaign). ``new_heights``: the
+        planned tests' heights (one array a test) when the layout is known; else a new test is
+        taken to have what the search gives it at least (``MIN_TEST_READINGS`` readings, half as
+        many distinct heights)."""
         after = np.unique(np.asarray(after_bar, float))
         if after.size == self.tested.size and np.allclose(np.sort(self.tested), after):
             return self.orders_now, self.geometry_now
@@ -157,16 +162,34 @@ class PairFrames:
         if self.thermo:
             g = thermo.ThermoGeometry(rec.x0_m, rec.piston_area_m2, float(after.max()))
             return thermo.default_orders(after.size), g
-        heights = min(np.unique(np.round(t.height_m, 9)).size for t in rec.tests)
-        points = min(t.n_points for t in rec.tests)
+        heights = [np.unique(np.round(t.height_m, 9)).size for t in rec.tests]
+        points = [t.n_points for t in rec.tests]
+        if new_heights is None:
+            heights.append(MIN_TEST_READINGS // 2)
+            points.append(MIN_TEST_READINGS)
+        else:
+            heights += [np.unique(np.round(np.asarray(h, float), 9)).size for h in new_heights]
+            points += [np.size(h) for h in new_heights]
         o = surface.default_orders(
-            after.size,
-            min_heights=min(heights, MIN_TEST_READINGS // 2),
-            min_points=min(points, MIN_TEST_READINGS),
-            volume=not self.force_only,
+            after.size, min_heights=min(heights), min_points=min(points), volume=not self.force_only
         )
         mid, half = (after.max() + after.min()) / 2, max((after.max() - after.min()) / 2, 1e-3)
         return o, surface.Geometry(rec.x0_m, rec.piston_area_m2, float(mid), float(half))
+
+    def with_theta(self, theta):
+        """The same builder (file, references, model) on other draws of theta (S', n_theta): what
+        the plan would predict had the pilot known theta as ``theta`` says (scripts/plan_proof.py
+        gives it the draws of the fit after the plan, to measure what the new readings teach
+        about theta)."""
+        theta = np.asarray(theta, float)
+        if theta.ndim != 2 or theta.shape[1] != self.theta.shape[1]:
+            raise ValueError(f"theta must be (S, {self.theta.shape[1]}), got {theta.shape}")
+        out = copy.copy(self)
+        out._set_theta(theta)
+        return out
+
+    def _set_theta(self, theta) -> None:
+        self.theta = theta
 
     def label(self, orders) -> str:
         words = self.model_class.words.removeprefix("the ")
@@ -269,13 +292,14 @@ class PairFrames:
         return P, m
 
     # ---- the frame
-    def frame(self, new_bar=(), after_bar=None) -> Frame:
+    def frame(self, new_bar=(), after_bar=None, new_heights=None) -> Frame:
         """The frame with new tests at ``new_bar`` (bar), modelled as the fit of the campaign with
-        tests at ``after_bar`` would be (default: the file's and the new ones)."""
+        tests at ``after_bar`` would be (default: the file's and the new ones), the new tests read
+        at ``new_heights`` when the layout is known (:meth:`model`)."""
         new = np.asarray(new_bar, float).reshape(-1)
         _new_index(new, self.tested)
         after = np.concatenate([self.tested, new]) if after_bar is None else after_bar
-        o, g = self.model(after)
+        o, g = self.model(after, new_heights)
         T0, J = self.tested.size, new.size
         nodes = self.prepare(new)
         P, m = self._pilot(o, g, T0 + J, nodes)
@@ -331,6 +355,13 @@ class PairFrames:
         o, g = self.model(after_bar)
         return (repr(o), repr(g))
 
+    def heights_needed(self, new_bar, new_heights) -> int:
+        """Distinct heights each new test of this layout (tests at ``new_bar`` read at
+        ``new_heights``) needs for the model of the combined campaign to be fitted: that of the
+        orders the campaign gets (:meth:`model`; 0: any)."""
+        after = np.concatenate([self.tested, np.asarray(new_bar, float).reshape(-1)])
+        return self.min_test_heights(self.model(after, new_heights)[0])
+
 
 class DiscrepancyFrames(PairFrames):
     """Frames of the surface with a discrepancy in pressure (module docstring): the surface's
@@ -341,11 +372,15 @@ class DiscrepancyFrames(PairFrames):
 
     def __init__(self, rec, data, theta, stand, orders, geometry, reference, model=DiscrepancyFit):
         super().__init__(rec, data, theta, stand, orders, geometry, reference, model)
+        self.scales = np.asarray(data.s, float)  # s_k
+        self._set_theta(self.theta)
+
+    def _set_theta(self, theta) -> None:
+        self.theta = theta
         n_noise = 3 if self.force_only else 5
         n_blocks = 1 if self.force_only else 2
-        self.amplitudes = np.exp(self.theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
-        self.length = np.exp(self.theta[:, n_noise + n_blocks])  # (S,)
-        self.scales = np.asarray(data.s, float)  # s_k
+        self.amplitudes = np.exp(theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
+        self.length = np.exp(theta[:, n_noise + n_blocks])  # (S,)
 
     def label(self, orders) -> str:
         base = surface.force_label(orders) if self.force_only else orders.label
@@ -509,7 +544,7 @@ class CubicFrames:
         return np.sqrt(np.mean(np.square(kap), axis=0))
 
     # ---- the frame
-    def frame(self, new_bar=(), after_bar=None) -> Frame:
+    def frame(self, new_bar=(), after_bar=None, new_heights=None) -> Frame:
         new = np.asarray(new_bar, float).reshape(-1)
         _new_index(new, self.tested)
         T0, J, b = self.tested.size, new.size, self.block
@@ -606,6 +641,10 @@ class CubicFrames:
 
     def key(self, after_bar) -> tuple:
         return ()
+
+    def heights_needed(self, new_bar, new_heights) -> int:
+        """A new cubic is fixed by its prior: any heights do."""
+        return 0
 
 
 def frames_of(fit, draws: int = DRAWS):

@@ -17,7 +17,8 @@ current posterior of theta is an average of closed forms (a preposterior analysi
 Nonlinear targets are linearised at the posterior mean given theta (``uq._derived.plan_targets``).
 What this leaves out (docs/plan.md says when it matters, reports/plan-proof/ measures it): the
 spread of the posterior mean over theta (reported now as ``sd_now_theta_spread``), and that the
-new readings also teach theta (a noise scale poorly known from a small pilot moves).
+new readings also teach theta (a noise scale poorly known from a small pilot moves; the
+discrepancy's length scale, docs/plan.md's scenario D).
 
 The model is a :class:`Frame`: per draw of theta the precision and mean from what the file holds,
 the whitened rows of a reading at any height of any candidate test, and the rows of the force and

@@ -1066,6 +1066,9 @@ BLOCKS: dict[str, Block] = {
     "sealed-between-knee": report_block(
         sealed_coverage_summary("reports/sealed-between/n50-knee/coverage.json")
     ),
+    "sealed-between-kink-surface": report_block(
+        sealed_coverage_summary("reports/sealed-between/n50-kink-surface/coverage.json")
+    ),
     "maxwell-table1": report_block(maxwell_summary("reports/maxwell-table1/maxwell.json")),
     "speed": report_block(speed_table),
     "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),

@@ -228,21 +228,19 @@ def run(
     reps = len(seconds)
     n_counts = len(chosen) * len(QUANTITIES)
     counts, verdicts = {}, []
+    widths = {}  # mean width of the 90 % interval over |truth|, per scenario and quantity
     for sc in chosen:
         ok = [r for r in rows if r["scenario"] == sc[0] and r["evaluable"]]
         lo, hi = binomial_acceptance(len(ok), LEVEL, ALPHA, 2 * n_counts) if ok else (0, 0)
         c = {q: sum(r[q]["covered"] for r in ok) for q in QUANTITIES}
         counts[sc[0]] = {"evaluable": len(ok), "acceptance": [lo, hi], "covered": c}
         verdicts += [lo <= v <= hi for v in c.values()] if ok else [False]
-    z = np.concatenate([r["reading_z"] for r in rows if r["evaluable"]])
-    widths = {}  # mean width of the 90 % interval over |truth|, per scenario and quantity
-    for sc in chosen:
-        ok = [r for r in rows if r["scenario"] == sc[0] and r["evaluable"]]
         if ok:
             widths[sc[0]] = {
                 q: float(np.mean([np.diff(r[q]["interval"])[0] / abs(r[q]["truth"]) for r in ok]))
                 for q in QUANTITIES
             }
+    z = np.concatenate([r["reading_z"] for r in rows if r["evaluable"]])
     return {
         "command": command
         or "python scripts/sealed_coverage.py --reps " + str(reps) + (" --tiny" if tiny else ""),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import uq
-from uq._models.fitted import thin_rows
+from uq._inference.summary import thin_rows
 
 LAYOUT = uq.Layout(pressures_bar=(5.0,), step_m=0.005)
 
@@ -136,3 +136,19 @@ def test_posterior_makes_its_parts_on_demand_and_the_same_whenever():
             np.testing.assert_array_equal(cached[name], thin[name])
         assert 0 < thin["force_N"].shape[0] <= n_draws
     assert "predictive" not in c._cache
+
+
+def test_one_thinning_rule_for_draws_and_sampler_steps():
+    """Every ceil(N / max)-th draw, all of them when they fit: the fits' fixed draws (thin_rows)
+    and the sampler's kept steps (whole steps of every walker) follow the one rule."""
+    from uq._inference.sampler import Chains, thin
+
+    rows = np.arange(10)
+    assert thin_rows(rows, 3).tolist() == [0, 4, 8]
+    for keep_all in (None, 0, 10, 11):
+        np.testing.assert_array_equal(thin_rows(rows, keep_all), rows)
+    draws = np.arange(2 * 12 * 2.0).reshape(2, 12 * 2, 1)  # 2 ensembles, 12 steps of 2 walkers
+    ch = Chains(("x",), draws, draws[..., 0], np.ones(4), np.ones(1), 12, 0, 2, n_walkers=2)
+    kept = thin(ch, 10)  # 48 draws -> every 5th step: steps 0, 5, 10 of both walkers
+    np.testing.assert_array_equal(kept.samples[0, :, 0], [0, 1, 10, 11, 20, 21])
+    assert thin(ch, 48) is ch

@@ -51,6 +51,7 @@ from uq._inference.convergence import Convergence, convergence
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import map_rows, row_keys
 from uq._inference.sampler import INDEPENDENCE_MIX, Chains, Settings, run_many, thin
+from uq._inference.summary import thin_rows, thin_step
 
 
 class CollapsedModel(NamedTuple):
@@ -169,8 +170,7 @@ def replicates(model: CollapsedModel, posterior: Posterior, n_draws: int, seed: 
     C, D, nt = posterior.theta.shape
     rows = posterior.theta.reshape(C * D, nt)
     beta = np.asarray(posterior.beta).reshape(C * D, -1)
-    step = max(1, int(np.ceil(C * D / max(int(n_draws), 1))))
-    rows, beta = rows[::step], beta[::step]
+    rows, beta = (thin_rows(a, max(int(n_draws), 1)) for a in (rows, beta))
     keys = row_keys(jax.random.PRNGKey(seed), rows.shape[0])
     out = map_rows(_predict_row, (rows, beta, keys), (posterior.data,), static=(model.predict,))
     return {k: np.asarray(v) for k, v in out.items()}
@@ -456,21 +456,22 @@ class Posterior:
 
     def predictive_thinned(self, max_draws: int | None) -> dict | None:
         """The rows of :attr:`predictive` (chains flattened, {name: (S, n)}) that thinning to at
-        most ``max_draws`` keeps (every ceil(N / max_draws)-th draw, ``uq._models.fitted.thin_rows``'
-        rule), the same numbers, computed on those draws only: memory of S, not N, replicates a
-        reading (None when the model has no ``predict`` or the fit asked for no replicates)."""
+        most ``max_draws`` keeps (:func:`uq._inference.summary.thin_rows`), the same numbers,
+        computed on those draws only: memory of S, not N, replicates a reading (None when the model
+        has no ``predict`` or the fit asked for no replicates)."""
         if self._model.predict is None or not self._predictive:
             return None
         C, D = self.theta.shape[:2]
-        n = C * D
-        step = int(np.ceil(n / max_draws)) if max_draws and n > max_draws else 1
         if "predictive" in self._cache:
-            return {k: v.reshape(n, -1)[::step] for k, v in self._cache["predictive"].items()}
+            return {
+                k: thin_rows(v.reshape(C * D, -1), max_draws)
+                for k, v in self._cache["predictive"].items()
+            }
         rows, beta = self._rows()
-        keys = row_keys(self._keys()[1], n)[::step]
+        keys = row_keys(self._keys()[1], C * D)
         pred = map_rows(
             _predict_row,
-            (rows[::step], beta[::step], keys),
+            tuple(thin_rows(a, max_draws) for a in (rows, beta, keys)),
             (self.data,),
             static=(self._model.predict,),
         )
@@ -484,8 +485,7 @@ class Posterior:
             return None
         if "loglik_loo" not in self._cache:
             C, D, nt = self.theta.shape
-            step = max(1, int(np.ceil(C * D / LOO_DRAWS)))
-            sub = self.theta[:, ::step]
+            sub = self.theta[:, :: thin_step(C * D, LOO_DRAWS)]
             self._cache["loglik_loo"] = np.asarray(
                 map_rows(
                     _loo_row,

@@ -38,6 +38,7 @@ import emcee
 import numpy as np
 
 from uq._inference.convergence import ACCEPT_RANGE, failed_rules
+from uq._inference.summary import thin_step
 
 
 @dataclass(frozen=True)
@@ -124,7 +125,7 @@ def thin(chains: Chains, max_total: int) -> Chains:
     order (steps x walkers) that the diagnostics rely on survives.
     """
     C, D = chains.samples.shape[:2]
-    k = max(1, int(np.ceil(C * D / max_total)))
+    k = thin_step(C * D, max_total)
     if k == 1:
         return chains
 

@@ -1,4 +1,5 @@
-"""Posterior summaries in the contract's shape: {"mean", "sd", "q05", "q95"}, and bands."""
+"""Posterior summaries in the contract's shape: {"mean", "sd", "q05", "q95"}, bands, and the one
+rule by which draws are thinned."""
 
 from __future__ import annotations
 
@@ -24,3 +25,15 @@ def band(draws, axis=0, level=0.90) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     d = np.asarray(draws, float)
     a = (1.0 - level) / 2.0
     return d.mean(axis=axis), np.quantile(d, a, axis=axis), np.quantile(d, 1.0 - a, axis=axis)
+
+
+def thin_step(n: int, max_draws: int | None) -> int:
+    """Every how many-th of ``n`` draws is kept so that at most ``max_draws`` remain: ceil(n /
+    max_draws), 1 when they fit (or for None). The one rule behind every fit's fixed draws and
+    ``on_draws``, the sampler's retained steps, the replicates and the leave-one-out draws."""
+    return int(np.ceil(n / max_draws)) if max_draws and n > max_draws else 1
+
+
+def thin_rows(draws: np.ndarray, max_draws: int | None) -> np.ndarray:
+    """Rows (draws) kept evenly, every :func:`thin_step`-th, so that at most ``max_draws`` remain."""
+    return draws[:: thin_step(draws.shape[0], max_draws)]

@@ -33,9 +33,10 @@ import numpy as np
 
 from uq._data.reference import FORCE_NAMES, PISTON_NAMES
 from uq._inference.convergence import CLI_ADVICE
+from uq._inference.summary import thin_rows
 from uq._io.errors import InputError
 from uq._models import saved
-from uq._models.fitted import Block, Verdict, refuse_extrapolation, thin_rows
+from uq._models.fitted import Block, Verdict, refuse_extrapolation
 from uq._physics.quantities import BAR_PA
 
 N_DRAWS = 2000

@@ -29,9 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.summary import estimate
+from uq._inference.summary import estimate, thin_rows
 from uq._models import discrepancy_gp as gp
-from uq._models.fitted import thin_rows
 from uq._models.linear_fit import BlockSpec
 from uq._models.surface import SurfaceFit, force_label
 from uq._models.surface import summary as surface_summary

@@ -115,14 +115,6 @@ class FittedModel(Protocol):
 # ----------------------------------------------------------------------------- shared by the fits
 
 
-def thin_rows(draws: np.ndarray, max_draws: int | None) -> np.ndarray:
-    """Rows (draws) kept evenly, every ceil(N / max_draws)-th, so that at most ``max_draws`` remain
-    (all of them for None): the one rule behind every fit's fixed draws and ``on_draws``."""
-    if max_draws and draws.shape[0] > max_draws:
-        return draws[:: int(np.ceil(draws.shape[0] / max_draws))]
-    return draws
-
-
 def refuse_extrapolation(
     height_m, p_bar, height_range_m, pressure_range_bar, param: str | None, model: str
 ) -> None:

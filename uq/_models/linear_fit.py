@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.summary import band, estimate
+from uq._inference.summary import band, estimate, thin_rows
 from uq._io.errors import InputError
 from uq._models import saved
-from uq._models.fitted import Block, Verdict, refuse_extrapolation, thin_rows
+from uq._models.fitted import Block, Verdict, refuse_extrapolation
 from uq._models.registry import resolve
 from uq._physics.quantities import BAR_PA
 
@@ -80,7 +80,7 @@ class LinearFit:
     ``reported`` {name: (C, D)}: the sampled parameters as the likelihood reports them (noise);
     ``posterior``: the driver's :class:`uq._inference.collapsed.Posterior` (None when loaded);
     ``max_draws``: the fixed draws are the chains flattened and thinned evenly to at most this
-    (:func:`uq._models.fitted.thin_rows`; None: all of them)."""
+    (:func:`uq._inference.summary.thin_rows`; None: all of them)."""
 
     orders: Params
     geometry: Params

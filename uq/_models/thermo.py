@@ -42,8 +42,7 @@ import numpy as np
 
 from uq._data.recordings import Recordings
 from uq._inference.convergence import CLI_ADVICE
-from uq._inference.summary import estimate
-from uq._models.fitted import thin_rows
+from uq._inference.summary import estimate, thin_rows
 from uq._models.linear_fit import BlockSpec, LinearFit, Params
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 

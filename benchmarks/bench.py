@@ -48,6 +48,7 @@ from pathlib import Path
 
 import emcee
 import numpy as np
+from bench_tables import MEMORY, SCALING, table
 
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES
@@ -789,6 +790,13 @@ def summary(r: dict) -> str:
     )
 
 
+#: --scaling on the console: the ratios of the time a step and of the memory the fit adds, too
+SCALING_CONSOLE = (
+    ("step ratio", lambda x: f"x{x['per_step_time_ratio']:.2f}"),
+    ("added ratio", lambda x: f"x{x['added_rss_ratio']:.2f}"),
+)
+
+
 def scale_summary(name: str, r: dict) -> str:
     if name == "margin":
         f, s, m, c = (
@@ -811,11 +819,9 @@ def scale_summary(name: str, r: dict) -> str:
     if name == "memory":
         m, ramp = r["model"], r["ramp"]
         lines = [f"bench --memory: {r['workload']}; load average {r['load_average_1min']:.1f}"]
-        for x in r["runs"]:
-            lines.append(
-                f"  {x['readings']:>6} readings: peak RSS {x['peak_rss_mb']:6.0f} MB ({x['wall_s']:.0f} s); "
-                f"the line {x['line_error_mb']:+.0f} MB; uq fit's model {x['fit_model_mb']:.0f} MB"
-            )
+        lines += table(
+            MEMORY + (("wall time", lambda x: f"{x['wall_s']:.0f} s"),), r["runs"], False
+        )
         room = r["available_gb"]
         lines += [
             f"  measured: {r['measured_bytes_per_reading'] / 1e3:.1f} kB a reading + "
@@ -850,12 +856,7 @@ def scale_summary(name: str, r: dict) -> str:
             ]
         )
     lines = [f"bench --scaling: {r['workload']}; load average {r['load_average_1min']:.1f}"]
-    for x in r["runs"]:
-        lines.append(
-            f"  {x['factor']:>3}x ({x['n_points']:>5} points): {x['wall_s']:6.1f} s (x{x['time_ratio']:.2f}), "
-            f"{x['ms_per_step']:.2f} ms/step (x{x['per_step_time_ratio']:.2f}), peak RSS {x['peak_rss_mb']:.0f} MB, "
-            f"added {x['added_rss_mb']:.0f} MB (x{x['added_rss_ratio']:.2f})"
-        )
+    lines += table(SCALING + SCALING_CONSOLE, r["runs"], False)
     rep = r["report"]
     lines.append(
         f"  uq report (paper's campaign, cold process): {rep['wall_s']:.1f} s, peak RSS {rep['peak_rss_mb']:.0f} MB"

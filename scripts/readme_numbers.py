@@ -50,6 +50,9 @@ TIMINGS = ROOT / "reports" / "readme-timings.json"
 #: What a workspace holds: copies, so that a block may write anywhere in it.
 WORKSPACE_COPIES = ("data", "fits", "docs/examples")
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_tables import MEMORY, SCALING, table  # noqa: E402  (benchmarks/ is no package)
+
 
 def pages() -> list[Path]:
     """Every page that may hold generated blocks: README.md and the Markdown pages of docs/."""
@@ -724,14 +727,8 @@ def scaling_bench_summary(rel: str) -> Callable[[], str]:
             f"From `{rel}` (`python benchmarks/bench.py --scaling`, load average "
             f"{r['load_average_1min']:.1f}): {r['workload']}",
             "",
-            "| points per test | wall time | time ratio | ms per step | peak RSS | added by the fit |",
-            "| --- | --- | --- | --- | --- | --- |",
+            *table(SCALING, r["runs"], True),
         ]
-        for x in r["runs"]:
-            lines.append(
-                f"| {x['points_per_test']:.0f} ({x['factor']}x) | {x['wall_s']:.1f} s | x{x['time_ratio']:.2f} "
-                f"| {x['ms_per_step']:.2f} | {x['peak_rss_mb']:.0f} MB | {x['added_rss_mb']:.0f} MB |"
-            )
         rep = r["report"]
         lines += [
             "",
@@ -756,14 +753,8 @@ def memory_bench_summary(rel: str) -> Callable[[], str]:
             f"From `{rel}` (`python benchmarks/bench.py --memory`, {r['cores']} cores at load "
             f"average {r['load_average_1min']:.1f}): {r['workload']}",
             "",
-            "| readings | peak RSS | the measured line minus the peak | uq fit's model (the check) |",
-            "| --- | --- | --- | --- |",
+            *table(MEMORY, r["runs"], True),
         ]
-        for x in r["runs"]:
-            lines.append(
-                f"| {x['readings']} | {x['peak_rss_mb']:.0f} MB | {x['line_error_mb']:+.0f} MB "
-                f"| {x['fit_model_mb']:.0f} MB |"
-            )
         room = r["available_gb"]
         peaks = [x["peak_rss_mb"] for x in r["runs"]]
         sizes = [x["readings"] for x in r["runs"]]

@@ -23,6 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN_BY = {
     "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
     "benchmarks/commands.py": "test_commands_bench_tiny_run",
+    "benchmarks/bench_tables.py": "test_bench_tables_one_row_formatter (imported by bench.py and "
+    "readme_numbers.py, whose --check tests/test_docs.py runs)",
     "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
     "scripts/diagnose_proof.py": "test_diagnose_proof_small",
     "scripts/diagnose_power.py": "test_diagnose_power_tiny",
@@ -61,6 +63,31 @@ def test_every_script_is_run_by_a_test():
     assert found == set(RUN_BY), "scripts without a test (add one here): " + str(
         sorted(found ^ set(RUN_BY))
     )
+
+
+def test_bench_tables_one_row_formatter():
+    """The memory table's cells, once: as docs/speed.md shows them (markdown) and on the console
+    (right-aligned columns), the console's extra column added by the caller."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from bench_tables import MEMORY, table
+    finally:
+        sys.path.pop(0)
+    runs = [
+        {"readings": 6347, "peak_rss_mb": 575.6, "line_error_mb": -36.4, "fit_model_mb": 884.0},
+        {"readings": 12683, "peak_rss_mb": 465.2, "line_error_mb": 54.0, "fit_model_mb": 1005.3},
+    ]
+    assert table(MEMORY, runs, True) == [
+        "| readings | peak RSS | the measured line minus the peak | uq fit's model (the check) |",
+        "| --- | --- | --- | --- |",
+        "| 6347 | 576 MB | -36 MB | 884 MB |",
+        "| 12683 | 465 MB | +54 MB | 1005 MB |",
+    ]
+    assert table(MEMORY[:2] + (("s", lambda x: "7"),), runs, False) == [
+        "  readings  peak RSS  s",
+        "      6347    576 MB  7",
+        "     12683    465 MB  7",
+    ]
 
 
 @pytest.mark.parametrize("name", ["install.sh", "main.sh", "test.sh"])

@@ -152,3 +152,25 @@ def test_one_thinning_rule_for_draws_and_sampler_steps():
     kept = thin(ch, 10)  # 48 draws -> every 5th step: steps 0, 5, 10 of both walkers
     np.testing.assert_array_equal(kept.samples[0, :, 0], [0, 1, 10, 11, 20, 21])
     assert thin(ch, 48) is ch
+
+
+def test_a_model_of_a_namespace_takes_its_functions_by_field_name():
+    """CollapsedModel.of: the namespace's functions named as the fields, explicit fields winning,
+    an absent optional field None and an absent required one refused."""
+    from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
+    from uq._models import cubic, diagnose
+
+    assert cubic.MODEL.pointwise_loo is cubic.pointwise_loo
+    assert cubic.MODEL.hold_out is hold_out_by_weight
+    assert diagnose.MODEL.predict is None and diagnose.MODEL.hold_out is diagnose.hold_out
+
+    def f(*args):
+        return args
+
+    required = ("log_prob", "draw_linear", "pointwise", "start", "report")
+    ns = dict.fromkeys(required, f) | {"observed": f, "sequential": True}
+    m = CollapsedModel.of(ns, "m", ("a",), report=len)
+    assert (m.name, m.theta_names, m.log_prob, m.report, m.observed) == ("m", ("a",), f, len, f)
+    assert m.predict is None and m.sequential is False  # a namespace's non-functions are not taken
+    with pytest.raises(TypeError, match="start"):
+        CollapsedModel.of({k: f for k in required if k != "start"}, "m", ("a",))

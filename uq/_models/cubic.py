@@ -251,18 +251,8 @@ def observed(d: CubicData) -> dict:
     return {"force_N": np.asarray(d.force), "piston_m": np.asarray(d.piston)}
 
 
-MODEL = CollapsedModel(
-    name="per-pressure cubics (eqs. 8, 9)",
-    theta_names=SAMPLER_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
-    observed=observed,
-    pointwise_loo=pointwise_loo,
-    hold_out=hold_out_by_weight,
+MODEL = CollapsedModel.of(
+    globals(), "per-pressure cubics (eqs. 8, 9)", SAMPLER_NAMES, hold_out=hold_out_by_weight
 )
 
 

@@ -513,16 +513,8 @@ def report(theta, beta, d: Data) -> dict:
     return {THETA_NAMES[i]: np.asarray(theta)[:, i] for i in on}
 
 
-MODEL = CollapsedModel(
-    name="traditional model with mechanisms (uq diagnose)",
-    theta_names=THETA_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    hold_out=hold_out,
-    sequential=True,
+MODEL = CollapsedModel.of(
+    globals(), "traditional model with mechanisms (uq diagnose)", THETA_NAMES, sequential=True
 )
 
 

@@ -583,18 +583,8 @@ def report(theta, beta, d) -> dict:
     return {n: nat[:, i] for i, n in enumerate(names)}
 
 
-MODEL = CollapsedModel(
-    name="surface with a discrepancy in pressure",
-    theta_names=THETA_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
-    observed=observed,
-    pointwise_loo=pointwise_loo,
-    hold_out=hold_out_by_weight,
+MODEL = CollapsedModel.of(
+    globals(), "surface with a discrepancy in pressure", THETA_NAMES, hold_out=hold_out_by_weight
 )
 
 FORCE_MODEL = MODEL._replace(

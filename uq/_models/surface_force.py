@@ -134,16 +134,6 @@ def report(theta, beta, d) -> dict:
     return {n: noise[:, i] for i, n in enumerate(NATURAL_NAMES[: noise.shape[1]])}
 
 
-MODEL = CollapsedModel(
-    name="pressure-coupled force surface",
-    theta_names=THETA_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
-    observed=observed,
-    pointwise_loo=pointwise_loo,
-    hold_out=hold_out_by_weight,
+MODEL = CollapsedModel.of(
+    globals(), "pressure-coupled force surface", THETA_NAMES, hold_out=hold_out_by_weight
 )

@@ -77,17 +77,11 @@ def report(theta, beta, d: PairData) -> dict:
     return out
 
 
-MODEL = CollapsedModel(
-    name="thermodynamic potential G(x, p_u)",
-    theta_names=THETA_NAMES,
-    log_prob=log_prob,
-    draw_linear=draw_linear,
-    pointwise=pointwise,
-    start=start,
-    report=report,
-    predict=predict,
+MODEL = CollapsedModel.of(
+    globals(),
+    "thermodynamic potential G(x, p_u)",
+    THETA_NAMES,
     observed=pair.observed,
-    pointwise_loo=pointwise_loo,
     hold_out=hold_out_by_weight,
 )
 

@@ -44,6 +44,7 @@ from uq._io.errors import InputError
 from uq._models import cubic, pair, registry, surface, thermo
 from uq._models import discrepancy as dev
 from uq._models import discrepancy_gp as gp
+from uq._models.cubic_interpolation import bracket, curvatures, feff
 from uq._models.cubic_results import CampaignFit
 from uq._models.discrepancy_fit import DiscrepancyFit
 from uq._models.surface import SurfaceFit
@@ -509,39 +510,26 @@ class CubicFrames:
         )
 
     # ---- the pilot's mean force and its curvature in pressure
-    def _feff_mean(self, u, j):
-        c = self.mean_coef[j]
-        return (c[0] + c[1] * u + c[2] * u**2 + c[3] * u**3) / (self.tested[j] * BAR_PA)
-
     def mean_force(self, x, p):
         """The pilot's interpolated posterior-mean force at (x, p) (F_eff linear in p between its
         tests, the end intervals extended), N: the budget's reference at a new test."""
         u = np.asarray(x, float).ravel() - self.x0_m
         p = np.asarray(p, float).ravel()
-        F = np.stack([self._feff_mean(u, j) for j in range(self.tested.size)])  # (T, n)
         if self.tested.size == 1:
-            return p * BAR_PA * F[0]
-        i = np.clip(np.searchsorted(self.tested, p, side="right") - 1, 0, self.tested.size - 2)
-        pa, pb = self.tested[i], self.tested[i + 1]
-        w = (p - pa) / (pb - pa)
-        n = np.arange(u.size)
-        return p * BAR_PA * ((1 - w) * F[i, n] + w * F[i + 1, n])
+            return p * BAR_PA * feff(self.mean_coef[0], u, self.tested[0])
+        i, pa, pb, w = bracket(self.tested, p)
+        F = (1 - w) * feff(self.mean_coef[i], u, pa) + w * feff(self.mean_coef[i + 1], u, pb)
+        return p * BAR_PA * F
 
     def curvature_sd(self, x) -> np.ndarray:
         """rms over the file's interior tests of d^2 F_eff / dp^2 at height x (m^2/bar^2), from the
         posterior means (``CubicInterpolation.curvature_sd``'s estimate, pooled); 0 with fewer than
         three tests."""
-        T = self.tested.size
         u = np.asarray(x, float) - self.x0_m
-        if T < 3:
+        if self.tested.size < 3:
             return np.zeros(u.shape)
-        F = np.stack([self._feff_mean(u, j) for j in range(T)])
-        kap = []
-        for j in range(1, T - 1):
-            a, b, c = self.tested[j - 1], self.tested[j], self.tested[j + 1]
-            line = (F[j - 1] * (c - b) + F[j + 1] * (b - a)) / (c - a)
-            kap.append(2.0 * (F[j] - line) / ((b - a) * (b - c)))
-        return np.sqrt(np.mean(np.square(kap), axis=0))
+        F = np.stack([feff(c, u, p) for c, p in zip(self.mean_coef, self.tested, strict=True)])
+        return np.sqrt(np.mean(np.square(curvatures(F, self.tested)[1:-1]), axis=0))
 
     # ---- the frame
     def frame(self, new_bar=(), after_bar=None, new_heights=None) -> Frame:
@@ -604,9 +592,7 @@ class CubicFrames:
             if ps.size == 1:
                 rows[n[:, None], idx[0] * b + np.arange(4)] = X * (p / ps[0])[:, None]
                 return rows
-            i = np.clip(np.searchsorted(ps, p, side="right") - 1, 0, ps.size - 2)
-            pa, pb = ps[i], ps[i + 1]
-            w = (p - pa) / (pb - pa)
+            i, pa, pb, w = bracket(ps, p)
             rows[n[:, None], idx[i][:, None] * b + np.arange(4)] += X * ((1 - w) * p / pa)[:, None]
             rows[n[:, None], idx[i + 1][:, None] * b + np.arange(4)] += X * (w * p / pb)[:, None]
             return rows
@@ -616,8 +602,7 @@ class CubicFrames:
             ps, _ = tests_of(open_)
             if ps.size < 2:
                 return np.zeros(x.size)
-            i = np.clip(np.searchsorted(ps, p, side="right") - 1, 0, ps.size - 2)
-            pa, pb = ps[i], ps[i + 1]
+            _, pa, pb, _ = bracket(ps, p)
             bump = 0.5 * np.clip((p - pa) * (pb - p), 0, None)
             return (self.curvature_sd(x) * bump * p * BAR_PA) ** 2
 

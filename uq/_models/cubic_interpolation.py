@@ -72,11 +72,32 @@ class TestsVerdict:
         ]
 
 
-def _feff(coef, u, p):
+def feff(coef, u, p):
     """F_eff = P / p_u of force cubics ``coef`` (..., 4) at u (m) and p (bar)."""
     return (coef[..., 0] + coef[..., 1] * u + coef[..., 2] * u**2 + coef[..., 3] * u**3) / (
         p * BAR_PA
     )
+
+
+def bracket(tested_bar, p):
+    """The interval between tested pressures (``tested_bar`` ascending, two or more; the end
+    intervals extended) of each pressure ``p`` (n,): its index i, its ends pa and pb, and the
+    weight w = (p - pa) / (pb - pa) of its upper end, each (n,)."""
+    i = np.clip(np.searchsorted(tested_bar, p, side="right") - 1, 0, tested_bar.size - 2)
+    pa, pb = tested_bar[i], tested_bar[i + 1]
+    return i, pa, pb, (p - pa) / (pb - pa)
+
+
+def curvatures(F, tested_bar):
+    """d^2 F / dp^2 at every interior tested pressure of values ``F`` (T, ...) at ``tested_bar``
+    (T,): 2 e_j / ((p_j - p_j-1)(p_j - p_j+1)), e_j the value minus the line through the two
+    neighbours (module docstring); NaN at the end tests."""
+    kap = np.full_like(F, np.nan)
+    for j in range(1, tested_bar.size - 1):
+        a, b, c = tested_bar[j - 1], tested_bar[j], tested_bar[j + 1]
+        line = (F[j - 1] * (c - b) + F[j + 1] * (b - a)) / (c - a)
+        kap[j] = 2.0 * (F[j] - line) / ((b - a) * (b - c))
+    return kap
 
 
 def _area(coef, u, area_m2):
@@ -181,19 +202,14 @@ class CubicInterpolation:
 
     def curvature_sd(self, height_m, interval):
         """sd of d^2 F_eff / dp^2 (m^2/bar^2) on ``interval`` from its end tests' neighbours."""
-        return self._curvature_sd(height_m, np.asarray(interval), _feff, self.force)
+        return self._curvature_sd(height_m, np.asarray(interval), feff, self.force)
 
     def _curvature_sd(self, height_m, interval, curve, coef):
         u = np.asarray(height_m, float) - self.x0_m
         mean = coef.mean(axis=0)  # (T, 4)
         p = self.tested_pressures_bar
         T = p.size
-        F = np.stack([curve(mean[j], u, p[j]) for j in range(T)])  # (T, n)
-        kap = np.full_like(F, np.nan)
-        for j in range(1, T - 1):
-            a, b, c = p[j - 1], p[j], p[j + 1]
-            line = (F[j - 1] * (c - b) + F[j + 1] * (b - a)) / (c - a)
-            kap[j] = 2.0 * (F[j] - line) / ((b - a) * (b - c))
+        kap = curvatures(np.stack([curve(mean[j], u, p[j]) for j in range(T)]), p)  # (T, n)
         ends = np.stack(
             [
                 kap[np.clip(interval, 0, T - 1), np.arange(u.size)],
@@ -215,9 +231,7 @@ class CubicInterpolation:
         u = h - self.x0_m
         if T == 1:
             return curve(coef[:, 0][:, None, :], u, tp[0]), shape
-        i = np.clip(np.searchsorted(tp, p, side="right") - 1, 0, max(T - 2, 0))
-        pa, pb = tp[i], tp[i + 1]
-        w = (p - pa) / (pb - pa)
+        i, pa, pb, w = bracket(tp, p)
         Fa = curve(coef[:, i], u, pa)  # (S, n)
         Fb = curve(coef[:, i + 1], u, pb)
         sd = self._curvature_sd(h, i, curve, coef)
@@ -226,13 +240,13 @@ class CubicInterpolation:
 
     def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """P = p_u F_eff, F_eff interpolated (module docstring), N, (S, *shape)."""
-        feff, shape = self._interpolate(_feff, self.force, self.z, height_m, p_bar, check)
+        F, shape = self._interpolate(feff, self.force, self.z, height_m, p_bar, check)
         p = np.broadcast_to(np.asarray(p_bar, float), shape).ravel()
-        return (p * BAR_PA * feff).reshape(-1, *shape)
+        return (p * BAR_PA * F).reshape(-1, *shape)
 
     def feff_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
-        feff, shape = self._interpolate(_feff, self.force, self.z, height_m, p_bar, check)
-        return feff.reshape(-1, *shape)
+        F, shape = self._interpolate(feff, self.force, self.z, height_m, p_bar, check)
+        return F.reshape(-1, *shape)
 
     def volume_area_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """dV/dx = -S dL/dx of the piston cubics, interpolated (module docstring), m^2."""

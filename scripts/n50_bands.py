@@ -136,7 +136,7 @@ def main(argv=None) -> int:
         "cpu_seconds": cpu,
         "hyperparameters": {
             k: answers["discrepancy"].to_json()["discrepancy"][k]
-            for k in ("a_F_m2", "a_V_m2", "length_bar")
+            for k in ("a_F_m2", "a_V_m2", "a_P_m2", "length_bar")
         },
         "between_nodes": between_nodes(answers["discrepancy"]),
         "converged": bool(answers["discrepancy"].convergence.converged),

@@ -892,7 +892,14 @@ def n50_bands_summary(rel: str) -> Callable[[], str]:
             f"{s['centre_shift_in_cubic_sd_max']:.2f}). Posterior: a_F {hp['a_F_m2']['mean'] * 1e4:.1f} cm^2 "
             f"[{hp['a_F_m2']['q05'] * 1e4:.1f}, {hp['a_F_m2']['q95'] * 1e4:.1f}], a_V "
             f"{hp['a_V_m2']['mean'] * 1e4:.1f} cm^2 [{hp['a_V_m2']['q05'] * 1e4:.1f}, "
-            f"{hp['a_V_m2']['q95'] * 1e4:.1f}], length scale {hp['length_bar']['mean']:.2f} bar "
+            f"{hp['a_V_m2']['q95'] * 1e4:.1f}], "
+            + (
+                f"a_P {hp['a_P_m2']['mean'] * 1e4:.1f} cm^2 [{hp['a_P_m2']['q05'] * 1e4:.1f}, "
+                f"{hp['a_P_m2']['q95'] * 1e4:.1f}], "
+                if "a_P_m2" in hp
+                else ""
+            )
+            + f"length scale {hp['length_bar']['mean']:.2f} bar "
             f"[{hp['length_bar']['q05']:.2f}, {hp['length_bar']['q95']:.2f}]; "
             f"{'converged' if d['converged'] else 'NOT converged'}.",
         ]

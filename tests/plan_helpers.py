@@ -88,8 +88,7 @@ def discrepancy_builder(rec, n_draws=4, seed=0, length_bar=2.0):
     stand = PAPER_STAND
     o, g = surface.orders_for(rec), surface.geometry_of(rec)
     d = dev.dev_data(rec, o, stand) if rec.has_piston else dev.force_dev_data(rec, o, stand)
-    rates = np.log(1.0 / np.asarray(d.rates))
-    centre = np.concatenate([np.asarray(d.prior_mean), rates, [np.log(length_bar)]])
+    centre = dev.theta_of(np.asarray(d.prior_mean), 1.0 / np.asarray(d.rates), length_bar)
     rng = np.random.default_rng(seed)
     theta = centre[None] + 0.2 * rng.standard_normal((n_draws, centre.size))
     level = float(np.mean(np.abs(np.concatenate([t.force_N for t in rec.tests]))))

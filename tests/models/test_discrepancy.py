@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from uq._inference.float64 import jnp
+from uq._inference.float64 import jax, jnp
 from uq._inference.linear import linear_posterior
 from uq._models import discrepancy as dm
 from uq._models import discrepancy_gp as gp
@@ -39,14 +39,21 @@ def tiny_force():
     return rec, dm.force_dev_data(rec, FORCE_ORDERS)
 
 
-def theta_of(d, a=(3e-4, 2e-4), length=2.0):
-    noise = np.asarray(d.prior_mean)
-    return jnp.asarray(np.concatenate([noise, np.log(a[: d.rates.shape[0]]), [np.log(length)]]))
+def theta_of(d, a=(3e-4, 2e-4, 1.5e-4), length=2.0):
+    """theta with amplitudes ``a`` of (delta, eps, phi) (without piston: of delta and phi)."""
+    a = a if dm.has_piston(d) else (a[0], a[2])
+    theta = dm.theta_of(np.asarray(d.prior_mean), a, length)
+    amps, ell = dm.hyper_draws(theta[None], d)
+    np.testing.assert_allclose(amps[0], a, rtol=1e-12)  # the sampled coordinates invert exactly
+    np.testing.assert_allclose(ell, [length], rtol=1e-12)
+    return jnp.asarray(theta)
 
 
 def dense_designs(rec, d, theta):
     """The model's dense (n, K) force and piston designs written from its definition: the surface's
-    designs, then p_i t^k and -(h/S) t^(k+1)/(k+1) times a s_k chol(R) for every deviation."""
+    designs, then a s_k chol(R) times, per block, delta: force p_i t^k and piston
+    -(h/S) t^(k+1)/(k+1); eps: that piston alone; phi: force p_ref t^k alone (p_ref the highest
+    tested pressure)."""
     piston = dm.has_piston(d)
     g = surface.geometry_of(rec)
     if piston:
@@ -62,16 +69,20 @@ def dense_designs(rec, d, theta):
     _, amps, length = (np.asarray(v) for v in dm._split(np.asarray(theta), d))
     Lr = np.linalg.cholesky(gp.correlation(p, float(length)))
     lever = -BASIS_SCALE_M / g.area_m2
+    blocks = ("delta", "eps", "phi") if piston else ("delta", "phi")
     n_c = nk * amps.size
     DF = np.zeros((t.size, n_c * T))
     DL = np.zeros_like(DF)
     for c in range(n_c):
-        k, amp = c % nk, amps[c // nk]
+        k, amp, block = c % nk, amps[c // nk], blocks[c // nk]
         for j in range(T):
             fac = amp * Lr[idx, j]
-            if c < nk:
+            if block == "delta":
                 DF[:, c * T + j] = p[idx] * BAR_PA * t**k * fac
-            DL[:, c * T + j] = lever * t ** (k + 1) / (k + 1) * fac
+            if block == "phi":
+                DF[:, c * T + j] = p.max() * BAR_PA * t**k * fac
+            if block in ("delta", "eps"):
+                DL[:, c * T + j] = lever * t ** (k + 1) / (k + 1) * fac
     return np.hstack([Xf, DF]), (np.hstack([Xl, DL]) if piston else None)
 
 
@@ -100,7 +111,7 @@ def test_the_span_reproduces_the_surface_and_the_deviations(tiny):
     Xf = np.random.default_rng(0).standard_normal((7, 2))
     with pytest.raises(ValueError, match="does not reproduce"):
         dm.span_map(Zf, Zl, Xf, np.zeros((7, 2)), "test design")
-    assert d.A.shape == (3, 9, 18) and d.D.shape == (3, 9, 8)
+    assert d.A.shape == (3, 9, 18) and d.D.shape == (3, 9, 12)
 
 
 @pytest.mark.parametrize("which", ["pair", "force"])
@@ -186,6 +197,36 @@ def test_priors_are_normalised_and_as_stated():
     assert np.trapezoid(np.where(v < 0.0, pl, 0.0), v) == pytest.approx(0.25, abs=1e-4)
 
 
+def test_force_amplitudes_prior_in_polar_coordinates_is_the_two_exponentials(tiny_force):
+    """The force blocks' amplitudes are sampled as (log r, u) (``force_amplitudes``); the model's
+    prior there is the two independent exponentials of a_F and a_P times the Jacobian: it
+    integrates to one over (log r, u), and P(a_F > U) and P(a_P > U) are the stated 0.05."""
+    _, d = tiny_force
+    rate = float(d.rates[0])
+    lr = np.linspace(-6.0, 4.0, 801) + np.log(1.0 / rate)
+    u = np.linspace(-30.0, 30.0, 1201)
+    LR, UU = np.meshgrid(lr, u, indexing="ij")
+    noise = np.asarray(d.prior_mean)
+    theta = np.concatenate(
+        [
+            np.broadcast_to(noise, LR.shape + noise.shape),
+            LR[..., None],
+            UU[..., None],
+            np.zeros(LR.shape + (1,)),
+        ],
+        axis=-1,
+    ).reshape(-1, noise.size + 3)
+    lp = np.asarray(jax.vmap(lambda t: dm.log_prior(t, d))(jnp.asarray(theta))).reshape(LR.shape)
+    lp = lp - float(gp.log_prior_length(0.0))  # the noise logs sit at their centres: 0
+    dens = np.exp(lp)
+    cell = (lr[1] - lr[0]) * (u[1] - u[0])
+    assert dens.sum() * cell == pytest.approx(1.0, abs=2e-3)
+    a_F, a_P = dm.force_amplitudes(LR, UU)
+    U = -np.log(gp.AMPLITUDE_TAIL) / rate  # the exponential's 95 % point
+    for a in (a_F, a_P):
+        assert (dens * (a > U)).sum() * cell == pytest.approx(gp.AMPLITUDE_TAIL, abs=2e-3)
+
+
 def test_two_point_mean_is_exact_at_nodes_and_linear_in_the_long_limit():
     nodes = np.array([1.0, 1.5, 2.5])
     i, w = gp.two_point_weights(nodes, nodes, np.array([0.7, 1e9]))
@@ -268,8 +309,8 @@ def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
 
     """The same draws on every call and on thinned views; each draw's force is a continuous curve
     in pressure (at every node, tested or virtual, its value from the left and from the right
-    agree); at a tested pressure the force is the surface's plus p_u times the draw's deviation
-    there."""
+    agree); at a tested pressure the force is the surface's plus p_u times the draw's pressure-area
+    deviation there plus p_ref times its force deviation (phi)."""
     fit = small_fit
     ps = np.linspace(2.0, 8.0, 801)
     h = np.full(801, 0.15)
@@ -281,14 +322,20 @@ def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
     np.testing.assert_allclose(half.force_draws(h, ps), F1[rows], rtol=1e-12)
     nodes = fit.nodes[0][1:-1]
     eps = 1e-9
-    below = fit.deviation_draws(np.full(nodes.size, 0.15), nodes - eps)
-    above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps)
+    every = fit.symbols
+    below = fit.deviation_draws(np.full(nodes.size, 0.15), nodes - eps, every)
+    above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps, every)
     scale = np.abs(fit.tested_deviations).max()
     assert np.abs(above - below).max() < 1e-6 * scale
     base = SurfaceFit.force_draws(fit, 0.15, 4.0)
     t = fit.geometry.t(0.15)
-    dev = fit.tested_deviations[:, 1, : fit.n_k] @ t ** np.arange(fit.n_k)
-    np.testing.assert_allclose(fit.force_draws(0.15, 4.0), base + 4e5 * dev, rtol=1e-9)
+    tk = t ** np.arange(fit.n_k)
+    delta = fit.tested_deviations[:, 1, : fit.n_k] @ tk
+    phi = fit.tested_deviations[:, 1, fit.symbols.index("phi") * fit.n_k :][:, : fit.n_k] @ tk
+    p_ref = fit.tested_pressures_bar.max() * 1e5
+    np.testing.assert_allclose(
+        fit.force_draws(0.15, 4.0), base + 4e5 * delta + p_ref * phi, rtol=1e-9
+    )
 
 
 def test_protocol_quantities(small_fit):
@@ -306,7 +353,14 @@ def test_protocol_quantities(small_fit):
     assert blocks["pressure_area_deviation_m2"].draws.shape == (fit.n_draws, 4 * fit.n_k)
     assert blocks["volume_area_deviation_m2"].names[0] == "eps_0_2bar"
     doc = fit.to_json()
-    assert set(doc["discrepancy"]) >= {"a_F_m2", "a_V_m2", "length_bar", "kernel", "priors"}
+    assert set(doc["discrepancy"]) >= {
+        "a_F_m2",
+        "a_V_m2",
+        "a_P_m2",
+        "length_bar",
+        "kernel",
+        "priors",
+    }
     at = doc["discrepancy"]["at_x0"]
     assert at["3"]["tested"] is False and at["4"]["tested"] is True
 

@@ -200,7 +200,9 @@ def _print_discrepancy(rec, fit, res, comparison) -> None:
     ell = d["length_bar"]
     print(
         f"  discrepancy ({d['kernel']}): amplitude of the pressure-area deviation {cm2(d['a_F_m2'])}"
-        f"{vol}, length scale {ell['mean']:.2f} bar [{ell['q05']:.2f}, {ell['q95']:.2f}]"
+        f"{vol}, of the force not proportional to p_u {cm2(d['a_P_m2'])} (an area at "
+        f"{d['p_ref_bar']:g} bar), length scale {ell['mean']:.2f} bar [{ell['q05']:.2f}, "
+        f"{ell['q95']:.2f}]"
     )
     if comparison:
         _print_comparison(fit.name, comparison)

@@ -46,7 +46,7 @@ from uq._models import discrepancy as dev
 from uq._models import discrepancy_gp as gp
 from uq._models.cubic_interpolation import bracket, curvatures, feff
 from uq._models.cubic_results import CampaignFit
-from uq._models.discrepancy_fit import DiscrepancyFit
+from uq._models.discrepancy_fit import DiscrepancyFit, p_ref_pa
 from uq._models.surface import SurfaceFit
 from uq._models.thermo import ThermoFit
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M, force_noise_var
@@ -366,10 +366,11 @@ class PairFrames:
 
 class DiscrepancyFrames(PairFrames):
     """Frames of the surface with a discrepancy in pressure (module docstring): the surface's
-    coefficients, then per deviation channel c (delta_k, then eps_k) and test j of the frame (the
-    file's, then the planned) a standard normal z_cj; a test i's deviation is a_c s_k (L z_c)_i,
-    L the Cholesky factor of the Matern 3/2 correlation of the frame's pressures at the draw's
-    length scale. Rows therefore depend on the draw: (S, n, k)."""
+    coefficients, then per deviation channel c (delta_k, eps_k, phi_k; uq._models.discrepancy) and
+    test j of the frame (the file's, then the planned) a standard normal z_cj; a test i's
+    deviation is a_c s_k (L z_c)_i, L the Cholesky factor of the Matern 3/2 correlation of the
+    frame's pressures at the draw's length scale. Rows therefore depend on the draw: (S, n, k).
+    phi's p_ref is the file's (the pilot's theta draws are of the pilot's fit)."""
 
     def __init__(self, rec, data, theta, stand, orders, geometry, reference, model=DiscrepancyFit):
         super().__init__(rec, data, theta, stand, orders, geometry, reference, model)
@@ -378,10 +379,7 @@ class DiscrepancyFrames(PairFrames):
 
     def _set_theta(self, theta) -> None:
         self.theta = theta
-        n_noise = 3 if self.force_only else 5
-        n_blocks = 1 if self.force_only else 2
-        self.amplitudes = np.exp(theta[:, n_noise : n_noise + n_blocks])  # (S, blocks)
-        self.length = np.exp(theta[:, n_noise + n_blocks])  # (S,)
+        self.amplitudes, self.length = dev.hyper_draws(theta, self.data)  # (S, blocks), (S,)
 
     def label(self, orders) -> str:
         base = surface.force_label(orders) if self.force_only else orders.label
@@ -409,12 +407,13 @@ class DiscrepancyFrames(PairFrames):
         """The deviations' rows per channel at points: force (n, n_c), piston (n, n_c) or None."""
         t = (np.asarray(x, float) - self.rec.x0_m) / BASIS_SCALE_M
         area = None if self.force_only else self.rec.piston_area_m2
-        f, dl, el = dev.deviation_rows(
-            t, np.asarray(p, float)[:, None] * BAR_PA, self.scales.size, area
+        return dev.deviation_rows(
+            t,
+            np.asarray(p, float)[:, None] * BAR_PA,
+            self.scales.size,
+            area,
+            p_ref_pa(self.tested),
         )
-        if self.force_only:
-            return f, None
-        return np.concatenate([f, np.zeros_like(f)], axis=1), np.concatenate([dl, el], axis=1)
 
     def _channel_scales(self, rows) -> np.ndarray:
         """a s_k per channel and draw, (s, n_c)."""

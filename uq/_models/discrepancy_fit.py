@@ -40,12 +40,33 @@ from uq._physics.quantities import BAR_PA
 GRID_CHUNK = 256
 #: the seed stream of the virtual pressures' normals (with the fit's seed)
 GRID_STREAM = 29
-#: the sampled parameters of the discrepancy as reported (the noise's are the surface's)
-HYPER = ("a_F_m2", "a_V_m2", "length_bar")
-BLOCKS = (
-    ("pressure_area_deviation_m2", "delta", "F_p gains sum_k delta_k t^k at each tested pressure"),
-    ("volume_area_deviation_m2", "eps", "-dV/dx gains sum_k (delta_k + eps_k) t^k"),
-)
+#: the deviation blocks in the order of their channels, with and without piston readings
+#: (uq._models.discrepancy's module docstring)
+BLOCKS = ("delta", "eps", "phi")
+FORCE_BLOCKS = ("delta", "phi")
+#: per deviation block: its saved name, its amplitude as reported
+#: and what it multiplies
+BLOCK_INFO = {
+    "delta": (
+        "pressure_area_deviation_m2",
+        "a_F_m2",
+        "F_p gains sum_k delta_k t^k at each tested pressure",
+    ),
+    "eps": ("volume_area_deviation_m2", "a_V_m2", "-dV/dx gains sum_k (delta_k + eps_k) t^k"),
+    "phi": (
+        "force_deviation_m2",
+        "a_P_m2",
+        "P gains p_ref sum_k phi_k t^k (p_ref the highest tested overpressure): a force not "
+        "proportional to p_u",
+    ),
+}
+
+
+def p_ref_pa(tested_bar) -> float:
+    """p_ref (Pa), the pressure at which phi's force p_ref sum_k phi_k t^k is an area: the highest
+    tested overpressure (phi's amplitude a_P, m^2, is then the sd of a force not proportional to
+    p_u as a share of the pressure area at the top of the tested range)."""
+    return float(np.max(np.asarray(tested_bar, float))) * BAR_PA
 
 
 @dataclass(eq=False, frozen=True, repr=False)
@@ -75,16 +96,31 @@ class DiscrepancyFit(SurfaceFit):
         return self.orders.K + 1
 
     @property
+    def symbols(self) -> tuple[str, ...]:
+        """The deviation blocks, in the order of their channels."""
+        return FORCE_BLOCKS if self.force_only else BLOCKS
+
+    @property
+    def hyper_names(self) -> tuple[str, ...]:
+        """The blocks' amplitudes as reported (m^2), in the same order."""
+        return tuple(BLOCK_INFO[s][1] for s in self.symbols)
+
+    @property
     def n_channels(self) -> int:
-        return self.n_k * (1 if self.force_only else 2)
+        return self.n_k * len(self.symbols)
+
+    @property
+    def p_ref_pa(self) -> float:
+        """p_ref, Pa: phi's force is p_ref sum_k phi_k t^k."""
+        return p_ref_pa(self.tested_pressures_bar)
 
     def surface_layout(self) -> tuple[BlockSpec, ...]:
         return SurfaceFit.block_layout(self)
 
     def block_layout(self) -> tuple[BlockSpec, ...]:
-        dev = tuple(
+        blocks = tuple(
             BlockSpec(
-                name,
+                BLOCK_INFO[sym][0],
                 tuple(
                     f"{sym}_{k}_{p:g}bar"
                     for p in self.tested_pressures_bar
@@ -92,11 +128,11 @@ class DiscrepancyFit(SurfaceFit):
                 ),
                 1.0,
                 "m^2",
-                basis,
+                BLOCK_INFO[sym][2],
             )
-            for name, sym, basis in BLOCKS[: self.n_channels // self.n_k]
+            for sym in self.symbols
         )
-        return (*self.surface_layout(), *dev)
+        return (*self.surface_layout(), *blocks)
 
     @property
     def n_surface(self) -> int:
@@ -119,7 +155,7 @@ class DiscrepancyFit(SurfaceFit):
         beta = np.asarray(posterior.beta)
         C, D, K = beta.shape
         reported = {n: np.asarray(v) for n, v in posterior.reported.items()}
-        amps = [reported[n].reshape(-1) for n in HYPER[: shell.n_channels // shell.n_k]]
+        amps = [reported[n].reshape(-1) for n in shell.hyper_names]
         z = beta[..., ks:].reshape(C * D, shell.n_channels, -1)
         dev = gp.tested_values(
             z,
@@ -147,9 +183,9 @@ class DiscrepancyFit(SurfaceFit):
     @functools.cached_property
     def hyper(self) -> dict:
         """The fixed draws' amplitudes (S, n_blocks) m^2 and length scales (S,) bar."""
-        names = HYPER[: self.n_channels // self.n_k]
         amps = np.stack(
-            [np.asarray(self.reported[n], float).reshape(-1)[self.rows] for n in names], 1
+            [np.asarray(self.reported[n], float).reshape(-1)[self.rows] for n in self.hyper_names],
+            1,
         )
         return {
             "amplitude": amps,
@@ -158,7 +194,7 @@ class DiscrepancyFit(SurfaceFit):
 
     @functools.cached_property
     def channel_scale(self) -> np.ndarray:
-        """a s_k of every channel (delta's n_k, then eps's), (S, n_c)."""
+        """a s_k of every channel (block after block, n_k each), (S, n_c)."""
         return np.repeat(self.hyper["amplitude"], self.n_k, axis=1) * gp.COEFFICIENT_SCALE
 
     @functools.cached_property
@@ -195,9 +231,10 @@ class DiscrepancyFit(SurfaceFit):
         order = np.argsort(allp, kind="stable")
         return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
 
-    def deviation_draws(self, height_m, p_bar, *, volume: bool = False, check: bool = True):
-        """The deviation of the pressure area from the surface's (``volume`` True: of the
-        volume-derived area, delta + eps), m^2, (S, *shape)."""
+    def deviation_draws(self, height_m, p_bar, blocks=("delta",), *, check: bool = True):
+        """The sum of the deviation ``blocks`` (``symbols``) at the points, m^2, (S, *shape):
+        ("delta",) the pressure area's, ("delta", "eps") the volume-derived area's, ("phi",) the
+        force's not proportional to p_u (as an area at p_ref)."""
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
@@ -208,51 +245,55 @@ class DiscrepancyFit(SurfaceFit):
             values = np.concatenate([values, values], axis=1)
         else:
             i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
+        offsets = [self.symbols.index(b) * self.n_k for b in blocks]
         out = np.zeros((self.rows.size, p.size))
         for k in range(self.n_k):
-            series = values[:, :, k]
-            if volume:
-                series = series + values[:, :, self.n_k + k]
+            series = sum(values[:, :, o + k] for o in offsets)
             out += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
         return out.reshape(-1, *shape)
-
-    def _eps_draws(self, height_m, p_bar):
-        return self.deviation_draws(
-            height_m, p_bar, volume=True, check=False
-        ) - self.deviation_draws(height_m, p_bar, check=False)
 
     def _p_pa(self, height_m, p_bar):
         shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
         return np.broadcast_to(np.asarray(p_bar, float), shape) * BAR_PA
 
+    def _dev(self, height_m, p_bar, *blocks):
+        return self.deviation_draws(height_m, p_bar, blocks, check=False)
+
     # ---- the quantities: the surface's plus the deviations
     def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
-        """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta."""
+        """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta plus
+        p_ref phi."""
         base = super().force_draws(height_m, p_bar, check=check)
-        return base + self._p_pa(height_m, p_bar) * self.deviation_draws(
-            height_m, p_bar, check=False
+        return (
+            base
+            + self._p_pa(height_m, p_bar) * self._dev(height_m, p_bar, "delta")
+            + self.p_ref_pa * self._dev(height_m, p_bar, "phi")
         )
 
     def pressure_area_draws(self, height_m, p_bar, *, check=True):
         """F_p + delta, m^2: the pressure area with its deviation."""
         base = super().pressure_area_draws(height_m, p_bar, check=check)
-        return base + self.deviation_draws(height_m, p_bar, check=False)
+        return base + self._dev(height_m, p_bar, "delta")
 
     def volume_area_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The volume-derived area dV/dx = F_p + D + delta + eps, m^2 (eq. 1's second formula)."""
         base = super().volume_area_draws(height_m, p_bar, check=check)
-        return base + self.deviation_draws(height_m, p_bar, volume=True, check=False)
+        return base + self._dev(height_m, p_bar, "delta", "eps")
 
     def volume_excess_draws(self, height_m, p_bar, *, check=True):
         """D + eps = -dV/dx - (F_p + delta), m^2."""
-        return super().volume_excess_draws(height_m, p_bar, check=check) + self._eps_draws(
-            height_m, p_bar
+        return super().volume_excess_draws(height_m, p_bar, check=check) + self._dev(
+            height_m, p_bar, "eps"
         )
 
     def spread_draws(self, height_m, p_bar, *, check=True):
-        """p_u (-dV/dx) - P = p_u (D + eps) - E, N."""
+        """p_u (-dV/dx) - P = p_u (D + eps) - E - p_ref phi, N."""
         base = super().spread_draws(height_m, p_bar, check=check)
-        return base + self._p_pa(height_m, p_bar) * self._eps_draws(height_m, p_bar)
+        return (
+            base
+            + self._p_pa(height_m, p_bar) * self._dev(height_m, p_bar, "eps")
+            - self.p_ref_pa * self._dev(height_m, p_bar, "phi")
+        )
 
     # ---- the JSON document
     def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
@@ -269,7 +310,7 @@ class DiscrepancyFit(SurfaceFit):
 
 
 def discrepancy_summary(fit: DiscrepancyFit) -> dict:
-    names = HYPER[: fit.n_channels // fit.n_k]
+    names = fit.hyper_names
     tested = np.asarray(fit.tested_pressures_bar, float)
     between = (tested[:-1] + tested[1:]) / 2
     some = fit.on_draws(2000)
@@ -278,6 +319,7 @@ def discrepancy_summary(fit: DiscrepancyFit) -> dict:
         f"{pb:g}": {
             "tested": bool(np.any(np.isclose(pb, tested))),
             "pressure_area_deviation_m2": estimate(some.deviation_draws(x0, pb)),
+            "force_deviation_N": estimate(some.p_ref_pa * some.deviation_draws(x0, pb, ("phi",))),
             "force_N": estimate(some.force_draws(x0, pb)),
         }
         for pb in sorted({*tested.tolist(), *between.tolist()})
@@ -285,7 +327,8 @@ def discrepancy_summary(fit: DiscrepancyFit) -> dict:
     return {
         "kernel": "Matern 3/2 in p_u (bar)",
         "deviation_degree": fit.n_k - 1,
-        "blocks": [b[0] for b in BLOCKS[: fit.n_channels // fit.n_k]],
+        "blocks": [BLOCK_INFO[s][0] for s in fit.symbols],
+        "p_ref_bar": fit.p_ref_pa / BAR_PA,
         "priors": {
             "amplitude": f"exponential, P(a > {gp.AMPLITUDE_UPPER_REL:g} x reference area) = "
             f"{gp.AMPLITUDE_TAIL:g} (reference area: the median pressure area of a least-squares fit)",

@@ -204,3 +204,34 @@ def test_pressure_needed_where_the_force_dips_away_from_the_load():
     assert np.all((d >= min(truth) - 0.02) & (d <= max(truth) + 0.02))
     with pytest.raises(InputError, match="more than one overpressure"):
         pressure_needed(Dip(), 0.150, 5000.0)  # down through 5000 N below 1 bar, up again at 4.2
+
+
+def test_pressure_needed_widens_when_a_few_draws_cross_the_load_twice():
+    """Up to NOT_RISING_MAX of the draws may cross the load more than once (a band between tested
+    pressures that does not know the force rises there): each answers with its lowest crossing,
+    and the share is returned; above that share the query is refused."""
+    from uq._derived.margin import NOT_RISING_MAX
+
+    class Bump:
+        height_range_m, pressure_range_bar = (0.065, 0.155), (1.0, 10.0)
+
+        def __init__(self, n_bumped):
+            self.n_bumped = n_bumped
+
+        def check_range(self, *args):
+            pass
+
+        def force_draws(self, x, p):
+            p = np.asarray(p, float)
+            bump = np.zeros((100, 1))
+            bump[: self.n_bumped] = 3000.0  # up through 5000 N before 3 bar, down, up again at 5
+            return 1000.0 * p + bump * np.exp(-(((p - 3.0) / 0.3) ** 2))
+
+    d, share = pressure_needed(Bump(5), 0.15, 5000.0, with_share=True)
+    assert share == pytest.approx(0.05)
+    np.testing.assert_allclose(d[5:], 5.0, atol=0.02)  # the draws that rise: one crossing
+    assert np.all((d[:5] > 2.0) & (d[:5] < 3.0))  # the lowest of their three crossings
+    assert np.array_equal(pressure_needed(Bump(5), 0.15, 5000.0), d)
+    n_refused = int(100 * NOT_RISING_MAX) + 1
+    with pytest.raises(InputError, match="more than one overpressure in 11 %"):
+        pressure_needed(Bump(n_refused), 0.15, 5000.0)

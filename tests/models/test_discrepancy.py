@@ -401,6 +401,22 @@ def test_saved_and_loaded_it_answers_the_same(small_fit, tmp_path):
     )
 
 
+def test_a_file_saved_before_the_force_deviation_is_refused_in_one_line(
+    small_fit, tmp_path, monkeypatch
+):
+    """A discrepancy surface saved without the force's deviation block (phi; saved before it was
+    added) is not today's model: refused in one line naming the file, not loaded wrongly."""
+    from uq._io.errors import InputError
+    from uq._models import saved
+
+    path = small_fit.save(tmp_path / "d.nc", seed=3)
+    attrs, groups = saved.read(path)
+    groups["posterior"] = groups["posterior"].drop_vars("force_deviation_m2")
+    monkeypatch.setattr(saved, "read", lambda p: (attrs, groups))
+    with pytest.raises(InputError, match=r"d\.nc: a discrepancy surface saved before .*phi"):
+        saved.load(path)
+
+
 def test_its_page_shows_the_discrepancy(small_fit, tmp_path):
     """uq report --surface / uq surface --report: the surface's page with the discrepancy's section
     (the deviation at x0 at and between tested pressures)."""

@@ -19,7 +19,8 @@ reading noise excluded: the load cell's and the pressure holding's scatter belon
 stand, not to the element in service). ``pressure_bar_for_prob`` is exact: the force grows
 with pressure at a fixed height, so "the element carries at least W at p" holds for a draw iff
 p >= that draw's required pressure, and the smallest p with probability ``prob`` is the
-``prob`` quantile of ``pressure_bar_needed``.
+``prob`` quantile of ``pressure_bar_needed``. (A draw that does not rise everywhere between tested
+pressures answers with its lowest crossing of the load; their share is stated: ``pressure_needed``.)
 """
 
 from __future__ import annotations
@@ -42,23 +43,38 @@ def model_choices() -> tuple[str, ...]:
     return (AUTO, *registry.names())
 
 
-def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
-    """Posterior draws of the overpressure (bar) at which the element carries ``load_N``."""
+#: the share of posterior draws whose force crosses the load more than once in pressure up to which
+#: a margin is answered (their lowest crossing taken, the share stated); above it, refused
+NOT_RISING_MAX = 0.10
+
+
+def pressure_needed(model, height_m: float, load_N: float, *, with_share: bool = False):
+    """Posterior draws of the overpressure (bar) at which the element carries ``load_N``; with
+    ``with_share``, (draws, the share of draws whose force crosses the load more than once).
+
+    The force rises with pressure at a fixed height, and a draw crosses the load once. Between
+    tested pressures a band that knows little (coarse grids, the discrepancy's Gaussian process)
+    has some draws that do not rise everywhere and cross the load more than once: such a draw
+    answers with its lowest crossing, the least pressure at which it carries the load as the
+    spring is charged (so the interval is widened towards lower pressures, not narrowed), and the
+    share is said (``not_rising_share`` in ``uq margin``'s JSON). Above ``NOT_RISING_MAX`` of the
+    draws the model does not know that the force rises with pressure there: refused."""
     model.check_range(height_m, model.pressure_range_bar[0], "height_m")
     plo, phi = model.pressure_range_bar
     ps = np.linspace(plo, phi, N_P_GRID)
     P = model.force_draws(np.full_like(ps, height_m), ps)  # (S, G)
     above = P >= load_N
-    # The answer is unique where the force crosses the load once; a force that does not rise with
-    # pressure elsewhere (at 150 mm the casing's tension makes the 0.1-bar force negative, which
-    # bends the cubics' interpolation below 1 bar) does not matter to a load it never equals there.
+    # a force that does not rise with pressure elsewhere (at 150 mm the casing's tension makes the
+    # 0.1-bar force negative, which bends the cubics' interpolation below 1 bar) does not matter
+    # to a load it never equals there: only crossings of the load count
     crossings = np.count_nonzero(np.diff(above.astype(np.int8), axis=1), axis=1)
     frac = float(np.mean(crossings > 1))
-    if frac > 0.01:
+    if frac > NOT_RISING_MAX:
         raise InputError(
             f"load_N: at {height_m * 1e3:g} mm the force equals {load_N:g} N at more than one "
             f"overpressure in {100 * frac:.0f} % of the posterior draws (it does not rise with "
-            "pressure there); no unique required pressure",
+            f"pressure there; answered up to {100 * NOT_RISING_MAX:.0f} %); no unique required "
+            "pressure",
             param="load_N",
         )
     lo_load, hi_load = band(P[:, 0])[2], band(P[:, -1])[1]
@@ -78,7 +94,7 @@ def pressure_needed(model, height_m: float, load_N: float) -> np.ndarray:
     out[rows] = p0 + (load_N - f0) / (f1 - f0) * (p1 - p0)
     out[above[:, 0]] = plo  # already carried at the lowest pressure (within the band edge)
     out[~above.any(axis=1)] = np.inf  # not carried in the tested range
-    return out
+    return (out, frac) if with_share else out
 
 
 def _finite_estimate(d):
@@ -226,7 +242,7 @@ def margin(
         )
     if model_info is None:
         model_info = describe(model, why="given by the caller; no comparison made")
-    need = pressure_needed(model, height_m, load_N)
+    need, not_rising = pressure_needed(model, height_m, load_N, with_share=True)
     est = _finite_estimate(need)
     plo, phi = model.pressure_range_bar
     res = {
@@ -239,6 +255,9 @@ def margin(
         "distribution": "posterior of the mean characteristic (stand reading noise excluded)",
         "tested_pressure_range_bar": [plo, phi],
         "tested_height_range_m": list(model.height_range_m),
+        # the share of draws whose force crosses the load more than once (their lowest crossing
+        # taken: pressure_needed)
+        "not_rising_share": not_rising,
     }
     if pressure_bar is not None:
         model.check_range(height_m, pressure_bar, "pressure_bar")

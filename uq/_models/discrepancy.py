@@ -720,7 +720,7 @@ def fit_discrepancy(
     :class:`uq._models.discrepancy_fit.DiscrepancyFit`.
 
     ``orders``: the surface's (default :func:`uq._models.surface.orders_for` the campaign); a
-    campaign without piston readings gets the force surface and the pressure-area deviation alone.
+    campaign without piston readings gets the force surface and the force's deviations (delta, phi).
     Needs two tests or more (one test has nothing between tested pressures) and, per test, the
     distinct heights that fix the test's cubic (``min_heights_needed``). Ensembles get at least the
     walkers the sampler's independence move needs (``walkers_for``)."""

@@ -17,8 +17,8 @@ smooth surface; between tested pressures each posterior draw carries its Gaussia
 So a draw's force at 801 pressures is one smooth curve in p_u, as ``uq margin`` needs (it looks for
 where each draw's force crosses the load). Everything else (the surface's blocks and columns, the
 saved format, the JSON's common parts) is the smooth surface's (uq._models.surface.SurfaceFit),
-with the deviations as two more blocks and the amplitudes and length scale among the sampled
-parameters; a fitted or loaded model evaluates in numpy.
+with the deviations as three more blocks (two without piston readings) and the amplitudes and
+length scale among the sampled parameters; a fitted or loaded model evaluates in numpy.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import estimate, thin_rows
+from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models.linear_fit import BlockSpec
 from uq._models.surface import SurfaceFit, force_label
@@ -173,6 +174,17 @@ class DiscrepancyFit(SurfaceFit):
             [beta[..., :ks] * scales, np.concatenate(blocks, axis=1).reshape(C, D, -1)], axis=-1
         )
         return shell.fitted(coefficients, posterior, recordings, stand, provenance)
+
+    @classmethod
+    def from_saved(cls, attrs: dict, groups: dict) -> DiscrepancyFit:
+        """The saved model, refused in one line when it was saved before the force's deviation
+        phi (uq 0.1 round 7, before its third session): its blocks are not this model's."""
+        if "force_deviation_m2" not in groups["posterior"].data_vars:
+            raise InputError(
+                "a discrepancy surface saved before it had the force's deviation (phi, added in "
+                "round 7): its blocks are not today's model's; fit and save it again"
+            )
+        return super().from_saved(attrs, groups)
 
     # ---- the draws between tested pressures
     @functools.cached_property

@@ -1,7 +1,7 @@
 """The Gaussian process in pressure of the discrepancy surface: kernel, priors, draws between tests.
 
 Each coefficient k of a deviation block (the pressure-area deviation delta, the volume-area
-deviation eps; uq._models.discrepancy) is, over the tested pressures, a zero-mean Gaussian process
+deviation eps, the force's deviation phi; uq._models.discrepancy) is, over the tested pressures, a zero-mean Gaussian process
 in the overpressure p_u (bar):
 
     Cov(delta_k(p), delta_k(p')) = a^2 s_k^2 R(|p - p'| / l),   R Matern 3/2:  (1 + r) exp(-r),

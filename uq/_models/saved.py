@@ -167,6 +167,8 @@ def load(path):
     kind = registry.entry(name).model_class()
     try:
         return kind.from_saved(attrs, groups)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from None
     except Exception as exc:  # a damaged or hand-edited file: say so in one line
         raise InputError(
             f"{path}: damaged saved model ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"

@@ -1064,6 +1064,9 @@ BLOCKS: dict[str, Block] = {
     "sealed-between-knee": report_block(
         sealed_coverage_summary("reports/sealed-between/n50-knee/coverage.json")
     ),
+    "sealed-between-ripple": report_block(
+        sealed_coverage_summary("reports/sealed-between/n50-ripple/coverage.json")
+    ),
     "sealed-between-kink-surface": report_block(
         sealed_coverage_summary("reports/sealed-between/n50-kink-surface/coverage.json")
     ),

@@ -243,10 +243,9 @@ class DiscrepancyFit(SurfaceFit):
         order = np.argsort(allp, kind="stable")
         return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
 
-    def deviation_draws(self, height_m, p_bar, blocks=("delta",), *, check: bool = True):
-        """The sum of the deviation ``blocks`` (``symbols``) at the points, m^2, (S, *shape):
-        ("delta",) the pressure area's, ("delta", "eps") the volume-derived area's, ("phi",) the
-        force's not proportional to p_u (as an area at p_ref)."""
+    def block_draws(self, height_m, p_bar, *, check: bool = True) -> dict[str, np.ndarray]:
+        """Every deviation block (``symbols``) at the points, m^2: {symbol: (S, *shape)}; phi's is
+        the force's deviation not proportional to p_u as an area at p_ref."""
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
@@ -257,55 +256,53 @@ class DiscrepancyFit(SurfaceFit):
             values = np.concatenate([values, values], axis=1)
         else:
             i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
-        offsets = [self.symbols.index(b) * self.n_k for b in blocks]
-        out = np.zeros((self.rows.size, p.size))
-        for k in range(self.n_k):
-            series = sum(values[:, :, o + k] for o in offsets)
-            out += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
-        return out.reshape(-1, *shape)
+        out = {}
+        for b, sym in enumerate(self.symbols):
+            acc = np.zeros((self.rows.size, p.size))
+            for k in range(self.n_k):
+                series = values[:, :, b * self.n_k + k]
+                acc += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
+            out[sym] = acc.reshape(-1, *shape)
+        return out
+
+    def deviation_draws(self, height_m, p_bar, blocks=("delta",), *, check: bool = True):
+        """The sum of the deviation ``blocks`` at the points, m^2, (S, *shape): ("delta",) the
+        pressure area's, ("delta", "eps") the volume-derived area's (``block_draws``)."""
+        d = self.block_draws(height_m, p_bar, check=check)
+        return sum(d[b] for b in blocks)
 
     def _p_pa(self, height_m, p_bar):
         shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
         return np.broadcast_to(np.asarray(p_bar, float), shape) * BAR_PA
-
-    def _dev(self, height_m, p_bar, *blocks):
-        return self.deviation_draws(height_m, p_bar, blocks, check=False)
 
     # ---- the quantities: the surface's plus the deviations
     def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta plus
         p_ref phi."""
         base = super().force_draws(height_m, p_bar, check=check)
-        return (
-            base
-            + self._p_pa(height_m, p_bar) * self._dev(height_m, p_bar, "delta")
-            + self.p_ref_pa * self._dev(height_m, p_bar, "phi")
-        )
+        d = self.block_draws(height_m, p_bar, check=False)
+        return base + self._p_pa(height_m, p_bar) * d["delta"] + self.p_ref_pa * d["phi"]
 
     def pressure_area_draws(self, height_m, p_bar, *, check=True):
         """F_p + delta, m^2: the pressure area with its deviation."""
         base = super().pressure_area_draws(height_m, p_bar, check=check)
-        return base + self._dev(height_m, p_bar, "delta")
+        return base + self.deviation_draws(height_m, p_bar, check=False)
 
     def volume_area_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The volume-derived area dV/dx = F_p + D + delta + eps, m^2 (eq. 1's second formula)."""
         base = super().volume_area_draws(height_m, p_bar, check=check)
-        return base + self._dev(height_m, p_bar, "delta", "eps")
+        return base + self.deviation_draws(height_m, p_bar, ("delta", "eps"), check=False)
 
     def volume_excess_draws(self, height_m, p_bar, *, check=True):
         """D + eps = -dV/dx - (F_p + delta), m^2."""
-        return super().volume_excess_draws(height_m, p_bar, check=check) + self._dev(
-            height_m, p_bar, "eps"
-        )
+        base = super().volume_excess_draws(height_m, p_bar, check=check)
+        return base + self.deviation_draws(height_m, p_bar, ("eps",), check=False)
 
     def spread_draws(self, height_m, p_bar, *, check=True):
         """p_u (-dV/dx) - P = p_u (D + eps) - E - p_ref phi, N."""
         base = super().spread_draws(height_m, p_bar, check=check)
-        return (
-            base
-            + self._p_pa(height_m, p_bar) * self._dev(height_m, p_bar, "eps")
-            - self.p_ref_pa * self._dev(height_m, p_bar, "phi")
-        )
+        d = self.block_draws(height_m, p_bar, check=False)
+        return base + self._p_pa(height_m, p_bar) * d["eps"] - self.p_ref_pa * d["phi"]
 
     # ---- the JSON document
     def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:

@@ -51,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 from uq._data.stand_description import PAPER_STAND  # noqa: E402
 from uq._derived.design import DesignGrid, SealedDesign, sealed_draws  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
+from uq._io.errors import InputError  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
 from uq._models.discrepancy import fit_discrepancy  # noqa: E402
 from uq._models.registry import DEFAULT_MODEL  # noqa: E402
@@ -144,7 +145,10 @@ def scenario_rows(model, scenario, seed: int, spring: str = SPRING) -> dict:
     path, _ = sealed_draws(grid, design, heights_m=xs)
     if not path.in_range.all():
         return {"scenario": name, "seed": seed, "evaluable": False}
-    freq = natural_frequency_Hz(path.rate_N_per_m[:, 1], path.force_N[:, 1])
+    try:
+        freq = natural_frequency_Hz(path.rate_N_per_m[:, 1], path.force_N[:, 1])
+    except InputError as exc:  # uq design refuses the frequency (a draw's rate not positive)
+        freq, refused = None, str(exc)
     pairs = {
         "force_below": (path.force_N[:, 0], truth.force_N[0]),
         "force_above": (path.force_N[:, 2], truth.force_N[2]),
@@ -161,6 +165,9 @@ def scenario_rows(model, scenario, seed: int, spring: str = SPRING) -> dict:
         "dvdp_sd_l_per_bar": grid.dvdp_sd(design)[0],
     }
     for q, (draws, true) in pairs.items():
+        if draws is None:  # refused: counted as not covered, no width
+            row[q] = {"covered": False, "refused": refused, "truth": float(true)}
+            continue
         lo, hi = _interval(draws)
         row[q] = {"covered": bool(lo <= true <= hi), "interval": [lo, hi], "truth": float(true)}
     # the recorded sealed test against the posterior predictive (reading noise added)
@@ -237,7 +244,15 @@ def run(
         verdicts += [lo <= v <= hi for v in c.values()] if ok else [False]
         if ok:
             widths[sc[0]] = {
-                q: float(np.mean([np.diff(r[q]["interval"])[0] / abs(r[q]["truth"]) for r in ok]))
+                q: float(
+                    np.mean(
+                        [
+                            np.diff(r[q]["interval"])[0] / abs(r[q]["truth"])
+                            for r in ok
+                            if "interval" in r[q]
+                        ]
+                    )
+                )
                 for q in QUANTITIES
             }
     z = np.concatenate([r["reading_z"] for r in rows if r["evaluable"]])

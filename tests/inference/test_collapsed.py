@@ -140,18 +140,26 @@ def test_posterior_makes_its_parts_on_demand_and_the_same_whenever():
 
 def test_one_thinning_rule_for_draws_and_sampler_steps():
     """Every ceil(N / max)-th draw, all of them when they fit: the fits' fixed draws (thin_rows)
-    and the sampler's kept steps (whole steps of every walker) follow the one rule."""
-    from uq._inference.sampler import Chains, thin
+    and the sampler's kept steps (whole steps of every walker) follow the one rule, the sampler
+    keeping at least MIN_KEPT_STEPS steps a walker."""
+    from uq._inference.sampler import MIN_KEPT_STEPS, Chains, thin
 
     rows = np.arange(10)
     assert thin_rows(rows, 3).tolist() == [0, 4, 8]
     for keep_all in (None, 0, 10, 11):
         np.testing.assert_array_equal(thin_rows(rows, keep_all), rows)
-    draws = np.arange(2 * 12 * 2.0).reshape(2, 12 * 2, 1)  # 2 ensembles, 12 steps of 2 walkers
-    ch = Chains(("x",), draws, draws[..., 0], np.ones(4), np.ones(1), 12, 0, 2, n_walkers=2)
-    kept = thin(ch, 10)  # 48 draws -> every 5th step: steps 0, 5, 10 of both walkers
-    np.testing.assert_array_equal(kept.samples[0, :, 0], [0, 1, 10, 11, 20, 21])
-    assert thin(ch, 48) is ch
+    steps = 400  # 2 ensembles, 400 steps of 2 walkers: 1600 draws
+    draws = np.arange(2 * steps * 2.0).reshape(2, steps * 2, 1)
+    ch = Chains(("x",), draws, draws[..., 0], np.ones(4), np.ones(1), steps, 0, 2, n_walkers=2)
+    kept = thin(ch, 200)  # every 8th step: steps 0, 8, 16, ... of both walkers
+    np.testing.assert_array_equal(kept.samples[0, :4, 0], [0, 1, 16, 17])
+    assert kept.samples.shape[1] == 2 * steps // 8
+    assert thin(ch, 1600) is ch
+    # never fewer than MIN_KEPT_STEPS steps a walker (the diagnostics' chains): 10 draws asked,
+    # every 20th of the 400 steps kept
+    few = thin(ch, 10)
+    assert few.samples.shape[1] // 2 == MIN_KEPT_STEPS
+    np.testing.assert_array_equal(few.samples[0, :4, 0], [0, 1, 40, 41])
 
 
 def test_a_model_of_a_namespace_takes_its_functions_by_field_name():

@@ -117,15 +117,24 @@ class Chains:
         return arr.reshape(C, D // self.n_walkers, self.n_walkers, *arr.shape[2:])
 
 
+#: steps per walker that thinning keeps at least: the convergence diagnostics treat every walker's
+#: steps as a chain, and split-chain ESS needs several per half (with 92 walkers and 1000 draws
+#: kept, every 258th of 1400 steps left 5 a walker and every ESS undefined: NaN, "not converged")
+MIN_KEPT_STEPS = 20
+
+
 def thin(chains: Chains, max_total: int) -> Chains:
-    """Keep every k-th step (all walkers) so that at most about ``max_total`` samples remain.
+    """Keep every k-th step (all walkers) so that at most about ``max_total`` samples remain, but
+    at least ``MIN_KEPT_STEPS`` steps per walker (more than ``max_total`` samples then remain; a
+    fit's fixed draws are thinned to its own maximum again).
 
     Steps closer than an autocorrelation time carry little extra information; thinning keeps
     the exact coefficient draws and derived bands cheap. Whole steps are kept so the storage
     order (steps x walkers) that the diagnostics rely on survives.
     """
     C, D = chains.samples.shape[:2]
-    k = thin_step(C * D, max_total)
+    steps = D // chains.n_walkers
+    k = min(thin_step(C * D, max_total), max(1, steps // MIN_KEPT_STEPS))
     if k == 1:
         return chains
 

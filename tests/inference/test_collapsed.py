@@ -156,10 +156,11 @@ def test_one_thinning_rule_for_draws_and_sampler_steps():
     assert kept.samples.shape[1] == 2 * steps // 8
     assert thin(ch, 1600) is ch
     # never fewer than MIN_KEPT_STEPS steps a walker (the diagnostics' chains): 10 draws asked,
-    # every 20th of the 400 steps kept
+    # every (400 / MIN_KEPT_STEPS)-th of the 400 steps kept
     few = thin(ch, 10)
+    every = steps // MIN_KEPT_STEPS
     assert few.samples.shape[1] // 2 == MIN_KEPT_STEPS
-    np.testing.assert_array_equal(few.samples[0, :4, 0], [0, 1, 40, 41])
+    np.testing.assert_array_equal(few.samples[0, :4, 0], [0, 1, 2 * every, 2 * every + 1])
 
 
 def test_a_model_of_a_namespace_takes_its_functions_by_field_name():

@@ -119,7 +119,7 @@ class Chains:
 
 #: steps per walker that thinning keeps at least: the convergence diagnostics treat every walker's
 #: steps as a chain, and split-chain ESS needs at least 4 per half (with 4 ensembles of 92 walkers
-#: and 1000 draws kept, every 548th of 1500 steps left 3 a walker and every ESS undefined: NaN,
+#: and 1000 draws kept, every 552nd of 1500 steps left 3 a walker and every ESS undefined: NaN,
 #: "not converged"). At the default 4000 draws every fit keeps more than this already.
 MIN_KEPT_STEPS = 10
 

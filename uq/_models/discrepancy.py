@@ -308,13 +308,18 @@ def _n_noise(theta, d) -> int:
     return theta.shape[-1] - d.rates.shape[0] - 1
 
 
-def _split(theta, d):
-    """(noise, amplitudes per deviation block in ``BLOCKS`` (or ``FORCE_BLOCKS``) order, length)
-    from theta = (noise logs, log r, u, [log a_V], log l)."""
+def _hyper(theta, d, xp):
+    """(noise logs, amplitudes per deviation block in ``BLOCKS`` (or ``FORCE_BLOCKS``) order on the
+    last axis, length) from theta = (noise logs, log r, u, [log a_V], log l) on its last axis."""
     k = _n_noise(theta, d)
-    a_F, a_P = force_amplitudes(theta[k], theta[k + 1], jnp)
-    amps = [a_F, jnp.exp(theta[k + 2]), a_P] if has_piston(d) else [a_F, a_P]
-    return theta[:k], jnp.stack(amps), jnp.exp(theta[-1])
+    a_F, a_P = force_amplitudes(theta[..., k], theta[..., k + 1], xp)
+    amps = [a_F, xp.exp(theta[..., k + 2]), a_P] if has_piston(d) else [a_F, a_P]
+    return theta[..., :k], xp.stack(amps, axis=-1), xp.exp(theta[..., -1])
+
+
+def _split(theta, d):
+    """(noise, amplitudes, length) of one theta (JAX)."""
+    return _hyper(theta, d, jnp)
 
 
 BLOCK_AMPLITUDE = {b: info[1] for b, info in BLOCK_INFO.items()}
@@ -323,11 +328,7 @@ BLOCK_AMPLITUDE = {b: info[1] for b, info in BLOCK_INFO.items()}
 def hyper_draws(theta, d) -> tuple[np.ndarray, np.ndarray]:
     """The amplitudes (S, blocks; ``BLOCKS`` order) and length scales (S,) of theta draws (S, k),
     numpy."""
-    theta = np.asarray(theta, float)
-    k = _n_noise(theta, d)
-    a_F, a_P = force_amplitudes(theta[:, k], theta[:, k + 1])
-    amps = [a_F, np.exp(theta[:, k + 2]), a_P] if has_piston(d) else [a_F, a_P]
-    return np.stack(amps, axis=1), np.exp(theta[:, -1])
+    return _hyper(np.asarray(theta, float), d, np)[1:]
 
 
 def theta_of(noise, amplitudes, length_bar) -> np.ndarray:

@@ -322,9 +322,6 @@ def _split(theta, d):
     return _hyper(theta, d, jnp)
 
 
-BLOCK_AMPLITUDE = {b: info[1] for b, info in BLOCK_INFO.items()}
-
-
 def hyper_draws(theta, d) -> tuple[np.ndarray, np.ndarray]:
     """The amplitudes (S, blocks; ``BLOCKS`` order) and length scales (S,) of theta draws (S, k),
     numpy."""
@@ -656,7 +653,7 @@ def report(theta, beta, d) -> dict:
     noise = NATURAL_NAMES if has_piston(d) else surface_force.NATURAL
     out = {n: np.exp(theta[:, i]) for i, n in enumerate(noise[:k])}
     amps, length = hyper_draws(theta, d)
-    names = [BLOCK_AMPLITUDE[b] for b in (BLOCKS if has_piston(d) else FORCE_BLOCKS)]
+    names = [BLOCK_INFO[b][1] for b in (BLOCKS if has_piston(d) else FORCE_BLOCKS)]
     out.update({n: amps[:, j] for j, n in enumerate(names)})
     out["length_bar"] = length
     return out

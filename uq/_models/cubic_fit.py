@@ -38,6 +38,17 @@ PRESSURE_MODELS = ("set", "measured")
 AR1_CHOICES = ("off", "on", "auto")
 
 
+@dataclasses.dataclass(frozen=True)
+class _Item:
+    """One test to fit, with what its campaign says about it."""
+
+    test: PressureTest
+    x0_m: float
+    piston_area_m2: float
+    pressure: str  # "set" or "measured"
+    seed: int  # of its exact coefficient draws
+
+
 def fit_tests(
     tests,
     x0_m: float,
@@ -76,82 +87,119 @@ def fit_tests(
 
     if pressure not in PRESSURE_MODELS:
         raise ValueError(f"pressure must be one of {PRESSURE_MODELS}, got {pressure!r}")
+    tests = list(tests)
+    items = [
+        _Item(t, x0_m, piston_area_m2, pressure, s)
+        for t, s in zip(tests, test_seeds(seed, len(tests)), strict=True)
+    ]
+    return _fit_items(
+        items, seed=seed, settings=settings, noise=noise, stand=stand, desc=desc, ar1=ar1
+    )
+
+
+#: the model of each variant (the key :func:`_variant_of` gives a test)
+_MODELS = {
+    "plain": MODEL,
+    "volume": MODEL,  # the plain model on VolumeData: L's rounding in its noise
+    "measured": MEASURED,
+    "ar1": AR1,
+    "force": FORCE_ONLY,
+    "force-measured": FORCE_ONLY,
+}
+#: the pressure-holding treatment PressureFit.variant records for each model key
+_HOLDING = {"force": "plain", "force-measured": "measured", "volume": "plain"}
+
+
+def _variant_of(item: _Item, ar1: str) -> str:
+    t = item.test
+    if t.piston_m is None and t.volume_m3 is None:  # force only
+        return "force-measured" if item.pressure == "measured" else "force"
+    if t.piston_m is None:  # L from a volume column: not read off the stand's piston
+        return "volume"
+    if item.pressure == "measured":
+        return "measured"
+    if ar1 == "on" and t.step is not None:
+        return "ar1"
+    return "plain"
+
+
+def _data_of(item: _Item, variant: str, noise: str, stand: StandDescription):
+    t, x0_m, area = item.test, item.x0_m, item.piston_area_m2
+    if variant == "measured":
+        return measured_data(t, x0_m, noise, stand, area)
+    if variant == "ar1":
+        return ar1_data(t, x0_m, noise, stand, area)
+    if variant in ("force", "force-measured"):
+        return force_data(t, x0_m, noise, stand, measured=variant == "force-measured")
+    return prepare(t, x0_m, noise, stand, area)  # the plain model
+
+
+def _fit_items(
+    items: list[_Item],
+    *,
+    seed: int,
+    settings: Settings,
+    noise: str,
+    stand: StandDescription,
+    desc: str | None,
+    ar1: str,
+) -> list[PressureFit]:
+    """The tests ``items`` (of one campaign or of several) in one emcee run per model variant,
+    seeded by ``seed``; each test's exact coefficient draws by its own ``item.seed``."""
     if ar1 not in AR1_CHOICES:
         raise ValueError(f"ar1 must be one of {AR1_CHOICES}, got {ar1!r}")
-    tests = list(tests)
-    seeds = test_seeds(seed, len(tests))
-
-    def variant_of(t) -> str:
-        if t.piston_m is None and t.volume_m3 is None:  # force only
-            return "force-measured" if pressure == "measured" else "force"
-        if t.piston_m is None:  # L from a volume column: not read off the stand's piston
-            return "volume"
-        if pressure == "measured":
-            return "measured"
-        if ar1 == "on" and t.step is not None:
-            return "ar1"
-        return "plain"
-
-    def data_of(t, variant):
-        if variant == "measured":
-            return measured_data(t, x0_m, noise, stand, piston_area_m2)
-        if variant == "ar1":
-            return ar1_data(t, x0_m, noise, stand, piston_area_m2)
-        if variant in ("force", "force-measured"):
-            return force_data(t, x0_m, noise, stand, measured=variant == "force-measured")
-        return prepare(t, x0_m, noise, stand, piston_area_m2)  # the plain model
-
-    models = {
-        "plain": MODEL,
-        "volume": MODEL,  # the plain model on VolumeData: L's rounding in its noise
-        "measured": MEASURED,
-        "ar1": AR1,
-        "force": FORCE_ONLY,
-        "force-measured": FORCE_ONLY,
-    }
-    #: the pressure-holding treatment PressureFit.variant records for each model key
-    holding = {"force": "plain", "force-measured": "measured", "volume": "plain"}
-    variants = [variant_of(t) for t in tests]
+    for it in items:
+        if it.pressure not in PRESSURE_MODELS:
+            raise ValueError(f"pressure must be one of {PRESSURE_MODELS}, got {it.pressure!r}")
+    variants = [_variant_of(it, ar1) for it in items]
 
     def run(indices, variant, label):
-        prepared = [data_of(tests[i], variant) for i in indices]
+        prepared = [_data_of(items[i], variant, noise, stand) for i in indices]
         posts = fit_collapsed(
-            models[variant],
+            _MODELS[variant],
             [p[0] for p in prepared],
             seed=seed,
             settings=settings,
             max_draws=MAX_DRAWS,
-            seeds=[seeds[i] for i in indices],
+            seeds=[items[i].seed for i in indices],
             desc=label,
         )
         return {
             i: with_order_check(
                 PressureFit.of(
-                    tests[i], x0_m, lsq_f, lsq_l, post, ref, noise, holding.get(variant, variant)
+                    items[i].test,
+                    items[i].x0_m,
+                    lsq_f,
+                    lsq_l,
+                    post,
+                    ref,
+                    noise,
+                    _HOLDING.get(variant, variant),
                 )
             )
             for i, (_, lsq_f, lsq_l, ref), post in zip(indices, prepared, posts, strict=True)
         }
 
     fits: dict[int, PressureFit] = {}
-    for variant in models:
+    for variant in _MODELS:
         idx = [i for i, v in enumerate(variants) if v == variant]
         if idx:
             fits |= run(
                 idx, variant, desc if variant == "plain" else f"{desc or 'sampling'} ({variant})"
             )
-    if ar1 == "auto" and pressure != "measured":
+    if ar1 == "auto":
         flagged = [
             i
             for i, f in fits.items()
             if f.variant == "plain"
-            and tests[i].step is not None
-            and tests[i].piston_m is not None
+            and items[i].pressure != "measured"
+            and items[i].test.step is not None
+            and items[i].test.piston_m is not None
             and f.model_warnings()
         ]
         if flagged:
             fits |= run(flagged, "ar1", f"{desc or 'sampling'} (AR(1) where flagged)")
-    return [fits[i] for i in range(len(tests))]
+    return [fits[i] for i in range(len(items))]
 
 
 def fit_test(
@@ -192,7 +240,7 @@ def fit_campaign(
     this plus :meth:`CampaignFit.to_json`. Recordings with measured pressures
     (``Recordings.pressure_measured``) use them as a covariate of the pressure-holding error;
     otherwise ``pressure_ar1`` ("off", "on", "auto") models the holding errors as an AR(1) series
-    in recording order (:func:`fit_tests`).
+    in recording order (:func:`fit_tests`). The same as ``fit_campaigns([recordings], [seed])[0]``.
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -203,19 +251,76 @@ def fit_campaign(
     >>> bool(12e3 < a_P.mean() < 14e3)
     True
     """
-    fits = fit_tests(
-        recordings.tests,
-        recordings.x0_m,
-        seed=seed,
+    return fit_campaigns(
+        [recordings], [seed], settings=settings, stand=stand, pressure_ar1=pressure_ar1
+    )[0]
+
+
+def fit_campaigns(
+    recordings: list[Recordings],
+    seeds: list[int],
+    *,
+    settings: Settings = Settings(),
+    stand: StandDescription = PAPER_STAND,
+    pressure_ar1: str = "off",
+    desc: str | None = None,
+) -> list[CampaignFit]:
+    """Fit many campaigns through one driver call: the tests of every campaign are sampled in
+    one emcee run per model variant (as the tests of one campaign are, :func:`fit_tests`), each
+    test with its own ensembles, burn-in and convergence verdict, its campaign's x0, piston area
+    and pressure treatment, and its exact coefficient draws seeded by its campaign's seed
+    (:func:`test_seeds` of it). ``uq batch`` fits its campaigns this way.
+
+    Determinism: the emcee random stream is shared by the run and seeded by ``seeds[0]``, so a
+    campaign's MCMC draws depend on the campaigns it was batched with (the same list gives the
+    same draws, to the bit on one machine); ``fit_campaigns([rec], [seed])[0]`` is
+    :func:`fit_campaign` ``(rec, seed=seed)``, draw for draw. The run is extended until every
+    test of every campaign passes the convergence rules (or ``max_steps``), so one slow test
+    lengthens the run of all; the retained draws are thinned to the same count either way.
+    All campaigns share ``settings`` and ``stand`` (group campaigns by them before calling). An
+    error in any campaign's data (e.g. a MAP that does not converge) is raised for the whole
+    call: fit the campaigns one by one to know whose it was.
+    """
+    recordings, seeds = list(recordings), [int(s) for s in seeds]
+    if len(recordings) != len(seeds):
+        raise ValueError(f"{len(recordings)} recordings but {len(seeds)} seeds")
+    if not recordings:
+        return []
+    items, spans = [], []
+    for rec, seed in zip(recordings, seeds, strict=True):
+        pressure = "measured" if getattr(rec, "pressure_measured", False) else "set"
+        area = getattr(rec, "piston_area_m2", PAPER_PISTON_AREA_M2)
+        first = len(items)
+        items += [
+            _Item(t, rec.x0_m, area, pressure, s)
+            for t, s in zip(rec.tests, test_seeds(seed, len(rec.tests)), strict=True)
+        ]
+        spans.append((first, len(items)))
+    if desc is None:
+        desc = (
+            "sampling all tests"
+            if len(recordings) == 1
+            else f"sampling {len(recordings)} campaigns"
+        )
+    fits = _fit_items(
+        items,
+        seed=seeds[0],
         settings=settings,
+        noise="budget",
         stand=stand,
-        desc="sampling all tests",
-        pressure="measured" if getattr(recordings, "pressure_measured", False) else "set",
+        desc=desc,
         ar1=pressure_ar1,
-        piston_area_m2=getattr(recordings, "piston_area_m2", PAPER_PISTON_AREA_M2),
     )
-    prov = provenance_of(recordings, seed=seed, settings=settings, stand=stand)
-    return CampaignFit(recordings, fits, seed, stand, prov)
+    return [
+        CampaignFit(
+            rec,
+            fits[a:b],
+            seed,
+            stand,
+            provenance_of(rec, seed=seed, settings=settings, stand=stand),
+        )
+        for rec, seed, (a, b) in zip(recordings, seeds, spans, strict=True)
+    ]
 
 
 def with_order_check(fit: PressureFit) -> PressureFit:

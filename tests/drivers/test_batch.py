@@ -129,7 +129,7 @@ def test_local_cluster_run_failed_campaign_summary_and_rerun_skip(campaigns, tmp
     )
     out = tmp_path / "out"
     assert (
-        main(["batch", cat, "--out", str(out), "--quiet"]) == 1
+        main(["batch", cat, "--out", str(out), "--quiet", "--workers", "2"]) == 1
     )  # one failed, the others finished
     text = capsys.readouterr()
     assert "LocalCluster, 2 workers" in text.out and "2 done, 0 skipped, 1 failed" in text.out
@@ -159,7 +159,7 @@ def test_local_cluster_run_failed_campaign_summary_and_rerun_skip(campaigns, tmp
 
     before = (out / "one" / "fit" / "fit.json").stat().st_mtime_ns
     assert (
-        main(["batch", cat, "--out", str(out), "--quiet"]) == 1
+        main(["batch", cat, "--out", str(out), "--quiet", "--workers", "2"]) == 1
     )  # the broken one runs (and fails) again
     assert "0 done, 2 skipped, 1 failed" in capsys.readouterr().out
     rows = _rows(out)
@@ -246,3 +246,69 @@ def test_serial_and_scheduler_exclude_each_other(campaigns, tmp_path, capsys):
         == 2
     )
     assert "--serial and --scheduler" in capsys.readouterr().err
+
+
+def test_default_in_process_batched_failed_campaign_and_pointwise(campaigns, tmp_path, capsys):
+    """By default the fits run in this process, batched: a campaign whose file cannot be read
+    fails in its own row, the others are fitted in one driver call and written as `uq fit
+    --out` writes them (or without the pointwise groups, ``pointwise = false``)."""
+    import arviz as az
+
+    cat = _csv(
+        campaigns,
+        "name,file,tasks,seed,walkers,ensembles,max_steps,pointwise\n"
+        "one,c1.csv,fit,3,8,2,60,\nbroken,bad.csv,fit,3,8,2,60,\ntwo,c2.csv,fit,4,8,2,60,no\n",
+        "cat_batched.csv",
+    )
+    out = tmp_path / "out"
+    assert main(["batch", cat, "--out", str(out), "--quiet", "--allow-unconverged"]) == 1
+    text = capsys.readouterr()
+    assert "in this process, fits batched" in text.out and "2 done, 0 skipped, 1 failed" in text.out
+    rows = _rows(out)
+    assert [(r["campaign"], r["status"]) for r in rows] == [
+        ("one", "done"),
+        ("broken", "failed"),
+        ("two", "done"),
+    ]
+    assert rows[1]["error"].endswith("row 12, column 'height_mm': 'abc' is not a number")
+    for name, seed, groups in (
+        ("one", 3, {"posterior", "log_likelihood", "posterior_predictive"}),
+        ("two", 4, {"posterior"}),
+    ):
+        fit = json.loads((out / name / "fit" / "fit.json").read_text())
+        assert [t["pressure_bar"] for t in fit["tests"]] == [2.0, 5.0] and fit["seed"] == seed
+        idata = az.from_netcdf(out / name / "fit" / "posterior_5bar.nc")
+        assert groups | {"observed_data", "sample_stats"} == set(idata.groups())
+        assert (out / name / "fit" / "batch.json").exists()
+    assert main(["batch", cat, "--out", str(out), "--quiet", "--allow-unconverged"]) == 1
+    assert "0 done, 2 skipped, 1 failed" in capsys.readouterr().out
+
+
+def test_a_failing_batched_fit_falls_back_to_one_by_one(campaigns, tmp_path, monkeypatch):
+    """When the batched driver call raises (one campaign's data), its campaigns are fitted one
+    by one: the culprit's row gets its own one-line error, the others are done."""
+    from uq._io.errors import InputError
+
+    def batched(recordings, seeds, **kw):
+        raise InputError("some campaign of the batch")
+
+    real = _batch.fit_campaign
+
+    def one(rec, *, seed, **kw):
+        if seed == 4:
+            raise InputError("c2.csv: this campaign's own problem")
+        return real(rec, seed=seed, **kw)
+
+    monkeypatch.setattr(_batch, "fit_campaigns", batched)
+    monkeypatch.setattr(_batch, "fit_campaign", one)
+    cat = _csv(
+        campaigns,
+        "name,file,tasks,seed,walkers,ensembles,max_steps\n"
+        "one,c1.csv,fit,3,8,2,60\ntwo,c2.csv,fit,4,8,2,60\n",
+        "cat_fallback.csv",
+    )
+    res = _batch.run_batch(cat, tmp_path / "out")
+    rows = res["campaigns"]
+    assert [(r["campaign"], r["status"]) for r in rows] == [("one", "done"), ("two", "failed")]
+    assert rows[1]["error"] == "c2.csv: this campaign's own problem"
+    assert [v["verdict"] for v in res["verdicts"]][1] == "failed"

@@ -54,6 +54,23 @@ def test_saved_posteriors_work_with_arviz(tmp_path):
         loo = az.loo(idata, var_name="force_N")
         axes = az.plot_ppc(idata, var_names=["force_N"], num_pp_samples=20)
     assert np.isfinite(loo.elpd_loo) and np.size(axes) >= 1
+    # pointwise=False (uq batch's pointwise = false): the draws, observed data and sample stats,
+    # the same numbers, and the pointwise terms recomputed from them are the saved ones
+    from uq._io.netcdf import read_netcdf
+
+    (slim,) = fit.save_posteriors(tmp_path / "slim", pointwise=False)
+    small = az.from_netcdf(slim)
+    assert set(small.groups()) == {"posterior", "observed_data", "sample_stats"}
+    assert slim.stat().st_size < 0.2 * path.stat().st_size
+    for name in small.posterior.data_vars:
+        np.testing.assert_array_equal(small.posterior[name], idata.posterior[name])
+    np.testing.assert_array_equal(small.sample_stats["lp"], idata.sample_stats["lp"])
+    np.testing.assert_array_equal(
+        fit.tests[0].posterior.loglik["force_N"], idata.log_likelihood["force_N"]
+    )
+    attrs, groups = read_netcdf(slim, ("posterior", "observed_data"))
+    assert attrs["model"] == idata.attrs["model"]
+    np.testing.assert_array_equal(groups["observed_data"]["force_N"], rec.tests[0].force_N)
 
 
 def _map_and_jax_hessian(model, data, active=None):

@@ -26,13 +26,15 @@ def configure_batch(p) -> None:
     p.add_argument(
         "--scheduler",
         metavar="ADDRESS",
-        help="address of a running Dask scheduler (tcp://host:8786); default a LocalCluster on this machine",
+        help="run on the Dask cluster at ADDRESS (tcp://host:8786); default: in this process, "
+        "the campaigns' fits batched through one driver call",
     )
     p.add_argument(
         "--workers",
         type=positive_int,
-        default=2,
-        help="LocalCluster worker processes, one thread each (ignored with --scheduler)",
+        default=None,
+        help="run on a Dask LocalCluster of N worker processes, one thread each (ignored with "
+        "--scheduler); default: in this process",
     )
     p.add_argument(
         "--force",
@@ -42,7 +44,8 @@ def configure_batch(p) -> None:
     p.add_argument(
         "--serial",
         action="store_true",
-        help="no Dask: run the tasks one after another in this process (debugging; the reference of benchmarks/bench.py --batch)",
+        help="run the tasks one after another in this process, each campaign fitted on its own "
+        "(no batching; the reference of benchmarks/bench.py --batch)",
     )
     p.add_argument(
         "--json", metavar="PATH", help="also write the summary JSON to PATH ('-' for stdout)"
@@ -61,19 +64,17 @@ def command_batch(args) -> int:
 
     campaigns = B.read_catalogue(args.catalogue)  # every problem reported before a cluster starts
     n_jobs = sum(len(c.tasks) for c in campaigns)
-    if args.serial and args.scheduler:
-        raise InputError(
-            "options --serial and --scheduler: choose one (--serial runs without Dask)"
-        )
-    where_ = (
-        "in this process, one after another"
-        if args.serial
-        else (
-            f"scheduler {args.scheduler}"
-            if args.scheduler
-            else f"LocalCluster, {args.workers} workers x 1 thread"
-        )
-    )
+    if args.serial and (args.scheduler or args.workers):
+        option = "--scheduler" if args.scheduler else "--workers"
+        raise InputError(f"options --serial and {option}: choose one (--serial runs without Dask)")
+    if args.serial:
+        where_ = "in this process, one after another"
+    elif args.scheduler:
+        where_ = f"scheduler {args.scheduler}"
+    elif args.workers:
+        where_ = f"LocalCluster, {args.workers} workers x 1 thread"
+    else:
+        where_ = f"in this process, fits batched ({B.BATCH_CAMPAIGNS} campaigns per sampling run)"
     print(f"{args.catalogue}: {len(campaigns)} campaigns, {n_jobs} tasks; {where_}")
     with progress(total=n_jobs, desc="batch", unit="task") as bar:
 

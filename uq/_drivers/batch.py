@@ -1,11 +1,16 @@
-"""``uq batch CATALOGUE --out DIR``: many campaigns, one command, run on Dask distributed.
+"""``uq batch CATALOGUE --out DIR``: many campaigns, one command: in this process by default,
+on Dask distributed for more machines.
 
 A catalogue (TOML or CSV, docs/batch.md) lists recordings files and the tasks to run on each
 (``fit``, ``report``, ``surface``, ``diagnose``) with per-campaign options (seed, sampler,
-stand constants). Every (campaign, task) pair is one Dask task: a ``LocalCluster`` on this
-machine by default (worker processes, one thread each, because JAX dispatch and emcee hold
-the GIL), or the cluster at ``--scheduler ADDRESS``. The work calls the library directly
-(``read_recordings``, ``fit_campaign``, ``write_report``, ``fit_surface``, ``diagnose``).
+stand constants). By default the jobs run in this process and the fits of the ``fit`` and
+``report`` tasks are batched: the tests of up to ``BATCH_CAMPAIGNS`` campaigns with the same
+sampler settings and stand are sampled in one driver call (``fit_campaigns``,
+:func:`run_batched`). With ``--workers N`` (a ``LocalCluster`` of worker processes, one thread
+each, because JAX dispatch and emcee hold the GIL) or ``--scheduler ADDRESS`` each Dask task
+is a chunk of jobs run the same way in a worker. ``--serial``: one job after another, each
+campaign fitted on its own. The work calls the library directly (``read_recordings``,
+``fit_campaigns``, ``write_report``, ``fit_surface``, ``diagnose``).
 
 Outputs: ``DIR/<campaign>/<task>/`` per pair, with a stamp ``batch.json`` written last, holding
 the content hash of (recordings bytes, stand file bytes, task, options, package version); a
@@ -27,6 +32,7 @@ import hashlib
 import io
 import json
 import logging
+import math
 import os
 import re
 import time
@@ -45,7 +51,7 @@ from uq._io.files import dumps_json, emit_json, write_text_atomic
 from uq._io.values import boolean, compression, positive_float, positive_int, seed, walkers
 from uq._io.version import __version__
 from uq._models import registry
-from uq._models.cubic_fit import fit_campaign
+from uq._models.cubic_fit import fit_campaign, fit_campaigns
 from uq._report.campaign import write_report
 from uq._report.diagnose import write_diagnose_report
 from uq._report.html import render
@@ -70,6 +76,7 @@ OPTIONS = {
     "columns": str,  # a column map, checked by the reader (uq._data.column_map)
     "units_row": str,  # auto, yes or no, checked by the reader
     "header_row": positive_int,
+    "pointwise": boolean,  # fit: the pointwise groups in the NetCDF files (docs/batch.md)
 }
 DEFAULT_SEED = 20201  # as every command's --seed
 STAMP = "batch.json"
@@ -300,9 +307,12 @@ def _one_line(exc: BaseException) -> str:
     return text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
 
 
-def run_job(job: dict) -> dict:
+def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
     """Run one (campaign, task) in this process (a Dask worker or the caller); never raises.
 
+    ``fitted``: for the tasks that fit the per-pressure cubics (``FITTED_TASKS``), the campaign's
+    fit made beforehand in a batch (:func:`run_batched`), or the exception that fitting it raised
+    (then this row's error); ``fit_seconds``: its share of the batch's time, added to the row's.
     Returns the summary row; on success the stamp is written last, so a crash leaves no stamp."""
 
     out = Path(job["out"])
@@ -323,10 +333,15 @@ def run_job(job: dict) -> dict:
             missing_ok=True
         )  # stale stamp of other inputs: gone before new outputs appear
         out.mkdir(parents=True, exist_ok=True)
-        row |= TASK_RUNNERS[job["task"]](job, out) | {"status": "done"}
+        if isinstance(fitted, BaseException):
+            raise fitted
+        runner = TASK_RUNNERS[job["task"]]
+        row |= (runner(job, out) if fitted is None else runner(job, out, fitted)) | {
+            "status": "done"
+        }
     except Exception as exc:  # the batch goes on: the error is this row's, one line
         row["error"] = _one_line(exc)
-    row["seconds"] = round(time.perf_counter() - t0, 2)
+    row["seconds"] = round(time.perf_counter() - t0 + fit_seconds, 2)
     if row["status"] == "done":
         write_text_atomic(
             out / STAMP,
@@ -389,10 +404,17 @@ def _seed(job: dict) -> int:
     return int(job["options"].get("seed", DEFAULT_SEED))
 
 
-def _task_fit(job: dict, out: Path) -> dict:
-    rec = _recordings(job)
-    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
-    cf.save_posteriors(out)
+def _fit(job: dict):
+    """The campaign's per-pressure cubics, as ``uq fit`` makes them."""
+    return fit_campaign(
+        _recordings(job), seed=_seed(job), settings=_settings(job), stand=_stand(job)
+    )
+
+
+def _task_fit(job: dict, out: Path, cf=None) -> dict:
+    cf = cf or _fit(job)
+    rec = cf.recordings
+    cf.save_posteriors(out, pointwise=job["options"].get("pointwise", True))
     emit_json(cf.to_json(), str(out / "fit.json"))
     return {
         "converged": cf.converged,
@@ -401,9 +423,9 @@ def _task_fit(job: dict, out: Path) -> dict:
     }
 
 
-def _task_report(job: dict, out: Path) -> dict:
-    rec = _recordings(job)
-    cf = fit_campaign(rec, seed=_seed(job), settings=_settings(job), stand=_stand(job))
+def _task_report(job: dict, out: Path, cf=None) -> dict:
+    cf = cf or _fit(job)
+    rec = cf.recordings
     cb = campaign_bands(cf, n_draws=int(job["options"].get("draws", 2000)), seed=_seed(job))
     page = write_report(cf, out, bands=cb)
     emit_json(cf.to_json() | {"bands": cb.to_json(), "report": page.name}, str(out / "fit.json"))
@@ -454,6 +476,11 @@ TASK_RUNNERS = {
     "surface": _task_surface,
     "diagnose": _task_diagnose,
 }
+#: the tasks whose first step is the campaign's per-pressure cubics (``_fit``): batched
+FITTED_TASKS = ("fit", "report")
+#: campaigns per batched driver call (:func:`run_batched`; docs/batch.md, measured by
+#: benchmarks/bench.py --batch)
+BATCH_CAMPAIGNS = 50
 
 
 # ----------------------------------------------------------------------------- running
@@ -499,47 +526,130 @@ def _client(scheduler: str | None, workers: int):
 
 
 def run_dask(
-    jobs: list[dict], *, scheduler: str | None = None, workers: int = 2, on_row=None
+    jobs: list[dict],
+    *,
+    scheduler: str | None = None,
+    workers: int = 2,
+    on_row=None,
+    size: int = BATCH_CAMPAIGNS,
 ) -> list[dict]:
-    """Run ``jobs`` on Dask (a new LocalCluster, or the cluster at ``scheduler``); rows as they finish."""
+    """Run ``jobs`` on Dask (a new LocalCluster, or the cluster at ``scheduler``); rows as they
+    finish. Each Dask task is a chunk of jobs that :func:`run_batched` runs in the worker (the
+    fits batched there): at most ``size`` jobs, and small enough to give every worker thread
+    about two chunks, so that the cluster stays busy to the end."""
     from distributed import as_completed  # reason: optional and heavy, loaded only where used
 
     rows = []
     client = _client(scheduler, workers)
     try:
+        slots = max(1, sum(client.nthreads().values()))
+        per = max(1, min(size, math.ceil(len(jobs) / (2 * slots))))
+        chunks = [jobs[k : k + per] for k in range(0, len(jobs), per)]
         futures = {
             client.submit(
-                run_job, j, key=f"uq-batch-{j['campaign']}-{j['task']}-{j['hash'][:12]}", pure=False
-            ): j
-            for j in jobs
+                run_batched,
+                c,
+                key=f"uq-batch-{c[0]['campaign']}-{c[0]['task']}-{len(c)}-{c[0]['hash'][:12]}",
+                pure=False,
+            ): c
+            for c in chunks
         }
         for fut in as_completed(futures):
             try:
-                row = fut.result()
+                got = fut.result()
             except (
                 Exception
-            ) as exc:  # the worker itself died (KilledWorker, out of memory): this row fails
-                j = futures[fut]
-                row = {
-                    "campaign": j["campaign"],
-                    "task": j["task"],
-                    "file": j["file"],
-                    "status": "failed",
-                    "seconds": None,
-                    "converged": None,
-                    "result": "",
-                    "output": "",
-                    "error": _one_line(exc),
-                }
-            rows.append(row)
-            if on_row:
-                on_row(row)
+            ) as exc:  # the worker itself died (KilledWorker, out of memory): its rows fail
+                got = [
+                    {
+                        "campaign": j["campaign"],
+                        "task": j["task"],
+                        "file": j["file"],
+                        "status": "failed",
+                        "seconds": None,
+                        "converged": None,
+                        "result": "",
+                        "output": "",
+                        "error": _one_line(exc),
+                    }
+                    for j in futures[fut]
+                ]
+            for row in got:
+                rows.append(row)
+                if on_row:
+                    on_row(row)
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
         if cluster is not None and not scheduler:
             cluster.close()
     return rows
+
+
+def run_batched(jobs: list[dict], on_row=None, *, size: int = BATCH_CAMPAIGNS) -> list[dict]:
+    """The jobs in this process, the fits of ``FITTED_TASKS`` batched: the campaigns with the
+    same sampler settings and stand, in catalogue order, ``size`` at a time, go through one
+    driver call (:func:`uq._models.cubic_fit.fit_campaigns`), then each job writes its outputs
+    from its campaign's fit. A campaign whose recordings cannot be read fails alone; when a
+    batched fit raises (one campaign's data), its campaigns are fitted one by one, so each row
+    gets its own one-line error. The other tasks run one after another. Never raises.
+
+    A campaign's MCMC draws depend on the campaigns it was batched with (the emcee random stream
+    is the run's): deterministic for (catalogue, seeds, ``size``), but not the draws of
+    ``--serial``; they agree to Monte Carlo error."""
+    rows: list[dict] = []
+
+    def done(row):
+        rows.append(row)
+        if on_row:
+            on_row(row)
+
+    groups: dict[tuple, list[tuple[dict, object]]] = {}
+    for j in jobs:
+        if j["task"] not in FITTED_TASKS:
+            continue
+        (Path(j["out"]) / STAMP).unlink(missing_ok=True)  # stale: gone before any new output
+        try:
+            key = (_settings(j), j["options"].get("stand"))
+            ready = (j, _recordings(j))
+        except Exception as exc:  # this campaign's own problem: its row
+            done(run_job(j, fitted=exc))
+            continue
+        groups.setdefault(key, []).append(ready)
+    for (settings, stand_file), group in groups.items():
+        stand = stand_or_paper(stand_file)
+        for k in range(0, len(group), size):
+            for row in _run_chunk(group[k : k + size], settings, stand):
+                done(row)
+    for j in jobs:
+        if j["task"] not in FITTED_TASKS:
+            done(run_job(j))
+    return rows
+
+
+def _run_chunk(chunk: list[tuple[dict, object]], settings, stand):
+    """Rows of one batched fit (a generator: each campaign's outputs written as it comes)."""
+    t0 = time.perf_counter()
+    try:
+        fits = fit_campaigns(
+            [rec for _, rec in chunk],
+            [_seed(j) for j, _ in chunk],
+            settings=settings,
+            stand=stand,
+        )
+        share = (time.perf_counter() - t0) / len(chunk)
+        made = [(f, share) for f in fits]
+    except Exception:  # one campaign's data: fit them one by one, each error its row's
+        made = []
+        for j, rec in chunk:
+            t1 = time.perf_counter()
+            try:
+                f = fit_campaign(rec, seed=_seed(j), settings=settings, stand=stand)
+            except Exception as exc:
+                f = exc
+            made.append((f, time.perf_counter() - t1))
+    for (j, _), (f, seconds) in zip(chunk, made, strict=True):
+        yield run_job(j, fitted=f, fit_seconds=seconds)
 
 
 def run_serial(jobs: list[dict], on_row=None) -> list[dict]:
@@ -631,12 +741,17 @@ def run_batch(
     out_dir,
     *,
     scheduler: str | None = None,
-    workers: int = 2,
+    workers: int | None = None,
     serial: bool = False,
     force: bool = False,
     on_row=None,
+    size: int = BATCH_CAMPAIGNS,
 ) -> dict:
-    """Validate ``catalogue``, skip finished pairs, run the rest, write the summary; return it."""
+    """Validate ``catalogue``, skip finished pairs, run the rest, write the summary; return it.
+
+    By default in this process with the fits batched (:func:`run_batched`, ``size`` campaigns
+    per driver call); on Dask when given ``workers`` (a LocalCluster) or ``scheduler``;
+    ``serial``: one job after another, no batching (the reference of the benchmark)."""
     campaigns = read_catalogue(catalogue)
     jobs = jobs_of(campaigns, out_dir)
     rows, todo = [], []
@@ -647,9 +762,12 @@ def run_batch(
         else:
             todo.append(j)
     if todo:
-        rows += (
-            run_serial(todo, on_row)
-            if serial
-            else run_dask(todo, scheduler=scheduler, workers=workers, on_row=on_row)
-        )
+        if serial:
+            rows += run_serial(todo, on_row)
+        elif scheduler or workers:
+            rows += run_dask(
+                todo, scheduler=scheduler, workers=workers or 2, on_row=on_row, size=size
+            )
+        else:
+            rows += run_batched(todo, on_row, size=size)
     return write_summary(_ordered(rows, jobs), out_dir, catalogue)

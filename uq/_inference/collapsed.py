@@ -521,6 +521,20 @@ class Posterior:
             )
         return self._cache["idata"]
 
+    def draws_idata(self):
+        """The InferenceData without the (draws x readings) groups: posterior, observed_data and
+        sample_stats (not cached). The pointwise log-likelihood and the replicates are
+        recomputable exactly from these draws (:attr:`loglik`, :attr:`predictive`)."""
+        return _idata(
+            self._model,
+            self.reported,
+            None,
+            None,
+            self.data,
+            self._lp,
+            {"model": self.model, "method": self.method} | self._attrs,
+        )
+
     @contextlib.contextmanager
     def transient(self):
         """A block whose parts made on demand (pointwise terms, replicates, InferenceData) are
@@ -582,7 +596,9 @@ class Posterior:
 def _idata(model: CollapsedModel, reported, loglik, predictive, data, lp, attrs):
     import arviz as az
 
-    groups = {"posterior": reported, "log_likelihood": loglik}
+    groups = {"posterior": reported}
+    if loglik is not None:
+        groups["log_likelihood"] = loglik
     if predictive is not None:
         groups["posterior_predictive"] = predictive
     if model.observed is not None:

@@ -348,20 +348,26 @@ class CampaignFit:
             "tests": [t.to_json(advice) for t in self.tests],
         }
 
-    def save_posteriors(self, out_dir) -> list:
+    def save_posteriors(self, out_dir, *, pointwise: bool = True) -> list:
         """One NetCDF file per test (ArviZ InferenceData with posterior, log_likelihood,
-        posterior_predictive and observed_data groups), made in memory and written atomically (a
-        full disk is a one-line error, not a crash inside HDF5: ``uq._io.netcdf.netcdf_bytes``);
-        returns the paths (``uq fit --out``). Each test's InferenceData is made for its file and
-        dropped after it (unless it was made before): the memory of one test's (draws x readings)
-        groups at a time, not of the campaign's."""
+        posterior_predictive, observed_data and sample_stats groups), made in memory and written
+        atomically (a full disk is a one-line error, not a crash inside HDF5:
+        ``uq._io.netcdf.netcdf_bytes``); returns the paths (``uq fit --out``). Each test's
+        InferenceData is made for its file and dropped after it (unless it was made before): the
+        memory of one test's (draws x readings) groups at a time, not of the campaign's.
+
+        ``pointwise=False``: without the log_likelihood and posterior_predictive groups (about
+        90 % of the bytes; recomputable exactly from the posterior draws), for ``uq batch``'s
+        ``pointwise = false`` (docs/batch.md)."""
         out = Path(out_dir)
         paths = []
         for t in self.tests:
+            path = out / f"posterior_{t.pressure_bar:g}bar.nc"
+            if not pointwise:
+                paths.append(write_netcdf_atomic(path, t.posterior.draws_idata()))
+                continue
             with t.posterior.transient():
-                paths.append(
-                    write_netcdf_atomic(out / f"posterior_{t.pressure_bar:g}bar.nc", t.idata)
-                )
+                paths.append(write_netcdf_atomic(path, t.idata))
         return paths
 
     def __repr__(self) -> str:

@@ -251,13 +251,13 @@ def test_serial_and_scheduler_exclude_each_other(campaigns, tmp_path, capsys):
 def test_default_in_process_batched_failed_campaign_and_pointwise(campaigns, tmp_path, capsys):
     """By default the fits run in this process, batched: a campaign whose file cannot be read
     fails in its own row, the others are fitted in one driver call and written as `uq fit
-    --out` writes them (or without the pointwise groups, ``pointwise = false``)."""
+    --out` writes them, but without the pointwise groups unless ``pointwise = yes``."""
     import arviz as az
 
     cat = _csv(
         campaigns,
         "name,file,tasks,seed,walkers,ensembles,max_steps,pointwise\n"
-        "one,c1.csv,fit,3,8,2,60,\nbroken,bad.csv,fit,3,8,2,60,\ntwo,c2.csv,fit,4,8,2,60,no\n",
+        "one,c1.csv,fit,3,8,2,60,\nbroken,bad.csv,fit,3,8,2,60,\ntwo,c2.csv,fit,4,8,2,60,yes\n",
         "cat_batched.csv",
     )
     out = tmp_path / "out"
@@ -272,8 +272,8 @@ def test_default_in_process_batched_failed_campaign_and_pointwise(campaigns, tmp
     ]
     assert rows[1]["error"].endswith("row 12, column 'height_mm': 'abc' is not a number")
     for name, seed, groups in (
-        ("one", 3, {"posterior", "log_likelihood", "posterior_predictive"}),
-        ("two", 4, {"posterior"}),
+        ("one", 3, {"posterior"}),
+        ("two", 4, {"posterior", "log_likelihood", "posterior_predictive"}),
     ):
         fit = json.loads((out / name / "fit" / "fit.json").read_text())
         assert [t["pressure_bar"] for t in fit["tests"]] == [2.0, 5.0] and fit["seed"] == seed

@@ -4,7 +4,7 @@ Not part of the installed package: run from the repository root with the project
 
     .venv/bin/python benchmarks/bench.py [--seconds 10] [--json reports/bench/ess.json]
     .venv/bin/python benchmarks/bench.py --scaling  [--json reports/bench/scaling.json]
-    .venv/bin/python benchmarks/bench.py --batch 20 [--json reports/bench/batch.json]
+    .venv/bin/python benchmarks/bench.py --batch 20,100 [--json reports/bench/batch.json]
     .venv/bin/python benchmarks/bench.py --margin   [--json reports/bench/margin.json]
     .venv/bin/python benchmarks/bench.py --memory   [--json reports/bench/memory.json]
 
@@ -498,54 +498,88 @@ def report_memory(seed: int) -> dict:
         }
 
 
-def batch_speedup(n: int, *, seed: int, workers: int = 2) -> dict:
-    """``uq batch`` of ``n`` simulated campaigns (fit) on a LocalCluster against ``--serial``, both cold processes."""
-    import json
+def batch_scaling(
+    sizes: tuple[int, ...], *, seed: int, settings: Settings, serial_n: int | None = None
+) -> dict:
+    """``uq batch``'s default run (this process, the fits batched, ``run_batched``) of the first
+    n simulated campaigns for each n in ``sizes``, against ``--serial`` (each campaign fitted on
+    its own, ``run_serial``) of the first ``serial_n`` (default the smallest n), all in this
+    process after one warm-up of each (compilation and imports are not in the numbers): wall and
+    CPU seconds per campaign, their ratio, and a straight line through the batched runs' wall
+    times (the cost per campaign is its slope). The fit task with the catalogue's default outputs
+    (no pointwise groups), plus one batched run of the smallest n with ``pointwise = yes``."""
+    import resource
     import tempfile
 
+    from uq._drivers import batch as B
+    from uq._io import progress
+
+    progress.set_enabled(False)
+    sizes = tuple(sorted(set(sizes)))
+    serial_n = serial_n or sizes[0]
+    extra = {}
+    if settings.n_walkers != Settings.n_walkers:
+        extra["walkers"] = settings.n_walkers
+    if settings.max_steps != Settings.max_steps:
+        extra["max_steps"] = settings.max_steps
     with tempfile.TemporaryDirectory(prefix="uq-bench-batch-") as tmp:
-        cat = bench_catalogue(tmp, n, seed=seed)
-        serial = run_child(["batch", cat, "--out", Path(tmp) / "serial", "--serial"])
-        dask = run_child(["batch", cat, "--out", Path(tmp) / "dask", "--workers", workers])
-        means = [
-            [
-                _means(
-                    json.loads((Path(tmp) / run / f"c{i:02d}" / "fit" / "fit.json").read_text())[
-                        "tests"
-                    ]
-                )
-                for i in range(n)
-            ]
-            for run in ("serial", "dask")
-        ]
-    # observed not bit-identical (probably the workers' single-threaded XLA rounding sums differently,
-    # after which the chains part ways), so the two runs are compared to Monte Carlo error
-    diff = max(
-        abs(a - b) / sd
-        for ms, md in zip(*means, strict=True)
-        for (a, sd), (b, _) in zip(ms, md, strict=True)
-    )
+        cat = bench_catalogue(tmp, max(sizes + (serial_n,)), seed=seed, options=extra)
+        campaigns = B.read_catalogue(cat)
+
+        def jobs(n: int, tag: str, **options) -> list[dict]:
+            js = B.jobs_of(campaigns[:n], Path(tmp) / tag)
+            for j in js:
+                j["options"] |= options
+            return js
+
+        def timed(run, js) -> dict:
+            w, c = time.perf_counter(), time.process_time()
+            rows = run(js)
+            w, c = time.perf_counter() - w, time.process_time() - c
+            out = Path(js[0]["out"]).parents[1]
+            size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+            return {
+                "campaigns": len(js),
+                "wall_s": w,
+                "cpu_s": c,
+                "wall_per_campaign_s": w / len(js),
+                "cpu_per_campaign_s": c / len(js),
+                "done": sum(r["status"] == "done" for r in rows),
+                "converged": sum(bool(r["converged"]) for r in rows),
+                "mb_per_campaign": size / len(js) / 1e6,
+                "load_average_1min": os.getloadavg()[0],
+            }
+
+        B.run_serial(jobs(2, "warm-serial"))  # compilation, imports, caches: out of the numbers
+        B.run_batched(jobs(2, "warm-batched"))
+        serial = timed(B.run_serial, jobs(serial_n, "serial"))
+        batched = [timed(B.run_batched, jobs(n, f"batched-{n}")) for n in sizes]
+        pointwise = timed(B.run_batched, jobs(sizes[0], "pointwise", pointwise=True))
+        files = netcdf_costs(
+            B.fit_campaign(B._recordings(jobs(1, "x")[0]), seed=seed, settings=settings)
+        )
+    n = np.array([r["campaigns"] for r in batched], float)
+    wall = np.array([r["wall_s"] for r in batched])
+    slope, intercept = np.polyfit(n, wall, 1) if len(n) > 1 else (wall[0] / n[0], 0.0)
+    same = next(r for r in batched if r["campaigns"] == min(sizes))
     return {
-        "workload": f"{n} simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, seeds {seed}..{seed + n - 1}",
-        "cores": cores(),
-        "workers": workers,
+        "workload": f"simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, "
+        f"seeds {seed}..., uq batch in one process",
+        "batch_campaigns": B.BATCH_CAMPAIGNS,
+        "sizes": list(sizes),
         "serial": serial,
-        "dask": dask,
-        "speedup": serial["wall_s"] / dask["wall_s"],
-        "max_mean_difference_in_sd": diff,
-        "note": f"end-to-end wall time of each command in a fresh process (imports, JIT, cluster start included); "
-        f"the ideal speed-up is below {workers} on {workers} cores",
+        "batched": batched,
+        "pointwise": pointwise,
+        "netcdf": files,
+        "ratio_serial_to_batched": serial["wall_per_campaign_s"] / same["wall_per_campaign_s"],
+        "cpu_ratio_serial_to_batched": serial["cpu_per_campaign_s"] / same["cpu_per_campaign_s"],
+        "line": {"seconds_per_campaign": float(slope), "intercept_s": float(intercept)},
+        "predicted_1000_min": float((intercept + 1000 * slope) / 60),
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "note": "wall and CPU time of the batch's work in this process after a warm-up (imports "
+        "and JIT compilation of the first campaigns excluded); one process, the fits of up to "
+        f"{B.BATCH_CAMPAIGNS} campaigns per sampling run",
     }
-
-
-def _means(tests: list[dict]) -> list[tuple[float, float]]:
-    """(mean, sd) of every coefficient of every test of a fit.json."""
-    return [
-        (v["mean"], v["sd"])
-        for t in tests
-        for block in ("force", "piston")
-        for v in t[block].values()
-    ]
 
 
 def cores() -> int:
@@ -750,24 +784,81 @@ def bench(
     }
 
 
+def netcdf_costs(fit, repeats: int = 5) -> dict:
+    """Seconds (best of ``repeats``) and bytes of one test's NetCDF file (the last test of
+    ``fit``) written four ways: as before this round (group after group, zlib on every number),
+    group after group without zlib on floats, in one pass (``uq._io.netcdf.netcdf_bytes``), and
+    in one pass without the pointwise groups (``uq batch``'s default)."""
+    import io
+
+    import xarray as xr
+
+    from uq._io.netcdf import netcdf_bytes
+
+    test = fit.tests[-1]
+    idata = test.idata
+    groups = {g: getattr(idata, g) for g in idata.groups()}
+    attrs = dict(idata.attrs)
+
+    def by_group(zlib_floats: bool) -> bytes:
+        buf, mode = io.BytesIO(), "w"
+        xr.Dataset(attrs=attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")
+        for g, d in groups.items():
+            kinds = "biuSfc" if zlib_floats else "biuS"
+            enc = {k: {"zlib": True} for k, v in d.variables.items() if v.dtype.kind in kinds}
+            d.to_netcdf(buf, mode="a", group=f"/{g}", engine="h5netcdf", encoding=enc)
+        return buf.getvalue()
+
+    slim = test.posterior.draws_idata()
+    ways = {
+        "by_group_zlib": lambda: by_group(True),
+        "by_group_no_float_zlib": lambda: by_group(False),
+        "one_pass": lambda: netcdf_bytes(groups, attrs),
+        "one_pass_no_pointwise": lambda: netcdf_bytes(
+            {g: getattr(slim, g) for g in slim.groups()}, dict(slim.attrs)
+        ),
+    }
+    out = {}
+    for name, write in ways.items():
+        best, size = math.inf, 0
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            size = len(write())
+            best = min(best, time.perf_counter() - t0)
+        out[name] = {"seconds": best, "mb": size / 1e6}
+    return out
+
+
 def bench_catalogue(
-    folder, n: int, *, seed: int = 20201, pressures: str = "2,5", step_mm: float = 5.0
+    folder,
+    n: int,
+    *,
+    seed: int = 20201,
+    pressures: str = "2,5",
+    step_mm: float = 5.0,
+    options: dict | None = None,
 ) -> Path:
-    """``n`` simulated campaigns (virtual stand, seeds seed+i) and a catalogue running ``fit`` on each."""
+    """``n`` simulated campaigns (virtual stand, seeds seed+i) and a catalogue running ``fit`` on
+    each, with the catalogue ``options`` (e.g. walkers) for every campaign."""
     from uq._data.recordings import write_recordings_csv
     from uq._io.files import write_text_atomic
     from uq._stand.simulator import Layout, simulate
 
     folder = Path(folder)
     layout = Layout(tuple(float(p) for p in pressures.split(",")), step_m=step_mm * 1e-3)
-    rows = ["name,file,tasks,seed"]
+    options = options or {}
+    rows = [",".join(["name", "file", "tasks", "seed", *options])]
     for i in range(n):
         tests = simulate("n50", seed=seed + i, layout=layout)
         write_text_atomic(
-            folder / f"c{i:02d}.csv",
+            folder / f"c{i:04d}.csv",
             write_recordings_csv(tests, f"benchmark campaign {i}, seed {seed + i}"),
         )
-        rows.append(f"c{i:02d},c{i:02d}.csv,fit,{seed + i}")
+        rows.append(
+            ",".join(
+                [f"c{i:04d}", f"c{i:04d}.csv", "fit", str(seed + i), *map(str, options.values())]
+            )
+        )
     return write_text_atomic(folder / "catalogue.csv", "\n".join(rows) + "\n")
 
 
@@ -844,17 +935,29 @@ def scale_summary(name: str, r: dict) -> str:
         )
         return "\n".join(lines)
     if name == "batch":
-        s, d = r["serial"], r["dask"]
-        return "\n".join(
-            [
-                f"bench --batch: {r['workload']}; {r['cores']} cores, load average {r['load_average_1min']:.1f}",
-                f"  one process : {s['wall_s']:7.1f} s, peak RSS {s['peak_rss_mb']:.0f} MB",
-                f"  Dask        : {d['wall_s']:7.1f} s, peak RSS driver {d['peak_rss_mb']:.0f} MB, largest worker "
-                f"{d['children_peak_rss_mb']:.0f} MB ({r['workers']} workers)",
-                f"  speed-up {r['speedup']:.2f}x; posterior means of the two runs differ by at most "
-                f"{r['max_mean_difference_in_sd']:.2f} posterior sd",
-            ]
-        )
+        s, p, line = r["serial"], r["pointwise"], r["line"]
+        lines = [
+            f"bench --batch: {r['workload']}; {r['cores']} cores, load average {r['load_average_1min']:.1f}",
+            f"  --serial        : {s['campaigns']:5d} campaigns {s['wall_per_campaign_s']:6.2f} s a campaign "
+            f"(CPU {s['cpu_per_campaign_s']:.2f} s)",
+        ]
+        lines += [
+            f"  batched (default): {b['campaigns']:5d} campaigns {b['wall_per_campaign_s']:6.2f} s a campaign "
+            f"(CPU {b['cpu_per_campaign_s']:.2f} s), {b['converged']} converged, {b['mb_per_campaign']:.1f} MB a campaign"
+            for b in r["batched"]
+        ]
+        lines += [
+            f"  pointwise = yes  : {p['campaigns']:5d} campaigns {p['wall_per_campaign_s']:6.2f} s a campaign, "
+            f"{p['mb_per_campaign']:.1f} MB a campaign",
+            "  one test's NetCDF: "
+            + "; ".join(
+                f"{k} {v['seconds']:.2f} s {v['mb']:.1f} MB" for k, v in r["netcdf"].items()
+            ),
+            f"  ratio --serial / batched {r['ratio_serial_to_batched']:.2f} (CPU {r['cpu_ratio_serial_to_batched']:.2f}); "
+            f"line {line['seconds_per_campaign']:.2f} s a campaign + {line['intercept_s']:.1f} s: 1000 campaigns "
+            f"{r['predicted_1000_min']:.1f} min; peak RSS {r['peak_rss_mb']:.0f} MB",
+        ]
+        return "\n".join(lines)
     lines = [f"bench --scaling: {r['workload']}; load average {r['load_average_1min']:.1f}"]
     lines += table(SCALING + SCALING_CONSOLE, r["runs"], False)
     rep = r["report"]
@@ -869,6 +972,16 @@ def _seconds(text: str) -> float:
     if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(f"expected a non-negative number of seconds, got {text}")
     return value
+
+
+def _sizes(text: str) -> tuple[int, ...]:
+    try:
+        sizes = tuple(int(t) for t in text.split(","))
+    except ValueError:
+        sizes = ()
+    if not sizes or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"expected campaign counts like 20,100, got {text}")
+    return sizes
 
 
 def _positive_int(text: str) -> int:
@@ -952,9 +1065,10 @@ def parser() -> argparse.ArgumentParser:
     )
     mode.add_argument(
         "--batch",
-        type=_positive_int,
-        metavar="N",
-        help="instead: uq batch of N simulated campaigns on a LocalCluster against one process",
+        type=_sizes,
+        metavar="N[,N...]",
+        help="instead: uq batch (one process, fits batched) of N simulated campaigns for each N, "
+        "against --serial of the smallest N: seconds a campaign and its line",
     )
     mode.add_argument(
         "--margin",
@@ -990,7 +1104,7 @@ def measure(args) -> tuple[str, dict]:
         r = scaling(seed=args.seed, settings=settings, factors=factors)
         return "scaling", record | r | {"report": report_memory(args.seed)}
     if args.batch:
-        return "batch", record | batch_speedup(args.batch, seed=args.seed)
+        return "batch", record | batch_scaling(args.batch, seed=args.seed, settings=settings)
     if args.memory:
         steps = args.steps_mm
         extra = [] if args.max_steps == Settings.max_steps else ["--max-steps", args.max_steps]

@@ -705,15 +705,84 @@ def batch_bench_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         r = _load(rel)
         if r is None:
-            return _bench_missing(rel, "--batch 20 ")
-        s, d = r["serial"], r["dask"]
-        return (
-            f"From `{rel}` (`python benchmarks/bench.py --batch N`, {r['cores']} cores at load average "
-            f"{r['load_average_1min']:.1f}): {r['workload']}: one process {s['wall_s']:.0f} s (peak RSS "
-            f"{s['peak_rss_mb']:.0f} MB), a {r['workers']}-worker LocalCluster {d['wall_s']:.0f} s (largest "
-            f"worker {d['children_peak_rss_mb']:.0f} MB): speed-up {r['speedup']:.2f}; the two runs' posterior "
-            f"means differ by at most {r['max_mean_difference_in_sd']:.2f} posterior sd.\n"
-        )
+            return _bench_missing(rel, "--batch 20,100 ")
+        s, p, line = r["serial"], r["pointwise"], r["line"]
+        lines = [
+            f"From `{rel}` (`python benchmarks/bench.py --batch {','.join(map(str, r['sizes']))}`, "
+            f"{r['cores']} cores at load average {r['load_average_1min']:.1f}): {r['workload']}, "
+            f"up to {r['batch_campaigns']} campaigns per sampling run; after a warm-up in the same "
+            "process (imports and compilation excluded).",
+            "",
+            "| run | campaigns | wall s a campaign | CPU s a campaign | converged | MB a campaign |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
+        rows = [("`--serial` (one by one)", s)]
+        rows += [("batched (the default)", b) for b in r["batched"]]
+        rows += [("batched, `pointwise = yes`", p)]
+        lines += [
+            f"| {name} | {x['campaigns']} | {x['wall_per_campaign_s']:.2f} | "
+            f"{x['cpu_per_campaign_s']:.2f} | {x['converged']} | {x['mb_per_campaign']:.1f} |"
+            for name, x in rows
+        ]
+        lines += [
+            "",
+            f"`--serial` / batched: {r['ratio_serial_to_batched']:.2f} in wall time, "
+            f"{r['cpu_ratio_serial_to_batched']:.2f} in CPU time ({s['campaigns']} campaigns each). "
+            f"The line through the batched runs: {line['seconds_per_campaign']:.2f} s a campaign "
+            f"{'+' if line['intercept_s'] >= 0 else '-'} {abs(line['intercept_s']):.1f} s, "
+            f"so 1000 campaigns take about {r['predicted_1000_min']:.0f} minutes"
+            + (
+                " (measured: 1000 campaigns in the table)."
+                if 1000 in r["sizes"]
+                else " (extrapolated from the line)."
+            )
+            + f" Peak RSS {r['peak_rss_mb']:.0f} MB.",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
+def batch_netcdf_summary(rel: str) -> Callable[[], str]:
+    """benchmarks/bench.py --batch: one test's NetCDF file written four ways, and the bytes of
+    the batch's campaigns with and without the pointwise groups."""
+    names = {
+        "by_group_zlib": "group after group, zlib on every number (before)",
+        "by_group_no_float_zlib": "group after group, no zlib on floats",
+        "one_pass": "one pass, no zlib on floats (`uq fit --out`)",
+        "one_pass_no_pointwise": "one pass, without the pointwise groups (`uq batch`)",
+    }
+
+    def make() -> str:
+        r = _load(rel)
+        if r is None or "netcdf" not in r:
+            return _bench_missing(rel, "--batch 20,100 ")
+        nc = r["netcdf"]
+        base = nc["by_group_zlib"]
+        lines = [
+            f"From `{rel}` (`python benchmarks/bench.py --batch`, load average "
+            f"{r['load_average_1min']:.1f}; best of 5): one test's file (the last test of the "
+            "first campaign)",
+            "",
+            "| written | seconds | x before | MB | x before |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        lines += [
+            f"| {names[k]} | {v['seconds']:.2f} | {v['seconds'] / base['seconds']:.2f} | "
+            f"{v['mb']:.1f} | {v['mb'] / base['mb']:.2f} |"
+            for k, v in nc.items()
+        ]
+        full = r["pointwise"]
+        slim = next(b for b in r["batched"] if b["campaigns"] == full["campaigns"])
+        lines += [
+            "",
+            f"Without the pointwise groups a file holds {1 - nc['one_pass_no_pointwise']['mb'] / nc['one_pass']['mb']:.0%} "
+            f"fewer bytes; {full['campaigns']} batched campaigns wrote {full['mb_per_campaign']:.1f} MB a campaign with "
+            f"`pointwise = yes` and {slim['mb_per_campaign']:.1f} MB without (1000 campaigns: "
+            f"{full['mb_per_campaign']:.0f} GB against {slim['mb_per_campaign']:.1f} GB), and took "
+            f"{full['wall_per_campaign_s']:.2f} s against {slim['wall_per_campaign_s']:.2f} s a campaign.",
+        ]
+        return "\n".join(lines) + "\n"
 
     return make
 
@@ -1076,6 +1145,7 @@ BLOCKS: dict[str, Block] = {
     "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
     "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),
+    "bench-batch-netcdf": report_block(batch_netcdf_summary("reports/bench/batch.json")),
     "bench-scaling": report_block(scaling_bench_summary("reports/bench/scaling.json")),
     "bench-memory": report_block(memory_bench_summary("reports/bench/memory.json")),
     "calibration": report_block(calibration_summary("reports/calibration/calibration.json")),

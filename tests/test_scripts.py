@@ -303,6 +303,7 @@ def test_commands_bench_tiny_run(tmp_path):
         (["--scaling", "--margin"], "not allowed with"),
         (["--memory", "--steps-mm", "1"], "--steps-mm"),
         (["--memory", "--steps-mm", "1,-2"], "--steps-mm"),
+        (["--batch", "20,0"], "--batch"),
     ],
 )
 def test_bench_bad_options_exit_2(argv, words):
@@ -315,7 +316,7 @@ def test_bench_bad_options_exit_2(argv, words):
     "argv, key",
     [
         (["--scaling", "--factors", "1,2", "--walkers", 8, "--max-steps", 200], "runs"),
-        (["--batch", 2], "speedup"),
+        (["--batch", "1,2", "--walkers", 8, "--max-steps", 100], "ratio_serial_to_batched"),
         (["--margin", "--queries", 3, "--max-steps", 400], "ratio_full_to_saved"),
         (
             ["--memory", "--steps-mm", "10,5", "--walkers", 8, "--max-steps", 100],

@@ -80,6 +80,7 @@ _API = {
     "CampaignFit": "_models.cubic_results",
     "PressureFit": "_models.cubic_results",
     "fit_campaign": "_models.cubic_fit",
+    "fit_campaigns": "_models.cubic_fit",
     "fit_test": "_models.cubic_fit",
     "least_squares": "_models.cubic",
     "InputError": "_io.errors",

@@ -257,20 +257,26 @@ def test_default_in_process_batched_failed_campaign_and_pointwise(campaigns, tmp
     cat = _csv(
         campaigns,
         "name,file,tasks,seed,walkers,ensembles,max_steps,pointwise\n"
-        "one,c1.csv,fit,3,8,2,60,\nbroken,bad.csv,fit,3,8,2,60,\ntwo,c2.csv,fit,4,8,2,60,yes\n",
+        "one,c1.csv,fit;report,3,8,2,60,\nbroken,bad.csv,fit,3,8,2,60,\ntwo,c2.csv,fit,4,8,2,60,yes\n",
         "cat_batched.csv",
     )
     out = tmp_path / "out"
     assert main(["batch", cat, "--out", str(out), "--quiet", "--allow-unconverged"]) == 1
     text = capsys.readouterr()
-    assert "in this process, fits batched" in text.out and "2 done, 0 skipped, 1 failed" in text.out
+    assert "in this process, fits batched" in text.out and "3 done, 0 skipped, 1 failed" in text.out
     rows = _rows(out)
-    assert [(r["campaign"], r["status"]) for r in rows] == [
-        ("one", "done"),
-        ("broken", "failed"),
-        ("two", "done"),
+    assert [(r["campaign"], r["task"], r["status"]) for r in rows] == [
+        ("one", "fit", "done"),
+        ("one", "report", "done"),
+        ("broken", "fit", "failed"),
+        ("two", "fit", "done"),
     ]
-    assert rows[1]["error"].endswith("row 12, column 'height_mm': 'abc' is not a number")
+    # one fit serves a campaign's fit and report tasks
+    report = json.loads((out / "one" / "report" / "fit.json").read_text())
+    fit = json.loads((out / "one" / "fit" / "fit.json").read_text())
+    assert report["tests"][0]["force"] == fit["tests"][0]["force"]
+    assert (out / "one" / "report" / "report.html").exists()
+    assert rows[2]["error"].endswith("row 12, column 'height_mm': 'abc' is not a number")
     for name, seed, groups in (
         ("one", 3, {"posterior"}),
         ("two", 4, {"posterior", "log_likelihood", "posterior_predictive"}),
@@ -281,7 +287,7 @@ def test_default_in_process_batched_failed_campaign_and_pointwise(campaigns, tmp
         assert groups | {"observed_data", "sample_stats"} == set(idata.groups())
         assert (out / name / "fit" / "batch.json").exists()
     assert main(["batch", cat, "--out", str(out), "--quiet", "--allow-unconverged"]) == 1
-    assert "0 done, 2 skipped, 1 failed" in capsys.readouterr().out
+    assert "0 done, 3 skipped, 1 failed" in capsys.readouterr().out
 
 
 def test_a_failing_batched_fit_falls_back_to_one_by_one(campaigns, tmp_path, monkeypatch):

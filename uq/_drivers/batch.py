@@ -592,7 +592,7 @@ def run_batched(jobs: list[dict], on_row=None, *, size: int = BATCH_CAMPAIGNS) -
     """The jobs in this process, the fits of ``FITTED_TASKS`` batched: the campaigns with the
     same sampler settings and stand, in catalogue order, ``size`` at a time, go through one
     driver call (:func:`uq._models.cubic_fit.fit_campaigns`), then each job writes its outputs
-    from its campaign's fit. A campaign whose recordings cannot be read fails alone; when a
+    from its campaign's fit (one fit for a campaign's ``fit`` and ``report``). A campaign whose recordings cannot be read fails alone; when a
     batched fit raises (one campaign's data), its campaigns are fitted one by one, so each row
     gets its own one-line error. The other tasks run one after another. Never raises.
 
@@ -606,18 +606,24 @@ def run_batched(jobs: list[dict], on_row=None, *, size: int = BATCH_CAMPAIGNS) -
         if on_row:
             on_row(row)
 
-    groups: dict[tuple, list[tuple[dict, object]]] = {}
+    # campaign name -> [its fitted-task jobs, its recordings]; one fit serves them all
+    entries: dict[str, list] = {}
+    groups: dict[tuple, list[list]] = {}
     for j in jobs:
         if j["task"] not in FITTED_TASKS:
             continue
         (Path(j["out"]) / STAMP).unlink(missing_ok=True)  # stale: gone before any new output
         try:
             key = (_settings(j), j["options"].get("stand"))
-            ready = (j, _recordings(j))
+            rec = _recordings(j)
         except Exception as exc:  # this campaign's own problem: its row
             done(run_job(j, fitted=exc))
             continue
-        groups.setdefault(key, []).append(ready)
+        if j["campaign"] in entries:
+            entries[j["campaign"]][0].append(j)
+        else:
+            entries[j["campaign"]] = [[j], rec]
+            groups.setdefault(key, []).append(entries[j["campaign"]])
     for (settings, stand_file), group in groups.items():
         stand = stand_or_paper(stand_file)
         for k in range(0, len(group), size):
@@ -629,29 +635,27 @@ def run_batched(jobs: list[dict], on_row=None, *, size: int = BATCH_CAMPAIGNS) -
     return rows
 
 
-def _run_chunk(chunk: list[tuple[dict, object]], settings, stand):
-    """Rows of one batched fit (a generator: each campaign's outputs written as it comes)."""
+def _run_chunk(chunk: list[list], settings, stand):
+    """Rows of one batched fit of the campaigns ``chunk`` ([their jobs, their recordings]): a
+    generator, each campaign's outputs written as it comes."""
     t0 = time.perf_counter()
+    seeds = [_seed(js[0]) for js, _ in chunk]
     try:
-        fits = fit_campaigns(
-            [rec for _, rec in chunk],
-            [_seed(j) for j, _ in chunk],
-            settings=settings,
-            stand=stand,
-        )
+        fits = fit_campaigns([rec for _, rec in chunk], seeds, settings=settings, stand=stand)
         share = (time.perf_counter() - t0) / len(chunk)
         made = [(f, share) for f in fits]
-    except Exception:  # one campaign's data: fit them one by one, each error its row's
+    except Exception:  # one campaign's data: fit them one by one, each error its rows'
         made = []
-        for j, rec in chunk:
+        for (_, rec), seed in zip(chunk, seeds, strict=True):
             t1 = time.perf_counter()
             try:
-                f = fit_campaign(rec, seed=_seed(j), settings=settings, stand=stand)
+                f = fit_campaign(rec, seed=seed, settings=settings, stand=stand)
             except Exception as exc:
                 f = exc
             made.append((f, time.perf_counter() - t1))
-    for (j, _), (f, seconds) in zip(chunk, made, strict=True):
-        yield run_job(j, fitted=f, fit_seconds=seconds)
+    for (js, _), (f, seconds) in zip(chunk, made, strict=True):
+        for j in js:
+            yield run_job(j, fitted=f, fit_seconds=seconds / len(js))
 
 
 def run_serial(jobs: list[dict], on_row=None) -> list[dict]:

@@ -560,7 +560,9 @@ def batch_scaling(
         )
     n = np.array([r["campaigns"] for r in batched], float)
     wall = np.array([r["wall_s"] for r in batched])
+    cpu = np.array([r["cpu_s"] for r in batched])
     slope, intercept = np.polyfit(n, wall, 1) if len(n) > 1 else (wall[0] / n[0], 0.0)
+    cpu_slope, cpu_intercept = np.polyfit(n, cpu, 1) if len(n) > 1 else (cpu[0] / n[0], 0.0)
     same = next(r for r in batched if r["campaigns"] == min(sizes))
     return {
         "workload": f"simulated n50 campaigns (2 and 5 bar, 5 mm steps, 74 points each), task fit, "
@@ -575,8 +577,11 @@ def batch_scaling(
         "cpu_ratio_serial_to_batched": serial["cpu_per_campaign_s"] / same["cpu_per_campaign_s"],
         "line": {"seconds_per_campaign": float(slope), "intercept_s": float(intercept)},
         "predicted_1000_min": float((intercept + 1000 * slope) / 60),
+        "cpu_line": {"seconds_per_campaign": float(cpu_slope), "intercept_s": float(cpu_intercept)},
+        "predicted_1000_cpu_min": float((cpu_intercept + 1000 * cpu_slope) / 60),
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-        "note": "wall and CPU time of the batch's work in this process after a warm-up (imports "
+        "note": "wall and CPU time (all threads of this process) of the batch's work after a "
+        "warm-up (imports "
         "and JIT compilation of the first campaigns excluded); one process, the fits of up to "
         f"{B.BATCH_CAMPAIGNS} campaigns per sampling run",
     }
@@ -955,7 +960,8 @@ def scale_summary(name: str, r: dict) -> str:
             ),
             f"  ratio --serial / batched {r['ratio_serial_to_batched']:.2f} (CPU {r['cpu_ratio_serial_to_batched']:.2f}); "
             f"line {line['seconds_per_campaign']:.2f} s a campaign + {line['intercept_s']:.1f} s: 1000 campaigns "
-            f"{r['predicted_1000_min']:.1f} min; peak RSS {r['peak_rss_mb']:.0f} MB",
+            f"{r['predicted_1000_min']:.1f} min; CPU line {r['cpu_line']['seconds_per_campaign']:.2f} s a "
+            f"campaign: 1000 campaigns {r['predicted_1000_cpu_min']:.1f} CPU min; peak RSS {r['peak_rss_mb']:.0f} MB",
         ]
         return "\n".join(lines)
     lines = [f"bench --scaling: {r['workload']}; load average {r['load_average_1min']:.1f}"]

@@ -732,11 +732,13 @@ def batch_bench_summary(rel: str) -> Callable[[], str]:
             f"{'+' if line['intercept_s'] >= 0 else '-'} {abs(line['intercept_s']):.1f} s, "
             f"so 1000 campaigns take about {r['predicted_1000_min']:.0f} minutes"
             + (
-                " (measured: 1000 campaigns in the table)."
+                " (measured: 1000 campaigns in the table)"
                 if 1000 in r["sizes"]
-                else " (extrapolated from the line)."
+                else " (extrapolated from the line)"
             )
-            + f" Peak RSS {r['peak_rss_mb']:.0f} MB.",
+            + f"; in CPU time {r['cpu_line']['seconds_per_campaign']:.2f} s a campaign, 1000 "
+            f"campaigns about {r['predicted_1000_cpu_min']:.0f} CPU minutes (the wall time of an idle "
+            f"machine, where this process has a core to itself). Peak RSS {r['peak_rss_mb']:.0f} MB.",
         ]
         return "\n".join(lines) + "\n"
 

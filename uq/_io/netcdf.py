@@ -17,8 +17,8 @@ from uq._io.files import write_bytes_atomic
 
 def _compressible(dtype) -> bool:
     """Integers, booleans and byte strings are zlib-compressed; floating-point numbers and text
-    are not. Draws of floats barely compress (a fit's file: 9.9 MB raw, 9.3 MB with zlib at level
-    4, 6 % less) while zlib took about 45 % of the time to write it (docs/batch.md)."""
+    are not: draws of floats barely compress, and compressing them took most of the time to
+    write a fit's file (measured by benchmarks/bench.py --batch; docs/batch.md)."""
     return dtype.kind in {"b", "i", "u", "S"}
 
 
@@ -35,9 +35,9 @@ def netcdf_bytes(groups: dict, attrs: dict | None = None) -> bytes:
     (the layout ArviZ's ``idata.to_netcdf(path)`` writes and ``arviz.from_netcdf`` reads: root
     attributes, every group; integers zlib-compressed, floats stored as they are).
 
-    All groups go into the file in one pass (xarray's ``DataTree.to_netcdf``): writing group
-    after group reopens the file for each and costs about twice the time. With an xarray
-    without ``DataTree`` (before 2024.10) the groups are appended one by one.
+    All groups go into the file in one pass (xarray's ``DataTree.to_netcdf``) instead of
+    reopening it to append each group (a little faster: benchmarks/bench.py --batch measures
+    both); with an xarray without ``DataTree`` (before 2024.10) the groups are appended one by one.
 
     Why in memory: HDF5 writing straight to a full disk (or past a file-size limit) fails inside
     h5py, which can crash the interpreter (a segmentation fault, exit 139); the bytes are

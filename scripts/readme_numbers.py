@@ -724,21 +724,24 @@ def batch_bench_summary(rel: str) -> Callable[[], str]:
             f"{x['cpu_per_campaign_s']:.2f} | {x['converged']} | {x['mb_per_campaign']:.1f} |"
             for name, x in rows
         ]
+        cpu = r["cpu_line"]
         lines += [
             "",
-            f"`--serial` / batched: {r['ratio_serial_to_batched']:.2f} in wall time, "
-            f"{r['cpu_ratio_serial_to_batched']:.2f} in CPU time ({s['campaigns']} campaigns each). "
-            f"The line through the batched runs: {line['seconds_per_campaign']:.2f} s a campaign "
-            f"{'+' if line['intercept_s'] >= 0 else '-'} {abs(line['intercept_s']):.1f} s, "
-            f"so 1000 campaigns take about {r['predicted_1000_min']:.0f} minutes"
+            f"`--serial` / batched ({s['campaigns']} campaigns each): "
+            f"{r['cpu_ratio_serial_to_batched']:.2f} in CPU time, "
+            f"{r['ratio_serial_to_batched']:.2f} in wall time. The line through the batched runs' "
+            f"CPU times: {cpu['seconds_per_campaign']:.2f} s a campaign "
+            f"{'+' if cpu['intercept_s'] >= 0 else '-'} {abs(cpu['intercept_s']):.1f} s, so 1000 "
+            f"campaigns take about {r['predicted_1000_cpu_min']:.0f} CPU minutes"
             + (
                 " (measured: 1000 campaigns in the table)"
                 if 1000 in r["sizes"]
                 else " (extrapolated from the line)"
             )
-            + f"; in CPU time {r['cpu_line']['seconds_per_campaign']:.2f} s a campaign, 1000 "
-            f"campaigns about {r['predicted_1000_cpu_min']:.0f} CPU minutes (the wall time of an idle "
-            f"machine, where this process has a core to itself). Peak RSS {r['peak_rss_mb']:.0f} MB.",
+            + ", about the wall time on an idle machine, where this process has a core to itself "
+            f"(the wall-time line, at this load: {line['seconds_per_campaign']:.2f} s a campaign "
+            f"{'+' if line['intercept_s'] >= 0 else '-'} {abs(line['intercept_s']):.1f} s). "
+            f"Peak RSS {r['peak_rss_mb']:.0f} MB.",
         ]
         return "\n".join(lines) + "\n"
 
@@ -782,7 +785,7 @@ def batch_netcdf_summary(rel: str) -> Callable[[], str]:
             f"fewer bytes; {full['campaigns']} batched campaigns wrote {full['mb_per_campaign']:.1f} MB a campaign with "
             f"`pointwise = yes` and {slim['mb_per_campaign']:.1f} MB without (1000 campaigns: "
             f"{full['mb_per_campaign']:.0f} GB against {slim['mb_per_campaign']:.1f} GB), and took "
-            f"{full['wall_per_campaign_s']:.2f} s against {slim['wall_per_campaign_s']:.2f} s a campaign.",
+            f"{full['cpu_per_campaign_s']:.2f} CPU s against {slim['cpu_per_campaign_s']:.2f} CPU s a campaign.",
         ]
         return "\n".join(lines) + "\n"
 

@@ -480,8 +480,8 @@ TASK_RUNNERS = {
 }
 #: the tasks whose first step is the campaign's per-pressure cubics (``_fit``): batched
 FITTED_TASKS = ("fit", "report")
-#: campaigns per batched driver call (:func:`run_batched`; docs/batch.md, measured by
-#: benchmarks/bench.py --batch)
+#: campaigns per batched driver call (:func:`run_batched`): the fits of at most this many are
+#: held at once; benchmarks/bench.py --batch measures the cost a campaign below and above it
 BATCH_CAMPAIGNS = 50
 
 

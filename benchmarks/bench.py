@@ -4,7 +4,7 @@ Not part of the installed package: run from the repository root with the project
 
     .venv/bin/python benchmarks/bench.py [--seconds 10] [--json reports/bench/ess.json]
     .venv/bin/python benchmarks/bench.py --scaling  [--json reports/bench/scaling.json]
-    .venv/bin/python benchmarks/bench.py --batch 20,100 [--json reports/bench/batch.json]
+    .venv/bin/python benchmarks/bench.py --batch 20,50,200 [--json reports/bench/batch.json]
     .venv/bin/python benchmarks/bench.py --margin   [--json reports/bench/margin.json]
     .venv/bin/python benchmarks/bench.py --memory   [--json reports/bench/memory.json]
 

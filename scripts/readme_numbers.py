@@ -705,7 +705,7 @@ def batch_bench_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         r = _load(rel)
         if r is None:
-            return _bench_missing(rel, "--batch 20,100 ")
+            return _bench_missing(rel, "--batch 20,50,200 ")
         s, p, line = r["serial"], r["pointwise"], r["line"]
         lines = [
             f"From `{rel}` (`python benchmarks/bench.py --batch {','.join(map(str, r['sizes']))}`, "
@@ -761,7 +761,7 @@ def batch_netcdf_summary(rel: str) -> Callable[[], str]:
     def make() -> str:
         r = _load(rel)
         if r is None or "netcdf" not in r:
-            return _bench_missing(rel, "--batch 20,100 ")
+            return _bench_missing(rel, "--batch 20,50,200 ")
         nc = r["netcdf"]
         base = nc["by_group_zlib"]
         lines = [

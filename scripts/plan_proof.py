@@ -199,7 +199,7 @@ def answer(fit, name: str, target, sealed: SealedInputs | None) -> np.ndarray:
             target.pressure_bar * BAR_PA
         )
     if target.kind == "pressure_for":
-        return pressure_needed(ans, target.height_m, target.load_N) * BAR_PA
+        return pressure_needed(ans, target.height_m, target.load_N).values * BAR_PA
     if target.kind == "elastic_casing":
         p_lo, p_hi = target.pressures_bar
         x0 = np.array(fit.recordings.x0_m)

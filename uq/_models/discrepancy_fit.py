@@ -30,7 +30,6 @@ import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import estimate, thin_rows
-from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models.linear_fit import BlockSpec
 from uq._models.surface import SurfaceFit, force_label
@@ -174,17 +173,6 @@ class DiscrepancyFit(SurfaceFit):
             [beta[..., :ks] * scales, np.concatenate(blocks, axis=1).reshape(C, D, -1)], axis=-1
         )
         return shell.fitted(coefficients, posterior, recordings, stand, provenance)
-
-    @classmethod
-    def from_saved(cls, attrs: dict, groups: dict) -> DiscrepancyFit:
-        """The saved model, refused in one line when it was saved before the force's deviation
-        phi (uq 0.1 round 7, before its third session): its blocks are not this model's."""
-        if "force_deviation_m2" not in groups["posterior"].data_vars:
-            raise InputError(
-                "a discrepancy surface saved before it had the force's deviation (phi, added in "
-                "round 7): its blocks are not today's model's; fit and save it again"
-            )
-        return super().from_saved(attrs, groups)
 
     # ---- the draws between tested pressures
     @functools.cached_property

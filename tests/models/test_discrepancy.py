@@ -327,6 +327,12 @@ def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
     above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps, every)
     scale = np.abs(fit.tested_deviations).max()
     assert np.abs(above - below).max() < 1e-6 * scale
+    every_block = fit.block_draws(np.full(ps.size, 0.15), ps)  # every block computed
+    for some in (("delta",), ("eps",), ("delta", "eps"), ("delta", "phi"), ("eps", "phi")):
+        np.testing.assert_array_equal(  # only the blocks asked for computed: the same numbers
+            fit.deviation_draws(np.full(ps.size, 0.15), ps, some),
+            sum(every_block[b] for b in some),
+        )
     base = SurfaceFit.force_draws(fit, 0.15, 4.0)
     t = fit.geometry.t(0.15)
     tk = t ** np.arange(fit.n_k)

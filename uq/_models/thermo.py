@@ -108,13 +108,19 @@ def powers(o: ThermoOrders):
     return [(k, l) for k in range(1, o.K + 1) for l in range(o.L + 1)]
 
 
-def potential_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
-    """The columns of G, -dG/dx (force) and -dG/dp_u (volume) for unit standardised coefficients,
-    each (n, K (L + 1)): J, N and m^3."""
+def _terms(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
+    """(t (n, 1), s (n, 1), k, l): the basis t^k s^l's variables and powers, one column a term."""
     t = np.asarray(g.t(x_m), float)[..., None]
     s = np.asarray(g.s(p_bar), float)[..., None]
     k = np.array([k for k, _ in powers(o)], float)
     l = np.array([l for _, l in powers(o)], float)
+    return t, s, k, l
+
+
+def potential_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
+    """The columns of G, -dG/dx (force) and -dG/dp_u (volume) for unit standardised coefficients,
+    each (n, K (L + 1)): J, N and m^3."""
+    t, s, k, l = _terms(o, g, x_m, p_bar)
     p_ref_pa = g.p_ref_bar * BAR_PA
     G = G_SCALE_J * t**k * s**l
     force = -G_SCALE_J / BASIS_SCALE_M * k * t ** (k - 1) * s**l
@@ -147,11 +153,8 @@ def force_pressure_slope(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, coef):
 def slope_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
     """The columns of dP/dp_u = dV/dx (Maxwell) for unit standardised coefficients, (n, K (L + 1)),
     m^2."""
-    t = np.asarray(g.t(x_m), float)[..., None]
-    s = np.asarray(g.s(p_bar), float)[..., None]
-    k = np.array([k for k, _ in powers(o)], float)
-    l = np.array([l for _, l in powers(o)], float)
-    cols = (
+    t, s, k, l = _terms(o, g, x_m, p_bar)
+    return (
         -G_SCALE_J
         / BASIS_SCALE_M
         * k
@@ -160,7 +163,6 @@ def slope_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
         * s ** np.maximum(l - 1, 0)
         / (g.p_ref_bar * BAR_PA)
     )
-    return cols
 
 
 @dataclass(eq=False, frozen=True, repr=False)
@@ -198,12 +200,8 @@ class ThermoFit(LinearFit):
 
     def dvdp_columns(self, x_m, p_bar):
         """dV/dp_u = -d2G/dp_u^2 at fixed height, up to a function of p_u alone."""
-        o, g = self.orders, self.geometry
-        t = np.asarray(g.t(x_m), float)[..., None]
-        s = np.asarray(g.s(p_bar), float)[..., None]
-        k = np.array([k for k, _ in powers(o)], float)
-        l = np.array([l for _, l in powers(o)], float)
-        p_ref = g.p_ref_bar * BAR_PA
+        t, s, k, l = _terms(self.orders, self.geometry, x_m, p_bar)
+        p_ref = self.geometry.p_ref_bar * BAR_PA
         return self._padded(-G_SCALE_J / p_ref**2 * l * (l - 1) * t**k * s ** np.maximum(l - 2, 0))
 
     @property

@@ -284,10 +284,6 @@ def _poly(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
     return cubic(np.asarray(coef, float)[..., None, :], np.asarray(u, float))
 
 
-def _slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return cubic_slope(np.asarray(coef, float)[..., None, :], np.asarray(u, float))
-
-
 def choose_reference(
     pressures_bar, preferred: float = REFERENCE_BAR, has_volume=None
 ) -> tuple[int | None, str]:
@@ -430,7 +426,7 @@ def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_f
     T = force.shape[0]
     P = _poly(force, u)  # (T, D, G)
     L = _poly(piston, u)
-    dLdx = _slope(piston, u)
+    dLdx = cubic_slope(np.asarray(piston, float)[..., None, :], np.asarray(u, float))
     L_top = _poly(piston, np.atleast_1d(u_top))  # (T, D, T): column t is test t's x_max
     L_top = L_top[np.arange(T), :, np.arange(T)][..., None]  # (T, D, 1)
     p_pa = (p_bar * BAR_PA)[:, None, None]

@@ -424,7 +424,7 @@ def _print_force_only(rec, model, doc) -> None:
         f"{e['mean']:.0f} N [{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
     )
     print(f"  {FORCE_ONLY_WHY}")
-    _print_check(doc["model_check"])
+    print_check(doc["model_check"])
 
 
 def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
@@ -450,11 +450,13 @@ def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
     return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
 
 
-def _print_check(check: dict) -> None:
-    """The model's posterior-predictive check at the tested pressures (uq._derived.model_check)."""
+def print_check(check: dict, named: bool = True) -> None:
+    """The model's posterior-predictive check at the tested pressures (uq._derived.model_check),
+    with the model's name (``named``) or without (uq margin's, which names it above)."""
     from uq._derived.model_check import table, words
 
-    print(f"  the model at the tested points ({check['model']}): {words(check)}")
+    name = f" ({check['model']})" if named else ""
+    print(f"  the model at the tested points{name}: {words(check)}")
     if check["misses"]:  # the per-pressure table where it matters
         for line in table(check):
             print(f"  {line}")
@@ -497,6 +499,6 @@ def _print_sealed(rec, model, doc) -> None:
         "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
         + (words(c) if c else "not ranked (--no-compare, or the cubics answered)")
     )
-    _print_check(doc["model_check"])
+    print_check(doc["model_check"])
     for w in doc["source"]["warnings"]:
         print(f"  warning: {w}", file=sys.stderr)

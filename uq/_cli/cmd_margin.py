@@ -387,10 +387,9 @@ def _check_usage(args) -> None:
 
 
 def command_margin(args) -> int:
+    from uq._cli.cmd_design import print_check
     from uq._cli.common import load
     from uq._derived.model_check import predictive_check, unavailable
-    from uq._derived.model_check import table as check_table
-    from uq._derived.model_check import words as check_words
     from uq._io.files import emit_json
 
     _check_usage(args)
@@ -460,10 +459,7 @@ def command_margin(args) -> int:
         _print_table(source, ans, info, queries, results)
     elif queries:
         _print_one(source, ans, info, queries[0], results[0])
-    print(f"  the model at the tested points: {check_words(check)}")
-    if check["misses"]:  # the per-pressure table where it matters
-        for line in check_table(check):
-            print(f"  {line}")
+    print_check(check, named=False)
     for q, r in zip(queries, results, strict=True):
         if "design" in r:
             _print_design(q, r["design"], len(queries) > 1)

@@ -190,9 +190,14 @@ class ThermoFit(LinearFit):
         """A potential's columns with zeros for the piston references."""
         return np.concatenate([cols, np.zeros((cols.shape[0], len(self.tested_pressures_bar)))], 1)
 
+    def _potential(self, part: int):
+        """The columns of part ``part`` of :func:`potential_columns` (0: G, 1: force, 2: volume),
+        padded, as a function of (x, p_u)."""
+        return lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[part])
+
     def force_columns(self, x_m, p_bar):
         """P = -dG/dx."""
-        return self._padded(potential_columns(self.orders, self.geometry, x_m, p_bar)[1])
+        return self._potential(1)(x_m, p_bar)
 
     def area_columns(self, x_m, p_bar):
         """dV/dx = -d2G/dx dp_u (= dP/dp_u by the Maxwell relation)."""
@@ -216,14 +221,12 @@ class ThermoFit(LinearFit):
 
     def potential_draws(self, height_m, p_bar, *, check=True):
         """G(x, p_u) draws, J (up to a function of p_u alone, which isobaric tests cannot see)."""
-        cols = lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[0])  # noqa: E731
-        return self.evaluate(cols, height_m, p_bar, check=check)
+        return self.evaluate(self._potential(0), height_m, p_bar, check=check)
 
     def volume_change_draws(self, height_m, p_bar, *, check=True):
         """V(x, p_u) - V_(p_u) draws, m^3: the volume up to a constant per pressure (isobaric tests
         fix volume differences between heights, not the absolute volume)."""
-        cols = lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[2])  # noqa: E731
-        return self.evaluate(cols, height_m, p_bar, check=check)
+        return self.evaluate(self._potential(2), height_m, p_bar, check=check)
 
     def maxwell_ratio_draws(self, height_m, p_bar, *, check=True):
         """(dV/dx) / (P / p_u): how far the volume-derived area exceeds the force-derived one

@@ -6,10 +6,11 @@ temporaries of a few MB (batched over the walkers: the discrepancy surface's pri
 Cholesky factors for 184 walkers are 14 MB each). glibc serves a block above its mmap threshold
 (128 kB, raised dynamically only up to 32 MB) with a fresh ``mmap`` and returns it with
 ``munmap`` when freed, and trims the heap's free top above 128 kB: each call then faults its
-temporaries' pages in again. On data/n50 that was a third of the discrepancy fit's CPU time, in
-the kernel (``sys``: 74 of 239 s). With both thresholds at ``THRESHOLD_BYTES`` the blocks stay in
-the heap and are reused: the log posterior of 184 walkers ran 100 calls in 6.8 s instead of 11.6
-(page faults 135 k instead of 838 k).
+temporaries' pages in again. In one fit of the discrepancy surface to data/n50 that was 74 of 239
+CPU seconds, spent in the kernel. With both thresholds at ``THRESHOLD_BYTES`` the blocks stay in
+the heap and are reused (``benchmarks/discrepancy.py`` measures a call of that log posterior both
+ways in one process: docs/speed.md). The cubics' and the surface's fits, whose temporaries are
+small, hardly change.
 
 What it costs: up to ``THRESHOLD_BYTES`` of freed memory may stay with the process (its resident
 size after a peak), and a block above it still goes to ``mmap``. The settings belong to the

@@ -112,9 +112,6 @@ class DevData(NamedTuple):
     s: jnp.ndarray  # (n_k,) coefficient scales s_k
     rates: jnp.ndarray  # (3,) exponential prior rates of a_F, a_V, a_P (1/m^2)
     AAt: jnp.ndarray  # (T, T, m, m) A_i A_j^T: the surface's share of the span's prior covariance
-    DDt: (
-        jnp.ndarray
-    )  # (3, T, T, m, m) per deviation block, sum_c s_c^2 D_ic D_jc^T (``block_products``)
 
 
 class ForceDevData(NamedTuple):
@@ -137,7 +134,6 @@ class ForceDevData(NamedTuple):
     s: jnp.ndarray
     rates: jnp.ndarray  # (2,)
     AAt: jnp.ndarray  # (T, T, m, m)
-    DDt: jnp.ndarray  # (2, T, T, m, m)
 
 
 # ----------------------------------------------------------------------------- the span Z_i
@@ -249,7 +245,11 @@ def dev_data(
         base.dp_meas,
         jnp.asarray(p_bar * BAR_PA),
         jnp.asarray(p_bar),
-        *_span_arrays(A, D, n_k, np.full(len(BLOCKS), rate)),
+        jnp.asarray(np.stack(A)),
+        jnp.asarray(np.stack(D)),
+        jnp.full(n_k, gp.COEFFICIENT_SCALE),
+        jnp.full(len(BLOCKS), rate),
+        jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
     )
 
 
@@ -271,30 +271,12 @@ def force_dev_data(
         base.weight,
         jnp.asarray(p_bar * BAR_PA),
         jnp.asarray(p_bar),
-        *_span_arrays(
-            A, D, n_k, np.full(len(FORCE_BLOCKS), gp.amplitude_rate(reference_area(base.feff_hat)))
-        ),
+        jnp.asarray(np.stack(A)),
+        jnp.asarray(np.stack(D)),
+        jnp.full(n_k, gp.COEFFICIENT_SCALE),
+        jnp.full(len(FORCE_BLOCKS), gp.amplitude_rate(reference_area(base.feff_hat))),
+        jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
     )
-
-
-def _span_arrays(A, D, n_k: int, rates) -> tuple:
-    """The fields (A, D, s, rates, AAt, DDt) of ``DevData`` and ``ForceDevData`` from the tests'
-    span maps (lists of (m, k) arrays)."""
-    A, D = np.stack(A), np.stack(D)
-    s = np.full(n_k, gp.COEFFICIENT_SCALE)
-    AAt = np.einsum("iak,jbk->ijab", A, A)
-    return tuple(jnp.asarray(a) for a in (A, D, s, rates, AAt, block_products(D, s)))
-
-
-def block_products(D, s):
-    """(blocks, T, T, m, m): per deviation block (``len(s)`` channels each, in ``D``'s column
-    order), sum over its channels c of s_c^2 D_i[:, c] D_j[:, c]^T, the fixed factor of the block's share of
-    the span's prior covariance (``prior_span_cov``), so that a theta costs one product with the
-    correlation instead of a contraction over the channels."""
-    D, s = np.asarray(D, float), np.asarray(s, float)
-    T, m, n_c = D.shape
-    blocks = D.reshape(T, m, n_c // s.size, s.size) * s
-    return np.einsum("iabk,jcbk->bijac", blocks, blocks)
 
 
 def reference_area(feff_hat) -> float:
@@ -446,11 +428,11 @@ def moments(noise, d):
 
 def prior_span_cov(theta, d):
     """P (T, T, m, m): the prior covariance of the tests' Z-coefficients, C C^T: the surface's part
-    A_i A_j^T (fixed, ``AAt``) plus the deviations' R_ij D_i diag(a s)^2 D_j^T, summed block by
-    block from the fixed products ``DDt`` (``block_products``)."""
+    A_i A_j^T (fixed, ``AAt``) plus the deviations' R_ij D_i diag(a s)^2 D_j^T."""
     _, amps, length = _split(theta, d)
+    g2 = channel_scales(amps, d) ** 2
     R = gp.correlation(d.p_bar, length, jnp)
-    return d.AAt + R[:, :, None, None] * jnp.einsum("b,bijac->ijac", amps**2, d.DDt)
+    return d.AAt + jnp.einsum("ij,iac,c,jbc->ijab", R, d.D, g2, d.D)
 
 
 class SpanPosterior(NamedTuple):

@@ -636,6 +636,39 @@ def ess_bench_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def discrepancy_bench_summary(rel: str) -> Callable[[], str]:
+    """``benchmarks/discrepancy.py``: a call of the discrepancy log posterior with malloc's
+    defaults and with uq's thresholds (``uq._inference.allocator``), in one process."""
+
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return _bench_missing(rel, "")
+        lines = [
+            f"From `{rel}` (`python benchmarks/discrepancy.py`, {r['cores']} cores at load average "
+            f"{r['load_average_1min']:.1f}): {r['workload']}.",
+            "",
+            "| malloc | user CPU a call | kernel CPU a call | wall a call | page faults a call |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        names = {"malloc_defaults": "glibc's defaults", "tuned": "uq's thresholds"}
+        for key, label in names.items():
+            x = r["runs"][key]
+            lines.append(
+                f"| {label} | {x['user_ms']:.1f} ms | {x['sys_ms']:.1f} ms | {x['wall_ms']:.1f} ms "
+                f"| {x['page_faults']:.0f} |"
+            )
+        lines += [
+            "",
+            f"A call with glibc's defaults over one with uq's thresholds "
+            f"({r['threshold_bytes'] / 2**20:.0f} MB): CPU {r['cpu_ratio']:.2f}x, wall "
+            f"{r['wall_ratio']:.2f}x.",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def commands_bench_summary(rel: str) -> Callable[[], str]:
     """The before/after table of ``benchmarks/commands.py --baseline`` (issue 32's goals)."""
 
@@ -1074,6 +1107,7 @@ BLOCKS: dict[str, Block] = {
     "speed": report_block(speed_table),
     "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),
     "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
+    "bench-discrepancy": report_block(discrepancy_bench_summary("reports/bench/discrepancy.json")),
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
     "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),
     "bench-scaling": report_block(scaling_bench_summary("reports/bench/scaling.json")),

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uq._derived.plan_search import Frame, opened, target_columns
+from uq._derived.plan_search import Frame, opened
 
 THETA_UPDATES = 200  # simulated sets of the planned readings (uq plan --theta-updates)
 SET_CHUNK = 20  # simulated sets per block (memory: sets x draws x readings)
@@ -111,8 +111,8 @@ def frame_parts(frame: Frame, targets, readings) -> Parts:
         [frame.reading_noise(j, np.asarray(h, float)) for j, h in by.items()], axis=1
     )
     open_ = opened(frame, readings)
-    G, E = target_columns(frame, targets, open_)
-    value = np.stack([t.linearise(frame, frame.mean, open_)[0] for t in targets], axis=-1)
+    lin = [t.linearise(frame, frame.mean, open_) for t in targets]  # as target_columns
+    value, G, E = (np.stack([x[i] for x in lin], axis=-1) for i in range(3))
     return parts_of(Z, C, frame.precision, frame.mean, value, G, E)
 
 
@@ -127,7 +127,7 @@ def simulate(parts: Parts, n_sets: int, rng: np.random.Generator):
     # beta = m + L_A^-T z: covariance A^-1
     LA = parts.chol_pilot[s]
     beta = parts.mean[s] + np.linalg.solve(np.swapaxes(LA, -1, -2), z[..., None])[..., 0]
-    yw = np.einsum("mnrk,mk->mnr", parts.Z[s], beta) + e
+    yw = (parts.Z[s].reshape(n_sets, n * r, k) @ beta[..., None])[..., 0].reshape(n_sets, n, r) + e
     return np.einsum("mnrq,mnq->mnr", parts.C[s], yw), s, beta
 
 
@@ -140,18 +140,19 @@ def mixture(parts: Parts, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     S, n, r, k = parts.Z.shape
     T = parts.value.shape[1]
     var, mean, ess = np.empty((M, T)), np.empty((M, T)), np.empty(M)
-    fitted = np.einsum("snrk,sk->snr", parts.Z, parts.mean)  # (S, n, r)
+    Zf = parts.Z.reshape(S, n * r, k)
+    fitted = (Zf @ parts.mean[..., None])[..., 0].reshape(S, n, r)
     for lo in range(0, M, SET_CHUNK):
         yc = y[lo : lo + SET_CHUNK]
-        res = solve_lower(parts.C[None], yc[:, None]) - fitted[None]  # (c, S, n, r)
-        u = np.einsum("snrk,csnr->csk", parts.Z, res)
-        w = np.einsum("skl,csl->csk", parts.inv_chol, u)
-        quad = np.sum(res**2, axis=(2, 3)) - np.sum(w**2, axis=2)
+        res = (solve_lower(parts.C[None], yc[:, None]) - fitted[None]).reshape(-1, S, n * r)
+        u = (res[..., None, :] @ Zf[None])[..., 0, :]  # (c, S, k): Z' r
+        w = (parts.inv_chol[None] @ u[..., None])[..., 0]  # L^-1 Z' r
+        quad = np.sum(res**2, axis=2) - np.sum(w**2, axis=2)
         logp = -0.5 * (quad + parts.log_det[None])
         logp -= logp.max(axis=1, keepdims=True)
         wt = np.exp(logp)
         wt /= wt.sum(axis=1, keepdims=True)  # (c, S)
-        mu = parts.value[None] + np.einsum("skt,csk->cst", parts.H, w)  # (c, S, T)
+        mu = parts.value[None] + (w[..., None, :] @ parts.H[None])[..., 0, :]  # (c, S, T)
         mbar = np.einsum("cs,cst->ct", wt, mu)
         v = np.einsum("cs,cst->ct", wt, parts.var[None] + (mu - mbar[:, None]) ** 2)
         var[lo : lo + SET_CHUNK], mean[lo : lo + SET_CHUNK] = v, mbar

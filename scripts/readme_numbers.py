@@ -878,9 +878,12 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
         if d.get("model_choice"):
             lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
         sys.path.insert(0, str(ROOT / "scripts"))
-        from plan_proof import theta_lines  # the proof's own table of what theta learnt
+        from plan_proof import theta_lines, theta_updated_lines  # the proof's own tables
 
+        lines += theta_updated_lines(d)
         lines += theta_lines(d)
+        if d.get("notes"):
+            lines += ["", "Notes on the runs:", ""] + [f"- {n}" for n in d["notes"]]
         return "\n".join(lines) + "\n"
 
     return make

@@ -132,7 +132,7 @@ def one_campaign(spring: str, grid, seed: int, settings: Settings, qs, catalogue
                 }
             }
             try:
-                d = pressure_needed(ans, h, true_force)
+                d = pressure_needed(ans, h, true_force).values
                 d = d[np.isfinite(d)]
                 q_lo, q_hi = np.quantile(d, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
                 entry["margin"] = {

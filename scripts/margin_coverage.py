@@ -106,7 +106,7 @@ def one_campaign(
         row = {"height_mm": h_mm, "pressure_bar": p, "load_N": load}
         for name, ans in answers.items():
             try:
-                d = pressure_needed(ans, h_mm / 1e3, load)
+                d = pressure_needed(ans, h_mm / 1e3, load).values
             except InputError as exc:
                 row[name] = {"refused": str(exc)}
                 continue

@@ -54,6 +54,7 @@ from uq._derived.plan import (  # noqa: E402
 from uq._derived.plan_frames import frames_of  # noqa: E402
 from uq._derived.plan_search import evaluate  # noqa: E402
 from uq._derived.plan_targets import SealedInputs, parse_target  # noqa: E402
+from uq._derived.plan_theta import THETA_UPDATES  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
 from uq._models import registry  # noqa: E402
@@ -119,6 +120,18 @@ SCENARIOS = {
         0.010,
         ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
         model=registry.DISCREPANCY,
+        candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
+    ),
+    "E": Scenario(
+        "E",
+        "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, planned "
+        "and fitted with the smooth surface (what the model choice took before the discrepancy "
+        "became the default model)",
+        "n50",
+        (1.0, 4.0, 7.0, 10.0),
+        0.010,
+        ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
+        model=registry.SURFACE,
         candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
     ),
 }
@@ -199,7 +212,7 @@ def answer(fit, name: str, target, sealed: SealedInputs | None) -> np.ndarray:
             target.pressure_bar * BAR_PA
         )
     if target.kind == "pressure_for":
-        return pressure_needed(ans, target.height_m, target.load_N) * BAR_PA
+        return pressure_needed(ans, target.height_m, target.load_N).values * BAR_PA
     if target.kind == "elastic_casing":
         p_lo, p_hi = target.pressures_bar
         x0 = np.array(fit.recordings.x0_m)
@@ -229,7 +242,9 @@ def combined(sc: Scenario, pilot_tests, planned, seed: int):
 # ----------------------------------------------------------------------------- one replication
 
 
-def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -> dict:
+def replicate(
+    sc: Scenario, rep: int, settings, draws: int, search_draws: int, theta_updates: int = 0
+) -> dict:
     seed = 1000 * (ord(sc.name) - 64) + rep
     t0 = time.perf_counter()
     layout = Layout(pressures_bar=sc.pressures_bar, step_m=sc.step_m)
@@ -243,7 +258,14 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
     builder = frames_of(fit, draws)
     cand = np.array(sc.candidates_bar, float)
     plan = make_plan(
-        builder, targets, HEIGHTS_M, cand, max_readings=sc.max_readings, draws=search_draws
+        builder,
+        targets,
+        HEIGHTS_M,
+        cand,
+        max_readings=sc.max_readings,
+        draws=search_draws,
+        theta_updates=theta_updates,
+        seed=seed,
     )
     doc = plan_document(plan)
     # the uniform grid of the same size, laid out as make_plan compared it
@@ -295,6 +317,17 @@ def replicate(sc: Scenario, rep: int, settings, draws: int, search_draws: int) -
             row[f"{key}sd_achieved"] = float(np.std(d))
             row[f"{key}covered"] = bool(lo <= row["truth"] <= hi)
         row["ratio"] = row["sd_achieved"] / row["sd_predicted"]
+        upd = plan.sd_after_theta_updated[i] if plan.sd_after_theta_updated else None
+        if upd is not None:  # the preposterior that also updates theta (uq._derived.plan_theta)
+            row["sd_theta_updated"] = upd
+            row["ratio_theta_updated"] = row["sd_achieved"] / upd["median"]
+            row["in_theta_updated_range"] = bool(upd["p10"] <= row["sd_achieved"] <= upd["p90"])
+            uu = plan.sd_uniform_theta_updated[i]
+            if uu is not None:
+                row["uniform_sd_theta_updated"] = uu
+                row["uniform_in_theta_updated_range"] = bool(
+                    uu["p10"] <= row["uniform_sd_achieved"] <= uu["p90"]
+                )
         row |= diag[i]
         out["targets"].append(row)
     out["seconds"] = time.perf_counter() - t0
@@ -459,7 +492,69 @@ def theta_lines(doc: dict) -> list[str]:
     return ["", *lines]
 
 
+def _theta_updated_summary(ts: list[dict]) -> dict:
+    """The theta-updated prediction against the achieved sd (replications that recorded it)."""
+    d = [t for t in ts if t.get("sd_theta_updated")]
+    if not d:
+        return {}
+    r = np.array([t["ratio_theta_updated"] for t in d])
+    u = [t for t in d if t.get("uniform_sd_theta_updated")]
+    return {
+        "theta_updated": {
+            "n": len(d),
+            "ratio_median_mean": float(r.mean()),
+            "ratio_median_min": float(r.min()),
+            "ratio_median_max": float(r.max()),
+            "in_range": int(sum(t["in_theta_updated_range"] for t in d)),
+            "ratio_closed_form_mean": float(np.mean([t["ratio"] for t in d])),
+            "ess_median_min": float(min(t["sd_theta_updated"]["ess_median"] for t in d)),
+            "ess_min": float(min(t["sd_theta_updated"]["ess_min"] for t in d)),
+            "uniform_n": len(u),
+            "uniform_ratio_median_mean": float(
+                np.mean(
+                    [t["uniform_sd_achieved"] / t["uniform_sd_theta_updated"]["median"] for t in u]
+                )
+            )
+            if u
+            else None,
+            "uniform_in_range": int(sum(t["uniform_in_theta_updated_range"] for t in u)),
+        }
+    }
+
+
+def theta_updated_lines(doc: dict) -> list[str]:
+    """Markdown of the theta-updated prediction against the achieved sd."""
+    ts = [t for t in doc["by_target"] if t.get("theta_updated")]
+    if not ts:
+        return []
+    lines = [
+        "",
+        "The prediction that also updates theta (`sd_after_theta_updated`: the planned readings "
+        "simulated from the pilot's posterior predictive, the pilot's theta draws reweighted by "
+        "each set's likelihood; replications that recorded it):",
+        "",
+        "| scenario | target | n | achieved / closed-form prediction (mean) | achieved / theta-updated "
+        "median (mean, range) | achieved inside its 10-90 % range | the same for the uniform grid "
+        "(achieved / median, inside) | Kish size of the weights (least median over sets, least) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for t in ts:
+        h = t["theta_updated"]
+        uni = (
+            "-"
+            if not h["uniform_n"]
+            else f"{h['uniform_ratio_median_mean']:.2f}, {h['uniform_in_range']}/{h['uniform_n']}"
+        )
+        lines.append(
+            f"| {t['scenario']} | `{t['spec']}` | {h['n']} | {h['ratio_closed_form_mean']:.2f} | "
+            f"{h['ratio_median_mean']:.2f} ({h['ratio_median_min']:.2f}-{h['ratio_median_max']:.2f}) "
+            f"| {h['in_range']}/{h['n']} | {uni} | {h['ess_median_min']:.0f}, {h['ess_min']:.1f} |"
+        )
+    return lines
+
+
 def summarise(rows: list[dict], command: str) -> dict:
+    rows = sorted(rows, key=lambda r: (r["scenario"], r["rep"]))  # runs kept by --keep-rows
     by: dict[tuple, list] = {}
     for r in rows:
         for t in r["targets"]:
@@ -487,6 +582,7 @@ def summarise(rows: list[dict], command: str) -> dict:
                 "uniform_over_plan_sd": float(np.exp(np.mean(np.log(gain)))),
                 "plan_better": int(np.sum(gain > 1)),
                 **_theta_summary(ts),
+                **_theta_updated_summary(ts),
             }
         )
     poor = []
@@ -565,7 +661,10 @@ def markdown(doc: dict) -> str:
     lines += [f"- {w}" for w in doc["poor"]] or ["- none"]
     if doc.get("model_choice"):
         lines += ["", f"{doc['model_choice'][0].upper()}{doc['model_choice'][1:]}."]
+    lines += theta_updated_lines(doc)
     lines += theta_lines(doc)
+    if doc.get("notes"):
+        lines += ["", "Notes on the runs:", ""] + [f"- {n}" for n in doc["notes"]]
     lines += ["", "Scenarios:", ""]
     for name in sorted({r["scenario"] for r in doc["rows"]}):
         sc = SCENARIOS[name]
@@ -597,12 +696,26 @@ def main(argv=None) -> int:
         help="keep the rows of the scenarios not run from the proof.json in --out (their command "
         "is kept in 'commands')",
     )
+    ap.add_argument(
+        "--theta-updates",
+        type=int,
+        default=THETA_UPDATES,
+        help="simulated sets of the preposterior that also updates theta (0: off)",
+    )
+    ap.add_argument(
+        "--note",
+        action="append",
+        default=[],
+        help="a sentence for summary.md's notes on the runs (kept with --keep-rows)",
+    )
     ap.add_argument("--out", default=str(ROOT / "reports" / "plan-proof"))
     args = ap.parse_args(argv)
     out = Path(args.out)
     if args.summary_only:
         old = json.loads((out / "proof.json").read_text())
-        doc = summarise(old["rows"], old["command"])
+        doc = summarise(old["rows"], "; ".join(old.get("commands", [old["command"]]))) | {
+            k: old[k] for k in ("commands", "notes") if k in old
+        }
         write_text_atomic(out / "proof.json", dumps_json(doc))
         write_text_atomic(out / "summary.md", markdown(doc))
         return 0
@@ -618,31 +731,39 @@ def main(argv=None) -> int:
         settings = Settings(n_walkers=16, n_ensembles=2, max_steps=200)
         args.draws, args.search_draws = 20, 10
     command = "python scripts/plan_proof.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    rows, commands = [], []
+    rows, commands, notes = [], [], []
     if args.keep_rows and (out / "proof.json").exists():
         old = json.loads((out / "proof.json").read_text())
         run_now = {name for name, _ in plan}
         rows = [r for r in old["rows"] if r["scenario"] not in run_now]
         commands = [c for c in old.get("commands", [old["command"]]) if c != command.strip()]
+        notes = [n for n in old.get("notes", []) if n not in args.note]
     commands.append(command.strip())
+    notes += args.note
     for name, reps in plan:
         sc = SCENARIOS[name]
         if args.tiny:
             sc = Scenario(**{**sc.__dict__, "max_readings": 16})
         for rep in range(reps):
-            row = replicate(sc, rep, settings, args.draws, args.search_draws)
+            row = replicate(sc, rep, settings, args.draws, args.search_draws, args.theta_updates)
             rows.append(row)
             print(
                 f"{name}{rep}: {row['model']} {row['n_readings']} readings, "
                 + "; ".join(
                     f"{t['spec']} ratio {t['ratio']:.2f} covered {t['covered']} uniform/plan "
                     f"{t['uniform_sd_achieved'] / t['sd_achieved']:.2f}"
+                    + (
+                        f" theta-updated ratio {t['ratio_theta_updated']:.2f} "
+                        f"in range {t['in_theta_updated_range']}"
+                        if "ratio_theta_updated" in t
+                        else ""
+                    )
                     for t in row["targets"]
                 )
                 + f" ({row['seconds']:.0f} s)",
                 flush=True,
             )
-            doc = summarise(rows, "; ".join(commands)) | {"commands": commands}
+            doc = summarise(rows, "; ".join(commands)) | {"commands": commands, "notes": notes}
             write_text_atomic(out / "proof.json", dumps_json(doc))
             write_text_atomic(out / "summary.md", markdown(doc))
     return 0

@@ -636,6 +636,39 @@ def ess_bench_summary(rel: str) -> Callable[[], str]:
     return make
 
 
+def discrepancy_bench_summary(rel: str) -> Callable[[], str]:
+    """``benchmarks/discrepancy.py``: a call of the discrepancy log posterior with malloc's
+    defaults and with uq's thresholds (``uq._inference.allocator``), in one process."""
+
+    def make() -> str:
+        r = _load(rel)
+        if r is None:
+            return _bench_missing(rel, "")
+        lines = [
+            f"From `{rel}` (`python benchmarks/discrepancy.py`, {r['cores']} cores at load average "
+            f"{r['load_average_1min']:.1f}): {r['workload']}.",
+            "",
+            "| malloc | user CPU a call | kernel CPU a call | wall a call | page faults a call |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        names = {"malloc_defaults": "glibc's defaults", "tuned": "uq's thresholds"}
+        for key, label in names.items():
+            x = r["runs"][key]
+            lines.append(
+                f"| {label} | {x['user_ms']:.1f} ms | {x['sys_ms']:.1f} ms | {x['wall_ms']:.1f} ms "
+                f"| {x['page_faults']:.0f} |"
+            )
+        lines += [
+            "",
+            f"A call with glibc's defaults over one with uq's thresholds "
+            f"({r['threshold_bytes'] / 2**20:.0f} MB): CPU {r['cpu_ratio']:.2f}x, wall "
+            f"{r['wall_ratio']:.2f}x.",
+        ]
+        return "\n".join(lines) + "\n"
+
+    return make
+
+
 def commands_bench_summary(rel: str) -> Callable[[], str]:
     """The before/after table of ``benchmarks/commands.py --baseline`` (issue 32's goals)."""
 
@@ -919,9 +952,12 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
         if d.get("model_choice"):
             lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
         sys.path.insert(0, str(ROOT / "scripts"))
-        from plan_proof import theta_lines  # the proof's own table of what theta learnt
+        from plan_proof import theta_lines, theta_updated_lines  # the proof's own tables
 
+        lines += theta_updated_lines(d)
         lines += theta_lines(d)
+        if d.get("notes"):
+            lines += ["", "Notes on the runs:", ""] + [f"- {n}" for n in d["notes"]]
         return "\n".join(lines) + "\n"
 
     return make
@@ -1148,6 +1184,7 @@ BLOCKS: dict[str, Block] = {
     "speed": report_block(speed_table),
     "bench-commands": report_block(commands_bench_summary("reports/bench/commands.json")),
     "bench-ess": report_block(ess_bench_summary("reports/bench/ess.json")),
+    "bench-discrepancy": report_block(discrepancy_bench_summary("reports/bench/discrepancy.json")),
     "bench-margin": report_block(margin_bench_summary("reports/bench/margin.json")),
     "bench-batch": report_block(batch_bench_summary("reports/bench/batch.json")),
     "bench-batch-netcdf": report_block(batch_netcdf_summary("reports/bench/batch.json")),

@@ -61,6 +61,14 @@ def no_fitting(monkeypatch):
         (["--target", "elastic_casing", "--model", "cubics"], "do not interpolate the volume"),
         (["--target", "force@110mm,6bar", "--target", "force@110mm,6bar"], "given twice"),
         (["--target", "force@110mm,6bar", "--walkers", "8"], "option --walkers: 8 walkers"),
+        (
+            ["--target", "force@110mm,6bar", "--theta-updates", "-3"],
+            "--theta-updates: expected 0 (off) to 20000 simulated sets, got '-3'",
+        ),
+        (
+            ["--target", "force@110mm,6bar", "--theta-updates", "many"],
+            "--theta-updates: expected a whole number of simulated sets (0: off), got 'many'",
+        ),
     ],
 )
 def test_refused_before_the_fit(pilot, no_fitting, capsys, extra, match):
@@ -163,6 +171,21 @@ def test_json_has_the_contracts_keys(planned):
 def test_summary_names_the_plan_and_what_it_leaves_out(planned):
     text = planned[3]
     assert "add " in text and "left out" in text and "paper's protocol" in text
+    assert "with theta updated by the readings (200 simulated sets" in text
+    assert "effective theta draws of 6 (Kish" in text
+
+
+def test_json_states_the_prediction_with_theta_updated(planned):
+    """Per target the distribution of the sd over the simulated sets, ordered, and the weights'
+    effective sample size (at most the draws, 6 here); the same for the uniform grid."""
+    doc = planned[0]
+    assert doc["theta_updates"]["sets"] == 200
+    for t in doc["targets"]:
+        for key in ("sd_after_theta_updated", "sd_uniform_grid_theta_updated"):
+            d = t[key]
+            assert 0 < d["p10"] <= d["median"] <= d["p90"] and d["mean"] > 0
+            assert 1.0 <= d["ess_min"] <= d["ess_median"] <= 6.0 + 1e-9
+            assert 0.0 <= d["small_ess_share"] <= 1.0
 
 
 def test_template_is_refused_until_filled_then_read(planned, pilot, tmp_path):

@@ -303,3 +303,36 @@ def test_curve_bands_in_the_json_summary(paper_bands):
     row = cv["tests"][0]["feff_m2"]
     assert np.all(np.asarray(row["simultaneous_lo"]) < np.asarray(row["pointwise_q05"]))
     assert "pointwise" in cb.to_json()["intervals"]
+
+
+def test_predictive_bands_use_one_block_of_normals_per_campaign():
+    """The curves are made one test at a time, but the predictive draws' normals are the seed's
+    stream as one (2, tests, draws, grid) block, force's then piston's: every test's predictive
+    band is the one computed from that block directly (so the per-test path changed no band)."""
+    t = table1()
+    rng = np.random.default_rng(5)
+    D, x = 300, np.linspace(0.07, 0.15, 41)
+    force = t.force[:, None, :] * (1.0 + 1e-3 * rng.standard_normal((t.force.shape[0], D, 1)))
+    piston = t.piston[:, None, :] * (1.0 + 1e-3 * rng.standard_normal((t.force.shape[0], D, 1)))
+    noise = np.broadcast_to([20.0, 0.004, 2e-5], (t.force.shape[0], D, 3))
+    cb = bands_from_coefficients(
+        t.pressures_bar,
+        force,
+        piston,
+        x_grid=x,
+        x0_m=PAPER_X0_M,
+        piston_area_m2=PAPER_PISTON_AREA_M2,
+        noise=noise,
+        seed=11,
+    )
+    z = np.random.default_rng(11).standard_normal((2, t.force.shape[0], D, x.size))
+    u = x - PAPER_X0_M
+    for k, tb in enumerate(cb.tests):
+        P = cubic(force[k][:, None, :], u)
+        L = cubic(piston[k][:, None, :], u)
+        P_pred = P + np.sqrt(20.0**2 + (0.004 * np.abs(P)) ** 2) * z[0, k]
+        L_pred = L + 2e-5 * z[1, k]
+        lo, hi = np.quantile(P_pred, [0.05, 0.95], axis=0)
+        np.testing.assert_allclose(tb.force_pred.lo, lo, rtol=1e-12)
+        np.testing.assert_allclose(tb.force_pred.hi, hi, rtol=1e-12)
+        np.testing.assert_allclose(tb.piston_pred.mean, L_pred.mean(axis=0), rtol=1e-12)

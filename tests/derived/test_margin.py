@@ -172,7 +172,7 @@ def test_cubic_interpolation_coverage(tmp_path):
         path.write_text(write_recordings_csv(simulate("n50", seed=s)))
         cub = fit_campaign(read_recordings(path), seed=s)
         q05, q95 = np.quantile(
-            pressure_needed(CubicInterpolation.of(cub, seed=s), 0.112, load), [0.05, 0.95]
+            pressure_needed(CubicInterpolation.of(cub, seed=s), 0.112, load).values, [0.05, 0.95]
         )
         covered.append(bool(q05 <= p <= q95))
     b = stats.binom(n, 0.9)  # accepted counts: each tail <= 5e-4
@@ -197,7 +197,7 @@ def test_pressure_needed_where_the_force_dips_away_from_the_load():
             scale = np.linspace(0.99, 1.01, 50)[:, None]
             return scale * (1000.0 * p + 800.0 / p)  # falls below 0.894 bar, rises above
 
-    d = pressure_needed(Dip(), 0.150, 9000.0)  # crossed once, near 8.9 bar
+    d = pressure_needed(Dip(), 0.150, 9000.0).values  # crossed once, near 8.9 bar
     truth = [
         (9000.0 / s + np.sqrt((9000.0 / s) ** 2 - 4 * 1000 * 800)) / 2000 for s in (0.99, 1.01)
     ]
@@ -227,11 +227,11 @@ def test_pressure_needed_widens_when_a_few_draws_cross_the_load_twice():
             bump[: self.n_bumped] = 3000.0  # up through 5000 N before 3 bar, down, up again at 5
             return 1000.0 * p + bump * np.exp(-(((p - 3.0) / 0.3) ** 2))
 
-    d, share = pressure_needed(Bump(5), 0.15, 5000.0, with_share=True)
+    d, share = pressure_needed(Bump(5), 0.15, 5000.0)
     assert share == pytest.approx(0.05)
     np.testing.assert_allclose(d[5:], 5.0, atol=0.02)  # the draws that rise: one crossing
     assert np.all((d[:5] > 2.0) & (d[:5] < 3.0))  # the lowest of their three crossings
-    assert np.array_equal(pressure_needed(Bump(5), 0.15, 5000.0), d)
+    assert np.array_equal(pressure_needed(Bump(5), 0.15, 5000.0).values, d)
     n_refused = int(100 * NOT_RISING_MAX) + 1
     with pytest.raises(InputError, match="more than one overpressure in 11 %"):
         pressure_needed(Bump(n_refused), 0.15, 5000.0)

@@ -480,7 +480,7 @@ def test_design_margins_from_the_saved_fit(surface_saved, tmp_path, capsys):
     assert "natural frequency below 2.3 Hz with probability" in text and "stroke to 12000 N" in text
     full, _, _ = load_answer(fit)
     ans = full.on_draws(1000)  # the design margin's draws (at most 1000 of the saved ones)
-    p = pressure_needed(ans, 0.110, 8000.0)
+    p = pressure_needed(ans, 0.110, 8000.0).values
     h, dp = 1e-5, 1e-4
     idx = np.arange(p.size)
 

@@ -270,3 +270,12 @@ def test_the_issue_catalogue_fits_the_volume_test_to_the_truth():
     assert lo < truth < hi and hi - lo < 1000.0, (lo, hi, truth)
     sigma_L = t.flat("noise")[:, 2]  # the L readings' sd: never below the rounding
     assert np.all(sigma_L >= 1e-5 / np.sqrt(12.0) / 54.82e-4 * (1 - 1e-12))
+
+
+def test_a_saved_file_missing_a_block_is_refused_in_one_line(n50_fit, tmp_path, monkeypatch):
+    """The saved cubics without their piston block (the interpolation of the area still there) are
+    refused in one line naming the file and the block, not loaded as force-only cubics."""
+    from saved_helpers import refusal_without
+
+    message = refusal_without(n50_fit, tmp_path / "c.nc", monkeypatch, "piston")
+    assert "c.nc: incomplete saved model: no block piston " in message

@@ -327,6 +327,12 @@ def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
     above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps, every)
     scale = np.abs(fit.tested_deviations).max()
     assert np.abs(above - below).max() < 1e-6 * scale
+    every_block = fit.block_draws(np.full(ps.size, 0.15), ps)  # every block computed
+    for some in (("delta",), ("eps",), ("delta", "eps"), ("delta", "phi"), ("eps", "phi")):
+        np.testing.assert_array_equal(  # only the blocks asked for computed: the same numbers
+            fit.deviation_draws(np.full(ps.size, 0.15), ps, some),
+            sum(every_block[b] for b in some),
+        )
     base = SurfaceFit.force_draws(fit, 0.15, 4.0)
     t = fit.geometry.t(0.15)
     tk = t ** np.arange(fit.n_k)
@@ -405,16 +411,12 @@ def test_a_file_saved_before_the_force_deviation_is_refused_in_one_line(
     small_fit, tmp_path, monkeypatch
 ):
     """A discrepancy surface saved without the force's deviation block (phi; saved before it was
-    added) is not today's model: refused in one line naming the file, not loaded wrongly."""
-    from uq._io.errors import InputError
-    from uq._models import saved
+    added) is not today's model: refused in one line naming the file and the block, not loaded
+    wrongly (the check every saved model's load makes, ``saved.require_blocks``)."""
+    from saved_helpers import refusal_without
 
-    path = small_fit.save(tmp_path / "d.nc", seed=3)
-    attrs, groups = saved.read(path)
-    groups["posterior"] = groups["posterior"].drop_vars("force_deviation_m2")
-    monkeypatch.setattr(saved, "read", lambda p: (attrs, groups))
-    with pytest.raises(InputError, match=r"d\.nc: a discrepancy surface saved before .*phi"):
-        saved.load(path)
+    message = refusal_without(small_fit, tmp_path / "d.nc", monkeypatch, "force_deviation_m2")
+    assert "d.nc: incomplete saved model: no block force_deviation_m2 " in message
 
 
 def test_its_page_shows_the_discrepancy(small_fit, tmp_path):

@@ -85,7 +85,7 @@ def coverage_run(
         rec = _campaign(tmp_path, s, layout, stand=data_stand)
         fit = fit_surface(rec, orders, seed=s, settings=settings, stand=model_stand)
         b = fit.bands(x, p)
-        need = pressure_needed(fit, truth.x0_m, load)
+        need = pressure_needed(fit, truth.x0_m, load).values
         q05, q95 = np.quantile(need, [0.05, 0.95])
         feff = np.ravel(fit.feff_draws(x, p))
         thin = np.linspace(0, feff.size - 1, 99).astype(
@@ -459,3 +459,14 @@ def test_surface_on_a_coarse_grid(tmp_path):
     force = fit.force_draws(np.array(X_CHECK), 2.0)
     truth = float(SmoothSurfaceSpring().force_N(np.array(X_CHECK), 2.0))
     assert abs(float(np.mean(force)) - truth) < 0.02 * truth
+
+
+def test_a_saved_file_missing_blocks_is_refused_in_one_line(n50_surface, tmp_path, monkeypatch):
+    """A saved surface without two of its blocks is refused in one line naming the file and both
+    blocks (not a KeyError of a damaged file)."""
+    from saved_helpers import refusal_without
+
+    message = refusal_without(
+        n50_surface, tmp_path / "s.nc", monkeypatch, "casing_N", "piston_reference_m"
+    )
+    assert "s.nc: incomplete saved model: no block casing_N, piston_reference_m " in message

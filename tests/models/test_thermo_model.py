@@ -126,3 +126,12 @@ def test_margins_answered_by_the_thermodynamic_model(thermo_fit):
     assert abs(res["force_at_pressure"]["force_N"]["mean"] - load) < 0.01 * load
     area = ans.volume_area_draws(np.array(x), p)
     assert area.shape[0] == ans.n_draws and np.all(area > 0)
+
+
+def test_a_saved_file_missing_a_block_is_refused_in_one_line(thermo_fit, tmp_path, monkeypatch):
+    """A saved thermodynamic model without its potential is refused in one line naming the file
+    and the block."""
+    from saved_helpers import refusal_without
+
+    message = refusal_without(thermo_fit, tmp_path / "t.nc", monkeypatch, "potential")
+    assert "t.nc: incomplete saved model: no block potential " in message

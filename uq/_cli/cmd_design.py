@@ -327,32 +327,36 @@ def command_design(args) -> int:
     # the isobaric table also at the design charge when it was not tested (the sheet marks it)
     pressures = sorted(set(tested) | {float(args.charge_bar)})
     charges = args.charges_bar or _default_charges(rec)
-    if not rec.has_piston:
-        return _force_only(args, rec, stand, settings, heights, pressures, t0)
+    # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
+    # the isobaric loads only
+    answering = args.model if rec.has_piston else registry.CUBICS
+    fit = registry.fit(answering, rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
-    fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
-    if not args.no_compare and entry.over_all_tests:
+    if rec.has_piston and not args.no_compare and entry.over_all_tests:
         # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
         _, _, comparison = fit_both(
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
     model = fit.on_draws(args.draws)
-    design = _design_from(args)
-    grid = D.DesignGrid(model, x_c)
-    doc = D.design_document(model, design, charges, grid)
+    curves = None
+    if rec.has_piston:
+        design = _design_from(args)
+        grid = D.DesignGrid(model, x_c)
+        doc = D.design_document(model, design, charges, grid)
+    else:
+        doc = _force_only(args, model)
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
     doc["tested_pressures_bar"] = tested
-    doc["comparison"] = comparison
+    doc["comparison"] = comparison  # None for the cubics: no other model fitted to rank against
     doc["model_check"] = check
     doc["source"] = _source(args, rec, fit)
-    curves = None
-    if args.out:
+    if rec.has_piston and args.out:
         curves = {
             float(p): D.sealed_curve(model, design, grid, charge_bar=p)
             for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
         }
-    _print_sealed(rec, model, doc)
+    (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
     _sheet_and_json(
         args, rec, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
     )
@@ -363,25 +367,16 @@ def command_design(args) -> int:
 
 def _source(args, rec, fit) -> dict:
     """The JSON's ``source``: the recordings, the seed and the sampler's verdict."""
+    from uq._inference.convergence import CLI_ADVICE
+
     return {
         "recordings": str(rec.path),
         "n_tests": len(rec.tests),
         "n_readings": int(rec.n_points),
         "seed": args.seed,
         "converged": bool(fit.convergence.converged),
-        "warnings": fit.convergence.messages(_advice()),
+        "warnings": fit.convergence.messages(CLI_ADVICE),
     }
-
-
-def _advice():
-    from uq._inference.convergence import CLI_ADVICE
-
-    return CLI_ADVICE
-
-
-def _reconstructed(rec) -> bool:
-    """The recordings' comments (read with them) say they are reconstructed."""
-    return any("RECONSTRUCTED" in c.upper() for c in rec.comments)
 
 
 FORCE_ONLY_WHY = (
@@ -390,19 +385,15 @@ FORCE_ONLY_WHY = (
 )
 
 
-def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
-    """A campaign without piston readings: the per-pressure cubics (``uq fit``'s force-only
-    cubic per test), interpolated in pressure, give the isobaric loads."""
+def _force_only(args, model) -> dict:
+    """The document's start for a campaign without piston readings: the isobaric load at the
+    design height and charge (``model``: the per-pressure cubics, interpolated in pressure)."""
     from uq._derived import design as D
-    from uq._derived.model_check import predictive_check
     from uq._inference.summary import estimate
 
-    fit = registry.fit(registry.CUBICS, rec, seed=args.seed, settings=settings, stand=stand)
-    check = predictive_check(fit, seed=args.seed)
-    model = fit.on_draws(args.draws)
     x_c = args.height_mm * 1e-3
     load = model.force_draws([x_c], [args.charge_bar])[:, 0]
-    doc = {
+    return {
         "height_m": x_c,
         "charge_bar": args.charge_bar,
         "volume_l": args.volume_l,
@@ -420,28 +411,20 @@ def _force_only(args, rec, stand, settings, heights, pressures, t0) -> int:
             "the load is the element's isobaric force at the design height and charge pressure",
             model.label,
         ],
-        "isobaric": D.isobaric_table(model, pressures, heights, x_c),
-        "tested_pressures_bar": sorted({t.pressure_bar for t in rec.tests}),
-        "comparison": None,  # the per-pressure cubics answer: no other model fitted to rank against
-        "model_check": check,
-        "source": _source(args, rec, fit),
     }
+
+
+def _print_force_only(rec, model, doc) -> None:
     e = doc["load_N"]
     print(
         f"{rec.path}: force-only campaign, {len(rec.tests)} tests, {rec.n_points} readings ({model.label})"
     )
     print(
-        f"  isobaric load at {args.height_mm:g} mm and {args.charge_bar:g} bar: {e['mean']:.0f} N "
-        f"[{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
+        f"  isobaric load at {doc['height_m'] * 1e3:g} mm and {doc['charge_bar']:g} bar: "
+        f"{e['mean']:.0f} N [{e['q05']:.0f}, {e['q95']:.0f}] (mean [90 % interval])"
     )
     print(f"  {FORCE_ONLY_WHY}")
-    _print_check(check)
-    _sheet_and_json(
-        args, rec, doc, None, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
-    )
-    record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
-    record_misfit(args, check)
-    return 0
+    print_check(doc["model_check"])
 
 
 def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
@@ -455,7 +438,7 @@ def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
             doc,
             args.out,
             curves=curves,
-            reconstructed=_reconstructed(rec),
+            reconstructed=any("RECONSTRUCTED" in c.upper() for c in rec.comments),
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")
@@ -467,11 +450,13 @@ def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
     return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
 
 
-def _print_check(check: dict) -> None:
-    """The model's posterior-predictive check at the tested pressures (uq._derived.model_check)."""
+def print_check(check: dict, named: bool = True) -> None:
+    """The model's posterior-predictive check at the tested pressures (uq._derived.model_check),
+    with the model's name (``named``) or without (uq margin's, which names it above)."""
     from uq._derived.model_check import table, words
 
-    print(f"  the model at the tested points ({check['model']}): {words(check)}")
+    name = f" ({check['model']})" if named else ""
+    print(f"  the model at the tested points{name}: {words(check)}")
     if check["misses"]:  # the per-pressure table where it matters
         for line in table(check):
             print(f"  {line}")
@@ -514,6 +499,6 @@ def _print_sealed(rec, model, doc) -> None:
         "  how the data rank it (PSIS-LOO against the per-pressure cubics): "
         + (words(c) if c else "not ranked (--no-compare, or the cubics answered)")
     )
-    _print_check(doc["model_check"])
+    print_check(doc["model_check"])
     for w in doc["source"]["warnings"]:
         print(f"  warning: {w}", file=sys.stderr)

@@ -326,7 +326,7 @@ def _export(args) -> int:
     if args.sealed:
         design = sealed_design(args, args.height_mm * 1e-3, args.charge_bar)
         grid = export.sealed_export(grid, model, design)
-    grid = export.with_notes(grid, _source_notes(model, rec, args))
+    grid = export.with_notes(grid, _source_notes(model, rec))
     paths = export.write(grid, fmt, args.out, units, when=provenance["date"])
     shape = f"{grid.pressures_bar.size} pressures x {grid.heights_m.size} heights"
     say(
@@ -386,7 +386,7 @@ def _refused_unconverged(args, model, saved: bool) -> bool:
     return True
 
 
-def _source_notes(model, rec, args) -> list[str]:
+def _source_notes(model, rec) -> list[str]:
     """Notes every format carries about where the numbers came from: a fit that failed its
     convergence rules (exported with --allow-unconverged), and recordings that are not measured
     (their header says RECONSTRUCTED, as data/n50's does)."""

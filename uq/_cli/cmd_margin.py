@@ -387,10 +387,9 @@ def _check_usage(args) -> None:
 
 
 def command_margin(args) -> int:
+    from uq._cli.cmd_design import print_check
     from uq._cli.common import load
     from uq._derived.model_check import predictive_check, unavailable
-    from uq._derived.model_check import table as check_table
-    from uq._derived.model_check import words as check_words
     from uq._io.files import emit_json
 
     _check_usage(args)
@@ -460,10 +459,7 @@ def command_margin(args) -> int:
         _print_table(source, ans, info, queries, results)
     elif queries:
         _print_one(source, ans, info, queries[0], results[0])
-    print(f"  the model at the tested points: {check_words(check)}")
-    if check["misses"]:  # the per-pressure table where it matters
-        for line in check_table(check):
-            print(f"  {line}")
+    print_check(check, named=False)
     for q, r in zip(queries, results, strict=True):
         if "design" in r:
             _print_design(q, r["design"], len(queries) > 1)
@@ -492,6 +488,14 @@ def _warn_if_recordings_changed(meta: dict) -> None:
         )
 
 
+def _not_rising(res) -> str:
+    """The one phrasing of a result's ``not_rising_share`` (``uq._derived.margin.pressure_needed``)."""
+    return (
+        f"in {100 * res['not_rising_share']:.1f} % of the draws the force crosses the load more "
+        "than once in pressure: their lowest crossing is taken (the interval widens downwards)"
+    )
+
+
 def _print_one(source, ans, info, q, res) -> None:
     e = res["pressure_bar_needed"]
     print(f"{source}: {q['load_N']:g} N at {q['height_mm']:g} mm, answered by the {ans.label}")
@@ -513,11 +517,7 @@ def _print_one(source, ans, info, q, res) -> None:
         f"  carries at least the load with probability {q['prob']:g} from {res['pressure_bar_for_prob']:.3f} bar"
     )
     if res.get("not_rising_share"):
-        print(
-            f"  in {100 * res['not_rising_share']:.1f} % of the draws the force crosses the load more "
-            "than once in pressure (the band does not know it rises there): their lowest "
-            "crossing is taken, which widens the interval downwards"
-        )
+        print(f"  {_not_rising(res)}")
     if "force_at_pressure" in res:
         f = res["force_at_pressure"]["force_N"]
         print(
@@ -566,11 +566,7 @@ def _print_table(source, ans, info, queries, results) -> None:
         print(
             f"  {q['row']:>4}  {q['height_mm']:9g}  {q['load_N']:8g}  {q['prob']:4g}  "
             f"{e['mean']:6.3f} ({e['q05']:.3f}..{e['q95']:.3f})  {r['pressure_bar_for_prob']:10.3f}  {force:<25}  {stroke}".rstrip()
-            + (
-                f"  [{100 * r['not_rising_share']:.1f} % of draws cross the load twice: lowest taken]"
-                if r.get("not_rising_share")
-                else ""
-            )
+            + (f"  [{_not_rising(r)}]" if r.get("not_rising_share") else "")
         )
 
 

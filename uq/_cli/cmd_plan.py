@@ -54,6 +54,22 @@ def _heights(text: str):
     return _grid(text, "heights in mm")
 
 
+def _theta_updates(text: str) -> int:
+    """``--theta-updates``: 0 (off) or a number of simulated sets, at most ``MAX_THETA_UPDATES``."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise ValueError(
+            f"expected a whole number of simulated sets (0: off), got '{text}'"
+        ) from None
+    if not 0 <= value <= MAX_THETA_UPDATES:
+        raise ValueError(f"expected 0 (off) to {MAX_THETA_UPDATES} simulated sets, got '{text}'")
+    return value
+
+
+MAX_THETA_UPDATES = 20000
+theta_updates_count = option_type(_theta_updates)
+theta_updates_count.__name__ = "number of sets"
 pressures_grid = option_type(_pressures)
 heights_grid = option_type(_heights)
 pressures_grid.__name__, heights_grid.__name__ = "list or range", "list or range"
@@ -126,6 +142,17 @@ def configure_plan(p) -> None:
         type=positive_int,
         default=200,
         help="posterior draws of the noise parameters the prediction averages over (default 200)",
+    )
+    from uq._derived.plan_theta import THETA_UPDATES
+
+    g.add_argument(
+        "--theta-updates",
+        type=theta_updates_count,
+        default=THETA_UPDATES,
+        metavar="M",
+        help="also predict the sd with theta updated by the planned readings: M simulated sets of "
+        "them, the pilot's draws of theta reweighted by each set's likelihood; the median, 10-90 %% "
+        f"range and mean of the sd over the sets (default {THETA_UPDATES}; 0: off; docs/plan.md)",
     )
     o = p.add_argument_group("outputs")
     o.add_argument(
@@ -378,6 +405,7 @@ def _print(rec, plan, info) -> None:
         if plan.target_sd is not None:
             line += f"  (target {_fmt(plan.target_sd[i], t.unit)}: {'reached' if plan.reached[i] else 'NOT reached'})"
         print(line)
+    _print_theta_updated(plan)
     worse = [
         t.spec
         for t, now, after in zip(plan.targets, plan.sd_now, plan.sd_predicted, strict=True)
@@ -398,7 +426,49 @@ def _print(rec, plan, info) -> None:
             _fmt(s, t.unit) for s, t in zip(plan.sd_now_theta_spread, plan.targets, strict=True)
         )
         + "), and what the new readings teach about the noise itself (docs/plan.md)"
+        + (
+            "; the prediction with theta updated (above) includes both"
+            if plan.theta_updates
+            else ""
+        )
     )
+
+
+def _print_theta_updated(plan) -> None:
+    """The preposterior that also updates theta (uq._derived.plan_theta), next to the closed form."""
+    if not plan.theta_updates:
+        return
+    from uq._derived.plan_theta import SMALL_ESS
+
+    print(
+        f"predicted sd with theta updated by the readings ({plan.theta_updates} simulated sets of "
+        "them, the pilot's theta draws reweighted): median (10-90 %) and mean, after the plan | "
+        "uniform grid"
+    )
+    for i, t in enumerate(plan.targets):
+        parts = []
+        for d in (plan.sd_after_theta_updated[i], plan.sd_uniform_theta_updated[i]):
+            if d is None:
+                parts.append("-")
+                continue
+            parts.append(
+                f"{_fmt(d['median'], t.unit)} ({_fmt(d['p10'], t.unit)} to "
+                f"{_fmt(d['p90'], t.unit)}), mean {_fmt(d['mean'], t.unit)}"
+            )
+        print(f"  {t.spec}: {parts[0]} | {parts[1]}")
+    d = next((x for x in plan.sd_after_theta_updated if x is not None), None)
+    if d is not None:
+        line = (
+            f"  the weights keep {d['ess_median']:.0f} effective theta draws of {plan.n_draws} "
+            f"(Kish; median over the sets, least {d['ess_min']:.1f})"
+        )
+        if d["small_ess_share"] > 0:
+            line += (
+                f"; in {100 * d['small_ess_share']:.0f} % of the sets fewer than {SMALL_ESS:g}: "
+                "the readings pin theta more finely than the draws resolve it, and the answer is "
+                "as coarse as the few draws left (more --draws)"
+            )
+        print(line)
 
 
 def _template(args, rec, plan) -> str:
@@ -539,6 +609,8 @@ def command_plan(args) -> int:
         max_readings=args.max_readings,
         target_sd=target_sd,
         cost_per_pressure=args.cost_per_pressure_readings,
+        theta_updates=args.theta_updates,
+        seed=args.seed,
     )
     _print(rec, plan, info)
     doc = P.plan_document(plan, info)

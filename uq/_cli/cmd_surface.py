@@ -80,7 +80,9 @@ def command_surface(args) -> int:
             rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     res = fit.to_json(comparison)
-    PRINTERS.get(fit.name, _print_model)(rec, fit, res, comparison)
+    PRINTERS.get(fit.name, _print_model)(rec, fit, res)
+    if comparison:
+        _print_comparison(fit.name, comparison)
     for w in res["warnings"]:
         print(f"  warning: {w}")
     if args.report:
@@ -133,7 +135,16 @@ def _print_head(rec, fit, what: str) -> None:
         )
 
 
-def _print_thermo(rec, fit, res, comparison) -> None:
+def _print_noise(nz: dict) -> None:
+    """The noise's line: floor, load cell, pressure holding and, with piston readings, the piston's."""
+    piston = f", piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm" if "sL_m" in nz else ""
+    print(
+        f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
+        f"pressure holding x{nz['k_p']['mean']:.2f}{piston}"
+    )
+
+
+def _print_thermo(rec, fit, res) -> None:
     _print_head(rec, fit, "thermodynamic model")
     for pb, r in res["at_x0"].items():
         f, m = r["force_N"], r["maxwell_ratio"]
@@ -147,16 +158,10 @@ def _print_thermo(rec, fit, res, comparison) -> None:
         f"  piston area the recordings imply: {S['mean'] * 1e4:.2f} cm^2 [{S['q05'] * 1e4:.2f}, "
         f"{S['q95'] * 1e4:.2f}] (given {res['piston_area_m2'] * 1e4:.2f} cm^2)"
     )
-    nz = res["noise"]
-    print(
-        f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
-        f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
-    )
-    if comparison:
-        _print_comparison(fit.name, comparison)
+    _print_noise(res["noise"])
 
 
-def _print_surface(rec, fit, res, comparison, what: str = "surface model") -> None:
+def _print_surface(rec, fit, res, what: str = "surface model") -> None:
     _print_head(rec, fit, what)
     for pb, r in res["at_x0"].items():
         f, s = r["force_N"], r.get("spread_N")
@@ -169,28 +174,18 @@ def _print_surface(rec, fit, res, comparison, what: str = "surface model") -> No
             f"  x0, {pb} bar: F_p {r['pressure_area_m2']['mean'] * 1e4:.2f} cm^2, F_eff = P/p_u {r['feff_m2']['mean'] * 1e4:.2f} cm^2, "
             f"force {f['mean']:.0f} N [{f['q05']:.0f}, {f['q95']:.0f}]{spread}"
         )
-    nz = res["noise"]
+    _print_noise(res["noise"])
     if "omitted" in res:  # force only: no piston noise, no spread
-        print(
-            f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
-            f"pressure holding x{nz['k_p']['mean']:.2f}"
-        )
         print(f"  {fit.omitted_reason}")
     else:
         print(
-            f"  noise: floor {nz['s0_N']['mean']:.1f} N, load cell {100 * nz['rel_load']['mean']:.2f} %, "
-            f"pressure holding x{nz['k_p']['mean']:.2f}, piston floor {nz['sL_m']['mean'] * 1e3:.3f} mm"
-        )
-        print(
             f"  spread credibly non-zero over {100 * res['spread_credibly_nonzero_fraction']:.0f} % of the (x, p_u) range"
         )
-    if comparison:
-        _print_comparison(fit.name, comparison)
 
 
-def _print_discrepancy(rec, fit, res, comparison) -> None:
+def _print_discrepancy(rec, fit, res) -> None:
     """The surface's summary, then the discrepancy's amplitudes and length scale."""
-    _print_surface(rec, fit, res, None, what=fit.words.removeprefix("the "))
+    _print_surface(rec, fit, res, what=fit.words.removeprefix("the "))
     d = res["discrepancy"]
 
     def cm2(e):
@@ -204,11 +199,9 @@ def _print_discrepancy(rec, fit, res, comparison) -> None:
         f"{d['p_ref_bar']:g} bar), length scale {ell['mean']:.2f} bar [{ell['q05']:.2f}, "
         f"{ell['q95']:.2f}]"
     )
-    if comparison:
-        _print_comparison(fit.name, comparison)
 
 
-def _print_model(rec, fit, res, comparison) -> None:
+def _print_model(rec, fit, res) -> None:
     """Any model without a summary of its own: what it is, its sampled parameters, the comparison."""
     print(
         f"{rec.path}: {fit.label} over {len(rec.tests)} tests, {rec.n_points} readings "
@@ -216,8 +209,6 @@ def _print_model(rec, fit, res, comparison) -> None:
     )
     for name, e in (res.get("noise") or {}).items():
         print(f"  {name}: {e['mean']:.4g} [{e['q05']:.4g}, {e['q95']:.4g}]")
-    if comparison:
-        _print_comparison(fit.name, comparison)
 
 
 #: the summaries of the models that have their own, by registry name

@@ -273,23 +273,26 @@ def convergence_status(args, name: str, status: int) -> int:
     """The exit-status policy for fits that failed their convergence rules (one place for every
     command): a command that finished (``status`` 0) with such a fit exits 1 with one line on
     stderr saying so, or 0 with ``--allow-unconverged``; any other status stands."""
-    status = misfit_status(args, name, status)
-    failed = getattr(args, "unconverged_fits", [])
+    return _policy(
+        misfit_status(args, name, status),
+        getattr(args, "unconverged_fits", []),
+        getattr(args, "allow_unconverged", False),
+        f"uq {name}: NOT CONVERGED ({{}}), accepted with --allow-unconverged: exit 0; the results "
+        "carry the warnings and the NOT CONVERGED banner",
+        f"uq {name}: NOT CONVERGED ({{}}): the convergence rules failed, so what was written and "
+        "printed is not a result yet (each output says so); exit 1. Raise --max-steps or use more "
+        "walkers, or pass --allow-unconverged to accept it",
+    )
+
+
+def _policy(status: int, failed: list, allowed: bool, accepted: str, refused: str) -> int:
+    """An exit-status policy: a command that finished (``status`` 0) with ``failed`` (in words)
+    exits 0 with ``accepted`` on stderr when ``allowed``, else 1 with ``refused`` (each with the
+    failures at its ``{}``); any other status stands."""
     if status != 0 or not failed:
         return status
-    what = "; ".join(failed)
-    if getattr(args, "allow_unconverged", False):
-        sys.stderr.write(
-            f"uq {name}: NOT CONVERGED ({what}), accepted with --allow-unconverged: exit 0; the "
-            "results carry the warnings and the NOT CONVERGED banner\n"
-        )
-        return 0
-    sys.stderr.write(
-        f"uq {name}: NOT CONVERGED ({what}): the convergence rules failed, so what was written and "
-        "printed is not a result yet (each output says so); exit 1. Raise --max-steps or use more "
-        "walkers, or pass --allow-unconverged to accept it\n"
-    )
-    return 1
+    sys.stderr.write((accepted if allowed else refused).format("; ".join(failed)) + "\n")
+    return 0 if allowed else 1
 
 
 def settings_from(args):
@@ -475,19 +478,13 @@ def stand_from(args, model: bool = True):
 def misfit_status(args, name: str, status: int) -> int:
     """The exit-status policy for an answer whose model missed its readings (``record_misfit``):
     exit 1 with one line on stderr, or 0 with ``--allow-misfit``; any other status stands."""
-    missed = getattr(args, "misfits", [])
-    if status != 0 or not missed:
-        return status
-    what = "; ".join(missed)
-    if getattr(args, "allow_misfit", False):
-        sys.stderr.write(
-            f"uq {name}: the model misses the readings ({what}), accepted with --allow-misfit: "
-            "exit 0; the answer carries the check\n"
-        )
-        return 0
-    sys.stderr.write(
-        f"uq {name}: the model misses the readings ({what}): its posterior-predictive check at the "
+    return _policy(
+        status,
+        getattr(args, "misfits", []),
+        getattr(args, "allow_misfit", False),
+        f"uq {name}: the model misses the readings ({{}}), accepted with --allow-misfit: exit 0; "
+        "the answer carries the check",
+        f"uq {name}: the model misses the readings ({{}}): its posterior-predictive check at the "
         "tested pressures fails, so the answer printed and written is not to be trusted there; "
-        "exit 1. Use a model that follows them (see --model), or pass --allow-misfit to accept it\n"
+        "exit 1. Use a model that follows them (see --model), or pass --allow-misfit to accept it",
     )
-    return 1

@@ -285,6 +285,7 @@ def _poly(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def _slope(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """coef (..., 4), u (G,) -> (..., G): the cubic's slope d/du at every grid height."""
     return cubic_slope(np.asarray(coef, float)[..., None, :], np.asarray(u, float))
 
 
@@ -361,33 +362,39 @@ def bands_from_coefficients(
     S = float(piston_area_m2)
     x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
     ref, note = choose_reference(p_bar, reference_bar, has_vol)
-    quantities = _curve_quantities(
-        p_bar,
-        force,
-        piston,
-        x - x0_m,
-        x_max - x0_m,
-        S,
-        ref,
-        noise,
-        noise_ref_force,
-        np.random.default_rng(seed),
-    )
+    u, u_top = x - x0_m, x_max - x0_m
+    rng = np.random.default_rng(seed)
+    # the predictive draws' normals, force's then piston's, as one (T, D, G) block each (the
+    # stream the bands have always used); the curves themselves are made one test at a time, so
+    # a campaign holds one test's (D, G) arrays per quantity instead of every test's
+    z = None if noise is None else rng.standard_normal((2, *force.shape[:2], x.size))
+    feff_ref = None if ref is None else -S * _slope(piston[ref], u)
+    sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
+    feff_sel = np.empty((sel.size, force.shape[1], x.size))
     a = (1.0 - level) / 2.0
-    summaries = {}
-    for name, arr in quantities.items():  # one batched quantile per quantity: (2, T, G)
-        summaries[name] = (arr.mean(axis=1), np.quantile(arr, [a, 1.0 - a], axis=1))
     tests = []
     for t in range(T):
+        q = _curve_quantities(
+            p_bar[t],
+            force[t],
+            piston[t],
+            u,
+            u_top[t],
+            S,
+            feff_ref,
+            None if noise is None else np.asarray(noise, float)[t],
+            None if noise_ref_force is None else np.asarray(noise_ref_force, float)[t],
+            None if z is None else z[:, t],
+        )
+        if t in sel:
+            feff_sel[np.searchsorted(sel, t)] = q["feff"]
         present = [
             n
-            for n in quantities
+            for n in q
             if (n not in OWN_VOLUME or has_vol[t]) and (n not in REF_VOLUME or ref is not None)
         ]
-        B = {n: Band(summaries[n][0][t], *summaries[n][1][:, t]) for n in present}
-        sim = {
-            n: SimultaneousBand.of(quantities[n][t], level) for n in SIMULTANEOUS if n in present
-        }
+        B = {n: Band(q[n].mean(axis=0), *np.quantile(q[n], [a, 1.0 - a], axis=0)) for n in present}
+        sim = {n: SimultaneousBand.of(q[n], level) for n in SIMULTANEOUS if n in present}
         at0 = _at_x0(
             p_bar[t],
             force[t],
@@ -406,10 +413,7 @@ def bands_from_coefficients(
     }
     if extra_heights is not None:
         heights = dict(extra_heights)
-    sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
-    scatter, scatter_at = _scatter(
-        p_bar[sel], force[sel], quantities["feff"][sel], heights, x0_m, level
-    )
+    scatter, scatter_at = _scatter(p_bar[sel], force[sel], feff_sel, heights, x0_m, level)
     return CampaignBands(
         x,
         float(x0_m),
@@ -425,26 +429,25 @@ def bands_from_coefficients(
     )
 
 
-def _curve_quantities(p_bar, force, piston, u, u_top, S, ref, noise, noise_ref_force, rng) -> dict:
-    """Every banded curve, (T, D, G) per name, from the coefficient draws on the grid u = x - x0."""
-    T = force.shape[0]
-    P = _poly(force, u)  # (T, D, G)
+def _curve_quantities(p_bar, force, piston, u, u_top, S, feff_ref, noise, f_ref, z) -> dict:
+    """Every banded curve of one test, (D, G) per name, from its coefficient draws force, piston
+    (D, 4) on the grid u = x - x0: u_top its largest height, feff_ref (D, G) the reference test's
+    -S dL/dx (None: no reference), noise (D, 3) and f_ref (G,) the relative noise term's force
+    level (None: each draw's own |force|), z (2, D, G) the predictive draws' normals (None: no
+    noise, predictive curves equal to the mean curves)."""
+    P = _poly(force, u)  # (D, G)
     L = _poly(piston, u)
-    dLdx = _slope(piston, u)
-    L_top = _poly(piston, np.atleast_1d(u_top))  # (T, D, T): column t is test t's x_max
-    L_top = L_top[np.arange(T), :, np.arange(T)][..., None]  # (T, D, 1)
-    p_pa = (p_bar * BAR_PA)[:, None, None]
-    feff_vol = -S * dLdx  # NaN for a force-only test
+    L_top = _poly(piston, np.atleast_1d(u_top))  # (D, 1)
+    p_pa = p_bar * BAR_PA
+    feff_vol = -S * _slope(piston, u)  # NaN for a force-only test
     trad_own = p_pa * feff_vol
-    trad_ref = p_pa * (feff_vol[ref][None] if ref is not None else np.full_like(feff_vol, np.nan))
+    trad_ref = p_pa * (feff_ref if feff_ref is not None else np.full_like(feff_vol, np.nan))
     if noise is not None:
-        nz = np.asarray(noise, float)
-        f_ref = (
-            np.abs(P) if noise_ref_force is None else np.asarray(noise_ref_force, float)[:, None, :]
+        sd_f = np.sqrt(
+            force_noise_var(noise[:, 0:1], noise[:, 1:2], np.abs(P) if f_ref is None else f_ref)
         )
-        sd_f = np.sqrt(force_noise_var(nz[..., 0:1], nz[..., 1:2], f_ref))
-        P_pred = P + sd_f * rng.standard_normal(P.shape)
-        L_pred = L + nz[..., 2:3] * rng.standard_normal(L.shape)
+        P_pred = P + sd_f * z[0]
+        L_pred = L + noise[:, 2:3] * z[1]
     else:
         P_pred, L_pred = P, L
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -641,7 +641,7 @@ def design_margin(
     )
     if grid is None:  # the model's draws: at most DEFAULT_DRAWS
         model = model.on_draws(DEFAULT_DRAWS)
-    p_need = pressure_needed(model, height_m, load_N)
+    p_need = pressure_needed(model, height_m, load_N).values
     if not np.all(np.isfinite(p_need)):
         raise InputError(
             f"load_N: {load_N:g} N at {height_m * 1e3:g} mm lies at the edge of the tested pressures in part "

@@ -109,16 +109,6 @@ class Quantity:
     stats: dict
 
 
-#: kind -> (SI column suffix of the contract's table, JSON name suffix)
-_CONTRACT_SUFFIX = {
-    "force": ("N", "N"),
-    "area": ("m2", "m2"),
-    "volume": ("l", "m3"),
-    "stiffness": ("N_per_mm", "N_per_m"),
-    "pressure": ("bar", "bar"),
-}
-
-
 @dataclass(frozen=True)
 class ExportGrid:
     """Estimates on heights x pressures: each quantity's draws, and what answered.

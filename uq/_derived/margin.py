@@ -25,6 +25,8 @@ pressures answers with its lowest crossing of the load; their share is stated: `
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from uq._inference.summary import band, estimate
@@ -48,9 +50,17 @@ def model_choices() -> tuple[str, ...]:
 NOT_RISING_MAX = 0.10
 
 
-def pressure_needed(model, height_m: float, load_N: float, *, with_share: bool = False):
-    """Posterior draws of the overpressure (bar) at which the element carries ``load_N``; with
-    ``with_share``, (draws, the share of draws whose force crosses the load more than once).
+class Needed(NamedTuple):
+    """What :func:`pressure_needed` answers: the draws of the required overpressure (bar) and the
+    share of draws whose force crosses the load more than once (``not_rising_share``)."""
+
+    values: np.ndarray
+    not_rising_share: float
+
+
+def pressure_needed(model, height_m: float, load_N: float) -> Needed:
+    """Posterior draws of the overpressure (bar) at which the element carries ``load_N``, with the
+    share of draws whose force crosses the load more than once (:class:`Needed`).
 
     The force rises with pressure at a fixed height, and a draw crosses the load once. Between
     tested pressures a band that knows little (coarse grids, the discrepancy's Gaussian process)
@@ -94,7 +104,7 @@ def pressure_needed(model, height_m: float, load_N: float, *, with_share: bool =
     out[rows] = p0 + (load_N - f0) / (f1 - f0) * (p1 - p0)
     out[above[:, 0]] = plo  # already carried at the lowest pressure (within the band edge)
     out[~above.any(axis=1)] = np.inf  # not carried in the tested range
-    return (out, frac) if with_share else out
+    return Needed(out, frac)
 
 
 def _finite_estimate(d):
@@ -242,7 +252,7 @@ def margin(
         )
     if model_info is None:
         model_info = describe(model, why="given by the caller; no comparison made")
-    need, not_rising = pressure_needed(model, height_m, load_N, with_share=True)
+    need, not_rising = pressure_needed(model, height_m, load_N)
     est = _finite_estimate(need)
     plo, phi = model.pressure_range_bar
     res = {

@@ -27,6 +27,7 @@ from uq._derived.plan_search import (
     search,
     target_values,
 )
+from uq._derived.plan_theta import SMALL_ESS, theta_updated
 from uq._io.errors import InputError
 
 # ----------------------------------------------------------------------------- layouts
@@ -230,6 +231,9 @@ class Plan:
     tried: list = field(default_factory=list)
     min_heights_per_test: int = 0
     heights_added: list = field(default_factory=list)
+    theta_updates: int = 0
+    sd_after_theta_updated: list | None = None
+    sd_uniform_theta_updated: list | None = None
 
     @property
     def cost(self) -> float:
@@ -336,10 +340,10 @@ def _search_tests(builder, targets, cand, heights, n_new, required, scale2, **kw
 def _uniform(builder, targets, n_readings, n_tests, cand, heights, need):
     """The uniform grid of the plan's size (at least ``need`` distinct heights a test, completed
     where the combined campaign's orders need more: :func:`complete_tests`), and at other sizes
-    for the figure. Returns (same, curve, notes)."""
+    for the figure. Returns (same, curve, notes, (its readings, its frame))."""
     ps, tests = uniform_readings(n_readings, n_tests, cand, heights, need)
     tests, _, notes = complete_tests(builder, tests, heights, "uniform grid")
-    _, v, _ = _layout(builder, targets, tests)
+    readings, v, frame = _layout(builder, targets, tests)
     same = {
         "n_readings": int(sum(len(h) for _, h in tests)),
         "n_pressure_changes": len(tests),
@@ -360,7 +364,7 @@ def _uniform(builder, targets, n_readings, n_tests, cand, heights, need):
                     "sd": _sd(_layout(builder, targets, tl)[1]),
                 }
             )
-    return same, curve, notes
+    return same, curve, notes, (readings, frame)
 
 
 def make_plan(
@@ -373,6 +377,8 @@ def make_plan(
     target_sd=None,
     cost_per_pressure: float = COST_PER_PRESSURE,
     draws: int = SEARCH_DRAWS,
+    theta_updates: int = 0,
+    seed: int = 0,
 ) -> Plan:
     """Plan with a model's frames (``uq._derived.plan_frames``): the readings at ``heights_m`` of new
     tests at ``candidates_bar`` that make the targets' predicted sd smallest for the readings and
@@ -383,7 +389,11 @@ def make_plan(
     adding tests can widen the model and with it the bands. So the search is run for each number of
     new tests, in the frame of that campaign (twice when the chosen pressures change the scaling),
     and every plan is evaluated exactly in its own frame; the best is kept (least objective at the
-    budget, or least stand time reaching ``target_sd``)."""
+    budget, or least stand time reaching ``target_sd``).
+
+    ``theta_updates`` > 0: the chosen plan and the uniform grid of its size are also evaluated by
+    the preposterior that updates theta (``uq._derived.plan_theta``) on that many simulated sets of
+    their readings, seeded by ``seed``; the search itself keeps the closed form."""
     targets = list(targets)
     cand = np.sort(np.asarray(candidates_bar, float))
     heights = np.asarray(heights_m, float)
@@ -436,9 +446,13 @@ def make_plan(
             "do not inform them (`candidates_bar`, `heights_m`)"
         )
     _, path, tests, readings, v, own, need, added = best
-    uniform, curve, added_uniform = _uniform(
+    uniform, curve, added_uniform, (uni_readings, uni_frame) = _uniform(
         builder, targets, len(readings), len(tests), cand, heights, need
     )
+    upd = uni_upd = None
+    if theta_updates:
+        upd = theta_updated(own, targets, readings, theta_updates, seed)
+        uni_upd = theta_updated(uni_frame, targets, uni_readings, theta_updates, seed + 1)
     return Plan(
         model=builder.name,
         label=own.label,
@@ -467,6 +481,9 @@ def make_plan(
         tried=tried,
         min_heights_per_test=int(need),
         heights_added=added + added_uniform,
+        theta_updates=int(theta_updates),
+        sd_after_theta_updated=upd,
+        sd_uniform_theta_updated=uni_upd,
     )
 
 
@@ -474,11 +491,15 @@ APPROXIMATIONS = (
     "predicted sd: the posterior variance given the sampled parameters theta (noise scales, "
     "travel factor) averaged over their current posterior draws; it does not depend on the "
     "readings' values (a preposterior closed form, no simulation)",
-    "left out: the spread of the posterior mean over theta (reported now as "
+    "left out of sd_predicted: the spread of the posterior mean over theta (reported now as "
     "sd_now_theta_spread), and that the new readings also move theta (a noise scale poorly known "
     "from a small pilot changes the band; the discrepancy's length scale, whose short tail a pilot "
     "with tests far apart keeps from the prior, can carry most of a target's predicted variance "
     "next to a planned test, and tests close together then rule it out: docs/plan.md)",
+    "sd_after_theta_updated (unless switched off): the planned readings simulated from the "
+    "pilot's posterior predictive, the pilot's theta draws reweighted by each set's likelihood, "
+    "the target's sd from the reweighted mixture (both parts of the theta effect); its distribution "
+    "over the simulated sets; few effective draws (ess_min, ess_median) make it coarse",
     "pressure_for, natural_frequency and elastic_casing are linearised in the coefficients at the "
     "posterior mean given each theta (the delta method)",
     "the model after the plan is the one the default fit of the combined campaign takes (its orders "
@@ -506,6 +527,12 @@ def plan_document(plan: Plan, model_info: dict | None = None) -> dict:
         }
         now, after = plan.sd_now[i], plan.sd_predicted[i]
         row["less_certain_than_now"] = bool(now is not None and after is not None and after > now)
+        row["sd_after_theta_updated"] = (
+            None if plan.sd_after_theta_updated is None else plan.sd_after_theta_updated[i]
+        )
+        row["sd_uniform_grid_theta_updated"] = (
+            None if plan.sd_uniform_theta_updated is None else plan.sd_uniform_theta_updated[i]
+        )
         if plan.target_sd is not None:
             row["target_sd"] = plan.target_sd[i]
             row["reached"] = plan.reached[i]
@@ -552,5 +579,6 @@ def plan_document(plan: Plan, model_info: dict | None = None) -> dict:
             ],
         },
         "theta_draws": plan.n_draws,
+        "theta_updates": {"sets": plan.theta_updates, "small_ess": SMALL_ESS},
         "approximations": list(APPROXIMATIONS),
     }

@@ -250,6 +250,27 @@ class PairFrames:
         ]
         return np.stack([zf, zl], axis=2)
 
+    def _noise_factors(self, theta, force, lever, hold, p_abs) -> np.ndarray:
+        """Per draw the lower-triangular factor C (S, n, r, r) of each reading's noise covariance
+        with these budget references, in N and m: :meth:`_whiten`'s rows are C^-1 times the
+        design rows (``Frame.reading_noise``)."""
+        if self.force_only:
+            s0, rel, kp = (np.exp(theta[:, i])[:, None] for i in range(3))
+            sd = np.sqrt(force_noise_var(s0, rel, force[None]) + (kp * hold * lever) ** 2)
+            return sd[..., None, None]
+        d = self.data._replace(
+            phat=jnp.asarray(force),
+            feff_hat=jnp.asarray(lever),
+            dp_pa=jnp.asarray(hold),
+            p_abs_pa=jnp.asarray(p_abs),
+        )
+        L11, L21, L22 = (
+            np.asarray(a) for a in jax.vmap(lambda th: pair.cov_factors(th[:5], d))(theta)
+        )
+        C = np.zeros((*L11.shape, 2, 2))
+        C[..., 0, 0], C[..., 1, 0], C[..., 1, 1] = L11, L21, L22
+        return C
+
     def _pilot_block(self, rows, o, g, n_tests, nodes):
         """Whitened design (s, n, k) and readings (s, n) of the file's readings for the draws
         ``rows`` (indices into ``theta``)."""
@@ -312,6 +333,10 @@ class PairFrames:
             Xf_, Xl_ = self._designs(o, g, x, p, np.full(x.shape, T0 + j), T0 + J, None, nodes)
             return self._whiten(self.theta, Xf_, Xl_, *self._noise_data(x, p))
 
+        def reading_noise(j, heights_m):
+            x = np.asarray(heights_m, float).reshape(-1)
+            return self._noise_factors(self.theta, *self._noise_data(x, np.full(x.shape, new[j])))
+
         def force_rows(x, p, open_=None):
             x, p = np.broadcast_arrays(np.asarray(x, float), np.asarray(p, float))
             idx = np.zeros(x.size, int)
@@ -335,6 +360,7 @@ class PairFrames:
             new_bar=new,
             x0_m=self.rec.x0_m,
             reading_rows=reading_rows,
+            reading_noise=reading_noise,
             force_rows=force_rows,
             area_rows=None if self.force_only else area_rows,
             extra_force_var=self.extra_force_var(nodes),
@@ -575,6 +601,19 @@ class CubicFrames:
                 Z[:, :, 1, o + 4 : o + 8] = X[None] / sL[:, None, None]
             return Z
 
+        def reading_noise(j, heights_m):
+            """The force's and the piston's sd of each reading (independent), as a diagonal factor."""
+            x = np.asarray(heights_m, float).reshape(-1)
+            s0, rel, sL = self._noise[nearest[j]]
+            ref = np.abs(self.mean_force(x, np.full(x.shape, new[j])))
+            sf = np.sqrt(force_noise_var(s0[:, None], rel[:, None], ref[None]))  # (S, n)
+            r = 1 if self.force_only else 2
+            C = np.zeros((S, x.size, r, r))
+            C[..., 0, 0] = sf
+            if not self.force_only:
+                C[..., 1, 1] = sL[:, None]
+            return C
+
         def tests_of(open_):
             o = np.zeros(J, bool) if open_ is None else np.asarray(open_, bool)
             idx = np.concatenate([np.arange(T0), T0 + np.flatnonzero(o)])
@@ -614,6 +653,7 @@ class CubicFrames:
             new_bar=new,
             x0_m=x0,
             reading_rows=reading_rows,
+            reading_noise=reading_noise,
             force_rows=force_rows,
             area_rows=None,
             extra_force_var=extra_force_var,

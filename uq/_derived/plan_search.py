@@ -66,6 +66,11 @@ class Frame:
     -> (n,) or (S, n), N^2: the force's variance no reading at other pressures reduces (an
     interpolation error), or None. min_test_heights: the distinct heights a new test needs for the
     model after the plan to be fitted (the discrepancy's per-test span; 0: any).
+    reading_noise(j, heights_m (n,)) -> (S, n, r, r): per draw the lower-triangular factor C of each
+    reading's noise covariance in the readings' own units (N, m), such that ``reading_rows`` are
+    C^-1 times the reading's design rows and C^-1 y the whitened reading (what the preposterior
+    that updates theta needs to compare one set of readings across draws: ``uq._derived.plan_theta``);
+    None: not given.
     """
 
     name: str
@@ -83,6 +88,7 @@ class Frame:
     volume_why: str = ""
     key: tuple = ()
     min_test_heights: int = 0
+    reading_noise: Callable | None = None
 
     @property
     def n_draws(self) -> int:
@@ -102,8 +108,13 @@ class Frame:
         idx = np.linspace(0, S - 1, n).round().astype(int)
         rows = self.reading_rows
 
+        noise = self.reading_noise
+
         def reading_rows(j, heights_m):
             return rows(j, heights_m)[idx]
+
+        def reading_noise(j, heights_m):
+            return noise(j, heights_m)[idx]
 
         def per_draw(fn, ndim):
             """``fn`` with its per-draw results (``ndim`` dimensions) on the kept draws."""
@@ -121,6 +132,7 @@ class Frame:
             precision=self.precision[idx],
             mean=self.mean[idx],
             reading_rows=reading_rows,
+            reading_noise=None if noise is None else reading_noise,
             force_rows=per_draw(self.force_rows, 3),
             area_rows=per_draw(self.area_rows, 3),
             extra_force_var=per_draw(self.extra_force_var, 2),

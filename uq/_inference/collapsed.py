@@ -90,13 +90,13 @@ class CollapsedModel(NamedTuple):
     sequential: bool = False
 
     @classmethod
-    def of(cls, namespace, name: str, theta_names, **fields) -> CollapsedModel:
+    def of(cls, namespace, name: str, theta_names, *, prefix: str = "", **fields) -> CollapsedModel:
         """The model whose functions are those of ``namespace`` (a module, or ``globals()`` of a
         module after its functions) under the fields' names (``log_prob``, ``draw_linear``, ...,
-        ``hold_out``); ``fields`` set any field explicitly (an optional one absent from both is
-        None)."""
+        ``hold_out``), each after ``prefix`` (``"ar1_"``: ``ar1_log_prob``, ...); ``fields`` set
+        any field explicitly (an optional one absent from both is None)."""
         ns = namespace if isinstance(namespace, dict) else vars(namespace)
-        found = {f: ns[f] for f in cls._fields[2:] if callable(ns.get(f))}
+        found = {f: ns[prefix + f] for f in cls._fields[2:] if callable(ns.get(prefix + f))}
         return cls(name, theta_names, **(found | fields))
 
 

@@ -9,12 +9,17 @@ alone loads no JAX; the switch happens when a JAX-using part of uq is first used
 
 Importing it also turns on JAX's persistent compilation cache (``uq._inference.jax_cache``:
 ``~/.cache/airspring-uq/jax``, ``UQ_CACHE_DIR`` to move it or ``off``), as the ``uq`` command
-does, unless a cache directory was set for JAX already.
+does, unless a cache directory was set for JAX already, and sets glibc's malloc to keep JAX's
+large temporaries in the heap (``uq._inference.allocator``; ``UQ_MALLOC=default`` to leave it).
 """
 
-import jax
+from uq._inference import allocator
 
-from uq._inference.jax_cache import configure
+allocator.tune()  # before JAX allocates anything
+
+import jax  # noqa: E402
+
+from uq._inference.jax_cache import configure  # noqa: E402
 
 
 def enable_x64() -> None:

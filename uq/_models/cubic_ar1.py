@@ -263,17 +263,13 @@ def ar1_order_whitening(d: AR1Data, theta_mean) -> tuple[dict, dict]:
     )
 
 
-AR1 = CollapsedModel(
-    name="per-pressure cubics (eqs. 8, 9), AR(1) pressure-holding errors in recording order",
-    theta_names=AR_SAMPLER_NAMES,
-    log_prob=ar1_log_prob,
+AR1 = CollapsedModel.of(
+    globals(),
+    "per-pressure cubics (eqs. 8, 9), AR(1) pressure-holding errors in recording order",
+    AR_SAMPLER_NAMES,
+    prefix="ar1_",
     draw_linear=ar1_draw,
-    pointwise=ar1_pointwise,
-    start=ar1_start,
-    report=ar1_report,
-    predict=ar1_predict,
     observed=observed,
-    pointwise_loo=ar1_pointwise_loo,
     hold_out=hold_out_by_weight,
 )
 

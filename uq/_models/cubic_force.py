@@ -106,17 +106,12 @@ def force_observed(d: ForceData) -> dict:
     return {"force_N": np.asarray(d.force)}
 
 
-FORCE_ONLY = CollapsedModel(
-    name="per-pressure cubic of the force (eq. 8), force-only test",
-    theta_names=FORCE_SAMPLER_NAMES,
-    log_prob=force_log_prob,
+FORCE_ONLY = CollapsedModel.of(
+    globals(),
+    "per-pressure cubic of the force (eq. 8), force-only test",
+    FORCE_SAMPLER_NAMES,
+    prefix="force_",
     draw_linear=force_draw,
-    pointwise=force_pointwise,
-    start=force_start,
-    report=force_report,
-    predict=force_predict,
-    observed=force_observed,
-    pointwise_loo=force_pointwise_loo,
     hold_out=hold_out_by_weight,
 )
 

@@ -324,8 +324,13 @@ class CubicInterpolation:
     @classmethod
     def from_saved(cls, attrs: dict, groups: dict) -> CubicInterpolation:
         post, const = groups["posterior"], groups["constant_data"]
+        volume = "piston" in post or "interpolation_z_area" in post
+        needed = ("force", "interpolation_z") + (
+            ("piston", "interpolation_z_area") if volume else ()
+        )
+        saved.require_blocks(post, needed)
         x0, area = (float(v) for v in const["geometry"].values)
-        piston = post["piston"].values[0] if "piston" in post else None
+        piston = post["piston"].values[0] if volume else None
         return cls(
             post["force"].values[0],
             piston,

@@ -206,16 +206,12 @@ def measured_corrected(d: MeasuredData, beta_mean) -> dict:
     }
 
 
-MEASURED = CollapsedModel(
-    name="per-pressure cubics (eqs. 8, 9), measured pressure as a covariate",
-    theta_names=SAMPLER_NAMES,
-    log_prob=measured_log_prob,
+MEASURED = CollapsedModel.of(
+    globals(),
+    "per-pressure cubics (eqs. 8, 9), measured pressure as a covariate",
+    SAMPLER_NAMES,
+    prefix="measured_",
     draw_linear=measured_draw,
-    pointwise=measured_pointwise,
-    start=measured_start,
-    report=measured_report,
-    predict=measured_predict,
     observed=observed,
-    pointwise_loo=measured_pointwise_loo,
     hold_out=hold_out_by_weight,
 )

@@ -136,9 +136,6 @@ class PressureFit:
         arr = getattr(self, name)
         return arr.reshape(-1, *arr.shape[2:])
 
-    def ref_force(self) -> np.ndarray:
-        return self.ref_force_N
-
     def ref_force_at(self, height_m) -> np.ndarray:
         """The force level of the relative noise term at any heights, by the rule the fit used at
         the data: the report's predictive bands use it on their grid."""
@@ -240,15 +237,6 @@ class PressureFit:
         )
 
 
-def no_test_at(pressure_bar, pressures) -> InputError:
-    """The one line for a pressure no test was recorded at, naming those that were."""
-    return InputError(
-        f"pressure_bar: no test at {pressure_bar:g} bar; the tests are at "
-        f"{', '.join(f'{p:g}' for p in pressures)} bar",
-        param="pressure_bar",
-    )
-
-
 @dataclass(eq=False, frozen=True, repr=False)
 class CampaignFit:
     """The per-pressure cubics of every test of a campaign (:func:`fit_campaign`), and the
@@ -299,7 +287,11 @@ class CampaignFit:
         for t in self.tests:
             if abs(t.pressure_bar - pressure_bar) < 1e-9:
                 return t
-        raise no_test_at(pressure_bar, [t.pressure_bar for t in self.tests])
+        raise InputError(
+            f"pressure_bar: no test at {pressure_bar:g} bar; the tests are at "
+            f"{', '.join(f'{t.pressure_bar:g}' for t in self.tests)} bar",
+            param="pressure_bar",
+        )
 
     # ---- the FittedModel protocol, by the interpolation on fixed paired draws
     @functools.cached_property

@@ -30,7 +30,6 @@ import numpy as np
 
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import estimate, thin_rows
-from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models.linear_fit import BlockSpec
 from uq._models.surface import SurfaceFit, force_label
@@ -175,17 +174,6 @@ class DiscrepancyFit(SurfaceFit):
         )
         return shell.fitted(coefficients, posterior, recordings, stand, provenance)
 
-    @classmethod
-    def from_saved(cls, attrs: dict, groups: dict) -> DiscrepancyFit:
-        """The saved model, refused in one line when it was saved before the force's deviation
-        phi (uq 0.1 round 7, before its third session): its blocks are not this model's."""
-        if "force_deviation_m2" not in groups["posterior"].data_vars:
-            raise InputError(
-                "a discrepancy surface saved before it had the force's deviation (phi, added in "
-                "round 7): its blocks are not today's model's; fit and save it again"
-            )
-        return super().from_saved(attrs, groups)
-
     # ---- the draws between tested pressures
     @functools.cached_property
     def rows(self) -> np.ndarray:
@@ -243,9 +231,12 @@ class DiscrepancyFit(SurfaceFit):
         order = np.argsort(allp, kind="stable")
         return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
 
-    def block_draws(self, height_m, p_bar, *, check: bool = True) -> dict[str, np.ndarray]:
-        """Every deviation block (``symbols``) at the points, m^2: {symbol: (S, *shape)}; phi's is
-        the force's deviation not proportional to p_u as an area at p_ref."""
+    def block_draws(
+        self, height_m, p_bar, blocks=None, *, check: bool = True
+    ) -> dict[str, np.ndarray]:
+        """The deviation ``blocks`` (default: every one, ``symbols``) at the points, m^2:
+        {symbol: (S, *shape)}; phi's is the force's deviation not proportional to p_u as an area at
+        p_ref. Only the blocks asked for are computed."""
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
@@ -257,7 +248,8 @@ class DiscrepancyFit(SurfaceFit):
         else:
             i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
         out = {}
-        for b, sym in enumerate(self.symbols):
+        for sym in self.symbols if blocks is None else blocks:
+            b = self.symbols.index(sym)
             acc = np.zeros((self.rows.size, p.size))
             for k in range(self.n_k):
                 series = values[:, :, b * self.n_k + k]
@@ -268,8 +260,7 @@ class DiscrepancyFit(SurfaceFit):
     def deviation_draws(self, height_m, p_bar, blocks=("delta",), *, check: bool = True):
         """The sum of the deviation ``blocks`` at the points, m^2, (S, *shape): ("delta",) the
         pressure area's, ("delta", "eps") the volume-derived area's (``block_draws``)."""
-        d = self.block_draws(height_m, p_bar, check=check)
-        return sum(d[b] for b in blocks)
+        return sum(self.block_draws(height_m, p_bar, blocks, check=check).values())
 
     def _p_pa(self, height_m, p_bar):
         shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
@@ -280,7 +271,7 @@ class DiscrepancyFit(SurfaceFit):
         """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta plus
         p_ref phi."""
         base = super().force_draws(height_m, p_bar, check=check)
-        d = self.block_draws(height_m, p_bar, check=False)
+        d = self.block_draws(height_m, p_bar, ("delta", "phi"), check=False)
         return base + self._p_pa(height_m, p_bar) * d["delta"] + self.p_ref_pa * d["phi"]
 
     def pressure_area_draws(self, height_m, p_bar, *, check=True):
@@ -301,7 +292,7 @@ class DiscrepancyFit(SurfaceFit):
     def spread_draws(self, height_m, p_bar, *, check=True):
         """p_u (-dV/dx) - P = p_u (D + eps) - E - p_ref phi, N."""
         base = super().spread_draws(height_m, p_bar, check=check)
-        d = self.block_draws(height_m, p_bar, check=False)
+        d = self.block_draws(height_m, p_bar, ("eps", "phi"), check=False)
         return base + self._p_pa(height_m, p_bar) * d["eps"] - self.p_ref_pa * d["phi"]
 
     # ---- the JSON document

@@ -405,15 +405,17 @@ class LinearFit:
 
     @classmethod
     def from_saved(cls, attrs: dict, groups: dict) -> LinearFit:
-        """The model a file of :meth:`save` holds (no recordings, no posterior)."""
+        """The model a file of :meth:`save` holds (no recordings, no posterior); a file missing
+        any block of the layout is refused in one line naming them."""
         post, const = groups["posterior"], groups["constant_data"]
         shell = cls.shell(
             _params(cls, const, "orders"),
             _params(cls, const, "geometry"),
             const["tested_pressure_bar"].values,
         )
-        blocks = [np.asarray(post[b.name].values, float) for b in shell.block_layout()]
-        layout = {b.name for b in shell.block_layout()}
+        layout = [b.name for b in shell.block_layout()]
+        saved.require_blocks(post, layout)
+        blocks = [np.asarray(post[name].values, float) for name in layout]
         return dataclasses.replace(
             shell,
             coefficients=np.concatenate(blocks, axis=-1),

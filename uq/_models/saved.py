@@ -175,6 +175,17 @@ def load(path):
         ) from None
 
 
+def require_blocks(posterior, names) -> None:
+    """Refuse, in one line naming them, a saved model whose ``posterior`` lacks any of the blocks
+    ``names`` its layout needs (a file of an older uq, or an incomplete one)."""
+    missing = [n for n in names if n not in posterior.data_vars]
+    if missing:
+        raise InputError(
+            f"incomplete saved model: no block {', '.join(missing)} (saved by an older uq, or "
+            "cut short); fit and save it again"
+        )
+
+
 def provenance_from(attrs: dict) -> dict:
     """A loaded model's ``provenance`` from the root attributes."""
     out = {

@@ -46,12 +46,11 @@ def pointwise(theta, beta, d: PairData):
 
 
 #: the pair likelihood's own draws, replicates and leave-one-out densities (no travel factor)
-MODEL = CollapsedModel(
-    name="pressure-coupled surface",
-    theta_names=NOISE_NAMES,
-    log_prob=log_prob,
+MODEL = CollapsedModel.of(
+    globals(),
+    "pressure-coupled surface",
+    NOISE_NAMES,
     draw_linear=pair.draw,
-    pointwise=pointwise,
     start=surface_force.start,
     report=surface_force.report,
     predict=pair.predict,

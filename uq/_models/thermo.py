@@ -108,13 +108,19 @@ def powers(o: ThermoOrders):
     return [(k, l) for k in range(1, o.K + 1) for l in range(o.L + 1)]
 
 
-def potential_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
-    """The columns of G, -dG/dx (force) and -dG/dp_u (volume) for unit standardised coefficients,
-    each (n, K (L + 1)): J, N and m^3."""
+def _terms(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
+    """(t (n, 1), s (n, 1), k, l): the basis t^k s^l's variables and powers, one column a term."""
     t = np.asarray(g.t(x_m), float)[..., None]
     s = np.asarray(g.s(p_bar), float)[..., None]
     k = np.array([k for k, _ in powers(o)], float)
     l = np.array([l for _, l in powers(o)], float)
+    return t, s, k, l
+
+
+def potential_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
+    """The columns of G, -dG/dx (force) and -dG/dp_u (volume) for unit standardised coefficients,
+    each (n, K (L + 1)): J, N and m^3."""
+    t, s, k, l = _terms(o, g, x_m, p_bar)
     p_ref_pa = g.p_ref_bar * BAR_PA
     G = G_SCALE_J * t**k * s**l
     force = -G_SCALE_J / BASIS_SCALE_M * k * t ** (k - 1) * s**l
@@ -147,11 +153,8 @@ def force_pressure_slope(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar, coef):
 def slope_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
     """The columns of dP/dp_u = dV/dx (Maxwell) for unit standardised coefficients, (n, K (L + 1)),
     m^2."""
-    t = np.asarray(g.t(x_m), float)[..., None]
-    s = np.asarray(g.s(p_bar), float)[..., None]
-    k = np.array([k for k, _ in powers(o)], float)
-    l = np.array([l for _, l in powers(o)], float)
-    cols = (
+    t, s, k, l = _terms(o, g, x_m, p_bar)
+    return (
         -G_SCALE_J
         / BASIS_SCALE_M
         * k
@@ -160,7 +163,6 @@ def slope_columns(o: ThermoOrders, g: ThermoGeometry, x_m, p_bar):
         * s ** np.maximum(l - 1, 0)
         / (g.p_ref_bar * BAR_PA)
     )
-    return cols
 
 
 @dataclass(eq=False, frozen=True, repr=False)
@@ -188,9 +190,14 @@ class ThermoFit(LinearFit):
         """A potential's columns with zeros for the piston references."""
         return np.concatenate([cols, np.zeros((cols.shape[0], len(self.tested_pressures_bar)))], 1)
 
+    def _potential(self, part: int):
+        """The columns of part ``part`` of :func:`potential_columns` (0: G, 1: force, 2: volume),
+        padded, as a function of (x, p_u)."""
+        return lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[part])
+
     def force_columns(self, x_m, p_bar):
         """P = -dG/dx."""
-        return self._padded(potential_columns(self.orders, self.geometry, x_m, p_bar)[1])
+        return self._potential(1)(x_m, p_bar)
 
     def area_columns(self, x_m, p_bar):
         """dV/dx = -d2G/dx dp_u (= dP/dp_u by the Maxwell relation)."""
@@ -198,12 +205,8 @@ class ThermoFit(LinearFit):
 
     def dvdp_columns(self, x_m, p_bar):
         """dV/dp_u = -d2G/dp_u^2 at fixed height, up to a function of p_u alone."""
-        o, g = self.orders, self.geometry
-        t = np.asarray(g.t(x_m), float)[..., None]
-        s = np.asarray(g.s(p_bar), float)[..., None]
-        k = np.array([k for k, _ in powers(o)], float)
-        l = np.array([l for _, l in powers(o)], float)
-        p_ref = g.p_ref_bar * BAR_PA
+        t, s, k, l = _terms(self.orders, self.geometry, x_m, p_bar)
+        p_ref = self.geometry.p_ref_bar * BAR_PA
         return self._padded(-G_SCALE_J / p_ref**2 * l * (l - 1) * t**k * s ** np.maximum(l - 2, 0))
 
     @property
@@ -218,14 +221,12 @@ class ThermoFit(LinearFit):
 
     def potential_draws(self, height_m, p_bar, *, check=True):
         """G(x, p_u) draws, J (up to a function of p_u alone, which isobaric tests cannot see)."""
-        cols = lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[0])  # noqa: E731
-        return self.evaluate(cols, height_m, p_bar, check=check)
+        return self.evaluate(self._potential(0), height_m, p_bar, check=check)
 
     def volume_change_draws(self, height_m, p_bar, *, check=True):
         """V(x, p_u) - V_(p_u) draws, m^3: the volume up to a constant per pressure (isobaric tests
         fix volume differences between heights, not the absolute volume)."""
-        cols = lambda x, p: self._padded(potential_columns(self.orders, self.geometry, x, p)[2])  # noqa: E731
-        return self.evaluate(cols, height_m, p_bar, check=check)
+        return self.evaluate(self._potential(2), height_m, p_bar, check=check)
 
     def maxwell_ratio_draws(self, height_m, p_bar, *, check=True):
         """(dV/dx) / (P / p_u): how far the volume-derived area exceeds the force-derived one

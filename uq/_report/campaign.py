@@ -240,8 +240,7 @@ def figure_force(cf, cb: CampaignBands):
     for i, (tf, tb, c) in enumerate(zip(cf.tests, cb.tests, colours, strict=True)):
         _fill(ax, x, tb.force, 1e-3, c, alpha=0.4)
         ax.plot(tf.test.height_m * MM, tf.test.force_N * 1e-3, ".", color=c, ms=3)
-        mean_at = cubic(tf.flat("force").mean(0), tf.test.height_m - tf.x0_m)
-        r = tf.test.force_N - mean_at
+        r = tf.mean_residuals("force")
         _residual_panel(
             res[i],
             x,
@@ -286,8 +285,7 @@ def figure_volume(cf, cb: CampaignBands):
     for i, ((tf, tb), c) in enumerate(zip(pairs, colours, strict=True)):
         _fill(ax, x, tb.dV, 1e3, c, alpha=0.4)
         ax.plot(tf.test.height_m * MM, _dV_points(tf, tb, S) * 1e3, ".", color=c, ms=3)
-        mean_at = cubic(tf.flat("piston").mean(0), tf.test.height_m - tf.x0_m)
-        r = S * (tf.piston_m - mean_at)
+        r = S * tf.mean_residuals("piston")
         _residual_panel(
             res[i],
             x,

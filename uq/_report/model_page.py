@@ -227,29 +227,46 @@ def write_model_page(fit, result: dict, out_dir, *, figure_format: str = "png") 
     """``out_dir/<name>.html`` and its figure (PNG or SVG, ``figure_format``) for any fitted model
     of a campaign, from the fit and its ``to_json`` document ``result`` (module docstring);
     returns the page's path."""
+    what = fit.words
+    return write_page(
+        "model.html",
+        f"{fit.name}.html",
+        fit,
+        result,
+        out_dir,
+        figure_format,
+        lambda: {
+            f"{fit.name}_force": (figure_residual_overlay(fit), f"readings against {what}'s band")
+        },
+        label=fit.label,
+        what=what,
+        name=fit.name,
+    )
+
+
+def write_page(
+    template, page, fit, result, out_dir, figure_format, figures, *, notes=None, **extra
+) -> Path:
+    """``out_dir/page`` from ``template`` with what every model's page shows (the comparison
+    with the cubics and the preference, with the model's own ``notes``; the order selection; the
+    noise table; the convergence banner) and ``extra``; ``figures()`` (stem -> (figure, alt
+    text)) written beside it as ``figure_format`` and given to the template as ``figures``."""
     check_format(figure_format)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    what = fit.words
-    figures = write_figures(
-        {f"{fit.name}_force": (figure_residual_overlay(fit), f"readings against {what}'s band")},
-        out,
-        figure_format,
-        unconverged_words(result, what),
-    )
+    unconverged = unconverged_words(result, fit.words)
     comp = result.get("comparison")
-    page = render(
-        "model.html",
+    html = render(
+        template,
         path=fit.recordings.path,
-        label=fit.label,
-        what=what,
-        figure=figures[f"{fit.name}_force"],
         result=result,
         comparison=comp,
-        rows=comparison_rows(comp, fit.name, what) if comp else [],
-        preference=preference(comp, fit.name, what),
+        rows=comparison_rows(comp, fit.name, fit.words) if comp else [],
+        preference=preference(comp, fit.name, fit.words, notes),
         order_selection=result.get("order_selection") or [],
         noise=noise_rows(result.get("noise") or {}),
-        not_converged=unconverged_words(result, what),
+        figures=write_figures(figures(), out, figure_format, unconverged),
+        not_converged=unconverged,
+        **extra,
     )
-    return write_text_atomic(out / f"{fit.name}.html", page)
+    return write_text_atomic(out / page, html)

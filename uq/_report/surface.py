@@ -18,17 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from uq._inference.summary import band
-from uq._io.files import write_text_atomic
 from uq._models.surface import SurfaceFit, spread_region
-from uq._report.html import check_format, pyplot, render
-from uq._report.model_page import (
-    comparison_rows,
-    figure_residual_overlay,
-    noise_rows,
-    preference,
-    unconverged_words,
-    write_figures,
-)
+from uq._report.html import pyplot
+from uq._report.model_page import figure_residual_overlay, write_page
 
 
 def figure_pressure_area(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
@@ -95,31 +87,29 @@ def write_surface_report(
     """``out_dir/surface.html`` (the template ``surface.html``) and its three figures (PNG or
     SVG, ``figure_format``), from the fit and its :func:`uq._models.surface.summary` ``result``;
     returns the page's path."""
-    check_format(figure_format)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    figs = {
-        "surface_pressure_area": (
-            figure_pressure_area(fit),
-            "pressure area F_p(x, p_u) heat map",
-        ),
-        "surface_residuals": (figure_residual_overlay(fit), "readings against the surface band"),
-    }
-    if not fit.force_only:  # the spread needs the volume
-        figs["surface_spread"] = (figure_spread(fit), "spread traditional minus measured")
-    figures = write_figures(figs, out, figure_format, unconverged_words(result, fit.words))
-    comp = result.get("comparison")
-    page = render(
+
+    def figures():
+        figs = {
+            "surface_pressure_area": (
+                figure_pressure_area(fit),
+                "pressure area F_p(x, p_u) heat map",
+            ),
+            "surface_residuals": (
+                figure_residual_overlay(fit),
+                "readings against the surface band",
+            ),
+        }
+        if not fit.force_only:  # the spread needs the volume
+            figs["surface_spread"] = (figure_spread(fit), "spread traditional minus measured")
+        return figs
+
+    return write_page(
         "surface.html",
-        path=fit.recordings.path,
-        result=result,
-        comparison=comp,
-        rows=comparison_rows(comp, fit.name, fit.words) if comp else [],
-        preference=preference(comp, fit.name, fit.words),
-        order_selection=result.get("order_selection") or [],
-        noise=noise_rows(result["noise"]),
-        figures=figures,
+        "surface.html",
+        fit,
+        result,
+        out_dir,
+        figure_format,
+        figures,
         volume_omitted=fit.omitted_reason,
-        not_converged=unconverged_words(result, fit.words),
     )
-    return write_text_atomic(out / "surface.html", page)

@@ -20,19 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from uq._inference.summary import band
-from uq._io.files import write_text_atomic
 from uq._models.registry import CUBICS
 from uq._models.thermo import ThermoFit
 from uq._physics.quantities import BAR_PA
-from uq._report.html import check_format, pyplot, render
-from uq._report.model_page import (
-    comparison_rows,
-    figure_residual_overlay,
-    noise_rows,
-    preference,
-    unconverged_words,
-    write_figures,
-)
+from uq._report.html import check_format, pyplot
+from uq._report.model_page import figure_residual_overlay, write_page
 
 PAGE = "thermodynamic.html"
 #: what the preference means for a model that ties force and volume through one potential
@@ -187,12 +179,16 @@ def write_thermo_report(
     """``out_dir/thermodynamic.html`` (the template ``thermodynamic.html``) and its four figures
     (PNG or SVG, ``figure_format``), from the fit and its :meth:`ThermoFit.to_json` ``result``;
     returns the page's path."""
-    check_format(figure_format)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    check_format(figure_format)  # before the Maxwell ratio's grid is computed
     region = maxwell_region(fit)
-    figures = write_figures(
-        {
+    return write_page(
+        PAGE,
+        PAGE,
+        fit,
+        result,
+        out_dir,
+        figure_format,
+        lambda: {
             "thermo_force": (
                 figure_residual_overlay(fit),
                 "force readings against the thermodynamic model's band, by test",
@@ -201,23 +197,7 @@ def write_thermo_report(
             "thermo_maxwell": (figure_maxwell(fit, region), "Maxwell ratio heat map"),
             "thermo_piston_area": (figure_piston_area(fit), "implied piston area"),
         },
-        out,
-        figure_format,
-        unconverged_words(result, fit.words),
-    )
-    comp = result.get("comparison")
-    page = render(
-        PAGE,
-        path=fit.recordings.path,
-        result=result,
-        comparison=comp,
-        rows=comparison_rows(comp, fit.name, fit.words) if comp else [],
-        preference=preference(comp, fit.name, fit.words, PHYSICS_NOTES),
-        order_selection=result.get("order_selection") or [],
-        noise=noise_rows(result["noise"]),
+        notes=PHYSICS_NOTES,
         maxwell_share=float(region["excludes_one"].mean()),
         piston=piston_words(result["implied_piston_area_m2"], result["piston_area_m2"]),
-        figures=figures,
-        not_converged=unconverged_words(result, fit.words),
     )
-    return write_text_atomic(out / PAGE, page)

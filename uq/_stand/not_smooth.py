@@ -40,12 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
-from uq._stand.simulator import (
-    ELEMENT_VOLUME_AT_XMAX_M3,
-    PAPER_PISTON_AREA_M2,
-    SPRINGS,
-    ThermoSpring,
-)
+from uq._stand.simulator import SPRINGS, ThermoSpring
 
 
 class NotSmoothSpring(ThermoSpring):
@@ -56,14 +51,6 @@ class NotSmoothSpring(ThermoSpring):
     description = ""
     W0_M2 = 0.0
     SLOPE = 0.5
-
-    def __init__(
-        self,
-        piston_area_m2: float = PAPER_PISTON_AREA_M2,
-        element_volume_at_xmax_m3: float = ELEMENT_VOLUME_AT_XMAX_M3,
-        compliance_at_x0_m3_per_pa: float = 0.0,
-    ) -> None:
-        super().__init__(piston_area_m2, element_volume_at_xmax_m3, compliance_at_x0_m3_per_pa)
 
     # ---- the extra term
     def extra_h_pa(self, p_bar):

@@ -131,6 +131,9 @@ def run_child(what: list[str], env: dict) -> dict:
             stderr=subprocess.PIPE,
             text=True,
             env=env,
+            # not the checkout's root: ``python -c`` puts the working directory first on sys.path,
+            # ahead of PYTHONPATH, and a root holding uq/ would shadow the baseline's
+            cwd=tempfile.gettempdir(),
         )
         wall = time.perf_counter() - t0
         r = json.loads(Path(out).read_text() or "{}")

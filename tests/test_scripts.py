@@ -9,6 +9,7 @@ the end and write what they promise, where they promise it.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -293,6 +294,30 @@ def test_commands_bench_tiny_run(tmp_path):
     assert "fit" in proc.stdout and "import floor" in proc.stdout
     bad = _run(ROOT / "benchmarks" / "commands.py", "--commands", "fit,nope")
     assert bad.returncode == 2 and "--commands" in bad.stderr
+
+
+def test_commands_bench_runs_the_baselines_code(tmp_path, monkeypatch):
+    """The benchmark's child runs the package its PYTHONPATH names, even when the benchmark is
+    started from a checkout's root (``python -c`` puts the working directory first on sys.path):
+    a stand-in ``uq`` whose command line writes a mark is the one run."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_commands", ROOT / "benchmarks" / "commands.py"
+    )
+    commands = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(commands)
+    fake = tmp_path / "baseline"
+    (fake / "uq" / "_cli").mkdir(parents=True)
+    (fake / "uq" / "__init__.py").write_text("")
+    (fake / "uq" / "_cli" / "__init__.py").write_text("")
+    mark = tmp_path / "mark"
+    (fake / "uq" / "_cli" / "main.py").write_text(
+        f"def main(argv):\n    open({str(mark)!r}, 'w').write(' '.join(argv))\n    return 0\n"
+    )
+    monkeypatch.chdir(ROOT)
+    r = commands.run_child(["uq", "fit", "x.csv"], commands._with_path(dict(os.environ), fake))
+    assert r["exit"] == 0 and mark.read_text() == "fit x.csv"
 
 
 @pytest.mark.parametrize(

@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN_BY = {
     "benchmarks/bench.py": "test_bench_tiny_run_writes_only_where_asked",
     "benchmarks/commands.py": "test_commands_bench_tiny_run",
+    "benchmarks/discrepancy.py": "test_discrepancy_bench_tiny_run",
     "benchmarks/bench_tables.py": "test_bench_tables_one_row_formatter (imported by bench.py and "
     "readme_numbers.py, whose --check tests/test_docs.py runs)",
     "fits/n50/make_points.py": "test_make_points_reproduces_the_committed_file",
@@ -294,6 +295,30 @@ def test_commands_bench_tiny_run(tmp_path):
     assert "fit" in proc.stdout and "import floor" in proc.stdout
     bad = _run(ROOT / "benchmarks" / "commands.py", "--commands", "fit,nope")
     assert bad.returncode == 2 and "--commands" in bad.stderr
+
+
+def test_discrepancy_bench_tiny_run(tmp_path):
+    """The malloc benchmark: a few calls each way in one process, the JSON's ratio is the two
+    runs' CPU times' (never timing); with glibc the thresholds are set in its second run."""
+    import platform
+
+    out = tmp_path / "d.json"
+    proc = _run(
+        ROOT / "benchmarks" / "discrepancy.py",
+        "--calls",
+        2,
+        "--walkers",
+        8,
+        "--json",
+        out,
+        cwd=ROOT,
+    )
+    assert proc.returncode == 0, proc.stderr
+    r = json.loads(out.read_text())
+    cpu = {k: v["user_ms"] + v["sys_ms"] for k, v in r["runs"].items()}
+    assert r["cpu_ratio"] == pytest.approx(cpu["malloc_defaults"] / cpu["tuned"])
+    assert r["allocator_tuned"] is (platform.libc_ver()[0] == "glibc")
+    assert "malloc's defaults over one with uq's thresholds" in proc.stdout
 
 
 def test_commands_bench_runs_the_baselines_code(tmp_path, monkeypatch):

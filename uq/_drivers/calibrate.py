@@ -303,7 +303,7 @@ def _predictive_coverage(fit, fresh: PressureTest, rng, n_draws: int = 2000) -> 
         y = np.asarray(fit.idata.posterior_predictive["force_N"]).reshape(-1, u.size)[idx]
     else:
         mu = cubic(f[idx][:, None, :], u)  # (draws, n)
-        sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force()) ** 2)
+        sd = np.sqrt(nz[idx, 0:1] ** 2 + (nz[idx, 1:2] * fit.ref_force_N) ** 2)
         y = mu + sd * rng.standard_normal(mu.shape)
     lo, hi = np.quantile(y, [0.05, 0.95], axis=0)
     inside = (lo <= fresh.force_N) & (fresh.force_N <= hi)

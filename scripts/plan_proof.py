@@ -30,7 +30,7 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -111,31 +111,22 @@ SCENARIOS = {
         model=AUTO,
         candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
     ),
-    "D": Scenario(
-        "D",
-        "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, planned "
-        "and fitted with the surface with a discrepancy in pressure",
-        "n50",
-        (1.0, 4.0, 7.0, 10.0),
-        0.010,
-        ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
-        model=registry.DISCREPANCY,
-        candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
-    ),
-    "E": Scenario(
-        "E",
-        "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, planned "
-        "and fitted with the smooth surface (what the model choice took before the discrepancy "
-        "became the default model)",
-        "n50",
-        (1.0, 4.0, 7.0, 10.0),
-        0.010,
-        ("force@110mm,5.5bar", "pressure_for@120mm,12000N"),
-        model=registry.SURFACE,
-        candidates_bar=(2, 3, 5, 5.5, 6, 8, 9),
-    ),
 }
 
+_TABLE1_PILOT = "Table 1's spring (not smooth in pressure), pilot at 1, 4, 7, 10 bar every 10 mm, "
+SCENARIOS["D"] = replace(
+    SCENARIOS["C"],
+    name="D",
+    words=_TABLE1_PILOT + "planned and fitted with the surface with a discrepancy in pressure",
+    model=registry.DISCREPANCY,
+)
+SCENARIOS["E"] = replace(
+    SCENARIOS["C"],
+    name="E",
+    words=_TABLE1_PILOT + "planned and fitted with the smooth surface (what the model choice took "
+    "before the discrepancy became the default model)",
+    model=registry.SURFACE,
+)
 
 # ----------------------------------------------------------------------------- truth
 

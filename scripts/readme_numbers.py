@@ -763,8 +763,7 @@ def batch_bench_summary(rel: str) -> Callable[[], str]:
             f"`--serial` / batched ({s['campaigns']} campaigns each): "
             f"{r['cpu_ratio_serial_to_batched']:.2f} in CPU time, "
             f"{r['ratio_serial_to_batched']:.2f} in wall time. The line through the batched runs' "
-            f"CPU times: {cpu['seconds_per_campaign']:.2f} s a campaign "
-            f"{'+' if cpu['intercept_s'] >= 0 else '-'} {abs(cpu['intercept_s']):.1f} s, so 1000 "
+            f"CPU times: {_per_campaign(cpu)}, so 1000 "
             f"campaigns take about {r['predicted_1000_cpu_min']:.0f} CPU minutes"
             + (
                 " (measured: 1000 campaigns in the table)"
@@ -772,13 +771,20 @@ def batch_bench_summary(rel: str) -> Callable[[], str]:
                 else " (extrapolated from the line)"
             )
             + ", about the wall time on an idle machine, where this process has a core to itself "
-            f"(the wall-time line, at this load: {line['seconds_per_campaign']:.2f} s a campaign "
-            f"{'+' if line['intercept_s'] >= 0 else '-'} {abs(line['intercept_s']):.1f} s). "
+            f"(the wall-time line, at this load: {_per_campaign(line)}). "
             f"Peak RSS {r['peak_rss_mb']:.0f} MB.",
         ]
         return "\n".join(lines) + "\n"
 
     return make
+
+
+def _per_campaign(line: dict) -> str:
+    """A line through a benchmark's times: "a s a campaign + b s"."""
+    b = line["intercept_s"]
+    return (
+        f"{line['seconds_per_campaign']:.2f} s a campaign {'+' if b >= 0 else '-'} {abs(b):.1f} s"
+    )
 
 
 def batch_netcdf_summary(rel: str) -> Callable[[], str]:

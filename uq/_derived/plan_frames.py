@@ -228,32 +228,22 @@ class PairFrames:
         return np.exp(theta[:, 5]) if self.thermo else np.ones(theta.shape[0])
 
     def _whiten(self, theta, Xf, Xl, force, lever, hold, p_abs):
-        """Whitened rows (S, n, r, k) of readings with these budget references, per draw."""
+        """Whitened rows (S, n, r, k) of readings with these budget references, per draw: the
+        design rows times the inverse of :meth:`_noise_factors`."""
         S = theta.shape[0]
-        Xf = _draws(Xf, S)
+        C = self._noise_factors(theta, force, lever, hold, p_abs)
+        zf = _draws(Xf, S) / C[..., 0, 0, None]
         if self.force_only:
-            s0, rel, kp = (np.exp(theta[:, i])[:, None] for i in range(3))
-            sd = np.sqrt(force_noise_var(s0, rel, force[None]) + (kp * hold * lever) ** 2)
-            return (Xf / sd[..., None])[:, :, None, :]
-        d = self.data._replace(
-            phat=jnp.asarray(force),
-            feff_hat=jnp.asarray(lever),
-            dp_pa=jnp.asarray(hold),
-            p_abs_pa=jnp.asarray(p_abs),
-        )
-        L11, L21, L22 = (
-            np.asarray(a) for a in jax.vmap(lambda th: pair.cov_factors(th[:5], d))(theta)
-        )
-        zf = Xf / L11[..., None]
-        zl = (self._scale(theta)[:, None, None] * _draws(Xl, S) - L21[..., None] * zf) / L22[
-            ..., None
+            return zf[:, :, None, :]
+        zl = (self._scale(theta)[:, None, None] * _draws(Xl, S) - C[..., 1, 0, None] * zf) / C[
+            ..., 1, 1, None
         ]
         return np.stack([zf, zl], axis=2)
 
     def _noise_factors(self, theta, force, lever, hold, p_abs) -> np.ndarray:
         """Per draw the lower-triangular factor C (S, n, r, r) of each reading's noise covariance
-        with these budget references, in N and m: :meth:`_whiten`'s rows are C^-1 times the
-        design rows (``Frame.reading_noise``)."""
+        with these budget references, in N and m (``Frame.reading_noise``; :meth:`_whiten`
+        divides the design rows by it)."""
         if self.force_only:
             s0, rel, kp = (np.exp(theta[:, i])[:, None] for i in range(3))
             sd = np.sqrt(force_noise_var(s0, rel, force[None]) + (kp * hold * lever) ** 2)

@@ -23,7 +23,6 @@ sets malloc's own thresholds, and a C library that is not glibc (nothing is chan
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 
 #: both thresholds (bytes): blocks up to this size come from the heap, and the heap keeps up to
@@ -45,9 +44,8 @@ def tune() -> bool:
         return False
     if "glibc.malloc.mmap_threshold" in os.environ.get("GLIBC_TUNABLES", ""):
         return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
+    try:  # the process's own symbols: libc is loaded already (find_library would run ldconfig)
+        mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # not glibc (macOS, musl without mallopt): nothing to tune
         return False
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int

@@ -85,9 +85,7 @@ def fit_tests(
     stand's S (Boyle's law moves the piston by dV / S; a volume column's L = -V / S).
     """
 
-    if pressure not in PRESSURE_MODELS:
-        raise ValueError(f"pressure must be one of {PRESSURE_MODELS}, got {pressure!r}")
-    tests = list(tests)
+    tests = list(tests)  # pressure and ar1 are checked by _fit_items
     items = [
         _Item(t, x0_m, piston_area_m2, pressure, s)
         for t, s in zip(tests, test_seeds(seed, len(tests)), strict=True)

@@ -294,6 +294,16 @@ def ar1(e: np.ndarray, corr: float) -> np.ndarray:
     return out
 
 
+def make_spring(spring_name: str, piston_area_m2: float = PAPER_PISTON_AREA_M2):
+    """The stand's spring object by name (:data:`SPRINGS`); an unknown name is one line."""
+    if spring_name not in SPRINGS:
+        raise InputError(
+            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
+            param="spring_name",
+        )
+    return SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
+
+
 def simulate(
     spring_name: str = "n50",
     *,
@@ -308,15 +318,8 @@ def simulate(
     ``stand`` is the error budget and gas volume of the stand that makes the noise; it need not
     be the one a model assumes (that is how the tests check models against a different stand).
     """
-    if spring_name not in SPRINGS:
-        raise InputError(
-            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
-            param="spring_name",
-        )
+    spring = make_spring(spring_name, piston_area_m2)
     effects = dict(effects or {})
-    spring = (
-        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
-    )
     rng = np.random.default_rng(seed)
     heights, comp = layout.heights()
     return [
@@ -367,14 +370,7 @@ def simulate_planned(
     """The virtual stand reading planned tests (the ``tests`` of ``uq plan --json``: dicts with
     pressure_bar, heights_mm in recording order and optional branches, compression when absent), with
     the same errors as :func:`simulate`; returns one dict of arrays per test, as :func:`simulate`."""
-    if spring_name not in SPRINGS:
-        raise InputError(
-            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
-            param="spring_name",
-        )
-    spring = (
-        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
-    )
+    spring = make_spring(spring_name, piston_area_m2)
     rng = np.random.default_rng(seed)
     return [
         _test(

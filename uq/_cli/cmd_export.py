@@ -10,8 +10,6 @@ files (one per statistic) or JSON; ``--sealed`` adds the closed spring of ``uq d
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
 import sys
 from pathlib import Path
 
@@ -269,16 +267,6 @@ def _model(args, saved: bool):
     return model, rec, provenance
 
 
-def _date() -> str:
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    when = (
-        datetime.datetime.fromtimestamp(int(epoch), datetime.UTC)
-        if epoch and epoch.isdigit()
-        else datetime.datetime.now(datetime.UTC)
-    )
-    return when.strftime("%Y-%m-%d %H:%M UTC")
-
-
 def command_export(args) -> int:
     try:
         return _export(args)
@@ -291,7 +279,7 @@ def _export(args) -> int:
     from uq._cli.common import output_units
     from uq._derived import export
     from uq._io.files import emit_json
-    from uq._io.version import __version__
+    from uq._io.version import __version__, date_stamp
 
     _check_usage(args)
     fmt = _format(args)
@@ -311,7 +299,7 @@ def _export(args) -> int:
     )
     provenance |= {
         "uq_version": __version__,
-        "date": _date(),
+        "date": date_stamp(),
         "between": f"{model.label}: {registry.entry(model.name).words}",
     }
     grid = export.export_grid(

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
-import datetime
 import multiprocessing
 import os
 import signal
@@ -31,7 +30,7 @@ from uq._io.files import (
     write_bytes_atomic,
     write_text_atomic,
 )
-from uq._io.version import __version__
+from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import (
@@ -897,18 +896,11 @@ def provenance(rec, stand) -> dict:
     """The footer of a page: uq's version, the date (``SOURCE_DATE_EPOCH`` when set, for
     reproducible pages), the recordings' file and SHA-256 (taken when they were read), and the
     stand description used."""
-
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    when = (
-        datetime.datetime.fromtimestamp(int(epoch), datetime.UTC)
-        if epoch and epoch.isdigit()
-        else datetime.datetime.now(datetime.UTC)
-    )
     digest = getattr(rec, "sha256", None)
     changes = stand.changes()
     return {
         "version": __version__,
-        "date": when.strftime("%Y-%m-%d %H:%M UTC"),
+        "date": date_stamp(),
         "file": Path(rec.path).name,
         "sha256": digest,
         "stand": "the paper's stand (section 3.2: load cell 0.5 %, pressure held within 0.01 bar)"

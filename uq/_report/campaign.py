@@ -230,40 +230,47 @@ def _residual_labels(fig, axes, ylabel: str) -> None:
     _residual_key(fig)
 
 
+def _curves_and_residuals(cb, pairs, curve, points, residuals, ylabel, rlabel, title, below, unit):
+    """Figures 2 and 3: one quantity's curves by pressure with the readings above; below, per test,
+    the readings and bands minus the posterior-mean curve. ``pairs``: (test fit, test bands);
+    ``curve(tb)``: (band, scale to the axis' unit); ``points(tf, tb)``: the readings in the band's
+    unit; ``residuals(tf, tb)``: :func:`_residual_panel`'s residuals, curve band, new reading's band
+    and scale."""
+    fig, ax, res = _with_residuals(len(pairs))
+    x = cb.x_m * MM
+    colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
+    widths = []
+    for i, ((tf, tb), c) in enumerate(zip(pairs, colours, strict=True)):
+        band, scale = curve(tb)
+        _fill(ax, x, band, scale, c, alpha=0.4)
+        ax.plot(tf.test.height_m * MM, points(tf, tb) * scale, ".", color=c, ms=3)
+        _residual_panel(res[i], x, tf.test.height_m * MM, *residuals(tf, tb), c, tb.pressure_bar)
+        widths.append(np.max(band.hi - band.lo) * scale)
+    _mark_x0(ax, cb.x0_m * MM)
+    ax.set(xlabel="height x (mm)", ylabel=ylabel)
+    ax.grid(alpha=0.3)
+    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
+    _residual_labels(fig, res, rlabel)
+    note = _band_note_after_layout(fig, ax, title, widths, 1e3, unit)
+    ax.set_title(title.format(f"{note}; below: {below}"), fontsize=9)
+    return fig
+
+
 def figure_force(cf, cb: CampaignBands):
     """Figure 2 (eq. 8): force curves by pressure, readings and bands; below, per test, readings
     and bands minus the posterior-mean curve (the bands are too narrow to see above)."""
-    fig, ax, res = _with_residuals(len(cb.tests))
-    x = cb.x_m * MM
-    colours, sm = _pressure_colours([t.pressure_bar for t in cb.tests])
-    for i, (tf, tb, c) in enumerate(zip(cf.tests, cb.tests, colours, strict=True)):
-        _fill(ax, x, tb.force, 1e-3, c, alpha=0.4)
-        ax.plot(tf.test.height_m * MM, tf.test.force_N * 1e-3, ".", color=c, ms=3)
-        r = tf.mean_residuals("force")
-        _residual_panel(
-            res[i],
-            x,
-            tf.test.height_m * MM,
-            r,
-            tb.force,
-            tb.force_pred,
-            1.0,
-            c,
-            tb.pressure_bar,
-        )
-    _mark_x0(ax, cb.x0_m * MM)
-    ax.set(xlabel="height x (mm)", ylabel="force P (kN)")
-    ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
-    _residual_labels(fig, res, "reading − mean (N)")
-    title = "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n{}"
-    note = _band_note_after_layout(
-        fig, ax, title, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N"
+    return _curves_and_residuals(
+        cb,
+        list(zip(cf.tests, cb.tests, strict=True)),
+        lambda tb: (tb.force, 1e-3),
+        lambda tf, tb: tf.test.force_N,
+        lambda tf, tb: (tf.mean_residuals("force"), tb.force, tb.force_pred, 1.0),
+        "force P (kN)",
+        "reading − mean (N)",
+        "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n{}",
+        "readings and bands minus the mean curve",
+        "N",
     )
-    ax.set_title(
-        title.format(f"{note}; below: readings and bands minus the mean curve"), fontsize=9
-    )
-    return fig
 
 
 def _dV_points(tf, tb, S):
@@ -276,43 +283,25 @@ def figure_volume(cf, cb: CampaignBands):
     """Figure 3 (eq. 10): volume increments by pressure; below, per test, the piston readings and
     bands minus the posterior-mean L(x), as volume S ΔL. Only the tests with a volume curve
     (force-only tests have none)."""
-    pairs = [(tf, tb) for tf, tb in zip(cf.tests, cb.tests, strict=True) if tb.has_volume]
-    fig, ax, res = _with_residuals(len(pairs))
-    x = cb.x_m * MM
     S = cb.piston_area_m2
-    colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
-    for i, ((tf, tb), c) in enumerate(zip(pairs, colours, strict=True)):
-        _fill(ax, x, tb.dV, 1e3, c, alpha=0.4)
-        ax.plot(tf.test.height_m * MM, _dV_points(tf, tb, S) * 1e3, ".", color=c, ms=3)
-        r = S * tf.mean_residuals("piston")
-        _residual_panel(
-            res[i],
-            x,
-            tf.test.height_m * MM,
-            r,
+    return _curves_and_residuals(
+        cb,
+        [(tf, tb) for tf, tb in zip(cf.tests, cb.tests, strict=True) if tb.has_volume],
+        lambda tb: (tb.dV, 1e3),
+        lambda tf, tb: _dV_points(tf, tb, S),
+        lambda tf, tb: (
+            S * tf.mean_residuals("piston"),
             _scaled(tb.piston, S),
             _scaled(tb.piston_pred, S),
             1e6,
-            c,
-            tb.pressure_bar,
-        )
-    _mark_x0(ax, cb.x0_m * MM)
-    ax.set(xlabel="height x (mm)", ylabel="volume increment ΔV (dm³ = litre)")
-    ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
-    _residual_labels(fig, res, "S (L − mean L) (cm³)")
-    title = (
+        ),
+        "volume increment ΔV (dm³ = litre)",
+        "S (L − mean L) (cm³)",
         "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean "
-        "curves\n{}"
+        "curves\n{}",
+        "piston readings and bands minus the mean L(x), times S",
+        "cm³",
     )
-    note = _band_note_after_layout(
-        fig, ax, title, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³"
-    )
-    ax.set_title(
-        title.format(f"{note}; below: piston readings and bands minus the mean L(x), times S"),
-        fontsize=9,
-    )
-    return fig
 
 
 def _scaled(b: Band, factor: float) -> Band:

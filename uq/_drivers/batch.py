@@ -27,7 +27,6 @@ duplicate name is one line naming the catalogue and the row (exit 2).
 from __future__ import annotations
 
 import csv
-import dataclasses
 import hashlib
 import io
 import json
@@ -44,7 +43,7 @@ import uq._inference.float64  # noqa: F401  float64 in every worker, before any 
 from uq._data.recordings import read_recordings, require_for
 from uq._data.stand_description import stand_or_paper
 from uq._derived.bands import campaign_bands
-from uq._diagnose.engine import diagnose
+from uq._diagnose.engine import diagnose, shorter_sampling
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError, where
 from uq._io.files import dumps_json, emit_json, write_text_atomic
@@ -457,9 +456,7 @@ def _task_surface(job: dict, out: Path) -> dict:
 
 
 def _task_diagnose(job: dict, out: Path) -> dict:
-    # the same shorter sampling as `uq diagnose` (its command_diagnose)
-    s = _settings(job)
-    settings = dataclasses.replace(s, chunk=200, min_steps=min(300, s.max_steps))
+    settings = shorter_sampling(_settings(job))  # as `uq diagnose`
     res = diagnose(_recordings(job), seed=_seed(job), settings=settings, stand=_stand(job))
     emit_json(res.to_json(), str(out / "diagnose.json"))
     page = write_diagnose_report(res, out)

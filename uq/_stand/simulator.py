@@ -113,6 +113,12 @@ class N50Spring:
             )
         return self._force(p_bar), self._piston(p_bar)
 
+    def _a_L(self, p_bar: float) -> float:
+        """Table 1's a_L at ``p_bar``, held at its end values beyond the tested pressures (the
+        piston reference of the springs defined at every pressure)."""
+        lo, hi = self._p.min(), self._p.max()
+        return float(self._piston(min(max(p_bar, lo), hi))[0])
+
     def force_N(self, height_m, p_bar):
         return cubic(self._coef(p_bar)[0], np.asarray(height_m) - self.x0_m)
 
@@ -146,10 +152,6 @@ class TraditionalSpring(N50Spring):
         self._feff = t.force[t.index(5.0)] / (5.0 * BAR_PA)  # m^2, m, 1, 1/m
         self._area = piston_area_m2
         self.pressure_range_bar = (0.01, 50.0)
-
-    def _a_L(self, p_bar: float) -> float:
-        lo, hi = self._p.min(), self._p.max()
-        return float(self._piston(min(max(p_bar, lo), hi))[0])
 
     def _check(self, p_bar: float) -> None:
         lo, hi = self.pressure_range_bar
@@ -745,10 +747,6 @@ class ThermoSpring(N50Spring):
         """The lever of a pressure-holding error on the force: dP/dp_u = V0' + p_u C', m^2."""
         self._check(p_bar)
         return self.volume_area_m2(height_m, p_bar)
-
-    def _a_L(self, p_bar: float) -> float:
-        lo, hi = self._p.min(), self._p.max()
-        return float(self._piston(min(max(p_bar, lo), hi))[0])
 
     def piston_m(self, height_m, p_bar):
         self._check(p_bar)

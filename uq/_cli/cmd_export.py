@@ -9,7 +9,6 @@ files (one per statistic) or JSON; ``--sealed`` adds the closed spring of ``uq d
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from uq._cli.common import (
     add_recordings,
     add_sampling,
     add_stand,
+    option_type,
     positive_float,
     positive_int,
     say,
@@ -48,20 +48,16 @@ EXPORT_OPTIONS = {
 
 
 def _parsed(parse: str, what: str):
-    """An option type checking its text with ``uq._derived.export``'s function ``parse`` (imported
-    when an option is parsed) and keeping the text."""
+    """An option type parsing its text with ``uq._derived.export``'s function ``parse`` (imported
+    when an option is parsed)."""
 
-    def parse_option(text: str):
+    def check(text: str):
         from uq._derived import export
 
-        try:
-            getattr(export, parse)(text)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-        return text
+        return getattr(export, parse)(text)
 
-    parse_option.__name__ = what
-    return parse_option
+    check.__name__ = what
+    return option_type(check)
 
 
 def configure_export(p) -> None:
@@ -293,10 +289,7 @@ def _export(args) -> int:
     if _refused_unconverged(args, model, saved):
         return 1
     units = output_units(rec, args.units)
-    heights = None if args.heights_mm is None else export.parse_heights_mm(args.heights_mm) * 1e-3
-    pressures = (
-        None if args.pressures_bar is None else export.parse_pressures_bar(args.pressures_bar)
-    )
+    heights = None if args.heights_mm is None else args.heights_mm * 1e-3
     provenance |= {
         "uq_version": __version__,
         "date": date_stamp(),
@@ -305,8 +298,8 @@ def _export(args) -> int:
     grid = export.export_grid(
         model,
         heights,
-        pressures,
-        quantiles=export.parse_quantiles(args.quantiles),
+        args.pressures_bar,
+        quantiles=args.quantiles,
         extrapolate=args.extrapolate,
         n_draws=args.draws,
         provenance=provenance,

@@ -344,11 +344,9 @@ class SurfaceFit(LinearFit):
             out[name] = self.band(fn, height_m, p_bar, level)
         return out
 
-    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
+    def json_document(self, comparison: dict | None, advice: str) -> dict:
         """What ``uq surface --json`` writes (docs/formats.md)."""
-        if self.document is not None:
-            return super().to_json(comparison, advice)
-        return summary(self, comparison, CLI_ADVICE if advice is None else advice)
+        return summary(self, comparison, advice)
 
 
 def geometry_of(rec: Recordings) -> Geometry:

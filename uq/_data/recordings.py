@@ -527,15 +527,10 @@ def _ignore(note: str) -> None:
 
 
 def _outlier_columns(t: PressureTest, cols: dict[str, Column]) -> list:
-    force = cols["force"]
-    out = [(force.name, t.force_N, 1.0 / force.factor, force.unit)]
-    if t.piston_m is not None:
-        c = cols["piston"]
-        out.append((c.name, t.piston_m, 1.0 / c.factor, c.unit))
-    if t.volume_m3 is not None:
-        c = cols["volume"]
-        out.append((c.name, t.volume_m3, 1.0 / c.factor, c.unit))
-    return out
+    readings = (("force", t.force_N), ("piston", t.piston_m), ("volume", t.volume_m3))
+    return [
+        (cols[q].name, v, 1.0 / cols[q].factor, cols[q].unit) for q, v in readings if v is not None
+    ]
 
 
 def _make_test(

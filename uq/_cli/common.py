@@ -316,22 +316,13 @@ def load(args, min_points: int = 6, needs=None):
     command's entry of uq._data.recordings.COMMAND_NEEDS, the one table to edit when a command
     learns to use force-only campaigns or campaigns in unknown order.
     """
-    from uq._data.recordings import COMMAND_NEEDS, read_recordings, require
+    from uq._data.recordings import COMMAND_NEEDS, READING_OPTIONS, read_recordings, require
 
     rec = read_recordings(
         args.file,
-        piston_area_cm2=args.piston_area_cm2,
-        x0_mm=args.x0_mm,
         min_points=min_points,
-        compression=getattr(args, "compression", "positive"),
-        sheet=getattr(args, "sheet", None),
-        absolute_pressure=getattr(args, "absolute_pressure", False),
-        p_atm_bar=getattr(args, "p_atm_bar", DEFAULT_P_ATM_BAR),
-        pressure_tolerance_bar=getattr(args, "pressure_tolerance_bar", None),
-        columns=getattr(args, "columns", None),
-        units_row=getattr(args, "units_row", "auto"),
-        header_row=getattr(args, "header_row", None),
         on_note=_note,  # what the reader decided by itself (a units row, a title), said at once
+        **{k: getattr(args, k) for k in READING_OPTIONS if hasattr(args, k)},
     )
     require(rec, COMMAND_NEEDS.get(getattr(args, "_name", ""), ()) if needs is None else needs)
     check_memory(args, rec)

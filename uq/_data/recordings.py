@@ -56,6 +56,20 @@ COMPRESSION_CONVENTIONS = ("positive", "negative")
 DEFAULT_PISTON_AREA_CM2 = 54.82
 DEFAULT_X0_MM = 112.0
 DEFAULT_P_ATM_BAR = 1.01325
+#: the options of :func:`read_recordings` that say how a file is read (the commands' reading
+#: options, the batch catalogue's)
+READING_OPTIONS = (
+    "piston_area_cm2",
+    "x0_mm",
+    "compression",
+    "sheet",
+    "absolute_pressure",
+    "p_atm_bar",
+    "pressure_tolerance_bar",
+    "columns",
+    "units_row",
+    "header_row",
+)
 
 
 @dataclass(frozen=True, eq=False)

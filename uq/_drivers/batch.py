@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
-from uq._data.recordings import read_recordings, require_for
+from uq._data.recordings import READING_OPTIONS, read_recordings, require_for
 from uq._data.stand_description import stand_or_paper
 from uq._derived.bands import campaign_bands
 from uq._diagnose.engine import diagnose, shorter_sampling
@@ -359,20 +359,6 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
 
 
 # ----------------------------------------------------------------------------- tasks
-
-
-READING_OPTIONS = (
-    "piston_area_cm2",
-    "x0_mm",
-    "compression",
-    "sheet",
-    "absolute_pressure",
-    "p_atm_bar",
-    "pressure_tolerance_bar",
-    "columns",
-    "units_row",
-    "header_row",
-)
 
 
 def _recordings(job: dict):

@@ -215,9 +215,9 @@ def _check_usage(args) -> None:
     given = [o for o, v in closed if v is not None]
     if not args.sealed and given:
         raise InputError(f"option {given[0]}: only with --sealed (the closed spring)")
-    if args.format == "teimorbit" or Path(args.out).suffix.lower() == ".tpf":
-        if str(args.out) == "-":
-            raise InputError("option --out: teimorbit writes one file per statistic; give a path")
+    teimorbit = args.format == "teimorbit" or Path(args.out).suffix.lower() == ".tpf"
+    if teimorbit and str(args.out) == "-":
+        raise InputError("option --out: teimorbit writes one file per statistic; give a path")
 
 
 def _model(args, saved: bool):

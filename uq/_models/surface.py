@@ -149,10 +149,7 @@ def tq_columns(t, q, kmax, lmax, integrate=False):
     q = np.asarray(q, float)[..., None, None]
     k = np.arange(kmax + 1)[:, None]
     lq = np.arange(lmax + 1)[None, :]
-    if integrate:
-        cols = t ** (k + 1) / (k + 1) * q**lq
-    else:
-        cols = t**k * q**lq
+    cols = t ** (k + 1) / (k + 1) * q**lq if integrate else t**k * q**lq
     cols = np.broadcast_to(cols, cols.shape)
     return cols.reshape(*cols.shape[:-2], -1)
 

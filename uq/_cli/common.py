@@ -273,7 +273,7 @@ def convergence_status(args, name: str, status: int) -> int:
     """The exit-status policy for fits that failed their convergence rules (one place for every
     command): a command that finished (``status`` 0) with such a fit exits 1 with one line on
     stderr saying so, or 0 with ``--allow-unconverged``; any other status stands."""
-    return _policy(
+    return exit_policy(
         misfit_status(args, name, status),
         getattr(args, "unconverged_fits", []),
         getattr(args, "allow_unconverged", False),
@@ -285,7 +285,7 @@ def convergence_status(args, name: str, status: int) -> int:
     )
 
 
-def _policy(status: int, failed: list, allowed: bool, accepted: str, refused: str) -> int:
+def exit_policy(status: int, failed: list, allowed: bool, accepted: str, refused: str) -> int:
     """An exit-status policy: a command that finished (``status`` 0) with ``failed`` (in words)
     exits 0 with ``accepted`` on stderr when ``allowed``, else 1 with ``refused`` (each with the
     failures at its ``{}``); any other status stands."""
@@ -469,7 +469,7 @@ def stand_from(args, model: bool = True):
 def misfit_status(args, name: str, status: int) -> int:
     """The exit-status policy for an answer whose model missed its readings (``record_misfit``):
     exit 1 with one line on stderr, or 0 with ``--allow-misfit``; any other status stands."""
-    return _policy(
+    return exit_policy(
         status,
         getattr(args, "misfits", []),
         getattr(args, "allow_misfit", False),

@@ -295,7 +295,7 @@ class DiscrepancyFit(SurfaceFit):
         return base + self._p_pa(height_m, p_bar) * d["eps"] - self.p_ref_pa * d["phi"]
 
     # ---- the JSON document
-    def json_document(self, comparison: dict | None, advice: str) -> dict:
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
         """The surface's document (``uq surface --json``) with the discrepancy: its kernel, priors,
         sampled amplitudes and length scale, and its deviation at x0 at and between the tested
         pressures."""

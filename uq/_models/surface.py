@@ -341,7 +341,7 @@ class SurfaceFit(LinearFit):
             out[name] = self.band(fn, height_m, p_bar, level)
         return out
 
-    def json_document(self, comparison: dict | None, advice: str) -> dict:
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
         """What ``uq surface --json`` writes (docs/formats.md)."""
         return summary(self, comparison, advice)
 

@@ -240,7 +240,7 @@ class ThermoFit(LinearFit):
         a = np.asarray(self.reported["piston_area_m2"], float)
         return thin_rows(a.reshape(-1), self.max_draws)
 
-    def json_document(self, comparison: dict | None, advice: str) -> dict:
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
         """What ``uq surface --model thermodynamic --json`` writes (docs/formats.md)."""
         return summary(self, comparison, advice)
 

@@ -430,13 +430,10 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     p_pa = tb.pressure_bar * BAR_PA
     piston_m = t.piston_m if piston_m is None else piston_m
 
-    def points(ax, y):
-        _readings(ax, h, y, comp)
-
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)
     _fill(ax, x, tb.force, 1e-3, "tab:green", alpha=0.5, label="mean curve, pointwise 90 % band")
-    points(ax, t.force_N * 1e-3)
+    _readings(ax, h, t.force_N * 1e-3, comp)
     ax.plot([], [], color="0.5", alpha=0.4, lw=6, label="pointwise 90 % predictive band")
     ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="force (eq. 8)")
     ax.legend(fontsize=7)
@@ -447,7 +444,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
         ax.fill_between(
             x, band.lo - tb.force.mean, band.hi - tb.force.mean, color=color, alpha=alpha, lw=0
         )
-    points(ax, t.force_N - fit_pts)
+    _readings(ax, h, t.force_N - fit_pts, comp)
     ax.axhline(0, color="k", lw=0.6)
     ax.set(
         xlabel="height x (mm)", ylabel="force − posterior-mean curve (N)", title="force residuals"
@@ -457,7 +454,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     if tb.has_volume:
         _fill(ax, x, tb.piston_pred, MM, "0.5", alpha=0.2, line=False)
         _fill(ax, x, tb.piston, MM, "tab:green", alpha=0.5)
-        points(ax, piston_m * MM)
+        _readings(ax, h, piston_m * MM, comp)
     else:
         _absent(ax, "no volume: force-only test\n(no piston_* or volume_* column)", x)
     ax.set(xlabel="height x (mm)", ylabel="piston coordinate L (mm)", title="piston (eq. 9)")

@@ -767,9 +767,7 @@ def write(
         if grid.sealed is not None:
             header, rows = sealed_rows(grid, units)
             sheets.insert(-1, ("sealed", [header, *rows]))
-        stamp = None
-        if when:
-            stamp = datetime.datetime.strptime(str(when), "%Y-%m-%d %H:%M UTC")
+        stamp = datetime.datetime.strptime(str(when), "%Y-%m-%d %H:%M UTC") if when else None
         return [write_bytes_atomic(out, xlsx_bytes(sheets, when=stamp))]
     if fmt == "json":
         return [write_text_atomic(out, dumps_json(json_document(grid)))]

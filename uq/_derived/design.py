@@ -59,9 +59,8 @@ CHUNK_DRAWS = 250  # draws per sealed-path solve: bounds the spline coefficients
 LEVEL = 0.90
 N_CHART = 6
 MARGIN_SPAN_M = 0.008  # heights each side of the design height a design margin evaluates
-MARGIN_PRESSURES = (
-    21  # its pressure grid: the answer within 1e-4 of the 41-pressure grid's (tested), in < 2 s
-)
+#: its pressure grid: the answer within 1e-4 of the 41-pressure grid's (tested), in < 2 s
+MARGIN_PRESSURES = 21
 
 
 @dataclass(frozen=True)

@@ -90,9 +90,8 @@ SUMMARY_COLUMNS = (
     "error",
     "file",
 )
-_NAME = re.compile(
-    r"[A-Za-z0-9][A-Za-z0-9._-]*\Z"
-)  # becomes a folder name: no separators, no dot-files
+# becomes a folder name: no separators, no dot-files
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
 
 
 # ----------------------------------------------------------------------------- catalogue
@@ -328,9 +327,8 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
     }
     t0 = time.perf_counter()
     try:
-        (out / STAMP).unlink(
-            missing_ok=True
-        )  # stale stamp of other inputs: gone before new outputs appear
+        # stale stamp of other inputs: gone before new outputs appear
+        (out / STAMP).unlink(missing_ok=True)
         out.mkdir(parents=True, exist_ok=True)
         if isinstance(fitted, BaseException):
             raise fitted

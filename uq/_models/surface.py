@@ -313,9 +313,8 @@ class SurfaceFit(LinearFit):
 
     def volume_excess_draws(self, height_m, p_bar, *, check=True):
         """D(x, p_u) = -dV/dx - F_p draws, m^2 (0 in the traditional theory)."""
-        self.volume_area_draws(
-            self.x0_m, self.pressure_range_bar[0], check=False
-        )  # refuses force only
+        # refuses force only
+        self.volume_area_draws(self.x0_m, self.pressure_range_bar[0], check=False)
         return self.evaluate(lambda x, p: self._columns(x, p, d=1.0), height_m, p_bar, check=check)
 
     def spread_draws(self, height_m, p_bar, *, check=True):

@@ -180,9 +180,8 @@ class TraditionalSpring(N50Spring):
 SPRINGS = {"n50": N50Spring, "n50-traditional": TraditionalSpring}
 
 
-MAX_STEPS_PER_BRANCH = (
-    10_000  # readings per branch: far beyond any stand (0.009 mm steps over 90 mm)
-)
+#: readings per branch: far beyond any stand (0.009 mm steps over 90 mm)
+MAX_STEPS_PER_BRANCH = 10_000
 MAX_TESTS = 1000
 
 

@@ -143,8 +143,7 @@ def unit_list(text: str) -> dict:
     out: dict[str, str] = {}
     for name in (n.strip() for n in text.split(",") if n.strip()):
         quantity = next(
-            (q for q in ("pressure", "height", "force", "volume") if name in QUANTITIES[q][1]),
-            None,
+            (q for q in ("pressure", "height", "force", "volume") if name in QUANTITIES[q][1]), None
         )
         if quantity is None:
             known = ", ".join(

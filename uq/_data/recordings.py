@@ -272,8 +272,7 @@ def check_stand_options(piston_area_cm2: float, x0_mm: float) -> None:
         )
     if not (math.isfinite(x0_mm) and 1.0 <= x0_mm <= 5000.0):
         raise InputError(
-            f"x0_mm: expected a reference height in mm (1..5000), got {x0_mm}",
-            param="x0_mm",
+            f"x0_mm: expected a reference height in mm (1..5000), got {x0_mm}", param="x0_mm"
         )
 
 
@@ -283,8 +282,7 @@ def check_reading_options(
     """Validate the reading conventions given as options (names the parameter on failure; the CLI its option)."""
     if compression not in COMPRESSION_CONVENTIONS:
         raise InputError(
-            f"compression: expected positive or negative, got {compression!r}",
-            param="compression",
+            f"compression: expected positive or negative, got {compression!r}", param="compression"
         )
     if not (math.isfinite(p_atm_bar) and 0.3 <= p_atm_bar <= 1.2):
         raise InputError(

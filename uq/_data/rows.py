@@ -276,12 +276,7 @@ def leading_comments(lines) -> list[str]:
 
 
 def table_from_text(
-    text: str,
-    name: str,
-    is_column,
-    *,
-    header_row: int | None = None,
-    units_row: str = "auto",
+    text: str, name: str, is_column, *, header_row: int | None = None, units_row: str = "auto"
 ) -> Table:
     """The rows of CSV text; ``name`` stands for the file in messages."""
     check_shape_options(header_row, units_row)

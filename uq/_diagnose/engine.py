@@ -530,7 +530,7 @@ def _potential_reading(maxwell: dict | None) -> dict:
     it assumes; and where the thermodynamic model reads it from every test at once."""
     out = {
         "command": "uq surface FILE --model thermodynamic (implied_piston_area_m2): one potential "
-        "fitted to every test reads S from all of them at once",
+        "fitted to every test reads S from all of them at once"
     }
     middle = (maxwell or {}).get("interpretation", {}).get("middle", {})
     if "piston_area_m2" in middle:

@@ -66,13 +66,7 @@ from uq._inference.sampler import Settings, min_walkers_for_independence
 from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
-from uq._models.discrepancy_fit import (
-    BLOCK_INFO,
-    BLOCKS,
-    FORCE_BLOCKS,
-    DiscrepancyFit,
-    p_ref_pa,
-)
+from uq._models.discrepancy_fit import BLOCK_INFO, BLOCKS, FORCE_BLOCKS, DiscrepancyFit, p_ref_pa
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 

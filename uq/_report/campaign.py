@@ -24,12 +24,7 @@ from uq._data.reference import Reference, is_n50_reconstruction, paper_reference
 from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.errors import InputError
-from uq._io.files import (
-    remove_stale,
-    staged_folder,
-    write_bytes_atomic,
-    write_text_atomic,
-)
+from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
 from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA

@@ -73,11 +73,7 @@ from uq._data.reference import (
 )
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._io.errors import InputError
-from uq._physics.mechanisms import (
-    StandCurves,
-    apply_effects,
-    elastic_casing_slope,
-)
+from uq._physics.mechanisms import StandCurves, apply_effects, elastic_casing_slope
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 # The paper's stand (section 3.2); a different stand is a StandDescription (``--stand FILE``).
@@ -336,8 +332,7 @@ def _test(spring, effects, p, heights, comp, rng, stand, piston_area_m2) -> dict
     steps = np.arange(n)
     x_true = heights + reading_errors(rng, stand.displacement_sd_m, n, stand.error_df)
     dp_bar = ar1(
-        reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df),
-        stand.pressure_error_corr,
+        reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df), stand.pressure_error_corr
     )
     e_load = reading_errors(rng, stand.load_cell_rel_sd, n, stand.error_df)
     e_cal = reading_errors(rng, stand.caliper_sd_m, n, stand.error_df)

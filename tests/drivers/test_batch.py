@@ -318,3 +318,26 @@ def test_a_failing_batched_fit_falls_back_to_one_by_one(campaigns, tmp_path, mon
     assert [(r["campaign"], r["status"]) for r in rows] == [("one", "done"), ("two", "failed")]
     assert rows[1]["error"] == "c2.csv: this campaign's own problem"
     assert [v["verdict"] for v in res["verdicts"]][1] == "failed"
+
+
+@pytest.mark.parametrize("allow", [False, True])
+def test_unconverged_tasks_exit_by_the_commands_policy(
+    campaigns, tmp_path, capsys, monkeypatch, allow
+):
+    """Tasks that finished with an unconverged fit: exit 1 with one line saying how many, or 0
+    with --allow-unconverged (the policy of every command, uq._cli.common.exit_policy)."""
+    result = {"counts": {"done": 2, "skipped": 0, "failed": 0}, "campaigns": [], "verdicts": []}
+    monkeypatch.setattr(_batch, "run_batch", lambda *a, **k: result | {"not_converged": 2})
+    cat = _csv(campaigns, "file,tasks\nc1.csv,fit\n", "cat_nc.csv")
+    code = main(
+        ["batch", cat, "--out", str(tmp_path / "o"), "--serial"] + ["--allow-unconverged"] * allow
+    )
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    head = (
+        "uq batch: NOT CONVERGED: 2 task(s) finished with a fit that failed its convergence rules"
+    )
+    assert err.startswith(head)
+    if allow:
+        assert code == 0 and err.endswith("accepted with --allow-unconverged: exit 0")
+    else:
+        assert code == 1 and err.endswith("exit 1 (--allow-unconverged to accept them)")

@@ -32,9 +32,8 @@ from uq._cli.common import (
 )
 from uq._io.errors import InputError
 
-PAPER_PRESSURES = (
-    "0.1,1,2,3,4,5,6,7,8,9,10"  # uq._data.reference.PAPER_PRESSURES_BAR (tested equal)
-)
+# uq._data.reference.PAPER_PRESSURES_BAR (tested equal)
+PAPER_PRESSURES = "0.1,1,2,3,4,5,6,7,8,9,10"
 SPRING_NAMES = (
     "n50",
     "n50-traditional",
@@ -144,8 +143,7 @@ def unit_list(text: str) -> dict:
     out: dict[str, str] = {}
     for name in (n.strip() for n in text.split(",") if n.strip()):
         quantity = next(
-            (q for q in ("pressure", "height", "force", "volume") if name in QUANTITIES[q][1]),
-            None,
+            (q for q in ("pressure", "height", "force", "volume") if name in QUANTITIES[q][1]), None
         )
         if quantity is None:
             known = ", ".join(

@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from uq._cli.common import positive_int
+from uq._cli.common import exit_policy, positive_int
 from uq._drivers import batch as B
 from uq._io.errors import InputError
 
@@ -107,20 +107,14 @@ def command_batch(args) -> int:
     if c["failed"]:
         print(f"uq batch: {c['failed']} task(s) failed (see the summary)", file=sys.stderr)
         return 1
-    if res["not_converged"]:
-        accepted = getattr(args, "allow_unconverged", False)
-        print(
-            f"uq batch: NOT CONVERGED: {res['not_converged']} task(s) finished with a fit that failed "
-            "its convergence rules (see the summary); "
-            + (
-                "accepted with --allow-unconverged: exit 0"
-                if accepted
-                else "exit 1 (--allow-unconverged to accept them)"
-            ),
-            file=sys.stderr,
-        )
-        return 0 if accepted else 1
-    return 0
+    head = "uq batch: NOT CONVERGED: {} task(s) finished with a fit that failed its convergence rules (see the summary); "
+    return exit_policy(
+        0,
+        [str(res["not_converged"])] if res["not_converged"] else [],
+        getattr(args, "allow_unconverged", False),
+        head + "accepted with --allow-unconverged: exit 0",
+        head + "exit 1 (--allow-unconverged to accept them)",
+    )
 
 
 def _row_line(r: dict) -> str:

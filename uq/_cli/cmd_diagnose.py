@@ -13,11 +13,11 @@ from uq._cli.common import (
     add_stand,
     load,
     record_convergence,
+    settings_from,
     stand_from,
 )
 from uq._diagnose import engine as _diagnose
-from uq._diagnose.engine import GAIN_SE, summary_text
-from uq._inference.sampler import Settings
+from uq._diagnose.engine import GAIN_SE, shorter_sampling, summary_text
 from uq._io.errors import InputError
 from uq._io.files import emit_json
 from uq._models import diagnose as M
@@ -53,14 +53,7 @@ def command_diagnose(args) -> int:
         raise InputError(
             f"option --max-mechanisms: expected 0..{len(M.MECHS)}, got {args.max_mechanisms}"
         )
-    settings = Settings(
-        n_walkers=args.walkers,
-        n_ensembles=args.ensembles,
-        max_steps=args.max_steps,
-        min_steps=min(300, args.max_steps),
-        chunk=200,
-    )
-    settings.validate()
+    settings = shorter_sampling(settings_from(args))
     rec = load(args)
     stand = stand_from(args)
     res = _diagnose.diagnose(

@@ -9,9 +9,6 @@ files (one per statistic) or JSON; ``--sealed`` adds the closed spring of ``uq d
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import os
 import sys
 from pathlib import Path
 
@@ -21,6 +18,7 @@ from uq._cli.common import (
     add_recordings,
     add_sampling,
     add_stand,
+    option_type,
     positive_float,
     positive_int,
     say,
@@ -50,20 +48,16 @@ EXPORT_OPTIONS = {
 
 
 def _parsed(parse: str, what: str):
-    """An option type checking its text with ``uq._derived.export``'s function ``parse`` (imported
-    when an option is parsed) and keeping the text."""
+    """An option type parsing its text with ``uq._derived.export``'s function ``parse`` (imported
+    when an option is parsed)."""
 
-    def parse_option(text: str):
+    def check(text: str):
         from uq._derived import export
 
-        try:
-            getattr(export, parse)(text)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-        return text
+        return getattr(export, parse)(text)
 
-    parse_option.__name__ = what
-    return parse_option
+    check.__name__ = what
+    return option_type(check)
 
 
 def configure_export(p) -> None:
@@ -221,9 +215,9 @@ def _check_usage(args) -> None:
     given = [o for o, v in closed if v is not None]
     if not args.sealed and given:
         raise InputError(f"option {given[0]}: only with --sealed (the closed spring)")
-    if args.format == "teimorbit" or Path(args.out).suffix.lower() == ".tpf":
-        if str(args.out) == "-":
-            raise InputError("option --out: teimorbit writes one file per statistic; give a path")
+    teimorbit = args.format == "teimorbit" or Path(args.out).suffix.lower() == ".tpf"
+    if teimorbit and str(args.out) == "-":
+        raise InputError("option --out: teimorbit writes one file per statistic; give a path")
 
 
 def _model(args, saved: bool):
@@ -269,16 +263,6 @@ def _model(args, saved: bool):
     return model, rec, provenance
 
 
-def _date() -> str:
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    when = (
-        datetime.datetime.fromtimestamp(int(epoch), datetime.UTC)
-        if epoch and epoch.isdigit()
-        else datetime.datetime.now(datetime.UTC)
-    )
-    return when.strftime("%Y-%m-%d %H:%M UTC")
-
-
 def command_export(args) -> int:
     try:
         return _export(args)
@@ -291,7 +275,7 @@ def _export(args) -> int:
     from uq._cli.common import output_units
     from uq._derived import export
     from uq._io.files import emit_json
-    from uq._io.version import __version__
+    from uq._io.version import __version__, date_stamp
 
     _check_usage(args)
     fmt = _format(args)
@@ -305,20 +289,17 @@ def _export(args) -> int:
     if _refused_unconverged(args, model, saved):
         return 1
     units = output_units(rec, args.units)
-    heights = None if args.heights_mm is None else export.parse_heights_mm(args.heights_mm) * 1e-3
-    pressures = (
-        None if args.pressures_bar is None else export.parse_pressures_bar(args.pressures_bar)
-    )
+    heights = None if args.heights_mm is None else args.heights_mm * 1e-3
     provenance |= {
         "uq_version": __version__,
-        "date": _date(),
+        "date": date_stamp(),
         "between": f"{model.label}: {registry.entry(model.name).words}",
     }
     grid = export.export_grid(
         model,
         heights,
-        pressures,
-        quantiles=export.parse_quantiles(args.quantiles),
+        args.pressures_bar,
+        quantiles=args.quantiles,
         extrapolate=args.extrapolate,
         n_draws=args.draws,
         provenance=provenance,

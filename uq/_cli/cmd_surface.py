@@ -62,9 +62,8 @@ def command_surface(args) -> int:
 
     t0 = time.perf_counter()
     entry = registry.entry(args.model)
-    stand = stand_from(
-        args
-    )  # a bad --stand file or --walkers is refused before the recordings are read
+    # a bad --stand file or --walkers is refused before the recordings are read
+    stand = stand_from(args)
     settings = settings_from(args)
     settings.require_walkers(entry.n_sampled)
     if args.select and entry.select_orders is None:

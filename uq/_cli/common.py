@@ -273,7 +273,7 @@ def convergence_status(args, name: str, status: int) -> int:
     """The exit-status policy for fits that failed their convergence rules (one place for every
     command): a command that finished (``status`` 0) with such a fit exits 1 with one line on
     stderr saying so, or 0 with ``--allow-unconverged``; any other status stands."""
-    return _policy(
+    return exit_policy(
         misfit_status(args, name, status),
         getattr(args, "unconverged_fits", []),
         getattr(args, "allow_unconverged", False),
@@ -285,7 +285,7 @@ def convergence_status(args, name: str, status: int) -> int:
     )
 
 
-def _policy(status: int, failed: list, allowed: bool, accepted: str, refused: str) -> int:
+def exit_policy(status: int, failed: list, allowed: bool, accepted: str, refused: str) -> int:
     """An exit-status policy: a command that finished (``status`` 0) with ``failed`` (in words)
     exits 0 with ``accepted`` on stderr when ``allowed``, else 1 with ``refused`` (each with the
     failures at its ``{}``); any other status stands."""
@@ -316,22 +316,13 @@ def load(args, min_points: int = 6, needs=None):
     command's entry of uq._data.recordings.COMMAND_NEEDS, the one table to edit when a command
     learns to use force-only campaigns or campaigns in unknown order.
     """
-    from uq._data.recordings import COMMAND_NEEDS, read_recordings, require
+    from uq._data.recordings import COMMAND_NEEDS, READING_OPTIONS, read_recordings, require
 
     rec = read_recordings(
         args.file,
-        piston_area_cm2=args.piston_area_cm2,
-        x0_mm=args.x0_mm,
         min_points=min_points,
-        compression=getattr(args, "compression", "positive"),
-        sheet=getattr(args, "sheet", None),
-        absolute_pressure=getattr(args, "absolute_pressure", False),
-        p_atm_bar=getattr(args, "p_atm_bar", DEFAULT_P_ATM_BAR),
-        pressure_tolerance_bar=getattr(args, "pressure_tolerance_bar", None),
-        columns=getattr(args, "columns", None),
-        units_row=getattr(args, "units_row", "auto"),
-        header_row=getattr(args, "header_row", None),
         on_note=_note,  # what the reader decided by itself (a units row, a title), said at once
+        **{k: getattr(args, k) for k in READING_OPTIONS if hasattr(args, k)},
     )
     require(rec, COMMAND_NEEDS.get(getattr(args, "_name", ""), ()) if needs is None else needs)
     check_memory(args, rec)
@@ -478,7 +469,7 @@ def stand_from(args, model: bool = True):
 def misfit_status(args, name: str, status: int) -> int:
     """The exit-status policy for an answer whose model missed its readings (``record_misfit``):
     exit 1 with one line on stderr, or 0 with ``--allow-misfit``; any other status stands."""
-    return _policy(
+    return exit_policy(
         status,
         getattr(args, "misfits", []),
         getattr(args, "allow_misfit", False),

@@ -159,14 +159,8 @@ PARAM_OPTIONS = {
     "model": "--model",
 }
 
-EXIT_OK, EXIT_DISAGREE, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = (
-    0,
-    1,
-    2,
-    3,
-    130,
-    141,
-)
+#: exit statuses 0 (done) and 1 (disagreement, unconverged) are the commands' own (module docstring)
+EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 2, 3, 130, 141
 
 EPILOG = (
     "exit status: 0 done, 1 check disagrees or a fit did not converge (unless --allow-unconverged), "

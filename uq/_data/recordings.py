@@ -56,6 +56,20 @@ COMPRESSION_CONVENTIONS = ("positive", "negative")
 DEFAULT_PISTON_AREA_CM2 = 54.82
 DEFAULT_X0_MM = 112.0
 DEFAULT_P_ATM_BAR = 1.01325
+#: the options of :func:`read_recordings` that say how a file is read (the commands' reading
+#: options, the batch catalogue's)
+READING_OPTIONS = (
+    "piston_area_cm2",
+    "x0_mm",
+    "compression",
+    "sheet",
+    "absolute_pressure",
+    "p_atm_bar",
+    "pressure_tolerance_bar",
+    "columns",
+    "units_row",
+    "header_row",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -258,8 +272,7 @@ def check_stand_options(piston_area_cm2: float, x0_mm: float) -> None:
         )
     if not (math.isfinite(x0_mm) and 1.0 <= x0_mm <= 5000.0):
         raise InputError(
-            f"x0_mm: expected a reference height in mm (1..5000), got {x0_mm}",
-            param="x0_mm",
+            f"x0_mm: expected a reference height in mm (1..5000), got {x0_mm}", param="x0_mm"
         )
 
 
@@ -269,8 +282,7 @@ def check_reading_options(
     """Validate the reading conventions given as options (names the parameter on failure; the CLI its option)."""
     if compression not in COMPRESSION_CONVENTIONS:
         raise InputError(
-            f"compression: expected positive or negative, got {compression!r}",
-            param="compression",
+            f"compression: expected positive or negative, got {compression!r}", param="compression"
         )
     if not (math.isfinite(p_atm_bar) and 0.3 <= p_atm_bar <= 1.2):
         raise InputError(
@@ -527,15 +539,10 @@ def _ignore(note: str) -> None:
 
 
 def _outlier_columns(t: PressureTest, cols: dict[str, Column]) -> list:
-    force = cols["force"]
-    out = [(force.name, t.force_N, 1.0 / force.factor, force.unit)]
-    if t.piston_m is not None:
-        c = cols["piston"]
-        out.append((c.name, t.piston_m, 1.0 / c.factor, c.unit))
-    if t.volume_m3 is not None:
-        c = cols["volume"]
-        out.append((c.name, t.volume_m3, 1.0 / c.factor, c.unit))
-    return out
+    readings = (("force", t.force_N), ("piston", t.piston_m), ("volume", t.volume_m3))
+    return [
+        (cols[q].name, v, 1.0 / cols[q].factor, cols[q].unit) for q, v in readings if v is not None
+    ]
 
 
 def _make_test(

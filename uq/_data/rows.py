@@ -252,10 +252,7 @@ def _workbook_rows(
 
 def _decode(path: str, raw: bytes) -> str:
     """The file's text: UTF-8 with or without BOM (Excel's "CSV UTF-8"), or UTF-16 with BOM."""
-    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
-        encoding = "utf-16"
-    else:
-        encoding = "utf-8-sig"
+    encoding = "utf-16" if raw.startswith((b"\xff\xfe", b"\xfe\xff")) else "utf-8-sig"
     try:
         return raw.decode(encoding)
     except UnicodeDecodeError as exc:
@@ -279,12 +276,7 @@ def leading_comments(lines) -> list[str]:
 
 
 def table_from_text(
-    text: str,
-    name: str,
-    is_column,
-    *,
-    header_row: int | None = None,
-    units_row: str = "auto",
+    text: str, name: str, is_column, *, header_row: int | None = None, units_row: str = "auto"
 ) -> Table:
     """The rows of CSV text; ``name`` stands for the file in messages."""
     check_shape_options(header_row, units_row)

@@ -371,7 +371,6 @@ def bands_from_coefficients(
     feff_ref = None if ref is None else -S * _slope(piston[ref], u)
     sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
     feff_sel = np.empty((sel.size, force.shape[1], x.size))
-    a = (1.0 - level) / 2.0
     tests = []
     for t in range(T):
         q = _curve_quantities(
@@ -393,7 +392,7 @@ def bands_from_coefficients(
             for n in q
             if (n not in OWN_VOLUME or has_vol[t]) and (n not in REF_VOLUME or ref is not None)
         ]
-        B = {n: Band(q[n].mean(axis=0), *np.quantile(q[n], [a, 1.0 - a], axis=0)) for n in present}
+        B = {n: Band.of(q[n], level) for n in present}
         sim = {n: SimultaneousBand.of(q[n], level) for n in SIMULTANEOUS if n in present}
         at0 = _at_x0(
             p_bar[t],

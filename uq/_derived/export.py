@@ -579,36 +579,18 @@ def teimorbit_files(grid: ExportGrid, units: OutputUnits) -> list[tuple[str, str
     pressure (Altair MotionView, "TeimOrbit File for AirSpring"). With a sealed spring the files
     are the closed spring's curve instead (``sealed_<stat>``), its Z_DATA the charge pressure at
     the design height."""
-    out = []
-    stats = grid.stats("force")
-    for stat in _stat_order(grid) if grid.sealed is None else ():
-        out.append(
-            (
-                stat,
-                _teimorbit_text(
-                    grid, units, grid.heights_m, grid.pressures_bar, stats[stat], stat, "isobaric"
-                ),
-            )
-        )
-    if grid.sealed is not None:
-        s = grid.sealed
-        for stat in _stat_order(grid):
-            values = s["force"][stat]
-            out.append(
-                (
-                    f"sealed_{stat}",
-                    _teimorbit_text(
-                        grid,
-                        units,
-                        s["heights_m"],
-                        np.array([s["charge_bar"]]),
-                        np.asarray(values)[:, None],
-                        stat,
-                        "sealed",
-                    ),
-                )
-            )
-    return out
+    s = grid.sealed
+    if s is None:
+        force, kind = grid.stats("force"), "isobaric"
+        heights, pressures, prefix = grid.heights_m, grid.pressures_bar, ""
+    else:
+        force = {stat: np.asarray(v)[:, None] for stat, v in s["force"].items()}
+        heights, pressures, prefix = s["heights_m"], np.array([s["charge_bar"]]), "sealed_"
+        kind = "sealed"
+    return [
+        (prefix + stat, _teimorbit_text(grid, units, heights, pressures, force[stat], stat, kind))
+        for stat in _stat_order(grid)
+    ]
 
 
 def _teimorbit_text(grid, units, heights_m, pressures_bar, forces_N, stat: str, kind: str) -> str:
@@ -785,9 +767,7 @@ def write(
         if grid.sealed is not None:
             header, rows = sealed_rows(grid, units)
             sheets.insert(-1, ("sealed", [header, *rows]))
-        stamp = None
-        if when:
-            stamp = datetime.datetime.strptime(str(when), "%Y-%m-%d %H:%M UTC")
+        stamp = datetime.datetime.strptime(str(when), "%Y-%m-%d %H:%M UTC") if when else None
         return [write_bytes_atomic(out, xlsx_bytes(sheets, when=stamp))]
     if fmt == "json":
         return [write_text_atomic(out, dumps_json(json_document(grid)))]

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.stats import chi2
@@ -77,6 +77,12 @@ NOISE_FLAG = 2.0
 
 
 # ----------------------------------------------------------------------------- fitting
+
+
+def shorter_sampling(settings: Settings) -> Settings:
+    """The sampling of ``uq diagnose`` (and the batch's diagnose task): ``settings`` in chunks of
+    200 steps, at least min(300, max_steps) of them."""
+    return replace(settings, chunk=200, min_steps=min(300, settings.max_steps))
 
 
 class Fit:
@@ -524,7 +530,7 @@ def _potential_reading(maxwell: dict | None) -> dict:
     it assumes; and where the thermodynamic model reads it from every test at once."""
     out = {
         "command": "uq surface FILE --model thermodynamic (implied_piston_area_m2): one potential "
-        "fitted to every test reads S from all of them at once",
+        "fitted to every test reads S from all of them at once"
     }
     middle = (maxwell or {}).get("interpretation", {}).get("middle", {})
     if "piston_area_m2" in middle:

@@ -96,15 +96,7 @@ def ratio_draws(p_bar, force, piston, area_m2: float, x0_m: float, heights_m) ->
     return out
 
 
-def table(
-    p_bar,
-    force,
-    piston,
-    area_m2: float,
-    x0_m: float,
-    height_range_m,
-    n_bands=N_BANDS,
-):
+def table(p_bar, force, piston, area_m2: float, x0_m: float, height_range_m, n_bands=N_BANDS):
     """The Maxwell residual r by test and height band: mean, sd, q05, q95 and whether the band
     breaks the relation (|mean| > Z_FLAG sd), and what the pattern over pressure is and is not
     consistent with (:func:`interpret`, on the joint draws). Returns {"rows": [...], "rule": ...,

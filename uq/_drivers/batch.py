@@ -27,7 +27,6 @@ duplicate name is one line naming the catalogue and the row (exit 2).
 from __future__ import annotations
 
 import csv
-import dataclasses
 import hashlib
 import io
 import json
@@ -41,10 +40,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
-from uq._data.recordings import read_recordings, require_for
+from uq._data.recordings import READING_OPTIONS, read_recordings, require_for
 from uq._data.stand_description import stand_or_paper
 from uq._derived.bands import campaign_bands
-from uq._diagnose.engine import diagnose
+from uq._diagnose.engine import diagnose, shorter_sampling
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError, where
 from uq._io.files import dumps_json, emit_json, write_text_atomic
@@ -91,9 +90,8 @@ SUMMARY_COLUMNS = (
     "error",
     "file",
 )
-_NAME = re.compile(
-    r"[A-Za-z0-9][A-Za-z0-9._-]*\Z"
-)  # becomes a folder name: no separators, no dot-files
+# becomes a folder name: no separators, no dot-files
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\Z")
 
 
 # ----------------------------------------------------------------------------- catalogue
@@ -329,9 +327,8 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
     }
     t0 = time.perf_counter()
     try:
-        (out / STAMP).unlink(
-            missing_ok=True
-        )  # stale stamp of other inputs: gone before new outputs appear
+        # stale stamp of other inputs: gone before new outputs appear
+        (out / STAMP).unlink(missing_ok=True)
         out.mkdir(parents=True, exist_ok=True)
         if isinstance(fitted, BaseException):
             raise fitted
@@ -360,20 +357,6 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
 
 
 # ----------------------------------------------------------------------------- tasks
-
-
-READING_OPTIONS = (
-    "piston_area_cm2",
-    "x0_mm",
-    "compression",
-    "sheet",
-    "absolute_pressure",
-    "p_atm_bar",
-    "pressure_tolerance_bar",
-    "columns",
-    "units_row",
-    "header_row",
-)
 
 
 def _recordings(job: dict):
@@ -457,9 +440,7 @@ def _task_surface(job: dict, out: Path) -> dict:
 
 
 def _task_diagnose(job: dict, out: Path) -> dict:
-    # the same shorter sampling as `uq diagnose` (its command_diagnose)
-    s = _settings(job)
-    settings = dataclasses.replace(s, chunk=200, min_steps=min(300, s.max_steps))
+    settings = shorter_sampling(_settings(job))  # as `uq diagnose`
     res = diagnose(_recordings(job), seed=_seed(job), settings=settings, stand=_stand(job))
     emit_json(res.to_json(), str(out / "diagnose.json"))
     page = write_diagnose_report(res, out)

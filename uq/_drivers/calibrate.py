@@ -209,16 +209,14 @@ def calibrate(
     """``reps`` replications of one setting; ``stand`` is the virtual stand of the n50 truth;
     ``pressure`` "recorded" records each reading's pressure (n50 truth) and fits with it as a
     covariate; ``ar1`` "on" fits AR(1) pressure-holding errors (module docstring)."""
-    if truth not in ("prior", "n50"):
-        raise InputError(f"truth: expected 'prior' or 'n50', got '{truth}'", param="truth")
-    if noise not in ("budget", "constant"):
-        raise InputError(f"noise: expected 'budget' or 'constant', got '{noise}'", param="noise")
-    if pressure not in ("set", "recorded"):
-        raise InputError(
-            f"pressure: expected 'set' or 'recorded', got '{pressure}'", param="pressure"
-        )
-    if ar1 not in ("off", "on"):
-        raise InputError(f"ar1: expected 'off' or 'on', got '{ar1}'", param="ar1")
+    for name, value, (a, b) in (
+        ("truth", truth, ("prior", "n50")),
+        ("noise", noise, ("budget", "constant")),
+        ("pressure", pressure, ("set", "recorded")),
+        ("ar1", ar1, ("off", "on")),
+    ):
+        if value not in (a, b):
+            raise InputError(f"{name}: expected '{a}' or '{b}', got '{value}'", param=name)
     if truth == "prior" and (pressure != "set" or ar1 != "off"):
         raise InputError(
             "`pressure`/`ar1`: the prior truth draws its data from the plain model; use them "

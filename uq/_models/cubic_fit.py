@@ -324,10 +324,7 @@ def fit_campaigns(
 def with_order_check(fit: PressureFit) -> PressureFit:
     """The fit with its recording-order check (uq._models.residual_order), or the reason it is
     skipped for a test in unknown order."""
-    if fit.test.step is None:
-        check = {"skipped": ORDER_UNKNOWN}
-    else:
-        check = order_check(fit)
+    check = {"skipped": ORDER_UNKNOWN} if fit.test.step is None else order_check(fit)
     return dataclasses.replace(fit, order_check=check | {"alpha": ORDER_ALPHA})
 
 

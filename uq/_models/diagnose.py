@@ -46,11 +46,7 @@ from uq._data.recordings import Recordings
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import (
-    draw_exact,
-    gaussian_loglik,
-    posterior_from_moments,
-)
+from uq._inference.linear import draw_exact, gaussian_loglik, posterior_from_moments
 from uq._physics.mechanisms import MECHANISMS, DesignContext, LinearTerm, ScaleTerm
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 

@@ -66,20 +66,13 @@ from uq._inference.sampler import Settings, min_walkers_for_independence
 from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
-from uq._models.discrepancy_fit import (
-    BLOCK_INFO,
-    BLOCKS,
-    FORCE_BLOCKS,
-    DiscrepancyFit,
-    p_ref_pa,
-)
+from uq._models.discrepancy_fit import BLOCK_INFO, BLOCKS, FORCE_BLOCKS, DiscrepancyFit, p_ref_pa
 from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, NOISE_PRIOR_SD
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 #: sampled: the force blocks' joint amplitude r = sqrt(a_F^2 + a_P^2) and phi's share
 #: u = logit(2 atan2(a_P, a_F) / pi) (``force_amplitudes``), eps's amplitude, the length scale
 GP_NAMES = ("log_a_force_m2", "logit_phi_share", "log_a_V_m2", "log_length_bar")
-GP_NATURAL = ("a_F_m2", "a_V_m2", "a_P_m2", "length_bar")
 THETA_NAMES = NOISE_NAMES + GP_NAMES
 FORCE_THETA_NAMES = surface_force.THETA_NAMES + tuple(GP_NAMES[i] for i in (0, 1, 3))
 #: relative residual up to which the per-test span Z_i must reproduce the surface's design rows

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import estimate, thin_rows
 from uq._models import discrepancy_gp as gp
 from uq._models.linear_fit import BlockSpec
@@ -296,13 +295,10 @@ class DiscrepancyFit(SurfaceFit):
         return base + self._p_pa(height_m, p_bar) * d["eps"] - self.p_ref_pa * d["phi"]
 
     # ---- the JSON document
-    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
         """The surface's document (``uq surface --json``) with the discrepancy: its kernel, priors,
         sampled amplitudes and length scale, and its deviation at x0 at and between the tested
         pressures."""
-        if self.document is not None:
-            return super().to_json(comparison, advice)
-        advice = CLI_ADVICE if advice is None else advice
         doc = surface_summary(self, comparison, advice)
         doc["label"] = self.label
         doc["discrepancy"] = discrepancy_summary(self)

@@ -361,7 +361,11 @@ class LinearFit:
         parameters and the sampler's verdict (a subclass adds its own quantities)."""
         if self.document is not None:
             return self.document | ({"comparison": comparison} if comparison else {})
-        advice = CLI_ADVICE if advice is None else advice
+        return self.fitted_document(comparison, CLI_ADVICE if advice is None else advice)
+
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
+        """:meth:`to_json` of a model fitted in this process (a loaded one keeps its document); a
+        subclass with quantities of its own gives its own."""
         plo, phi = self.pressure_range_bar
         return (
             self.json_head()

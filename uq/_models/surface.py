@@ -149,10 +149,7 @@ def tq_columns(t, q, kmax, lmax, integrate=False):
     q = np.asarray(q, float)[..., None, None]
     k = np.arange(kmax + 1)[:, None]
     lq = np.arange(lmax + 1)[None, :]
-    if integrate:
-        cols = t ** (k + 1) / (k + 1) * q**lq
-    else:
-        cols = t**k * q**lq
+    cols = t ** (k + 1) / (k + 1) * q**lq if integrate else t**k * q**lq
     cols = np.broadcast_to(cols, cols.shape)
     return cols.reshape(*cols.shape[:-2], -1)
 
@@ -316,9 +313,8 @@ class SurfaceFit(LinearFit):
 
     def volume_excess_draws(self, height_m, p_bar, *, check=True):
         """D(x, p_u) = -dV/dx - F_p draws, m^2 (0 in the traditional theory)."""
-        self.volume_area_draws(
-            self.x0_m, self.pressure_range_bar[0], check=False
-        )  # refuses force only
+        # refuses force only
+        self.volume_area_draws(self.x0_m, self.pressure_range_bar[0], check=False)
         return self.evaluate(lambda x, p: self._columns(x, p, d=1.0), height_m, p_bar, check=check)
 
     def spread_draws(self, height_m, p_bar, *, check=True):
@@ -344,11 +340,9 @@ class SurfaceFit(LinearFit):
             out[name] = self.band(fn, height_m, p_bar, level)
         return out
 
-    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
         """What ``uq surface --json`` writes (docs/formats.md)."""
-        if self.document is not None:
-            return super().to_json(comparison, advice)
-        return summary(self, comparison, CLI_ADVICE if advice is None else advice)
+        return summary(self, comparison, advice)
 
 
 def geometry_of(rec: Recordings) -> Geometry:

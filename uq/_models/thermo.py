@@ -240,11 +240,9 @@ class ThermoFit(LinearFit):
         a = np.asarray(self.reported["piston_area_m2"], float)
         return thin_rows(a.reshape(-1), self.max_draws)
 
-    def to_json(self, comparison: dict | None = None, advice: str | None = None) -> dict:
+    def fitted_document(self, comparison: dict | None, advice: str) -> dict:
         """What ``uq surface --model thermodynamic --json`` writes (docs/formats.md)."""
-        if self.document is not None:
-            return super().to_json(comparison, advice)
-        return summary(self, comparison, CLI_ADVICE if advice is None else advice)
+        return summary(self, comparison, advice)
 
 
 # ----------------------------------------------------------------------------- summary

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
-import datetime
 import multiprocessing
 import os
 import signal
@@ -25,13 +24,8 @@ from uq._data.reference import Reference, is_n50_reconstruction, paper_reference
 from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.errors import InputError
-from uq._io.files import (
-    remove_stale,
-    staged_folder,
-    write_bytes_atomic,
-    write_text_atomic,
-)
-from uq._io.version import __version__
+from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
+from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import (
@@ -231,40 +225,47 @@ def _residual_labels(fig, axes, ylabel: str) -> None:
     _residual_key(fig)
 
 
+def _curves_and_residuals(cb, pairs, curve, points, residuals, ylabel, rlabel, title, below, unit):
+    """Figures 2 and 3: one quantity's curves by pressure with the readings above; below, per test,
+    the readings and bands minus the posterior-mean curve. ``pairs``: (test fit, test bands);
+    ``curve(tb)``: (band, scale to the axis' unit); ``points(tf, tb)``: the readings in the band's
+    unit; ``residuals(tf, tb)``: :func:`_residual_panel`'s residuals, curve band, new reading's band
+    and scale."""
+    fig, ax, res = _with_residuals(len(pairs))
+    x = cb.x_m * MM
+    colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
+    widths = []
+    for i, ((tf, tb), c) in enumerate(zip(pairs, colours, strict=True)):
+        band, scale = curve(tb)
+        _fill(ax, x, band, scale, c, alpha=0.4)
+        ax.plot(tf.test.height_m * MM, points(tf, tb) * scale, ".", color=c, ms=3)
+        _residual_panel(res[i], x, tf.test.height_m * MM, *residuals(tf, tb), c, tb.pressure_bar)
+        widths.append(np.max(band.hi - band.lo) * scale)
+    _mark_x0(ax, cb.x0_m * MM)
+    ax.set(xlabel="height x (mm)", ylabel=ylabel)
+    ax.grid(alpha=0.3)
+    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
+    _residual_labels(fig, res, rlabel)
+    note = _band_note_after_layout(fig, ax, title, widths, 1e3, unit)
+    ax.set_title(title.format(f"{note}; below: {below}"), fontsize=9)
+    return fig
+
+
 def figure_force(cf, cb: CampaignBands):
     """Figure 2 (eq. 8): force curves by pressure, readings and bands; below, per test, readings
     and bands minus the posterior-mean curve (the bands are too narrow to see above)."""
-    fig, ax, res = _with_residuals(len(cb.tests))
-    x = cb.x_m * MM
-    colours, sm = _pressure_colours([t.pressure_bar for t in cb.tests])
-    for i, (tf, tb, c) in enumerate(zip(cf.tests, cb.tests, colours, strict=True)):
-        _fill(ax, x, tb.force, 1e-3, c, alpha=0.4)
-        ax.plot(tf.test.height_m * MM, tf.test.force_N * 1e-3, ".", color=c, ms=3)
-        r = tf.mean_residuals("force")
-        _residual_panel(
-            res[i],
-            x,
-            tf.test.height_m * MM,
-            r,
-            tb.force,
-            tb.force_pred,
-            1.0,
-            c,
-            tb.pressure_bar,
-        )
-    _mark_x0(ax, cb.x0_m * MM)
-    ax.set(xlabel="height x (mm)", ylabel="force P (kN)")
-    ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [t.pressure_bar for t in cb.tests])
-    _residual_labels(fig, res, "reading − mean (N)")
-    title = "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n{}"
-    note = _band_note_after_layout(
-        fig, ax, title, [np.max(t.force.hi - t.force.lo) * 1e-3 for t in cb.tests], 1e3, "N"
+    return _curves_and_residuals(
+        cb,
+        list(zip(cf.tests, cb.tests, strict=True)),
+        lambda tb: (tb.force, 1e-3),
+        lambda tf, tb: tf.test.force_N,
+        lambda tf, tb: (tf.mean_residuals("force"), tb.force, tb.force_pred, 1.0),
+        "force P (kN)",
+        "reading − mean (N)",
+        "Fig. 2: force characteristics (eq. 8): readings (points) and posterior-mean curves\n{}",
+        "readings and bands minus the mean curve",
+        "N",
     )
-    ax.set_title(
-        title.format(f"{note}; below: readings and bands minus the mean curve"), fontsize=9
-    )
-    return fig
 
 
 def _dV_points(tf, tb, S):
@@ -277,43 +278,25 @@ def figure_volume(cf, cb: CampaignBands):
     """Figure 3 (eq. 10): volume increments by pressure; below, per test, the piston readings and
     bands minus the posterior-mean L(x), as volume S ΔL. Only the tests with a volume curve
     (force-only tests have none)."""
-    pairs = [(tf, tb) for tf, tb in zip(cf.tests, cb.tests, strict=True) if tb.has_volume]
-    fig, ax, res = _with_residuals(len(pairs))
-    x = cb.x_m * MM
     S = cb.piston_area_m2
-    colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
-    for i, ((tf, tb), c) in enumerate(zip(pairs, colours, strict=True)):
-        _fill(ax, x, tb.dV, 1e3, c, alpha=0.4)
-        ax.plot(tf.test.height_m * MM, _dV_points(tf, tb, S) * 1e3, ".", color=c, ms=3)
-        r = S * tf.mean_residuals("piston")
-        _residual_panel(
-            res[i],
-            x,
-            tf.test.height_m * MM,
-            r,
+    return _curves_and_residuals(
+        cb,
+        [(tf, tb) for tf, tb in zip(cf.tests, cb.tests, strict=True) if tb.has_volume],
+        lambda tb: (tb.dV, 1e3),
+        lambda tf, tb: _dV_points(tf, tb, S),
+        lambda tf, tb: (
+            S * tf.mean_residuals("piston"),
             _scaled(tb.piston, S),
             _scaled(tb.piston_pred, S),
             1e6,
-            c,
-            tb.pressure_bar,
-        )
-    _mark_x0(ax, cb.x0_m * MM)
-    ax.set(xlabel="height x (mm)", ylabel="volume increment ΔV (dm³ = litre)")
-    ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
-    _residual_labels(fig, res, "S (L − mean L) (cm³)")
-    title = (
+        ),
+        "volume increment ΔV (dm³ = litre)",
+        "S (L − mean L) (cm³)",
         "Fig. 3: volume increment ΔV = S [L(x) − L(x_max)] (eq. 10): readings and posterior-mean "
-        "curves\n{}"
+        "curves\n{}",
+        "piston readings and bands minus the mean L(x), times S",
+        "cm³",
     )
-    note = _band_note_after_layout(
-        fig, ax, title, [np.max(tb.dV.hi - tb.dV.lo) * 1e3 for _, tb in pairs], 1e3, "cm³"
-    )
-    ax.set_title(
-        title.format(f"{note}; below: piston readings and bands minus the mean L(x), times S"),
-        fontsize=9,
-    )
-    return fig
 
 
 def _scaled(b: Band, factor: float) -> Band:
@@ -442,13 +425,10 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     p_pa = tb.pressure_bar * BAR_PA
     piston_m = t.piston_m if piston_m is None else piston_m
 
-    def points(ax, y):
-        _readings(ax, h, y, comp)
-
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)
     _fill(ax, x, tb.force, 1e-3, "tab:green", alpha=0.5, label="mean curve, pointwise 90 % band")
-    points(ax, t.force_N * 1e-3)
+    _readings(ax, h, t.force_N * 1e-3, comp)
     ax.plot([], [], color="0.5", alpha=0.4, lw=6, label="pointwise 90 % predictive band")
     ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="force (eq. 8)")
     ax.legend(fontsize=7)
@@ -459,7 +439,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
         ax.fill_between(
             x, band.lo - tb.force.mean, band.hi - tb.force.mean, color=color, alpha=alpha, lw=0
         )
-    points(ax, t.force_N - fit_pts)
+    _readings(ax, h, t.force_N - fit_pts, comp)
     ax.axhline(0, color="k", lw=0.6)
     ax.set(
         xlabel="height x (mm)", ylabel="force − posterior-mean curve (N)", title="force residuals"
@@ -469,7 +449,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     if tb.has_volume:
         _fill(ax, x, tb.piston_pred, MM, "0.5", alpha=0.2, line=False)
         _fill(ax, x, tb.piston, MM, "tab:green", alpha=0.5)
-        points(ax, piston_m * MM)
+        _readings(ax, h, piston_m * MM, comp)
     else:
         _absent(ax, "no volume: force-only test\n(no piston_* or volume_* column)", x)
     ax.set(xlabel="height x (mm)", ylabel="piston coordinate L (mm)", title="piston (eq. 9)")
@@ -897,18 +877,11 @@ def provenance(rec, stand) -> dict:
     """The footer of a page: uq's version, the date (``SOURCE_DATE_EPOCH`` when set, for
     reproducible pages), the recordings' file and SHA-256 (taken when they were read), and the
     stand description used."""
-
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    when = (
-        datetime.datetime.fromtimestamp(int(epoch), datetime.UTC)
-        if epoch and epoch.isdigit()
-        else datetime.datetime.now(datetime.UTC)
-    )
     digest = getattr(rec, "sha256", None)
     changes = stand.changes()
     return {
         "version": __version__,
-        "date": when.strftime("%Y-%m-%d %H:%M UTC"),
+        "date": date_stamp(),
         "file": Path(rec.path).name,
         "sha256": digest,
         "stand": "the paper's stand (section 3.2: load cell 0.5 %, pressure held within 0.01 bar)"

@@ -32,9 +32,9 @@ from uq._physics.mechanisms import elastic_casing_compliance
 from uq._physics.quantities import BAR_PA
 from uq._physics.sealed import G_STANDARD
 from uq._stand.simulator import (
-    SPRINGS,
     Layout,
     casing_reference_area_m2,
+    make_spring,
     reading_errors,
     true_curves,
 )
@@ -42,16 +42,6 @@ from uq._stand.simulator import (
 #: effects a sealed truth can carry: each changes force and volume as functions of (x, p_u) alone
 SEALED_EFFECTS = ("elastic_casing", "casing_force", "force_offset", "pressure_dependent_area")
 RATE_STEP_M = 1.0e-5
-
-
-def make_spring(spring_name: str, piston_area_m2: float = PAPER_PISTON_AREA_M2):
-    """The stand's spring object by name (``uq._stand.simulator.SPRINGS``)."""
-    if spring_name not in SPRINGS:
-        raise InputError(
-            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
-            param="spring_name",
-        )
-    return SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
 
 
 def true_volume_m3(

@@ -22,7 +22,7 @@ from uq._data.recordings import recordings_from_text
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._data.writing import write_recordings_csv
 from uq._physics.quantities import BAR_PA
-from uq._stand.simulator import PAPER_PISTON_AREA_M2, SPRINGS, Layout, simulate, true_curves
+from uq._stand.simulator import PAPER_PISTON_AREA_M2, Layout, make_spring, simulate, true_curves
 
 #: The pressure sensor of ``--record-pressure`` is the stand's (``StandDescription.
 #: pressure_sensor_*``; the paper's resolves 1 Pa and is accurate to 0.1 %, section 3.2): a reading
@@ -84,9 +84,7 @@ def catalogue(
     V(x_max) is the stand's element volume (4.2 L for the paper's stand, assumed).
     """
 
-    spring = (
-        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
-    )
+    spring = make_spring(spring_name, piston_area_m2)
     physical = {k: v for k, v in effects.items() if k != "thermal_drift"}
     out = []
     for t in tests:

@@ -73,11 +73,7 @@ from uq._data.reference import (
 )
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._io.errors import InputError
-from uq._physics.mechanisms import (
-    StandCurves,
-    apply_effects,
-    elastic_casing_slope,
-)
+from uq._physics.mechanisms import StandCurves, apply_effects, elastic_casing_slope
 from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 # The paper's stand (section 3.2); a different stand is a StandDescription (``--stand FILE``).
@@ -113,6 +109,12 @@ class N50Spring:
             )
         return self._force(p_bar), self._piston(p_bar)
 
+    def _a_L(self, p_bar: float) -> float:
+        """Table 1's a_L at ``p_bar``, held at its end values beyond the tested pressures (the
+        piston reference of the springs defined at every pressure)."""
+        lo, hi = self._p.min(), self._p.max()
+        return float(self._piston(min(max(p_bar, lo), hi))[0])
+
     def force_N(self, height_m, p_bar):
         return cubic(self._coef(p_bar)[0], np.asarray(height_m) - self.x0_m)
 
@@ -147,10 +149,6 @@ class TraditionalSpring(N50Spring):
         self._area = piston_area_m2
         self.pressure_range_bar = (0.01, 50.0)
 
-    def _a_L(self, p_bar: float) -> float:
-        lo, hi = self._p.min(), self._p.max()
-        return float(self._piston(min(max(p_bar, lo), hi))[0])
-
     def _check(self, p_bar: float) -> None:
         lo, hi = self.pressure_range_bar
         if not lo <= p_bar <= hi:
@@ -178,9 +176,8 @@ class TraditionalSpring(N50Spring):
 SPRINGS = {"n50": N50Spring, "n50-traditional": TraditionalSpring}
 
 
-MAX_STEPS_PER_BRANCH = (
-    10_000  # readings per branch: far beyond any stand (0.009 mm steps over 90 mm)
-)
+#: readings per branch: far beyond any stand (0.009 mm steps over 90 mm)
+MAX_STEPS_PER_BRANCH = 10_000
 MAX_TESTS = 1000
 
 
@@ -294,6 +291,16 @@ def ar1(e: np.ndarray, corr: float) -> np.ndarray:
     return out
 
 
+def make_spring(spring_name: str, piston_area_m2: float = PAPER_PISTON_AREA_M2):
+    """The stand's spring object by name (:data:`SPRINGS`); an unknown name is one line."""
+    if spring_name not in SPRINGS:
+        raise InputError(
+            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
+            param="spring_name",
+        )
+    return SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
+
+
 def simulate(
     spring_name: str = "n50",
     *,
@@ -308,15 +315,8 @@ def simulate(
     ``stand`` is the error budget and gas volume of the stand that makes the noise; it need not
     be the one a model assumes (that is how the tests check models against a different stand).
     """
-    if spring_name not in SPRINGS:
-        raise InputError(
-            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
-            param="spring_name",
-        )
+    spring = make_spring(spring_name, piston_area_m2)
     effects = dict(effects or {})
-    spring = (
-        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
-    )
     rng = np.random.default_rng(seed)
     heights, comp = layout.heights()
     return [
@@ -332,8 +332,7 @@ def _test(spring, effects, p, heights, comp, rng, stand, piston_area_m2) -> dict
     steps = np.arange(n)
     x_true = heights + reading_errors(rng, stand.displacement_sd_m, n, stand.error_df)
     dp_bar = ar1(
-        reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df),
-        stand.pressure_error_corr,
+        reading_errors(rng, stand.pressure_sd_bar(p), n, stand.error_df), stand.pressure_error_corr
     )
     e_load = reading_errors(rng, stand.load_cell_rel_sd, n, stand.error_df)
     e_cal = reading_errors(rng, stand.caliper_sd_m, n, stand.error_df)
@@ -367,14 +366,7 @@ def simulate_planned(
     """The virtual stand reading planned tests (the ``tests`` of ``uq plan --json``: dicts with
     pressure_bar, heights_mm in recording order and optional branches, compression when absent), with
     the same errors as :func:`simulate`; returns one dict of arrays per test, as :func:`simulate`."""
-    if spring_name not in SPRINGS:
-        raise InputError(
-            f"spring_name: unknown spring '{spring_name}'; expected one of {', '.join(SPRINGS)}",
-            param="spring_name",
-        )
-    spring = (
-        SPRINGS[spring_name]() if spring_name == "n50" else SPRINGS[spring_name](piston_area_m2)
-    )
+    spring = make_spring(spring_name, piston_area_m2)
     rng = np.random.default_rng(seed)
     return [
         _test(
@@ -749,10 +741,6 @@ class ThermoSpring(N50Spring):
         """The lever of a pressure-holding error on the force: dP/dp_u = V0' + p_u C', m^2."""
         self._check(p_bar)
         return self.volume_area_m2(height_m, p_bar)
-
-    def _a_L(self, p_bar: float) -> float:
-        lo, hi = self._p.min(), self._p.max()
-        return float(self._piston(min(max(p_bar, lo), hi))[0])
 
     def piston_m(self, height_m, p_bar):
         self._check(p_bar)

@@ -223,8 +223,21 @@ def answer(fit, name: str, target, sealed: SealedInputs | None) -> np.ndarray:
 
 
 def natural_frequency_draws(fit, target, sealed) -> np.ndarray:
-    """``uq design``'s natural frequency at the design point, per draw (its sealed path there)."""
-    design = SealedDesign(target.height_m, target.pressure_bar, sealed.volume_l)
+    """``uq design``'s natural frequency at the design point, per draw (its sealed path there),
+    with the target's own sealed inputs (the plan's and the truth's: ``sealed_inputs``), not
+    ``uq design``'s defaults (a dynamic polytropic range and a dV/dp_u sd from the recordings,
+    which the truth and the plan do not assume)."""
+    design = SealedDesign(
+        target.height_m,
+        target.pressure_bar,
+        sealed.volume_l,
+        volume_sd_l=sealed.volume_sd_l,
+        polytropic=sealed.polytropic,
+        reservoir_l=sealed.reservoir_l,
+        dvdp_l_per_bar=sealed.dvdp_l_per_bar,
+        p_atm_bar=sealed.p_atm_bar,
+        dvdp_sd_l_per_bar=0.0,  # exact, as the plan takes it
+    )
     grid = DesignGrid(fit.on_draws(1000), target.height_m)
     path, _ = sealed_draws(grid, design, target.pressure_bar, [target.height_m])
     return natural_frequency_Hz(path.rate_N_per_m[:, 0], path.force_N[:, 0])

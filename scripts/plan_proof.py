@@ -688,9 +688,13 @@ def markdown(doc: dict) -> str:
     u = doc.get("ratio_theta_updated")
     if u and u["n"]:
         lines.append(
-            f"- Achieved over the prediction with theta updated (the median over its simulated sets; "
-            f"the closed form in the {doc['intervals'] - u['n']} rows without it): mean "
-            f"{u['mean']:.2f}, range {u['min']:.2f}-{u['max']:.2f} (the same claims)."
+            "- Achieved over the prediction with theta updated (the median over its simulated sets"
+            + (
+                f"; the closed form in the {doc['intervals'] - u['n']} rows without it"
+                if u["n"] < doc["intervals"]
+                else ""
+            )
+            + f"): mean {u['mean']:.2f}, range {u['min']:.2f}-{u['max']:.2f} (the same claims)."
         )
     w = doc.get("without_misspecified")
     if w and w["intervals"] and w["intervals"] < doc["intervals"]:

@@ -279,3 +279,33 @@ def test_a_model_without_a_planning_frame_is_refused_in_one_line():
 
     with pytest.raises(InputError, match="no planning frame for the model 'rolling_lobe'"):
         frames_of(Outside())
+
+
+@pytest.mark.parametrize("median, said", [(2.0, True), (9.0, False)])
+def test_says_when_the_closed_form_is_far_from_the_theta_updated_median(capsys, median, said):
+    """A closed form 1.5 times the theta-updated median or more (or as far below) gets one line
+    saying so; close to it, nothing."""
+    from types import SimpleNamespace
+
+    from uq._cli.cmd_plan import _print_theta_updated
+    from uq._derived.plan_targets import parse_target
+
+    d = {"median": median, "p10": median / 2, "p90": median * 2, "mean": median}
+    d |= {
+        "ess_min": 5.0,
+        "ess_median": 20.0,
+        "small_ess_share": 0.0,
+        "draws": 400,
+        "held_out": True,
+    }
+    plan = SimpleNamespace(
+        theta_updates=200,
+        targets=[parse_target("force@110mm,6bar")],
+        sd_predicted=[10.0],
+        sd_after_theta_updated=[d],
+        sd_uniform_theta_updated=[None],
+    )
+    _print_theta_updated(plan)
+    out = capsys.readouterr().out
+    assert ("the closed form is 5 times the median with theta updated" in out) is said
+    assert "effective theta draws of 400 held out" in out

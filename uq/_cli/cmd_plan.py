@@ -443,6 +443,9 @@ def _print(rec, plan, info) -> None:
     )
 
 
+THETA_TEACHES = 1.5  # closed form over the theta-updated median beyond which the command says so
+
+
 def _print_theta_updated(plan) -> None:
     """The preposterior that also updates theta (uq._derived.plan_theta), next to the closed form."""
     if not plan.theta_updates:
@@ -465,6 +468,18 @@ def _print_theta_updated(plan) -> None:
                 f"{_fmt(d['p90'], t.unit)}), mean {_fmt(d['mean'], t.unit)}"
             )
         print(f"  {t.spec}: {parts[0]} | {parts[1]}")
+    for t, closed, d in zip(
+        plan.targets, plan.sd_predicted, plan.sd_after_theta_updated, strict=True
+    ):
+        if d is None or closed is None or not d["median"] > 0:
+            continue
+        r = closed / d["median"]
+        if not 1 / THETA_TEACHES < r < THETA_TEACHES:
+            print(
+                f"  note: for {t.spec} the closed form is {r:.2g} times the median with theta "
+                "updated: the planned readings will also teach theta, and the median is the "
+                "typical campaign's sd (docs/plan.md, What it cannot know)"
+            )
     d = next((x for x in plan.sd_after_theta_updated if x is not None), None)
     if d is not None:
         line = (

@@ -69,6 +69,10 @@ def no_fitting(monkeypatch):
             ["--target", "force@110mm,6bar", "--theta-updates", "many"],
             "--theta-updates: expected a whole number of simulated sets (0: off), got 'many'",
         ),
+        (
+            ["--target", "force@110mm,6bar", "--theta-pool", "0"],
+            "--theta-pool: expected a positive integer, got '0'",
+        ),
     ],
 )
 def test_refused_before_the_fit(pilot, no_fitting, capsys, extra, match):
@@ -106,6 +110,16 @@ def test_volume_targets_need_piston_readings(no_fitting, capsys):
     assert "no piston readings" in one_line(capsys.readouterr().err)
 
 
+def _from_a_fit(builder, n_used=6):
+    """A builder as ``of_fit`` makes it: ``n_used`` of its draws thinned, the rest its pool."""
+    from uq._derived.plan_frames import _thin
+
+    all_theta = builder.theta
+    builder._set_theta(_thin(all_theta, n_used))
+    builder.all_theta = all_theta
+    return builder
+
+
 @pytest.fixture(scope="module")
 def planned(pilot, tmp_path_factory):
     """One ``uq plan --json --template --plot`` run on frames of the pilot: (JSON, template, figure,
@@ -121,7 +135,7 @@ def planned(pilot, tmp_path_factory):
     paths = {k: out / f"plan.{k}" for k in ("json", "csv", "png")}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(cmd, "_fit", lambda args, *a: (read_recordings(args.file), {"name": "surface"}))
-        mp.setattr(pf, "frames_of", lambda rec, draws: surface_builder(rec, n_draws=6)[0])
+        mp.setattr(pf, "frames_of", lambda rec, draws: _from_a_fit(surface_builder(rec, 14)[0]))
         buf = io.StringIO()
         with contextlib.redirect_stdout(buf):
             status = run(
@@ -172,19 +186,21 @@ def test_summary_names_the_plan_and_what_it_leaves_out(planned):
     text = planned[3]
     assert "add " in text and "left out" in text and "paper's protocol" in text
     assert "with theta updated by the readings (200 simulated sets" in text
-    assert "effective theta draws of 6 (Kish" in text
+    assert "effective theta draws of 8 held out of those the sets come from (Kish" in text
 
 
 def test_json_states_the_prediction_with_theta_updated(planned):
     """Per target the distribution of the sd over the simulated sets, ordered, and the weights'
-    effective sample size (at most the draws, 6 here); the same for the uniform grid."""
+    effective sample size (at most the pool's draws, 8 here, held out of the 6 the sets come from);
+    the same for the uniform grid."""
     doc = planned[0]
     assert doc["theta_updates"]["sets"] == 200
     for t in doc["targets"]:
         for key in ("sd_after_theta_updated", "sd_uniform_grid_theta_updated"):
             d = t[key]
             assert 0 < d["p10"] <= d["median"] <= d["p90"] and d["mean"] > 0
-            assert 1.0 <= d["ess_min"] <= d["ess_median"] <= 6.0 + 1e-9
+            assert 1.0 <= d["ess_min"] <= d["ess_median"] <= 8.0 + 1e-9
+            assert d["draws"] == 8 and d["held_out"] is True
             assert 0.0 <= d["small_ess_share"] <= 1.0
 
 
@@ -263,3 +279,33 @@ def test_a_model_without_a_planning_frame_is_refused_in_one_line():
 
     with pytest.raises(InputError, match="no planning frame for the model 'rolling_lobe'"):
         frames_of(Outside())
+
+
+@pytest.mark.parametrize("median, said", [(2.0, True), (9.0, False)])
+def test_says_when_the_closed_form_is_far_from_the_theta_updated_median(capsys, median, said):
+    """A closed form 1.5 times the theta-updated median or more (or as far below) gets one line
+    saying so; close to it, nothing."""
+    from types import SimpleNamespace
+
+    from uq._cli.cmd_plan import _print_theta_updated
+    from uq._derived.plan_targets import parse_target
+
+    d = {"median": median, "p10": median / 2, "p90": median * 2, "mean": median}
+    d |= {
+        "ess_min": 5.0,
+        "ess_median": 20.0,
+        "small_ess_share": 0.0,
+        "draws": 400,
+        "held_out": True,
+    }
+    plan = SimpleNamespace(
+        theta_updates=200,
+        targets=[parse_target("force@110mm,6bar")],
+        sd_predicted=[10.0],
+        sd_after_theta_updated=[d],
+        sd_uniform_theta_updated=[None],
+    )
+    _print_theta_updated(plan)
+    out = capsys.readouterr().out
+    assert ("the closed form is 5 times the median with theta updated" in out) is said
+    assert "effective theta draws of 400 held out" in out

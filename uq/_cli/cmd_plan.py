@@ -143,7 +143,7 @@ def configure_plan(p) -> None:
         default=200,
         help="posterior draws of the noise parameters the prediction averages over (default 200)",
     )
-    from uq._derived.plan_theta import THETA_UPDATES
+    from uq._derived.plan_theta import THETA_POOL, THETA_UPDATES
 
     g.add_argument(
         "--theta-updates",
@@ -153,6 +153,15 @@ def configure_plan(p) -> None:
         help="also predict the sd with theta updated by the planned readings: M simulated sets of "
         "them, the pilot's draws of theta reweighted by each set's likelihood; the median, 10-90 %% "
         f"range and mean of the sd over the sets (default {THETA_UPDATES}; 0: off; docs/plan.md)",
+    )
+    g.add_argument(
+        "--theta-pool",
+        type=positive_int,
+        default=THETA_POOL,
+        metavar="N",
+        help="the pilot's draws of theta the simulated sets are reweighted over, held out of the "
+        f"--draws they are simulated from (default {THETA_POOL}; more give a finer answer where "
+        "the readings pin theta)",
     )
     o = p.add_argument_group("outputs")
     o.add_argument(
@@ -434,6 +443,9 @@ def _print(rec, plan, info) -> None:
     )
 
 
+THETA_TEACHES = 1.5  # closed form over the theta-updated median beyond which the command says so
+
+
 def _print_theta_updated(plan) -> None:
     """The preposterior that also updates theta (uq._derived.plan_theta), next to the closed form."""
     if not plan.theta_updates:
@@ -456,17 +468,30 @@ def _print_theta_updated(plan) -> None:
                 f"{_fmt(d['p90'], t.unit)}), mean {_fmt(d['mean'], t.unit)}"
             )
         print(f"  {t.spec}: {parts[0]} | {parts[1]}")
+    for t, closed, d in zip(
+        plan.targets, plan.sd_predicted, plan.sd_after_theta_updated, strict=True
+    ):
+        if d is None or closed is None or not d["median"] > 0:
+            continue
+        r = closed / d["median"]
+        if not 1 / THETA_TEACHES < r < THETA_TEACHES:
+            print(
+                f"  note: for {t.spec} the closed form is {r:.2g} times the median with theta "
+                "updated: the planned readings will also teach theta, and the median is the "
+                "typical campaign's sd (docs/plan.md, What it cannot know)"
+            )
     d = next((x for x in plan.sd_after_theta_updated if x is not None), None)
     if d is not None:
         line = (
-            f"  the weights keep {d['ess_median']:.0f} effective theta draws of {plan.n_draws} "
-            f"(Kish; median over the sets, least {d['ess_min']:.1f})"
+            f"  the weights keep {d['ess_median']:.0f} effective theta draws of {d['draws']} "
+            + ("held out of those the sets come from " if d["held_out"] else "")
+            + f"(Kish; median over the sets, least {d['ess_min']:.1f})"
         )
         if d["small_ess_share"] > 0:
             line += (
                 f"; in {100 * d['small_ess_share']:.0f} % of the sets fewer than {SMALL_ESS:g}: "
                 "the readings pin theta more finely than the draws resolve it, and the answer is "
-                "as coarse as the few draws left (more --draws)"
+                "as coarse as the few draws left (more --theta-pool)"
             )
         print(line)
 
@@ -610,6 +635,7 @@ def command_plan(args) -> int:
         target_sd=target_sd,
         cost_per_pressure=args.cost_per_pressure_readings,
         theta_updates=args.theta_updates,
+        theta_pool=args.theta_pool,
         seed=args.seed,
     )
     _print(rec, plan, info)

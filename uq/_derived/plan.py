@@ -27,7 +27,7 @@ from uq._derived.plan_search import (
     search,
     target_values,
 )
-from uq._derived.plan_theta import SMALL_ESS, theta_updated
+from uq._derived.plan_theta import SMALL_ESS, THETA_POOL, theta_updated
 from uq._io.errors import InputError
 
 # ----------------------------------------------------------------------------- layouts
@@ -274,10 +274,14 @@ def _now(builder, targets):
 def _layout(builder, targets, tests) -> tuple[list, np.ndarray, Frame]:
     """Readings of ``tests`` [(pressure_bar, heights)] in their own frame (the orders the combined
     campaign, laid out so, gets), and the variances."""
-    ps = np.array([p for p, _ in tests], float)
-    frame = builder.frame(ps, new_heights=[h for _, h in tests])
+    frame = _frame_of(builder, tests)
     readings = readings_at(frame, tests)
     return readings, evaluate(frame, targets, readings), frame
+
+
+def _frame_of(builder, tests) -> Frame:
+    """The frame of ``tests`` [(pressure_bar, heights)] added to the file (their own orders)."""
+    return builder.frame(np.array([p for p, _ in tests], float), new_heights=[h for _, h in tests])
 
 
 def paper_tests(tested_bar, heights_m=None):
@@ -364,7 +368,7 @@ def _uniform(builder, targets, n_readings, n_tests, cand, heights, need):
                     "sd": _sd(_layout(builder, targets, tl)[1]),
                 }
             )
-    return same, curve, notes, (readings, frame)
+    return same, curve, notes, (tests, readings, frame)
 
 
 def make_plan(
@@ -378,6 +382,7 @@ def make_plan(
     cost_per_pressure: float = COST_PER_PRESSURE,
     draws: int = SEARCH_DRAWS,
     theta_updates: int = 0,
+    theta_pool: int = THETA_POOL,
     seed: int = 0,
 ) -> Plan:
     """Plan with a model's frames (``uq._derived.plan_frames``): the readings at ``heights_m`` of new
@@ -393,7 +398,9 @@ def make_plan(
 
     ``theta_updates`` > 0: the chosen plan and the uniform grid of its size are also evaluated by
     the preposterior that updates theta (``uq._derived.plan_theta``) on that many simulated sets of
-    their readings, seeded by ``seed``; the search itself keeps the closed form."""
+    their readings, seeded by ``seed``, reweighting ``theta_pool`` of the pilot's draws held out of
+    the frames' (the frames' own when the builder has no others, or ``theta_pool`` is 0); the
+    search itself keeps the closed form."""
     targets = list(targets)
     cand = np.sort(np.asarray(candidates_bar, float))
     heights = np.asarray(heights_m, float)
@@ -446,13 +453,19 @@ def make_plan(
             "do not inform them (`candidates_bar`, `heights_m`)"
         )
     _, path, tests, readings, v, own, need, added = best
-    uniform, curve, added_uniform, (uni_readings, uni_frame) = _uniform(
+    uniform, curve, added_uniform, (uni_tests, uni_readings, uni_frame) = _uniform(
         builder, targets, len(readings), len(tests), cand, heights, need
     )
     upd = uni_upd = None
     if theta_updates:
-        upd = theta_updated(own, targets, readings, theta_updates, seed)
-        uni_upd = theta_updated(uni_frame, targets, uni_readings, theta_updates, seed + 1)
+        pool = builder.pool(theta_pool) if theta_pool else None
+
+        def updated(ts, rd, frame, s):
+            held = None if pool is None else _frame_of(pool, ts)
+            return theta_updated(frame, targets, rd, theta_updates, s, held)
+
+        upd = updated(tests, readings, own, seed)
+        uni_upd = updated(uni_tests, uni_readings, uni_frame, seed + 1)
     return Plan(
         model=builder.name,
         label=own.label,

@@ -57,11 +57,26 @@ STEP_X_M = 1.0e-5  # dV/dx = -S dL/dx by central differences of the (polynomial)
 REFERENCE_DRAWS = 400  # draws of the fit behind the error budget's references at new points
 
 
+def _thin_index(size: int, n: int) -> np.ndarray:
+    """Indices of ``size`` entries thinned evenly to at most ``n``."""
+    if size <= n:
+        return np.arange(size)
+    return np.linspace(0, size - 1, n).round().astype(int)
+
+
 def _thin(a: np.ndarray, n: int) -> np.ndarray:
     """The first axis thinned evenly to at most ``n`` entries."""
-    if a.shape[0] <= n:
-        return a
-    return a[np.linspace(0, a.shape[0] - 1, n).round().astype(int)]
+    return a[_thin_index(a.shape[0], n)]
+
+
+def held_out(all_theta: np.ndarray, n_used: int, n: int) -> np.ndarray:
+    """``n`` of a fit's draws ``all_theta`` (N, ...) thinned evenly from those that are not among the
+    ``n_used`` a frame builder took (:func:`_thin`): the reweighting pool of the preposterior that
+    updates theta (``uq._derived.plan_theta``), disjoint from the draws the planned readings are
+    simulated from."""
+    rest = np.ones(all_theta.shape[0], bool)
+    rest[_thin_index(all_theta.shape[0], n_used)] = False
+    return _thin(all_theta[rest], n)
 
 
 def _new_index(new_bar, tested_bar) -> None:
@@ -119,6 +134,7 @@ class PairFrames:
         self.theta = np.asarray(theta, float)
         self.orders_now, self.geometry_now = orders, geometry
         self.reference = reference
+        self.all_theta = None  # the fit's draws the frames' theta were thinned from (of_fit)
         self.model_class = model
         self.thermo = issubclass(model, ThermoFit)
         self.name = model.name
@@ -137,16 +153,19 @@ class PairFrames:
     def of_fit(cls, fit, draws: int = DRAWS):
         """The builder of a fit of this kind, on ``draws`` of its draws of theta."""
         th = np.asarray(fit.posterior.theta)
-        return cls(
+        th = th.reshape(-1, th.shape[-1])
+        out = cls(
             fit.recordings,
             fit.posterior.data,
-            _thin(th.reshape(-1, th.shape[-1]), draws),
+            _thin(th, draws),
             fit.stand,
             fit.orders,
             fit.geometry,
             fit_reference(fit),
             type(fit),
         )
+        out.all_theta = th
+        return out
 
     # ---- the model after the plan
     def model(self, after_bar, new_heights=None):
@@ -187,7 +206,16 @@ class PairFrames:
             raise ValueError(f"theta must be (S, {self.theta.shape[1]}), got {theta.shape}")
         out = copy.copy(self)
         out._set_theta(theta)
+        out.all_theta = None  # its draws are not the fit's thinned ones: no pool held out of them
         return out
+
+    def pool(self, n: int):
+        """The same builder on ``n`` of the fit's draws of theta that it does not use itself
+        (:func:`held_out`), or None when it was not built from a fit (:meth:`of_fit`) or the fit
+        has no other draws."""
+        if self.all_theta is None or self.all_theta.shape[0] <= self.theta.shape[0]:
+            return None
+        return self.with_theta(held_out(self.all_theta, self.theta.shape[0], n))
 
     def _set_theta(self, theta) -> None:
         self.theta = theta
@@ -490,6 +518,7 @@ class CubicFrames:
             + ([] if self.force_only else [np.full(4, cubic.PISTON_PRIOR_SD_M)])
         )
         self.x0_m = rec.x0_m
+        self._source = None  # (datas, each test's draws of theta, mean_coef) of the fit (of_fit)
         self.theta = thetas
         self.S = thetas[0].shape[0]
         self.mean_coef = np.asarray(mean_coef, float)[order]
@@ -517,12 +546,22 @@ class CubicFrames:
                 )
         th = [t.posterior.theta.reshape(-1, t.posterior.theta.shape[-1]) for t in cubic_fit.tests]
         n = min(draws, *(a.shape[0] for a in th))
-        return cls(
-            rec,
-            [t.posterior.data for t in cubic_fit.tests],
-            [_thin(a, n) for a in th],
-            np.stack([t.flat("force").mean(0) for t in cubic_fit.tests]),
-        )
+        datas = [t.posterior.data for t in cubic_fit.tests]
+        mean_coef = np.stack([t.flat("force").mean(0) for t in cubic_fit.tests])
+        out = cls(rec, datas, [_thin(a, n) for a in th], mean_coef)
+        out._source = (datas, th, mean_coef)
+        return out
+
+    def pool(self, n: int):
+        """The same builder on ``n`` draws of each test's theta that it does not use itself
+        (:func:`held_out`), or None when it was not built from a fit or a test has no other draws."""
+        if self._source is None:
+            return None
+        datas, th, mean_coef = self._source
+        n = min(n, *(a.shape[0] - self.S for a in th))
+        if n < 1:
+            return None
+        return type(self)(self.rec, datas, [held_out(a, self.S, n) for a in th], mean_coef)
 
     # ---- the pilot's mean force and its curvature in pressure
     def mean_force(self, x, p):

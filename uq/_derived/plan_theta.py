@@ -13,8 +13,9 @@ theta (numpy only):
    coefficients beta ~ N(m_s, A_s^-1) given theta_s and the pilot's readings (the frame's
    precision and mean), the readings y = X_s beta + noise with the noise at theta_s (y = C_s (Z_s beta
    + e), e ~ N(0, I); Z the frame's whitened rows, C their noise factor, ``Frame.reading_noise``);
-2. the weight of each draw t of the pilot's theta: the new readings' predictive density given
-   theta_t and the pilot's readings (the pilot's own likelihood is already in the draws),
+2. the weight of each draw t of a pool of the pilot's theta draws, held out of those the sets are
+   simulated from (``uq plan --theta-pool``): the new readings' predictive density given theta_t
+   and the pilot's readings (the pilot's own likelihood is already in the draws),
 
        log p(y | theta_t, pilot) = -1/2 [ |r|^2 - |L^-1 Z' r|^2 + log det B_t - log det A_t ]
                                    - sum log diag C_t  + const,
@@ -32,6 +33,14 @@ theta (numpy only):
 The weights' Kish effective sample size 1 / sum w^2 says how many of the pilot's draws carry a set's
 answer: when the new readings pin theta far inside the pilot's draws, few draws are left and the
 answer is as coarse as they are (it is reported, and flagged below ``SMALL_ESS``).
+
+Why the pool is held out: the true theta of a campaign is not one of the pilot's draws. Were the
+draw a set is simulated from among those reweighted, readings that pin theta would put the weight
+on that very draw, and the answer would be the posterior of a fit that knew theta exactly: too
+narrow by the spread over theta the real fit keeps (scripts/plan_proof.py measured the uniform
+grid's achieved sd at 1.5-1.7 times such a prediction for ``pressure_for`` between tested
+pressures). With a held-out pool the reweighting is an importance-sampling estimate of the
+posterior the fit will have, consistent as the pool grows.
 """
 
 from __future__ import annotations
@@ -43,6 +52,7 @@ import numpy as np
 from uq._derived.plan_search import Frame, opened
 
 THETA_UPDATES = 200  # simulated sets of the planned readings (uq plan --theta-updates)
+THETA_POOL = 400  # the pilot's draws of theta reweighted, held out of those the sets come from
 SET_CHUNK = 20  # simulated sets per block (memory: sets x draws x readings)
 SMALL_ESS = 10.0  # a set whose weights keep fewer effective draws is flagged
 QUANTILES = (0.1, 0.5, 0.9)
@@ -160,8 +170,9 @@ def mixture(parts: Parts, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     return var, mean, ess
 
 
-def summary(sd: np.ndarray, ess: np.ndarray) -> dict | None:
-    """One target's answer over the simulated sets (None where it is not finite)."""
+def summary(sd: np.ndarray, ess: np.ndarray, draws: int, held_out: bool) -> dict | None:
+    """One target's answer over the simulated sets (None where it is not finite), with the number
+    of theta draws reweighted and whether they are held out of those the sets come from."""
     if not np.all(np.isfinite(sd)):
         return None
     p10, p50, p90 = np.quantile(sd, QUANTILES)
@@ -173,16 +184,25 @@ def summary(sd: np.ndarray, ess: np.ndarray) -> dict | None:
         "ess_min": float(np.min(ess)),
         "ess_median": float(np.median(ess)),
         "small_ess_share": float(np.mean(ess < SMALL_ESS)),
+        "draws": int(draws),
+        "held_out": bool(held_out),
     }
 
 
-def theta_updated(frame: Frame, targets, readings, n_sets: int = THETA_UPDATES, seed: int = 0):
+def theta_updated(
+    frame: Frame, targets, readings, n_sets: int = THETA_UPDATES, seed: int = 0, pool=None
+):
     """Each target's posterior sd after the planned ``readings`` with theta updated by them, over
     ``n_sets`` simulated sets (module docstring): a list of :func:`summary` dicts (None for a
-    target the model cannot answer), deterministic for ``seed``."""
+    target the model cannot answer), deterministic for ``seed``. The sets are simulated from
+    ``frame``'s draws of theta and reweighted over ``pool``'s: the same frame on other draws of
+    the pilot's posterior (``uq._derived.plan_frames``' ``pool``); None reweights ``frame``'s
+    own draws, the simulating draw among them."""
     parts = frame_parts(frame, targets, readings)
     rng = np.random.default_rng(seed)
     y, _, _ = simulate(parts, n_sets, rng)
-    var, _, ess = mixture(parts, y)
+    weighed = parts if pool is None else frame_parts(pool, targets, readings)
+    var, _, ess = mixture(weighed, y)
     sd = np.sqrt(np.maximum(var, 0.0))
-    return [summary(sd[:, i], ess) for i in range(sd.shape[1])]
+    S = weighed.Z.shape[0]
+    return [summary(sd[:, i], ess, S, pool is not None) for i in range(sd.shape[1])]

@@ -5,7 +5,7 @@ Model of one test at overpressure p_u, u = x - x0 (m), t = u / h with h = 0.05 m
     force_k  ~ N(sum_j alpha_j t_k^j,  sigma0^2 + (r * |Phat_k|)^2)     (eq. 8)
     piston_k ~ N(sum_j gamma_j t_k^j,  sigma_L^2)                        (eq. 9)
 
-Phat_k is the least-squares force at point k (optimistix Levenberg-Marquardt), so the load
+Phat_k is the least-squares force at point k (a direct linear least-squares solve), so the load
 cell's relative error r and the floor sigma0 (pressure holding, displacement, relaxation)
 make the force noise grow with the force, as the stand's error budget does.
 
@@ -32,7 +32,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-import optimistix as optx
 
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES, PAPER_PISTON_AREA_M2, PISTON_NAMES
@@ -65,35 +64,19 @@ def basis(u_m, scale: float = BASIS_SCALE_M, degree: int = 3):
     return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
 
 
-def _scaled_residuals(alpha, args):
-    X, y, y_scale = args
-    return (X @ alpha - y) / y_scale  # of order one, so the solver's tolerances mean something
-
-
-@jax.jit
-def _lm(X, y):
-    y_scale = jnp.maximum(jnp.max(jnp.abs(y)), 1e-300)
-    solver = optx.LevenbergMarquardt(rtol=1e-13, atol=1e-13)
-    sol = optx.least_squares(
-        _scaled_residuals,
-        solver,
-        jnp.zeros(X.shape[1]),
-        args=(X, y, y_scale),
-        max_steps=200,
-        throw=False,
-    )
-    return sol.value, sol.result
-
-
 def least_squares(u_m, y) -> np.ndarray:
-    """Ordinary least-squares cubic (the paper's regression), via optimistix Levenberg-Marquardt.
+    """Ordinary least-squares cubic (the paper's regression): a linear problem, solved directly
+    (numpy's SVD-based ``lstsq`` on the scaled basis [1, t, t^2, t^3], t = u / 0.05 m, whose columns
+    are of order one, so the solve is well conditioned).
 
     Returns the paper-basis coefficients (4,).
     """
-    value, result = _lm(basis(u_m), jnp.asarray(y, dtype=float))
-    if result != optx.RESULTS.successful:
-        raise RuntimeError(f"least-squares cubic did not converge: {optx.RESULTS[result]}")
-    return to_paper_basis(np.asarray(value))
+    t = np.asarray(u_m, float) / BASIS_SCALE_M
+    X = t[:, None] ** np.arange(4)
+    value = np.linalg.lstsq(X, np.asarray(y, float), rcond=None)[0]
+    if not np.all(np.isfinite(value)):
+        raise RuntimeError("least-squares cubic: the readings give no finite solution")
+    return to_paper_basis(value)
 
 
 # ----------------------------------------------------------------------------- the model

@@ -142,6 +142,40 @@ def test_grouped_de_with_one_group_is_emcees_de_move():
     np.testing.assert_array_equal(f1, f2)
 
 
+def test_vectorised_accept_step_and_log_prob_are_emcees_to_the_bit():
+    """``_Grouped.propose`` (one vectorised accept test) and ``_Sampler.compute_log_prob`` (one
+    array, no per-walker scalars) give emcee's own propose loop's chains, log-probabilities and
+    acceptances to the bit, for every move of the mixture, with walkers whose proposals are -inf."""
+    from uq._inference.sampler import _moves, _Sampler
+
+    W, G, D = 16, 3, 3
+    prec = np.linalg.inv(np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.3], [0.0, 0.3, 0.5]]))
+
+    def log_prob(x):
+        lp = -0.5 * np.einsum("ni,ij,nj->n", x, prec, x)
+        return np.where(x[:, 0] > 2.0, -np.inf, lp)  # a wall: some proposals are rejected outright
+
+    def run(sampler_class, moves):
+        sampler = sampler_class(G * W, D, log_prob, vectorize=True, moves=moves)
+        sampler.random_state = np.random.RandomState(7).get_state()
+        p0 = np.random.default_rng(3).normal(size=(G * W, D)) * 0.3
+        sampler.run_mcmc(p0, 150, progress=False)
+        return sampler.get_chain(), sampler.get_log_prob(), sampler.acceptance_fraction
+
+    ours = _moves(W, (0.3, 0.2, 0.5))
+
+    class EmceeLoop:  # the same proposals through emcee's own RedBlueMove.propose
+        def __init__(self, move):
+            self.move = move
+
+        def propose(self, model, state):
+            return emcee.moves.RedBlueMove.propose(self.move, model, state)
+
+    theirs = [(EmceeLoop(m), w) for m, w in ours]
+    for a, b in zip(run(_Sampler, ours), run(emcee.EnsembleSampler, theirs), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_grouped_moves_never_mix_groups():
     """Proposals for a walker use its own group only: groups parked far apart stay apart."""
     from uq._inference.sampler import _GroupedDE, _GroupedIndependence, _GroupedSnooker

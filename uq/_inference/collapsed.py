@@ -48,6 +48,7 @@ import numpy as np
 import optimistix as optx
 
 from uq._inference.convergence import Convergence, convergence
+from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import map_rows, row_keys
 from uq._inference.sampler import INDEPENDENCE_MIX, Chains, Settings, run_many, thin
@@ -103,7 +104,7 @@ class CollapsedModel(NamedTuple):
 # ----------------------------------------------------------------------------- jitted kernels
 
 
-@functools.partial(jax.jit, static_argnums=0)
+@persistent_jit(static_argnums=(0,))
 def _log_prob_problems(fn, thetas, data):
     """thetas (K, W, D), data with a leading K axis -> (K, W)."""
     return jax.vmap(lambda ths, d: jax.vmap(lambda th: _finite(fn(th, d)))(ths))(thetas, data)
@@ -136,7 +137,7 @@ MAP_MAX_STEPS = 1000
 MAP_DECREMENT = 1e-3
 
 
-@functools.partial(jax.jit, static_argnums=0)
+@persistent_jit(static_argnums=(0,))
 def _bfgs(fn, x0, active, data):
     solver = optx.BFGS(rtol=MAP_RTOL, atol=MAP_ATOL)
     objective = _objective(fn)

@@ -15,11 +15,11 @@ All functions are pure and jittable; shapes in the docstrings.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import numpy as np
 
+from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
 
 LOG_2PI = 1.8378770664093453
@@ -215,6 +215,6 @@ def map_rows(
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a])[:n], *parts)
 
 
-@functools.partial(jax.jit, static_argnames=("fn", "static", "batch_size"))
+@persistent_jit(static_argnums=(0, 1, 4))
 def _map_rows(fn, static, rows, args, batch_size):
     return jax.lax.map(lambda r: fn(*r, *static, *args), rows, batch_size=batch_size)

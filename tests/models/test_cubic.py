@@ -50,6 +50,26 @@ def test_least_squares_equals_polyfit_and_the_exact_solution():
     assert np.allclose(least_squares(u, t.piston_m), exact, rtol=1e-12, atol=0)
 
 
+@pytest.mark.parametrize("degree", [3, 5])
+def test_basis_of_concrete_heights_is_jaxs_to_the_bit(degree):
+    """basis() computes concrete heights in numpy: the very matrix JAX computes (eagerly, and
+    inside jit, where the heights are traced), so a fit's data and results do not move."""
+    import jax
+    import jax.numpy as jnp
+
+    def jaxs(u):
+        t = jnp.asarray(u) / 0.05
+        return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
+
+    rng = np.random.default_rng(4)
+    for u in (rng.uniform(-0.1, 0.1, 2000), rng.normal(size=500), np.linspace(-0.047, 0.043, 37)):
+        ours = np.asarray(basis(u, degree=degree))
+        np.testing.assert_array_equal(ours, np.asarray(jaxs(u)))
+        np.testing.assert_array_equal(ours, np.asarray(jax.jit(jaxs)(u)))
+        traced = jax.jit(lambda v: basis(v, degree=degree))(jnp.asarray(u))
+        np.testing.assert_array_equal(ours, np.asarray(traced))
+
+
 def test_collapsed_posterior_is_the_closed_form():
     """Given the noise, the coefficient posterior is the weighted least-squares Gaussian."""
     rng = np.random.default_rng(0)

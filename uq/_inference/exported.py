@@ -139,6 +139,12 @@ class _Persistent:
             return self.jitted(*args)
         return program(*leaves)
 
+    def _cache_size(self) -> int:
+        """The programs compiled in this process (``jax.jit``'s ``_cache_size``, summed over the
+        plain jitted function and the exported programs: what tests of "compiles once" count)."""
+        kept = [p for p in self.programs.values() if p is not False]
+        return self.jitted._cache_size() + sum(p._cache_size() for p in kept)
+
     def _program(self, statics, tree, leaves):
         """The exported program for these statics and shapes: read from disk, else exported and
         written; None where it cannot be kept (then the plain jitted function is used)."""

@@ -59,9 +59,33 @@ NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 
 
 def basis(u_m, scale: float = BASIS_SCALE_M, degree: int = 3):
-    """Design matrix [1, t, t^2, t^3], t = u/scale; (n, degree+1)."""
-    t = jnp.asarray(u_m) / scale
-    return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
+    """Design matrix [1, t, t^2, t^3], t = u/scale; (n, degree+1).
+
+    Concrete heights (numpy) are computed in numpy with XLA's own operations (it divides by a
+    constant as a product with the constant's reciprocal, and raises to an integer power by the
+    products of ``_power``), so the matrix is the one JAX computes, to the bit (tested), without
+    the half-dozen one-operation programs JAX would look up in its compilation cache for it in
+    every process; traced heights (inside a jitted function) in JAX."""
+    if isinstance(u_m, jax.core.Tracer):
+        t = jnp.asarray(u_m) / scale
+        return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
+    t = np.asarray(u_m, float) * (1.0 / scale)
+    return jnp.asarray(np.stack([_power(t, j) for j in range(degree + 1)], axis=-1))
+
+
+def _power(x: np.ndarray, n: int) -> np.ndarray:
+    """x**n for an integer n >= 0 by the products JAX's ``integer_pow`` makes (square and
+    multiply, in its order): numpy's ``x**3`` calls ``pow``, which can differ in the last bit."""
+    if n == 0:
+        return np.ones_like(x)
+    acc = None
+    while n > 0:
+        if n & 1:
+            acc = x if acc is None else acc * x
+        n >>= 1
+        if n > 0:
+            x = x * x
+    return acc
 
 
 def least_squares(u_m, y) -> np.ndarray:

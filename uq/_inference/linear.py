@@ -191,6 +191,18 @@ def row_keys(key, n: int) -> np.ndarray:
     return np.asarray(jax.random.split(key, bucket(n)))[: int(n)]
 
 
+def seed_row_keys(seed: int, which: int, n: int) -> np.ndarray:
+    """``row_keys(jax.random.split(jax.random.PRNGKey(seed))[which], n)``, the same keys, from one
+    kept program (``persistent_jit``) instead of the seven one-operation programs JAX looks up for
+    those calls in every process."""
+    return np.asarray(_seed_keys(np.asarray(seed, dtype=np.int64), which, bucket(n)))[: int(n)]
+
+
+@persistent_jit(static_argnums=(1, 2))
+def _seed_keys(seed, which, size):
+    return jax.random.split(jax.random.split(jax.random.PRNGKey(seed))[which], size)
+
+
 def map_rows(
     fn, rows, args=(), *, static=(), batch_size: int = DRAW_BATCH, chunk: int = DRAW_CHUNK
 ):

@@ -37,6 +37,7 @@ from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES, PAPER_PISTON_AREA_M2, PISTON_NAMES
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
+from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
 from uq._models.cubic_results import NOISE_NAMES, noise_reference
@@ -70,7 +71,8 @@ def basis(u_m, scale: float = BASIS_SCALE_M, degree: int = 3):
         t = jnp.asarray(u_m) / scale
         return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
     t = np.asarray(u_m, float) * (1.0 / scale)
-    return jnp.asarray(np.stack([_power(t, j) for j in range(degree + 1)], axis=-1))
+    # device_put, not jnp.asarray: the latter compiles a copy program for every new shape
+    return jax.device_put(np.stack([_power(t, j) for j in range(degree + 1)], axis=-1))
 
 
 def _power(x: np.ndarray, n: int) -> np.ndarray:
@@ -242,8 +244,15 @@ def start(d: CubicData) -> np.ndarray:
     )
 
 
+@persistent_jit()
+def _natural_noise_at_mean(theta, ref_force):
+    """:func:`natural_noise` at a test's mean force level: one kept program for ``report``
+    (``uq._inference.exported``), not the dozen one-operation ones of calling it eagerly."""
+    return natural_noise(theta, jnp.mean(ref_force))
+
+
 def report(theta, beta, d: CubicData) -> dict:
-    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
+    noise = np.exp(np.asarray(_natural_noise_at_mean(np.asarray(theta, float), d.ref_force)))
     if _floor(d) is not None:  # a printed volume: the sd of an L reading holds its rounding
         noise[:, 2] = np.hypot(float(d.piston_floor), noise[:, 2])
     force = to_paper_basis(beta[:, :4])
@@ -312,14 +321,9 @@ def prepare(
     lsq_f = least_squares(u, test.force_N)
     lsq_l = least_squares(u, piston)
     ref_force = noise_reference(lsq_f, u, noise)
-    fields = (
-        basis(u),
-        jnp.asarray(test.force_N),
-        jnp.asarray(piston),
-        jnp.asarray(ref_force),
-        jnp.asarray(noise_prior_mean(stand)),
-        jnp.ones(np.size(test.force_N)),
-    )
+    arrays = (test.force_N, piston, ref_force, noise_prior_mean(stand), np.ones(np.size(u)))
+    # device_put, not jnp.asarray: the latter compiles a copy program for every new shape
+    fields = (basis(u), *(jax.device_put(np.asarray(a, float)) for a in arrays))
     if source == "volume":
         data = VolumeData(*fields, jnp.asarray(piston_rounding_sd(test, piston_area_m2)))
     else:

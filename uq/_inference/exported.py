@@ -14,7 +14,7 @@ in the compilation cache as before.
 The file's name is a hash of everything the traced program depends on: the function and its
 static arguments (module-level functions by qualified name), the argument tree and every leaf's
 shape and dtype, the versions of Python, jax, jaxlib, optimistix, equinox and lineax, the JAX
-flags that change tracing, and the source of every module of the ``uq`` package (any change to
+flags that change tracing, and every file of the ``uq`` package, code and data (any change to
 uq's code makes new names, so a stale program is never loaded; stale files are never read again).
 Files are written atomically (``uq._io.files``), so a reader sees a whole program or none; one
 that cannot be read is exported again and overwritten. Nothing is kept when the compilation
@@ -74,7 +74,7 @@ def folder() -> Path | None:
 @functools.cache
 def environment_key() -> str:
     """A hash of what every traced program depends on besides its own arguments: versions,
-    flags, and the source of every module of the uq package."""
+    flags, and every file of the uq package (its code and its data)."""
     h = hashlib.sha256()
     h.update(sys.version.encode())
     for name in TRACED_PACKAGES:
@@ -85,8 +85,8 @@ def environment_key() -> str:
     for flag in TRACE_FLAGS:
         h.update(f"{flag}={getattr(jax.config, flag, None)!r};".encode())
     h.update(jax.default_backend().encode())
-    root = Path(__file__).resolve().parents[1]  # the uq package
-    for path in sorted(root.rglob("*.py")):
+    root = Path(__file__).resolve().parents[1]  # the uq package: its code and data files
+    for path in sorted(p for p in root.rglob("*") if p.is_file() and p.suffix != ".pyc"):
         h.update(str(path.relative_to(root)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()

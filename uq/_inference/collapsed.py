@@ -45,7 +45,6 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-import optimistix as optx
 
 from uq._inference.convergence import Convergence, convergence
 from uq._inference.exported import persistent_jit
@@ -139,6 +138,10 @@ MAP_DECREMENT = 1e-3
 
 @persistent_jit(static_argnums=(0,))
 def _bfgs(fn, x0, active, data):
+    # reason: only traced when the program is not kept (uq._inference.exported): a warm `uq fit`
+    # loads it and never imports optimistix, equinox and lineax (about 0.7 CPU s)
+    import optimistix as optx
+
     solver = optx.BFGS(rtol=MAP_RTOL, atol=MAP_ATOL)
     objective = _objective(fn)
     args = (active, data)

@@ -40,8 +40,10 @@ from pathlib import Path
 import numpy as np
 
 from uq._inference.float64 import jax
+from uq._io.files import write_bytes_atomic
 
 Tracer = jax.core.Tracer
+export = jax.export
 
 #: the subfolder of JAX's compilation cache the exported programs are kept in
 FOLDER = "uq-exported"
@@ -152,8 +154,6 @@ class _Persistent:
         names = [_static_name(s) for s in statics]
         if where is None or None in names or not _hashed(self.fun):
             return None
-        from jax import export
-
         h = hashlib.sha256()
         h.update(environment_key().encode())
         h.update(f"{self.fun.__module__}.{self.fun.__qualname__};{','.join(names)};".encode())
@@ -171,8 +171,6 @@ class _Persistent:
             except Exception:  # a program export cannot take (e.g. a custom call): jax.jit's
                 return None
             try:
-                from uq._io.files import write_bytes_atomic
-
                 data = exported.serialize()
                 os.makedirs(where, exist_ok=True)
                 write_bytes_atomic(path, bytes(data))

@@ -94,6 +94,12 @@ def environment_key() -> str:
     return h.hexdigest()
 
 
+def _weak(x) -> bool:
+    """Whether a leaf is weakly typed (a JAX array made from a Python scalar): part of the key,
+    since an exported program keeps the types it was traced with."""
+    return bool(getattr(x, "weak_type", False))
+
+
 def _hashed(fun) -> bool:
     """Whether ``fun`` is a module-level function of the uq package, whose source the
     :func:`environment_key` covers (a plugin's or a test's function is not: its program is
@@ -133,10 +139,14 @@ class _Persistent:
             for x in leaves
         ):  # a Python scalar, or a call inside another transformation: jax.jit's own way
             return self.jitted(*args)
-        key = (statics, tree, tuple((x.shape, x.dtype) for x in leaves))
+        key = (statics, tree, tuple((x.shape, x.dtype, _weak(x)) for x in leaves))
         program = self.programs.get(key)
         if program is None:
-            program = self.programs[key] = self._program(statics, tree, leaves) or False
+            try:
+                program = self._program(statics, tree, leaves)
+            except Exception:  # e.g. the package's files unreadable: jax.jit's own way
+                program = None
+            program = self.programs[key] = program or False
         if program is False:
             return self.jitted(*args)
         return program(*leaves)
@@ -159,7 +169,7 @@ class _Persistent:
         h.update(f"{self.fun.__module__}.{self.fun.__qualname__};{','.join(names)};".encode())
         h.update(str(tree).encode())
         for x in leaves:
-            h.update(f"{x.shape}{np.dtype(x.dtype).str};".encode())
+            h.update(f"{x.shape}{np.dtype(x.dtype).str}{_weak(x)};".encode())
         path = where / f"{self.fun.__name__}-{h.hexdigest()[:40]}.jaxexport"
         try:
             exported = export.deserialize(bytearray(path.read_bytes()))

@@ -114,3 +114,40 @@ def test_nothing_is_kept_with_the_cache_off(monkeypatch, tmp_path):
         _Persistent(collapsed._bfgs.fun, (0,))(*args),
     )
     assert not list(tmp_path.iterdir())
+
+
+def test_a_second_uq_fit_loads_its_programs_imports_less_and_gives_the_same_json(tmp_path):
+    """Two `uq fit`s of a tiny campaign in fresh interpreters sharing a new cache: the first
+    exports its programs, the second loads them and never imports optimistix, equinox or
+    scipy.stats (nor traces the optimiser); both write the same JSON, to the byte."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from uq._cli.main import main
+
+    csv = tmp_path / "tiny.csv"
+    assert main(["simulate", "--out", str(csv), "--pressures", "2,5", "--step-mm", "15"]) == 0
+    env = dict(os.environ, UQ_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+
+    def fit(n):
+        out = tmp_path / f"fit{n}.json"
+        code = (
+            "import json, sys\n"
+            "from uq._cli.main import main\n"
+            f"rc = main(['fit', {str(csv)!r}, '--walkers', '8', '--max-steps', '40', '--quiet',"
+            f" '--json', {str(out)!r}])\n"
+            "heavy = ('optimistix', 'equinox', 'lineax', 'scipy.stats')\n"
+            "print(json.dumps([rc, [m for m in heavy if m in sys.modules]]))\n"
+        )
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+        assert r.returncode in (0, 1), r.stderr[-2000:]
+        return json.loads(r.stdout.strip().splitlines()[-1]), out.read_bytes()
+
+    (rc1, _), first = fit(1)
+    assert list((tmp_path / "cache" / exported.FOLDER).glob("_bfgs-*.jaxexport"))
+    (rc2, imported), second = fit(2)
+    assert rc1 == rc2 and imported == []
+    assert first == second

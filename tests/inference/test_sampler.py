@@ -422,3 +422,22 @@ def test_tau_is_emcee_s_integrated_time():
                 want = emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
             np.testing.assert_allclose(_tau(chain), want, rtol=1e-10, equal_nan=True)
         np.testing.assert_allclose(_tau(np.stack([x, x2]))[0], _tau(x), rtol=1e-12, equal_nan=True)
+
+
+def test_emcee_without_scipy_stats_still_has_a_working_kde_move():
+    """uq imports emcee without scipy.stats (its KDEMove's only use of it); the move still works,
+    importing scipy.stats when it is first used. In a fresh interpreter."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import uq._inference.sampler\n"
+        "assert 'scipy.stats' not in sys.modules, 'scipy.stats imported'\n"
+        "import emcee, numpy as np\n"
+        "s = emcee.EnsembleSampler(16, 2, lambda x: -0.5 * np.sum(x**2), moves=emcee.moves.KDEMove())\n"
+        "s.run_mcmc(np.random.default_rng(0).normal(size=(16, 2)), 50, progress=False)\n"
+        "print(round(float(np.var(s.get_chain(flat=True))), 1) > 0.3)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "True", r.stderr[-2000:]

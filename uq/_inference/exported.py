@@ -13,9 +13,10 @@ in the compilation cache as before.
 
 The file's name is a hash of everything the traced program depends on: the function and its
 static arguments (module-level functions by qualified name), the argument tree and every leaf's
-shape and dtype, the versions of Python, jax, jaxlib, optimistix, equinox and lineax, the JAX
-flags that change tracing, and every file of the ``uq`` package, code and data (any change to
-uq's code makes new names, so a stale program is never loaded; stale files are never read again).
+shape and dtype, the versions of Python, jax, jaxlib, optimistix, equinox, lineax and numpy
+(whose constants are traced in), the JAX flags that change tracing, and every file of the ``uq``
+package, code and data (any change to uq's code makes new names, so a stale program is never
+loaded; stale files are never read again).
 Files are written atomically (``uq._io.files``), so a reader sees a whole program or none; one
 that cannot be read is exported again and overwritten. Nothing is kept when the compilation
 cache is off (``UQ_CACHE_DIR=off``), for arguments that are not all arrays, or for static
@@ -48,7 +49,7 @@ export = jax.export
 #: the subfolder of JAX's compilation cache the exported programs are kept in
 FOLDER = "uq-exported"
 #: distributions whose code is traced into uq's programs
-TRACED_PACKAGES = ("jax", "jaxlib", "optimistix", "equinox", "lineax")
+TRACED_PACKAGES = ("jax", "jaxlib", "optimistix", "equinox", "lineax", "numpy")
 #: JAX flags that change what a function traces to
 TRACE_FLAGS = (
     "jax_enable_x64",

@@ -296,6 +296,7 @@ LATE_IMPORTS = {
     "xarray",
     "openpyxl",
     "scipy",
+    "optimistix",  # the optimiser's program, traced only when it is not kept (uq._inference.exported)
 }
 #: modules other engineers rewrite this round (the reader; the sampler's speed): their
 #: function-level imports move when that work lands (tracked in the round's issues)

@@ -83,3 +83,16 @@ def test_posterior_from_moments_is_linear_posterior():
     for u, v in zip(a, b, strict=True):
         assert np.allclose(np.asarray(u), np.asarray(v), rtol=1e-12, atol=0)
     assert float(b.log_marginal) == pytest.approx(float(a.log_marginal), rel=1e-12)
+
+
+def test_seed_row_keys_are_the_split_keys():
+    """One kept program for a fit's draw keys: the keys of splitting PRNGKey(seed), to the bit."""
+    import jax
+
+    from uq._inference.linear import row_keys, seed_row_keys
+
+    for seed in (0, 20201, 4294967295, 2**40 + 7, -5):
+        for which in (0, 1):
+            for n in (1, 37, 5000):
+                expected = row_keys(jax.random.split(jax.random.PRNGKey(seed))[which], n)
+                np.testing.assert_array_equal(seed_row_keys(seed, which, n), expected)

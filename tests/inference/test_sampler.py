@@ -142,6 +142,40 @@ def test_grouped_de_with_one_group_is_emcees_de_move():
     np.testing.assert_array_equal(f1, f2)
 
 
+def test_vectorised_accept_step_and_log_prob_are_emcees_to_the_bit():
+    """``_Grouped.propose`` (one vectorised accept test) and ``_Sampler.compute_log_prob`` (one
+    array, no per-walker scalars) give emcee's own propose loop's chains, log-probabilities and
+    acceptances to the bit, for every move of the mixture, with walkers whose proposals are -inf."""
+    from uq._inference.sampler import _moves, _Sampler
+
+    W, G, D = 16, 3, 3
+    prec = np.linalg.inv(np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.3], [0.0, 0.3, 0.5]]))
+
+    def log_prob(x):
+        lp = -0.5 * np.einsum("ni,ij,nj->n", x, prec, x)
+        return np.where(x[:, 0] > 2.0, -np.inf, lp)  # a wall: some proposals are rejected outright
+
+    def run(sampler_class, moves):
+        sampler = sampler_class(G * W, D, log_prob, vectorize=True, moves=moves)
+        sampler.random_state = np.random.RandomState(7).get_state()
+        p0 = np.random.default_rng(3).normal(size=(G * W, D)) * 0.3
+        sampler.run_mcmc(p0, 150, progress=False)
+        return sampler.get_chain(), sampler.get_log_prob(), sampler.acceptance_fraction
+
+    ours = _moves(W, (0.3, 0.2, 0.5))
+
+    class EmceeLoop:  # the same proposals through emcee's own RedBlueMove.propose
+        def __init__(self, move):
+            self.move = move
+
+        def propose(self, model, state):
+            return emcee.moves.RedBlueMove.propose(self.move, model, state)
+
+    theirs = [(EmceeLoop(m), w) for m, w in ours]
+    for a, b in zip(run(_Sampler, ours), run(emcee.EnsembleSampler, theirs), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_grouped_moves_never_mix_groups():
     """Proposals for a walker use its own group only: groups parked far apart stay apart."""
     from uq._inference.sampler import _GroupedDE, _GroupedIndependence, _GroupedSnooker
@@ -388,3 +422,22 @@ def test_tau_is_emcee_s_integrated_time():
                 want = emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
             np.testing.assert_allclose(_tau(chain), want, rtol=1e-10, equal_nan=True)
         np.testing.assert_allclose(_tau(np.stack([x, x2]))[0], _tau(x), rtol=1e-12, equal_nan=True)
+
+
+def test_emcee_without_scipy_stats_still_has_a_working_kde_move():
+    """uq imports emcee without scipy.stats (its KDEMove's only use of it); the move still works,
+    importing scipy.stats when it is first used. In a fresh interpreter."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import uq._inference.sampler\n"
+        "assert 'scipy.stats' not in sys.modules, 'scipy.stats imported'\n"
+        "import emcee, numpy as np\n"
+        "s = emcee.EnsembleSampler(16, 2, lambda x: -0.5 * np.sum(x**2), moves=emcee.moves.KDEMove())\n"
+        "s.run_mcmc(np.random.default_rng(0).normal(size=(16, 2)), 50, progress=False)\n"
+        "print(round(float(np.var(s.get_chain(flat=True))), 1) > 0.3)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "True", r.stderr[-2000:]

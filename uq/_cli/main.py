@@ -297,9 +297,11 @@ def _compile_cache() -> None:
     variables are set, before any command module is imported (JAX reads them when first
     imported), so commands that never import JAX stay fast; a cache location set by the user
     wins; ``UQ_CACHE_DIR=off`` turns it off."""
+    from uq._inference import blas
     from uq._inference.jax_cache import set_environment
 
     set_environment()
+    blas.set_environment()  # numpy's BLAS on one thread (uq._inference.blas), before numpy loads
 
 
 def _interrupts_are_not_lost() -> None:

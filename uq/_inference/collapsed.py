@@ -45,11 +45,11 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-import optimistix as optx
 
 from uq._inference.convergence import Convergence, convergence
+from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import map_rows, row_keys
+from uq._inference.linear import map_rows, row_keys, seed_row_keys
 from uq._inference.sampler import INDEPENDENCE_MIX, Chains, Settings, run_many, thin
 from uq._inference.summary import thin_rows, thin_step
 
@@ -103,7 +103,7 @@ class CollapsedModel(NamedTuple):
 # ----------------------------------------------------------------------------- jitted kernels
 
 
-@functools.partial(jax.jit, static_argnums=0)
+@persistent_jit(static_argnums=(0,))
 def _log_prob_problems(fn, thetas, data):
     """thetas (K, W, D), data with a leading K axis -> (K, W)."""
     return jax.vmap(lambda ths, d: jax.vmap(lambda th: _finite(fn(th, d)))(ths))(thetas, data)
@@ -136,8 +136,12 @@ MAP_MAX_STEPS = 1000
 MAP_DECREMENT = 1e-3
 
 
-@functools.partial(jax.jit, static_argnums=0)
+@persistent_jit(static_argnums=(0,))
 def _bfgs(fn, x0, active, data):
+    # reason: only traced when the program is not kept (uq._inference.exported): a warm `uq fit`
+    # loads it and never imports optimistix, equinox and lineax (about 0.7 CPU s)
+    import optimistix as optx
+
     solver = optx.BFGS(rtol=MAP_RTOL, atol=MAP_ATOL)
     objective = _objective(fn)
     args = (active, data)
@@ -227,13 +231,13 @@ def _active(model: CollapsedModel, data, active) -> np.ndarray:
 def _bfgs_best(model: CollapsedModel, data, act: np.ndarray):
     """BFGS from every start of the model, the best optimum kept; a run that does not report
     success restarted once from where it stopped: (x (D,), objective, success) or None."""
-    flags = jnp.asarray(act.astype(float))
+    flags = act.astype(float)  # numpy: jnp.asarray would compile a copy program per shape
     starts = np.atleast_2d(np.asarray(model.start(data), float)) * act
 
     def best_of(xs):
         best = None
         for x0 in xs:
-            x, f, ok = _bfgs(model.log_prob, jnp.asarray(x0), flags, data)
+            x, f, ok = _bfgs(model.log_prob, np.asarray(x0, float), flags, data)
             f = float(f)
             if np.isfinite(f) and (best is None or f < best[1]):
                 best = (np.asarray(x), f, bool(ok))
@@ -429,9 +433,6 @@ class Posterior:
         C, D, nt = self.theta.shape
         return self.theta.reshape(C * D, nt), self.beta.reshape(C * D, -1)
 
-    def _keys(self):
-        return jax.random.split(jax.random.PRNGKey(self._seed))  # (key of the draws, of replicates)
-
     @property
     def loglik(self) -> dict:
         """Pointwise log-likelihood {observed variable: (C, D, n)} (computed on first use)."""
@@ -455,7 +456,7 @@ class Posterior:
             rows, beta = self._rows()
             pred = map_rows(
                 _predict_row,
-                (rows, beta, row_keys(self._keys()[1], C * D)),
+                (rows, beta, seed_row_keys(self._seed, 1, C * D)),
                 (self.data,),
                 static=(self._model.predict,),
             )
@@ -478,7 +479,7 @@ class Posterior:
                 for k, v in self._cache["predictive"].items()
             }
         rows, beta = self._rows()
-        keys = row_keys(self._keys()[1], C * D)
+        keys = seed_row_keys(self._seed, 1, C * D)
         pred = map_rows(
             _predict_row,
             tuple(thin_rows(a, max_draws) for a in (rows, beta, keys)),
@@ -628,10 +629,8 @@ def _finish(
     :class:`Posterior`, which makes each when it is first asked for."""
     C, D, nt = theta.shape
     rows = theta.reshape(C * D, nt)
-    key_draw = jax.random.split(jax.random.PRNGKey(seed))[0]
-    beta = np.asarray(
-        map_rows(_draw_row, (rows, row_keys(key_draw, C * D)), (data,), static=(model.draw_linear,))
-    )
+    keys = seed_row_keys(seed, 0, C * D)  # the first of the seed's two keys (Posterior._keys)
+    beta = np.asarray(map_rows(_draw_row, (rows, keys), (data,), static=(model.draw_linear,)))
     reported = {
         k: np.asarray(v).reshape(C, D, *np.shape(v)[1:])
         for k, v in model.report(rows, beta, data).items()
@@ -682,7 +681,10 @@ def _campaign_log_prob(model: CollapsedModel, datas: list, active: np.ndarray, b
     for i, d in enumerate(datas):
         groups.setdefault(_signature(d), []).append(i)
     stacked = [
-        (np.array(idx), jax.tree.map(lambda *a: jnp.asarray(np.stack(a)), *[datas[i] for i in idx]))
+        (
+            np.array(idx),
+            jax.tree.map(lambda *a: jax.device_put(np.stack(a)), *[datas[i] for i in idx]),
+        )
         for idx in groups.values()
     ]
     dims = np.flatnonzero(active)

@@ -15,11 +15,11 @@ All functions are pure and jittable; shapes in the docstrings.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import numpy as np
 
+from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
 
 LOG_2PI = 1.8378770664093453
@@ -191,6 +191,18 @@ def row_keys(key, n: int) -> np.ndarray:
     return np.asarray(jax.random.split(key, bucket(n)))[: int(n)]
 
 
+def seed_row_keys(seed: int, which: int, n: int) -> np.ndarray:
+    """``row_keys(jax.random.split(jax.random.PRNGKey(seed))[which], n)``, the same keys, from one
+    kept program (``persistent_jit``) instead of the seven one-operation programs JAX looks up for
+    those calls in every process."""
+    return np.asarray(_seed_keys(np.asarray(seed, dtype=np.int64), which, bucket(n)))[: int(n)]
+
+
+@persistent_jit(static_argnums=(1, 2))
+def _seed_keys(seed, which, size):
+    return jax.random.split(jax.random.split(jax.random.PRNGKey(seed))[which], size)
+
+
 def map_rows(
     fn, rows, args=(), *, static=(), batch_size: int = DRAW_BATCH, chunk: int = DRAW_CHUNK
 ):
@@ -215,6 +227,6 @@ def map_rows(
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a])[:n], *parts)
 
 
-@functools.partial(jax.jit, static_argnames=("fn", "static", "batch_size"))
+@persistent_jit(static_argnums=(0, 1, 4))
 def _map_rows(fn, static, rows, args, batch_size):
     return jax.lax.map(lambda r: fn(*r, *static, *args), rows, batch_size=batch_size)

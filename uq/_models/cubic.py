@@ -5,7 +5,7 @@ Model of one test at overpressure p_u, u = x - x0 (m), t = u / h with h = 0.05 m
     force_k  ~ N(sum_j alpha_j t_k^j,  sigma0^2 + (r * |Phat_k|)^2)     (eq. 8)
     piston_k ~ N(sum_j gamma_j t_k^j,  sigma_L^2)                        (eq. 9)
 
-Phat_k is the least-squares force at point k (optimistix Levenberg-Marquardt), so the load
+Phat_k is the least-squares force at point k (a direct linear least-squares solve), so the load
 cell's relative error r and the floor sigma0 (pressure holding, displacement, relaxation)
 make the force noise grow with the force, as the stand's error budget does.
 
@@ -32,12 +32,12 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-import optimistix as optx
 
 from uq._data.recordings import PressureTest
 from uq._data.reference import FORCE_NAMES, PAPER_PISTON_AREA_M2, PISTON_NAMES
 from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
+from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import draw_exact, gaussian_loglik, linear_posterior, loo_given_noise
 from uq._models.cubic_results import NOISE_NAMES, noise_reference
@@ -60,40 +60,49 @@ NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 
 
 def basis(u_m, scale: float = BASIS_SCALE_M, degree: int = 3):
-    """Design matrix [1, t, t^2, t^3], t = u/scale; (n, degree+1)."""
-    t = jnp.asarray(u_m) / scale
-    return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
+    """Design matrix [1, t, t^2, t^3], t = u/scale; (n, degree+1).
+
+    Concrete heights (numpy) are computed in numpy with XLA's own operations (it divides by a
+    constant as a product with the constant's reciprocal, and raises to an integer power by the
+    products of ``_power``), so the matrix is the one JAX computes, to the bit (tested), without
+    the half-dozen one-operation programs JAX would look up in its compilation cache for it in
+    every process; traced heights (inside a jitted function) in JAX."""
+    if isinstance(u_m, jax.core.Tracer):
+        t = jnp.asarray(u_m) / scale
+        return jnp.stack([t**j for j in range(degree + 1)], axis=-1)
+    t = np.asarray(u_m, float) * (1.0 / scale)
+    # device_put, not jnp.asarray: the latter compiles a copy program for every new shape
+    return jax.device_put(np.stack([_power(t, j) for j in range(degree + 1)], axis=-1))
 
 
-def _scaled_residuals(alpha, args):
-    X, y, y_scale = args
-    return (X @ alpha - y) / y_scale  # of order one, so the solver's tolerances mean something
-
-
-@jax.jit
-def _lm(X, y):
-    y_scale = jnp.maximum(jnp.max(jnp.abs(y)), 1e-300)
-    solver = optx.LevenbergMarquardt(rtol=1e-13, atol=1e-13)
-    sol = optx.least_squares(
-        _scaled_residuals,
-        solver,
-        jnp.zeros(X.shape[1]),
-        args=(X, y, y_scale),
-        max_steps=200,
-        throw=False,
-    )
-    return sol.value, sol.result
+def _power(x: np.ndarray, n: int) -> np.ndarray:
+    """x**n for an integer n >= 0 by the products JAX's ``integer_pow`` makes (square and
+    multiply, in its order): numpy's ``x**3`` calls ``pow``, which can differ in the last bit."""
+    if n == 0:
+        return np.ones_like(x)
+    acc = None
+    while n > 0:
+        if n & 1:
+            acc = x if acc is None else acc * x
+        n >>= 1
+        if n > 0:
+            x = x * x
+    return acc
 
 
 def least_squares(u_m, y) -> np.ndarray:
-    """Ordinary least-squares cubic (the paper's regression), via optimistix Levenberg-Marquardt.
+    """Ordinary least-squares cubic (the paper's regression): a linear problem, solved directly
+    (numpy's SVD-based ``lstsq`` on the scaled basis [1, t, t^2, t^3], t = u / 0.05 m, whose columns
+    are of order one, so the solve is well conditioned).
 
     Returns the paper-basis coefficients (4,).
     """
-    value, result = _lm(basis(u_m), jnp.asarray(y, dtype=float))
-    if result != optx.RESULTS.successful:
-        raise RuntimeError(f"least-squares cubic did not converge: {optx.RESULTS[result]}")
-    return to_paper_basis(np.asarray(value))
+    t = np.asarray(u_m, float) / BASIS_SCALE_M
+    X = t[:, None] ** np.arange(4)
+    value = np.linalg.lstsq(X, np.asarray(y, float), rcond=None)[0]
+    if not np.all(np.isfinite(value)):
+        raise RuntimeError("least-squares cubic: the readings give no finite solution")
+    return to_paper_basis(value)
 
 
 # ----------------------------------------------------------------------------- the model
@@ -235,8 +244,15 @@ def start(d: CubicData) -> np.ndarray:
     )
 
 
+@persistent_jit()
+def _natural_noise_at_mean(theta, ref_force):
+    """:func:`natural_noise` at a test's mean force level: one kept program for ``report``
+    (``uq._inference.exported``), not the dozen one-operation ones of calling it eagerly."""
+    return natural_noise(theta, jnp.mean(ref_force))
+
+
 def report(theta, beta, d: CubicData) -> dict:
-    noise = np.exp(np.asarray(natural_noise(jnp.asarray(theta), jnp.mean(d.ref_force))))
+    noise = np.exp(np.asarray(_natural_noise_at_mean(np.asarray(theta, float), d.ref_force)))
     if _floor(d) is not None:  # a printed volume: the sd of an L reading holds its rounding
         noise[:, 2] = np.hypot(float(d.piston_floor), noise[:, 2])
     force = to_paper_basis(beta[:, :4])
@@ -305,14 +321,9 @@ def prepare(
     lsq_f = least_squares(u, test.force_N)
     lsq_l = least_squares(u, piston)
     ref_force = noise_reference(lsq_f, u, noise)
-    fields = (
-        basis(u),
-        jnp.asarray(test.force_N),
-        jnp.asarray(piston),
-        jnp.asarray(ref_force),
-        jnp.asarray(noise_prior_mean(stand)),
-        jnp.ones(np.size(test.force_N)),
-    )
+    arrays = (test.force_N, piston, ref_force, noise_prior_mean(stand), np.ones(np.size(u)))
+    # device_put, not jnp.asarray: the latter compiles a copy program for every new shape
+    fields = (basis(u), *(jax.device_put(np.asarray(a, float)) for a in arrays))
     if source == "volume":
         data = VolumeData(*fields, jnp.asarray(piston_rounding_sd(test, piston_area_m2)))
     else:

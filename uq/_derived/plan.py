@@ -371,6 +371,22 @@ def _uniform(builder, targets, n_readings, n_tests, cand, heights, need):
     return same, curve, notes, (tests, readings, frame)
 
 
+def _theta_updated(builder, targets, layouts, sets: int, pool_draws: int, seed: int) -> list:
+    """The prediction with theta updated (``uq._derived.plan_theta``) of each layout (tests,
+    readings, frame), seeded ``seed``, ``seed + 1``, ...: the sets simulated from the frame's draws
+    and reweighted over ``pool_draws`` of the pilot's held out of them (the frame's own when the
+    builder has no others, or ``pool_draws`` is 0); None for each when ``sets`` is 0."""
+    if not sets:
+        return [None] * len(layouts)
+    pool = builder.pool(pool_draws) if pool_draws else None
+    return [
+        theta_updated(
+            frame, targets, rd, sets, seed + i, None if pool is None else _frame_of(pool, ts)
+        )
+        for i, (ts, rd, frame) in enumerate(layouts)
+    ]
+
+
 def make_plan(
     builder,
     targets,
@@ -396,11 +412,8 @@ def make_plan(
     and every plan is evaluated exactly in its own frame; the best is kept (least objective at the
     budget, or least stand time reaching ``target_sd``).
 
-    ``theta_updates`` > 0: the chosen plan and the uniform grid of its size are also evaluated by
-    the preposterior that updates theta (``uq._derived.plan_theta``) on that many simulated sets of
-    their readings, seeded by ``seed``, reweighting ``theta_pool`` of the pilot's draws held out of
-    the frames' (the frames' own when the builder has no others, or ``theta_pool`` is 0); the
-    search itself keeps the closed form."""
+    ``theta_updates`` > 0: the chosen plan and the uniform grid of its size also get the prediction
+    with theta updated (:func:`_theta_updated`); the search itself keeps the closed form."""
     targets = list(targets)
     cand = np.sort(np.asarray(candidates_bar, float))
     heights = np.asarray(heights_m, float)
@@ -456,16 +469,8 @@ def make_plan(
     uniform, curve, added_uniform, (uni_tests, uni_readings, uni_frame) = _uniform(
         builder, targets, len(readings), len(tests), cand, heights, need
     )
-    upd = uni_upd = None
-    if theta_updates:
-        pool = builder.pool(theta_pool) if theta_pool else None
-
-        def updated(ts, rd, frame, s):
-            held = None if pool is None else _frame_of(pool, ts)
-            return theta_updated(frame, targets, rd, theta_updates, s, held)
-
-        upd = updated(tests, readings, own, seed)
-        uni_upd = updated(uni_tests, uni_readings, uni_frame, seed + 1)
+    layouts = ((tests, readings, own), (uni_tests, uni_readings, uni_frame))
+    upd, uni_upd = _theta_updated(builder, targets, layouts, theta_updates, theta_pool, seed)
     return Plan(
         model=builder.name,
         label=own.label,

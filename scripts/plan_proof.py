@@ -674,6 +674,32 @@ def summarise(rows: list[dict], command: str) -> dict:
     }
 
 
+def claim_lines(doc: dict) -> list[str]:
+    """The claims' lines beyond the closed form's (summary.md and docs/plan.md): the prediction with
+    theta updated, and the coverage without the misspecified scenarios."""
+    lines = []
+    u = doc.get("ratio_theta_updated")
+    if u and u["n"]:
+        lines.append(
+            "- Achieved over the prediction with theta updated (the median over its simulated sets"
+            + (
+                f"; the closed form in the {doc['intervals'] - u['n']} rows without it"
+                if u["n"] < doc["intervals"]
+                else ""
+            )
+            + f"): mean {u['mean']:.2f}, range {u['min']:.2f}-{u['max']:.2f} (claims: mean in 0.8-1.25, each in 0.6-1.6)."
+        )
+    w = doc.get("without_misspecified")
+    if w and w["intervals"] and w["intervals"] < doc["intervals"]:
+        lines.append(
+            f"- Without scenario {', '.join(w['scenarios_left_out'])} (the smooth surface given "
+            f"for a spring that is not smooth in pressure, kept to show that model's bias): "
+            f"{w['covered']} of {w['intervals']} hold the truth (region "
+            f"{w['binomial_region_95'][0]}-{w['binomial_region_95'][1]})."
+        )
+    return lines
+
+
 def markdown(doc: dict) -> str:
     lines = [
         "# uq plan on the virtual stand",
@@ -685,25 +711,7 @@ def markdown(doc: dict) -> str:
         f"- Achieved over predicted posterior sd: mean {doc['ratio_mean']:.2f}, range "
         f"{doc['ratio_min']:.2f}-{doc['ratio_max']:.2f} (claims: mean in 0.8-1.25, each in 0.6-1.6).",
     ]
-    u = doc.get("ratio_theta_updated")
-    if u and u["n"]:
-        lines.append(
-            "- Achieved over the prediction with theta updated (the median over its simulated sets"
-            + (
-                f"; the closed form in the {doc['intervals'] - u['n']} rows without it"
-                if u["n"] < doc["intervals"]
-                else ""
-            )
-            + f"): mean {u['mean']:.2f}, range {u['min']:.2f}-{u['max']:.2f} (the same claims)."
-        )
-    w = doc.get("without_misspecified")
-    if w and w["intervals"] and w["intervals"] < doc["intervals"]:
-        lines.append(
-            f"- Without scenario {', '.join(w['scenarios_left_out'])} (the smooth surface given "
-            f"for a spring that is not smooth in pressure, kept to show that model's bias): "
-            f"{w['covered']} of {w['intervals']} hold the truth (region "
-            f"{w['binomial_region_95'][0]}-{w['binomial_region_95'][1]})."
-        )
+    lines += claim_lines(doc)
     lines += [
         f"- Fits converged: plan {doc['converged']['plan']}, uniform grid {doc['converged']['uniform']} "
         f"of {doc['replications']}.",

@@ -936,20 +936,10 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
             f"- Achieved over predicted posterior sd: mean {d['ratio_mean']:.2f}, range "
             f"{d['ratio_min']:.2f}-{d['ratio_max']:.2f}.",
         ]
-        u, w = d.get("ratio_theta_updated"), d.get("without_misspecified")
-        if u and u["n"]:
-            lines.append(
-                "- Achieved over the prediction with theta updated (its median over the simulated "
-                f"sets; {u['n']} of {d['intervals']} rows): mean {u['mean']:.2f}, range "
-                f"{u['min']:.2f}-{u['max']:.2f}."
-            )
-        if w and 0 < w["intervals"] < d["intervals"]:
-            a, b = w["binomial_region_95"]
-            lines.append(
-                f"- Without scenario {', '.join(w['scenarios_left_out'])} (a model given outside "
-                f"the spring's class, on purpose): {w['covered']} of {w['intervals']} hold the "
-                f"truth (region {a}-{b})."
-            )
+        sys.path.insert(0, str(ROOT / "scripts"))
+        from plan_proof import claim_lines, theta_lines, theta_updated_lines  # the proof's own
+
+        lines += claim_lines(d)
         lines += [
             f"- Fits converged: {d['converged']['plan']} of {d['replications']} after the plan, "
             f"{d['converged']['uniform']} after the uniform grid.",
@@ -973,9 +963,6 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
         lines += [f"- {w}" for w in d.get("poor", [])] or ["- none"]
         if d.get("model_choice"):
             lines += ["", f"{d['model_choice'][0].upper()}{d['model_choice'][1:]}."]
-        sys.path.insert(0, str(ROOT / "scripts"))
-        from plan_proof import theta_lines, theta_updated_lines  # the proof's own tables
-
         lines += theta_updated_lines(d)
         lines += theta_lines(d)
         if d.get("notes"):

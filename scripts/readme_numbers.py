@@ -788,13 +788,15 @@ def _per_campaign(line: dict) -> str:
 
 
 def batch_netcdf_summary(rel: str) -> Callable[[], str]:
-    """benchmarks/bench.py --batch: one test's NetCDF file written four ways, and the bytes of
+    """benchmarks/bench.py --batch: one test's NetCDF file written six ways, and the bytes of
     the batch's campaigns with and without the pointwise groups."""
     names = {
-        "by_group_zlib": "group after group, zlib on every number (before)",
-        "by_group_no_float_zlib": "group after group, no zlib on floats",
-        "one_pass": "one pass, no zlib on floats (`uq fit --out`)",
-        "one_pass_no_pointwise": "one pass, without the pointwise groups (`uq batch`)",
+        "by_group_zlib": "h5netcdf, group after group, zlib on every number (two rounds ago)",
+        "by_group_no_float_zlib": "h5netcdf, group after group, no zlib on floats",
+        "one_pass_h5netcdf": "h5netcdf, one pass, no zlib on floats (before netCDF4)",
+        "one_pass_h5netcdf_no_pointwise": "h5netcdf, one pass, without the pointwise groups",
+        "one_pass": "netCDF4 in memory, one pass (`uq fit --out`)",
+        "one_pass_no_pointwise": "netCDF4 in memory, without the pointwise groups (`uq batch`)",
     }
 
     def make() -> str:

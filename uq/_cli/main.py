@@ -28,8 +28,10 @@ import contextlib
 import importlib.util
 import os
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 from uq._io.errors import InputError
@@ -312,7 +314,6 @@ def _interrupts_are_not_lost() -> None:
     way; if it lands in a callback again, it comes back here), so the command stops with its one
     line and exit 130."""
     import _thread
-    import threading
 
     previous = sys.unraisablehook
     if getattr(previous, "delivers_interrupts", False):
@@ -330,7 +331,22 @@ def _interrupts_are_not_lost() -> None:
     sys.unraisablehook = hook
 
 
+def _ignore_further_interrupts() -> None:
+    """After the command has stopped for a Ctrl-C, the process only exits: a second Ctrl-C (a
+    second press, or the first one delivered again by ``_interrupts_are_not_lost``'s timer)
+    landing while Python shuts down (joining the figure workers' threads, running finalisers)
+    would raise KeyboardInterrupt where nothing catches it, and Python then kills itself with
+    SIGINT: exit status -2 instead of 130, after the one line was printed. So SIGINT is ignored
+    from here on (a pending ``_thread.interrupt_main`` does nothing then). Only when ``main`` is
+    the program (the ``uq`` script, ``python -m``), not when a caller runs it in its process."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The ``uq`` command line: ``argv`` without the program's name (default ``sys.argv[1:]``,
+    and then ``main`` is taken to be the program, which only exits after it returns)."""
+    as_program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     _interrupts_are_not_lost()
     _compile_cache()  # before the command's module is imported: JAX reads the settings on its import
@@ -354,6 +370,8 @@ def main(argv: list[str] | None = None) -> int:
         exc = exc.for_cli(PARAM_OPTIONS)
         return _fail(name, f"error: {exc}", EXIT_INPUT)
     except KeyboardInterrupt:
+        if as_program:
+            _ignore_further_interrupts()
         return _fail(name, "interrupted", EXIT_INTERRUPTED)
     except (
         BrokenPipeError

@@ -341,3 +341,38 @@ def test_main_called_in_a_process_leaves_its_interrupt_handler_alone():
         [sys.executable, "-c", code], capture_output=True, text=True, env=_env(), timeout=60
     )
     assert proc.stdout.split() == ["130", "True"], proc.stdout + proc.stderr
+
+
+def test_an_interrupt_wrapped_by_python_is_still_an_interrupt(campaign):
+    """Ctrl-C landing while a class body is created (matplotlib's import, in a report) reaches
+    the command as ``RuntimeError: Error calling __set_name__ ...`` with the KeyboardInterrupt as
+    its cause: still the one interrupted line and 130, not an internal error (exit 3)."""
+    code = textwrap.dedent(
+        f"""
+        import sys
+        import uq._cli.cmd_basic as cmd
+
+        class Descriptor:
+            def __set_name__(self, owner, name):
+                raise KeyboardInterrupt
+
+        def interrupted(args):
+            class Formatter:
+                locs = Descriptor()
+
+        cmd.command_fit = interrupted
+        from uq._cli.main import main
+
+        sys.argv = ["uq", "fit", {str(campaign)!r}]
+        raise SystemExit(main())
+        """
+    )
+    proc = subprocess.run(
+        _as_at_a_terminal([sys.executable, "-c", code]),
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=60,
+    )
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("WARNING")]
+    assert proc.returncode == 130 and lines == ["uq fit: interrupted"], proc.stderr

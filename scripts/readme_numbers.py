@@ -805,13 +805,10 @@ def batch_netcdf_summary(rel: str) -> Callable[[], str]:
             return _bench_missing(rel, "--batch 20,50,200 ")
         nc = r["netcdf"]
         base = nc["by_group_zlib"]
-        if (
-            "one_pass_h5netcdf" not in nc
-        ):  # a run before the netCDF4 engine: one pass was h5netcdf's
-            names["one_pass"] = "h5netcdf, one pass, no zlib on floats (`uq fit --out` then)"
-            names["one_pass_no_pointwise"] = (
-                "h5netcdf, without the pointwise groups (`uq batch` then)"
-            )
+        labels = dict(names)
+        if "one_pass_h5netcdf" not in nc:  # a run before the netCDF4 engine: h5netcdf's one pass
+            labels["one_pass"] = "h5netcdf, one pass, no zlib on floats (`uq fit --out` then)"
+            labels["one_pass_no_pointwise"] = "h5netcdf, no pointwise groups (`uq batch` then)"
         lines = [
             f"From `{rel}` (`python benchmarks/bench.py --batch`, load average "
             f"{r['load_average_1min']:.1f}; best of 5): one test's file (the last test of the "

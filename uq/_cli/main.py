@@ -28,8 +28,10 @@ import contextlib
 import importlib.util
 import os
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 from uq._io.errors import InputError
@@ -312,7 +314,6 @@ def _interrupts_are_not_lost() -> None:
     way; if it lands in a callback again, it comes back here), so the command stops with its one
     line and exit 130."""
     import _thread
-    import threading
 
     previous = sys.unraisablehook
     if getattr(previous, "delivers_interrupts", False):
@@ -330,7 +331,39 @@ def _interrupts_are_not_lost() -> None:
     sys.unraisablehook = hook
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """``exc`` was raised because of a KeyboardInterrupt: Python wraps one that lands while a
+    class body is being created (``RuntimeError: Error calling __set_name__ ...``, seen while
+    matplotlib was imported) and some libraries re-raise it as their own error; either way the
+    user pressed Ctrl-C, and the answer is the interrupted line and 130, not an internal error."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _interrupted(name: str, as_program: bool) -> int:
+    """The one line and status 130 of a command stopped by Ctrl-C.
+
+    After that the process only exits: a second Ctrl-C (a second press, or the first one
+    delivered again by ``_interrupts_are_not_lost``'s timer) landing while Python shuts down
+    (joining the figure workers' threads, running finalisers) would raise KeyboardInterrupt where
+    nothing catches it, and Python then kills itself with SIGINT: exit status -2 instead of 130,
+    after the one line was printed. So SIGINT is ignored from here on (a pending
+    ``_thread.interrupt_main`` does nothing then), only when ``main`` is the program (the ``uq``
+    script, ``python -m``), not when a caller runs it in its own process."""
+    if as_program and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return _fail(name, "interrupted", EXIT_INTERRUPTED)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The ``uq`` command line: ``argv`` without the program's name (default ``sys.argv[1:]``,
+    and then ``main`` is taken to be the program, which only exits after it returns)."""
+    as_program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     _interrupts_are_not_lost()
     _compile_cache()  # before the command's module is imported: JAX reads the settings on its import
@@ -354,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
         exc = exc.for_cli(PARAM_OPTIONS)
         return _fail(name, f"error: {exc}", EXIT_INPUT)
     except KeyboardInterrupt:
-        return _fail(name, "interrupted", EXIT_INTERRUPTED)
+        return _interrupted(name, as_program)
     except (
         BrokenPipeError
     ):  # the reader of stdout went away (`| head`): the shell's status for SIGPIPE
@@ -365,6 +398,8 @@ def main(argv: list[str] | None = None) -> int:
         where = f": {exc.filename}" if exc.filename else ""
         return _fail(name, f"error: {exc.strerror or exc}{where}", EXIT_INPUT)
     except Exception as exc:
+        if _caused_by_interrupt(exc):  # a Ctrl-C that Python wrapped (e.g. inside __set_name__)
+            return _interrupted(name, as_program)
         if debug:
             import traceback
 

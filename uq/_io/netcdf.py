@@ -35,23 +35,27 @@ def netcdf_bytes(groups: dict, attrs: dict | None = None) -> bytes:
     (the layout ArviZ's ``idata.to_netcdf(path)`` writes and ``arviz.from_netcdf`` reads: root
     attributes, every group; integers zlib-compressed, floats stored as they are).
 
-    All groups go into the file in one pass (xarray's ``DataTree.to_netcdf``) instead of
-    reopening it to append each group (a little faster: benchmarks/bench.py --batch measures
-    both); with an xarray without ``DataTree`` (before 2024.10) the groups are appended one by one.
+    All groups go into the file in one pass (xarray's ``DataTree.to_netcdf``), written by the
+    netCDF-C library (the ``netCDF4`` package) in its in-memory mode: h5netcdf, which wrote them
+    before, spends tens of milliseconds a variable looking up the file's dimension scales through
+    h5py, and a fit's file took 5 to 10 times as long (benchmarks/bench.py --batch measures both
+    ways; docs/batch.md). With an xarray without ``DataTree`` (before 2024.10) the groups are
+    appended one by one through h5netcdf.
 
     Why in memory: HDF5 writing straight to a full disk (or past a file-size limit) fails inside
-    h5py, which can crash the interpreter (a segmentation fault, exit 139); the bytes are
-    written afterwards like any other output, where a full disk is a one-line error."""
+    the library, which can crash the interpreter (a segmentation fault, exit 139, seen in h5py);
+    the bytes are written afterwards like any other output, where a full disk is a one-line error."""
     # reason: xarray costs about half a second to import; only saving and loading a model need it
     import xarray as xr
 
-    buf = io.BytesIO()
     with _local_dask_scheduler():
         if hasattr(xr, "DataTree"):
             tree = {"/": xr.Dataset(attrs=attrs or {})} | {f"/{g}": d for g, d in groups.items()}
             encoding = {f"/{g}": _encoding(d) for g, d in groups.items()}
-            xr.DataTree.from_dict(tree).to_netcdf(buf, engine="h5netcdf", encoding=encoding)
-            return buf.getvalue()
+            # a path of None: the netCDF4 engine writes in memory and returns the bytes
+            data = xr.DataTree.from_dict(tree).to_netcdf(None, engine="netcdf4", encoding=encoding)
+            return bytes(data)
+        buf = io.BytesIO()
         mode = "w"
         if attrs:  # the file's own attributes, on the root group
             xr.Dataset(attrs=attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")

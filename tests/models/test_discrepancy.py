@@ -4,6 +4,9 @@ densities, and the Gaussian process between tested pressures (uq/_models/discrep
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -21,6 +24,8 @@ from uq._stand.simulator import Layout, recordings_from_tests, simulate
 TINY = Layout(pressures_bar=(1.0, 4.0, 6.0), step_m=0.015)
 ORDERS = surface.Orders(3, 1, 2, 1, 1)
 FORCE_ORDERS = surface.Orders(3, 1, 2, -1, -1)
+ROOT = Path(__file__).resolve().parents[2]
+BENCH = ROOT / "benchmarks" / "discrepancy.py"
 
 
 @pytest.fixture(scope="module")
@@ -145,67 +150,37 @@ def test_collapsed_density_equals_dense_and_brute_force(which, tiny, tiny_force)
     )
 
 
-def previous_log_marginal(theta, d):
-    """log p(y | theta) as the sampler computed it before its per-theta cost was cut (commit
-    c8f9c5f): segment sums of the readings' moments, P (T, T, m, m) from the deviations' maps D,
-    R P R^T by one einsum, triangular solves. The reference the faster route is held to."""
-    noise, amps, length = dm._split(theta, d)
-    T, m = d.A.shape[:2]
-    nf = (m - 1) // 2
-    L11, L21, L22 = pair.cov_factors(noise, d)
-    F, L = pair.readings(noise, d)
-    w, s = d.weight, L21 / (L11 * L22)
-    yf = F / L11
-    yl = (L - L21 * yf) / L22
-
-    def seg(v):
-        return jax.ops.segment_sum(v, d.test, num_segments=T)
-
-    P = d.t[:, None] ** jnp.arange(2 * nf + 1)
-    M1, M2, M3 = (seg(x[:, None] * P) for x in (w * (1 / L11**2 + s**2), w / L22**2, -w * s / L22))
-    a, b, pp = np.arange(nf), np.arange(nf + 1), d.p_pa[:, None, None]
-    Hff, Hll = M1[:, a[:, None] + a[None, :]] * pp**2, M2[:, b[:, None] + b[None, :]]
-    Hfl = M3[:, a[:, None] + b[None, :]] * pp
-    H = jnp.concatenate(
-        [jnp.concatenate([Hff, Hfl], 2), jnp.concatenate([jnp.swapaxes(Hfl, 1, 2), Hll], 2)], 1
-    )
-    vf, vl = w * (yf / L11 - s * yl), w * yl / L22
-    bvec = jnp.concatenate(
-        [seg(vf[:, None] * P[:, :nf]) * d.p_pa[:, None], seg(vl[:, None] * P[:, : nf + 1])], 1
-    )
-    yy, log_det = jnp.sum(w * (yf**2 + yl**2)), 2 * jnp.sum(w * (jnp.log(L11) + jnp.log(L22)))
-    Rt = jnp.linalg.cholesky(H)
-    u = jax.scipy.linalg.solve_triangular(Rt, bvec[..., None], lower=True)[..., 0]
-    A = d.A
-    R = gp.correlation(d.p_bar, length, jnp)
-    g2 = dm.channel_scales(amps, d) ** 2
-    Pc = jnp.einsum("iak,jbk->ijab", A, A) + jnp.einsum("ij,iac,c,jbc->ijab", R, d.D, g2, d.D)
-    RPR = jnp.einsum("iba,ijbc,jcd->iajd", Rt, Pc, Rt).reshape(T * m, T * m)
-    Lm = jnp.linalg.cholesky(jnp.eye(T * m) + RPR)
-    v = jax.scipy.linalg.solve_triangular(Lm, u.reshape(-1), lower=True)
-    quad = yy - (jnp.sum(u**2) - jnp.sum(v**2))
-    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(Lm)))
-    return -0.5 * (quad + log_det + logdet + 2 * jnp.sum(w) * np.log(2 * np.pi))
+def previous_log_marginal(monkeypatch):
+    """The previous formula of log p(y | theta), kept by benchmarks/discrepancy.py as its baseline
+    (which sets UQ_MALLOC when loaded: undone after the test)."""
+    monkeypatch.setenv("UQ_MALLOC", "default")
+    spec = importlib.util.spec_from_file_location("bench_discrepancy", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.previous_log_marginal
 
 
-def test_the_samplers_density_on_data_n50_equals_the_previous_formula_and_the_dense_route():
+def test_the_samplers_density_on_data_n50_equals_the_previous_formula_and_the_dense_route(
+    monkeypatch,
+):
     """data/n50 (11 tests, the 99 x 99 matrix of the sampler) at 24 random thetas around the start:
     log p(y | theta) equals the previous implementation and the (K x K) Gram route to 1e-9
     relative (measured: 2e-10 and 1e-10, about 1e-7 absolute; the formula's own rounding floor,
     y'Wy of about 1e9 less |u|^2, is 4e-11 relative: the previous formula against itself with the
     readings in reverse order), and a held-out reading (weight 0) drops out alike."""
-    rec = read_recordings("data/n50/recordings.csv")
+    previous = previous_log_marginal(monkeypatch)
+    rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     d = dm.dev_data(rec, surface.orders_for(rec))
     start = dm.start(d)[0]
     thetas = jnp.asarray(start + 0.5 * np.random.default_rng(7).standard_normal((24, start.size)))
     new = np.asarray(jax.jit(jax.vmap(lambda t: dm.log_marginal(t, d)))(thetas))
-    old = np.asarray(jax.jit(jax.vmap(lambda t: previous_log_marginal(t, d)))(thetas))
+    old = np.asarray(jax.jit(jax.vmap(lambda t: previous(t, d)))(thetas))
     dense = np.asarray(jax.vmap(lambda t: dm.posterior(t, d).log_marginal)(thetas[:6]))
     np.testing.assert_allclose(new, old, rtol=1e-9)
     np.testing.assert_allclose(new[:6], dense, rtol=1e-9)
     held = d._replace(weight=d.weight.at[::7].set(0.0))
     np.testing.assert_allclose(
-        dm.log_marginal(thetas[0], held), previous_log_marginal(thetas[0], held), rtol=1e-9
+        dm.log_marginal(thetas[0], held), previous(thetas[0], held), rtol=1e-9
     )
 
 

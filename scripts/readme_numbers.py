@@ -664,6 +664,16 @@ def discrepancy_bench_summary(rel: str) -> Callable[[], str]:
             f"({r['threshold_bytes'] / 2**20:.0f} MB): CPU {r['cpu_ratio']:.2f}x, wall "
             f"{r['wall_ratio']:.2f}x.",
         ]
+        if "formulas" in r:  # the previous formula of the density against the current one
+            prev, cur = r["formulas"]["previous"], r["formulas"]["current"]
+            lines += [
+                "",
+                f"The previous formula of the same density (commit c8f9c5f) against the current one, "
+                f"with uq's thresholds, in alternating rounds: CPU a call {prev['user_ms'] + prev['sys_ms']:.1f} "
+                f"ms against {cur['user_ms'] + cur['sys_ms']:.1f} ms ({r['formula_cpu_ratio']:.2f}x), "
+                f"wall {r['formula_wall_ratio']:.2f}x; the two agree to "
+                f"{r['formula_max_rel_diff']:.0e} relative.",
+            ]
         return "\n".join(lines) + "\n"
 
     return make

@@ -299,7 +299,8 @@ def test_commands_bench_tiny_run(tmp_path):
 
 def test_discrepancy_bench_tiny_run(tmp_path):
     """The malloc benchmark: a few calls each way in one process, the JSON's ratio is the two
-    runs' CPU times' (never timing); with glibc the thresholds are set in its second run."""
+    runs' CPU times' (never timing); with glibc the thresholds are set in its second run; the
+    previous formula against the current one likewise, with the same values."""
     import platform
 
     out = tmp_path / "d.json"
@@ -319,6 +320,10 @@ def test_discrepancy_bench_tiny_run(tmp_path):
     assert r["cpu_ratio"] == pytest.approx(cpu["malloc_defaults"] / cpu["tuned"])
     assert r["allocator_tuned"] is (platform.libc_ver()[0] == "glibc")
     assert "malloc's defaults over one with uq's thresholds" in proc.stdout
+    f = {k: v["user_ms"] + v["sys_ms"] for k, v in r["formulas"].items()}
+    assert r["formula_cpu_ratio"] == pytest.approx(f["previous"] / f["current"])
+    assert r["formula_max_rel_diff"] < 1e-9  # the same density (tests/models/test_discrepancy.py)
+    assert "previous formula over one of the current" in proc.stdout
 
 
 def test_commands_bench_runs_the_baselines_code(tmp_path, monkeypatch):

@@ -4,10 +4,14 @@ densities, and the Gaussian process between tested pressures (uq/_models/discrep
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
 
+from uq._data.recordings import read_recordings
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import linear_posterior
 from uq._models import discrepancy as dm
@@ -20,6 +24,8 @@ from uq._stand.simulator import Layout, recordings_from_tests, simulate
 TINY = Layout(pressures_bar=(1.0, 4.0, 6.0), step_m=0.015)
 ORDERS = surface.Orders(3, 1, 2, 1, 1)
 FORCE_ORDERS = surface.Orders(3, 1, 2, -1, -1)
+ROOT = Path(__file__).resolve().parents[2]
+BENCH = ROOT / "benchmarks" / "discrepancy.py"
 
 
 @pytest.fixture(scope="module")
@@ -141,6 +147,40 @@ def test_collapsed_density_equals_dense_and_brute_force(which, tiny, tiny_force)
     )
     np.testing.assert_allclose(
         post.mean, dense.mean, rtol=1e-7, atol=1e-9 * np.abs(dense.mean).max()
+    )
+
+
+def previous_log_marginal(monkeypatch):
+    """The previous formula of log p(y | theta), kept by benchmarks/discrepancy.py as its baseline
+    (which sets UQ_MALLOC when loaded: undone after the test)."""
+    monkeypatch.setenv("UQ_MALLOC", "default")
+    spec = importlib.util.spec_from_file_location("bench_discrepancy", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.previous_log_marginal
+
+
+def test_the_samplers_density_on_data_n50_equals_the_previous_formula_and_the_dense_route(
+    monkeypatch,
+):
+    """data/n50 (11 tests, the 99 x 99 matrix of the sampler) at 24 random thetas around the start:
+    log p(y | theta) equals the previous implementation and the (K x K) Gram route to 1e-9
+    relative (measured: 2e-10 and 1e-10, about 1e-7 absolute; the formula's own rounding floor,
+    y'Wy of about 1e9 less |u|^2, is 4e-11 relative: the previous formula against itself with the
+    readings in reverse order), and a held-out reading (weight 0) drops out alike."""
+    previous = previous_log_marginal(monkeypatch)
+    rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
+    d = dm.dev_data(rec, surface.orders_for(rec))
+    start = dm.start(d)[0]
+    thetas = jnp.asarray(start + 0.5 * np.random.default_rng(7).standard_normal((24, start.size)))
+    new = np.asarray(jax.jit(jax.vmap(lambda t: dm.log_marginal(t, d)))(thetas))
+    old = np.asarray(jax.jit(jax.vmap(lambda t: previous(t, d)))(thetas))
+    dense = np.asarray(jax.vmap(lambda t: dm.posterior(t, d).log_marginal)(thetas[:6]))
+    np.testing.assert_allclose(new, old, rtol=1e-9)
+    np.testing.assert_allclose(new[:6], dense, rtol=1e-9)
+    held = d._replace(weight=d.weight.at[::7].set(0.0))
+    np.testing.assert_allclose(
+        dm.log_marginal(thetas[0], held), previous(thetas[0], held), rtol=1e-9
     )
 
 

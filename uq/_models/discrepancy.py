@@ -37,7 +37,8 @@ Cost. At a fixed pressure the surface's force is a polynomial in t of degree m_t
 and its piston one of degree m_t + 1 with a constant, and so are the deviations: every mean of the
 model lies, test by test, in the span of Z_i = [force: p_i t^k, k <= m_t | piston: t^k, k <= m_t + 1].
 The readings enter through per-test moments H_i = Z_i^T Sigma_i^-1 Z_i, b_i = Z_i^T Sigma_i^-1 y_i
-(segment sums of the monomials of t times the pair likelihood's three weights), and the model's
+(per-test sums of the monomials of t times the pair likelihood's three weights, over each
+test's readings padded to one length: ``padded_rows``), and the model's
 coefficients map to each test's Z-coefficients by gamma_i = A_i beta + D_i v_i(theta) z, A_i
 fixed (least squares from the surface's design rows at the test's heights, the residual checked
 to be zero when the data are built), D_i the deviations' columns. The Gram matrix is then
@@ -47,6 +48,9 @@ and by Woodbury's identity it is never factored: the one Cholesky factor per the
 (T m x T m) matrix I + R P R^T (P = C C^T, H_i = R_i^T R_i), for the density, the exact draws
 (Matheron's rule) and the leave-one-out densities alike (``span_posterior``; tested against the
 dense design and against brute-force Gaussian integration in tests/models/test_discrepancy.py).
+The fixed parts of that matrix are made once with the data (``span_products``: A A^T and, per
+deviation block, D D^T), so a theta costs the readings' moments, two products of the block-diagonal
+R with a (T m x T m) matrix and two Cholesky factorisations (``span_posterior``).
 """
 
 from __future__ import annotations
@@ -104,7 +108,10 @@ class DevData(NamedTuple):
     D: jnp.ndarray  # (T, m, 3 n_k) deviations (delta, eps, phi) -> Z-coefficients
     s: jnp.ndarray  # (n_k,) coefficient scales s_k
     rates: jnp.ndarray  # (3,) exponential prior rates of a_F, a_V, a_P (1/m^2)
-    AAt: jnp.ndarray  # (T, T, m, m) A_i A_j^T: the surface's share of the span's prior covariance
+    AAt: jnp.ndarray  # (T m, T m) A A^T: the surface's share of the span's prior covariance
+    E: jnp.ndarray  # (3, T m, T m) per deviation block, D_i diag(s)^2 D_j^T (``span_products``)
+    rows: jnp.ndarray  # (T, n_max) int, each test's readings, padded (``padded_rows``)
+    powers: jnp.ndarray  # (T, n_max, 2 m_t + 3) t^k at those readings, 0 on the padding
 
 
 class ForceDevData(NamedTuple):
@@ -126,7 +133,10 @@ class ForceDevData(NamedTuple):
     D: jnp.ndarray  # (T, m, 2 n_k) (delta, phi)
     s: jnp.ndarray
     rates: jnp.ndarray  # (2,)
-    AAt: jnp.ndarray  # (T, T, m, m)
+    AAt: jnp.ndarray  # (T m, T m)
+    E: jnp.ndarray  # (2, T m, T m)
+    rows: jnp.ndarray  # (T, n_max)
+    powers: jnp.ndarray  # (T, n_max, 2 m_t + 1)
 
 
 # ----------------------------------------------------------------------------- the span Z_i
@@ -242,7 +252,8 @@ def dev_data(
         jnp.asarray(np.stack(D)),
         jnp.full(n_k, gp.COEFFICIENT_SCALE),
         jnp.full(len(BLOCKS), rate),
-        jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
+        *span_products(np.stack(A), np.stack(D), len(BLOCKS)),
+        *padded_rows(t, idx, len(p_bar), 2 * span_degree(orders) + 3),
     )
 
 
@@ -268,8 +279,36 @@ def force_dev_data(
         jnp.asarray(np.stack(D)),
         jnp.full(n_k, gp.COEFFICIENT_SCALE),
         jnp.full(len(FORCE_BLOCKS), gp.amplitude_rate(reference_area(base.feff_hat))),
-        jnp.asarray(np.einsum("iak,jbk->ijab", np.stack(A), np.stack(A))),
+        *span_products(np.stack(A), np.stack(D), len(FORCE_BLOCKS)),
+        *padded_rows(t, idx, len(p_bar), 2 * span_degree(orders) + 1),
     )
+
+
+def span_products(A, D, n_blocks: int):
+    """(A A^T (T m, T m), E (blocks, T m, T m)): the fixed products the span's prior covariance is
+    made of, rows and columns in (test, Z-column) order. E_b = D^b diag(s)^2 D^b^T over the n_k
+    channels of block b (s_k = ``gp.COEFFICIENT_SCALE``), so that the deviations' share is
+    R(l) (x) 1 times sum_b a_b^2 E_b: no product with D while sampling (``prior_span_cov``)."""
+    T, m, n_c = D.shape
+    flat = A.reshape(T * m, -1)
+    Db = D.reshape(T * m, n_blocks, n_c // n_blocks) * gp.COEFFICIENT_SCALE
+    return jnp.asarray(flat @ flat.T), jnp.asarray(np.einsum("xbk,ybk->bxy", Db, Db))
+
+
+def padded_rows(t, idx, n_tests: int, n_powers: int):
+    """(rows (T, n_max), powers (T, n_max, n_powers)): each test's reading indices padded to the
+    longest test's count (padding points at reading 0) and t^k at them, 0 on the padding: the
+    per-test moments are then one product over a reading axis per test (``pair_moments``) instead
+    of a scatter-add over the readings."""
+    t, idx = np.asarray(t, float), np.asarray(idx)
+    n_max = int(np.bincount(idx, minlength=n_tests).max())
+    rows = np.zeros((n_tests, n_max), int)
+    live = np.zeros((n_tests, n_max))
+    for i in range(n_tests):
+        r = np.flatnonzero(idx == i)
+        rows[i, : r.size], live[i, : r.size] = r, 1.0
+    powers = t[rows][..., None] ** np.arange(n_powers) * live[..., None]
+    return jnp.asarray(rows), jnp.asarray(powers)
 
 
 def reference_area(feff_hat) -> float:
@@ -354,12 +393,10 @@ def n_coefficients(d) -> int:
 # ----------------------------------------------------------------------------- moments
 
 
-def _segment(v, d):
-    return jax.ops.segment_sum(v, d.test, num_segments=d.p_pa.shape[0])
-
-
-def _powers(d, top):
-    return d.t[:, None] ** jnp.arange(top + 1)
+def _per_test(weights, d):
+    """sum over each test's readings of ``weights`` (n, k) times t^j: (k, T, 2 m_t + 3) (or + 1),
+    one product per test over its padded readings (``padded_rows``)."""
+    return jnp.einsum("tnk,tnp->ktp", weights[d.rows], d.powers)
 
 
 def pair_moments(noise, d: DevData):
@@ -372,10 +409,17 @@ def pair_moments(noise, d: DevData):
     yl = (L - L21 * yf) / L22
     m = d.A.shape[1]
     nf = (m - 1) // 2  # m_t + 1 force columns, m_t + 2 piston columns
-    P = _powers(d, 2 * nf)
-    M1 = _segment((w * (1.0 / L11**2 + s**2))[:, None] * P, d)
-    M2 = _segment((w / L22**2)[:, None] * P, d)
-    M3 = _segment((-w * s / L22)[:, None] * P, d)
+    weights = jnp.stack(
+        [
+            w * (1.0 / L11**2 + s**2),
+            w / L22**2,
+            -w * s / L22,
+            w * (yf / L11 - s * yl),  # vf
+            w * yl / L22,  # vl
+        ],
+        axis=1,
+    )
+    M1, M2, M3, Bf, Bl = _per_test(weights, d)
     a, b = np.arange(nf), np.arange(nf + 1)
     pp = d.p_pa[:, None, None]
     Hff = M1[:, a[:, None] + a[None, :]] * pp**2
@@ -388,15 +432,7 @@ def pair_moments(noise, d: DevData):
         ],
         axis=1,
     )
-    vf = w * (yf / L11 - s * yl)
-    vl = w * yl / L22
-    bvec = jnp.concatenate(
-        [
-            _segment(vf[:, None] * P[:, :nf], d) * d.p_pa[:, None],
-            _segment(vl[:, None] * P[:, : nf + 1], d),
-        ],
-        axis=1,
-    )
+    bvec = jnp.concatenate([Bf[:, :nf] * d.p_pa[:, None], Bl[:, : nf + 1]], axis=1)
     yy = jnp.sum(w * (yf**2 + yl**2))
     log_det = 2.0 * jnp.sum(w * (jnp.log(L11) + jnp.log(L22)))
     return H, bvec, yy, 2 * jnp.sum(w), log_det
@@ -407,11 +443,10 @@ def force_moments(noise, d: ForceDevData):
     sigma, y = surface_force.sigma_y(noise, d)
     w = d.weight / sigma**2
     nf = d.A.shape[1]
-    P = _powers(d, 2 * nf - 2)
-    M = _segment(w[:, None] * P, d)
+    M, B = _per_test(jnp.stack([w, w * y], axis=1), d)
     a = np.arange(nf)
     H = M[:, a[:, None] + a[None, :]] * d.p_pa[:, None, None] ** 2
-    bvec = _segment((w * y)[:, None] * P[:, :nf], d) * d.p_pa[:, None]
+    bvec = B[:, :nf] * d.p_pa[:, None]
     return H, bvec, jnp.sum(w * y**2), jnp.sum(d.weight), jnp.sum(d.weight * jnp.log(sigma**2))
 
 
@@ -420,12 +455,20 @@ def moments(noise, d):
 
 
 def prior_span_cov(theta, d):
-    """P (T, T, m, m): the prior covariance of the tests' Z-coefficients, C C^T: the surface's part
-    A_i A_j^T (fixed, ``AAt``) plus the deviations' R_ij D_i diag(a s)^2 D_j^T."""
+    """P (T m, T m), rows and columns in (test, Z-column) order: the prior covariance of the tests'
+    Z-coefficients, C C^T: the surface's part A A^T (fixed, ``AAt``) plus the deviations'
+    R_ij D_i diag(a s)^2 D_j^T = R_ij sum_b a_b^2 E_b,ij (``E`` fixed, ``span_products``)."""
     _, amps, length = _split(theta, d)
-    g2 = channel_scales(amps, d) ** 2
+    T, m = d.A.shape[:2]
     R = gp.correlation(d.p_bar, length, jnp)
-    return d.AAt + jnp.einsum("ij,iac,c,jbc->ijab", R, d.D, g2, d.D)
+    dev = jnp.einsum("b,bxy->xy", amps**2, d.E).reshape(T, m, T, m)
+    return d.AAt + (R[:, None, :, None] * dev).reshape(T * m, T * m)
+
+
+def _apply_blocks(Rt, X):
+    """R X for R = blockdiag(Rt_i^T) and X (T m, k): each test's m rows times Rt_i^T."""
+    T, m = Rt.shape[:2]
+    return jnp.einsum("iba,ibk->iak", Rt, X.reshape(T, m, -1)).reshape(T * m, -1)
 
 
 class SpanPosterior(NamedTuple):
@@ -433,9 +476,19 @@ class SpanPosterior(NamedTuple):
 
     Rt: jnp.ndarray  # (T, m, m) lower Cholesky factors of H_i (R_i = Rt_i^T)
     u: jnp.ndarray  # (T, m) R^-T b
-    P: jnp.ndarray  # (T, T, m, m) prior covariance of the Z-coefficients
+    P: jnp.ndarray  # (T m, T m) prior covariance of the Z-coefficients (``prior_span_cov``)
     Lm: jnp.ndarray  # (T m, T m) lower Cholesky factor of M = I + R P R^T
     log_marginal: jnp.ndarray  # () log p(readings | theta)
+
+
+def _bordered_cholesky(S, v, c):
+    """The Cholesky factor of [[S, v], [v^T, c]] (batched over leading axes): its leading block is
+    chol(S), its last row's leading part (chol(S)^-1 v)^T, so one factorisation gives both (no
+    triangular solve); ``c`` only has to keep the matrix positive definite."""
+    top = jnp.concatenate([S, v[..., :, None]], axis=-1)
+    bottom = jnp.concatenate([v, c[..., None]], axis=-1)[..., None, :]
+    L = jnp.linalg.cholesky(jnp.concatenate([top, bottom], axis=-2))
+    return L[..., :-1, :-1], L[..., -1, :-1]
 
 
 def span_posterior(theta, d) -> SpanPosterior:
@@ -445,17 +498,24 @@ def span_posterior(theta, d) -> SpanPosterior:
     b^T C (I + C^T H C)^-1 C^T b = |u|^2 - u^T (I + B B^T)^-1 u, u = R^-T b, so the one Cholesky
     factor is of the (T m x T m) matrix M = I + R P R^T (99 for data/n50), P = C C^T, not of the
     (K x K) Gram (183). Needs every H_i positive definite, which the fit's check of the heights per
-    test ensures."""
+    test ensures.
+
+    The cost per theta: P from fixed products (``span_products``: no product with the deviations'
+    maps), R P R^T as two products of the block-diagonal R with a (T m x T m) matrix (R P, then
+    R (R P)^T, P being symmetric), and two Cholesky factorisations of bordered matrices: of each
+    [[H_i, b_i], [b_i^T, c]] (R_i and u_i at once) and of [[M, u], [u^T, c']] (chol(M) and
+    chol(M)^-1 u at once), with c = 2 y'Wy + 1 >= 2 |u_i|^2 + 1 and c' = 2 |u|^2 + 1 > u^T M^-1 u
+    (M >= I), so both are positive definite whenever H_i is."""
     noise, _, _ = _split(theta, d)
     H, bvec, yy, n, log_det = moments(noise, d)
-    Rt = jnp.linalg.cholesky(H)
-    u = jax.scipy.linalg.solve_triangular(Rt, bvec[..., None], lower=True)[..., 0]
-    P = prior_span_cov(theta, d)
     T, m = bvec.shape
-    RPR = jnp.einsum("iba,ijbc,jcd->iajd", Rt, P, Rt).reshape(T * m, T * m)
-    Lm = jnp.linalg.cholesky(jnp.eye(T * m) + RPR)
-    v = jax.scipy.linalg.solve_triangular(Lm, u.reshape(-1), lower=True)
-    quad = yy - (jnp.sum(u**2) - jnp.sum(v**2))
+    Rt, u = _bordered_cholesky(H, bvec, jnp.full(T, 2.0 * yy + 1.0))
+    P = prior_span_cov(theta, d)
+    RP = _apply_blocks(Rt, P)
+    RPR = _apply_blocks(Rt, RP.T)
+    uu = jnp.sum(u**2)
+    Lm, v = _bordered_cholesky(jnp.eye(T * m) + RPR, u.reshape(-1), 2.0 * uu + 1.0)
+    quad = yy - (uu - jnp.sum(v**2))
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(Lm)))
     return SpanPosterior(Rt, u, P, Lm, -0.5 * (quad + log_det + logdet + n * LOG_2PI))
 
@@ -507,10 +567,11 @@ def span_moments(theta, d):
     post = span_posterior(theta, d)
     T, m = post.u.shape
     w = jax.scipy.linalg.cho_solve((post.Lm, True), post.u.reshape(-1)).reshape(T, m)
-    mean = jnp.einsum("ijab,jb->ia", post.P, _apply_Rt(post.Rt, w))
-    RP = jnp.einsum("iba,ijbc->iajc", post.Rt, post.P).reshape(T * m, T * m)
+    mean = (post.P @ _apply_Rt(post.Rt, w).reshape(-1)).reshape(T, m)
+    RP = _apply_blocks(post.Rt, post.P)
     Q = jax.scipy.linalg.solve_triangular(post.Lm, RP, lower=True).reshape(T * m, T, m)
-    G = jnp.einsum("iiab->iab", post.P) - jnp.einsum("kia,kib->iab", Q, Q)
+    Pd = post.P.reshape(T, m, T, m)
+    G = jnp.einsum("iaib->iab", Pd) - jnp.einsum("kia,kib->iab", Q, Q)
     return mean, G
 
 

@@ -35,10 +35,9 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.stats import chi2
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._diagnose.maxwell import campaign_table
+from uq._diagnose.maxwell import campaign_table, chi2_logsf
 from uq._inference.collapsed import Posterior, find_map, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.linear import map_rows
@@ -263,7 +262,7 @@ def _group_stats(r, z, sel, unit_scale):
     zs = z[sel]
 
     mean_z = float(zs.mean()) if k else 0.0
-    log_p = float(chi2.logsf(np.sum(zs**2), k)) if k else 0.0
+    log_p = chi2_logsf(float(np.sum(zs**2)), k) if k else 0.0
     stat = abs(mean_z) * math.sqrt(k)
     return {
         "n": k,

@@ -53,6 +53,24 @@ def test_gram_plan_equals_the_explicit_gram():
         assert np.all(np.abs(got - explicit) <= 1e-12 * scale + 1e-300)
 
 
+def test_a_symmetric_plan_gathers_the_lower_triangle_and_is_exactly_symmetric():
+    """The pair likelihood's plan (``symmetric=True``): half the entries, the explicit Gram to
+    rounding, exactly symmetric (the Cholesky factor reads one triangle); a group whose sum is
+    not symmetric is refused."""
+    rng = np.random.default_rng(3)
+    A, B = _polynomial_designs(rng)
+    groups = [[(A, A)], [(B, B)], [(B, A), (A, B)]]
+    full, half = gram_plan(groups), gram_plan(groups, symmetric=True)
+    k = A.shape[1]
+    assert half.index.shape[0] == k * (k + 1) // 2 and full.index.shape[0] == k * k
+    w = [jnp.asarray(rng.normal(size=A.shape[0])) for _ in range(3)]
+    got, want = (np.asarray(weighted_gram(p, w)) for p in (half, full))
+    assert np.array_equal(got, got.T)
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-12 * np.max(np.abs(want)))
+    with pytest.raises(ValueError, match="not symmetric"):
+        gram_plan([[(B, A)]], symmetric=True)
+
+
 def test_gram_plan_merges_only_proportional_products():
     """Random columns have no proportional products: every distinct pair keeps its own moment."""
     rng = np.random.default_rng(1)

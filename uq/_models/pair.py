@@ -122,7 +122,7 @@ def pair_data(
         jnp.asarray((p_bar + stand.p_atm_bar) * BAR_PA),
         jnp.asarray(area),
         jnp.asarray(noise_prior_mean(stand)),
-        gram_plan([[(Xf, Xf)], [(Xl, Xl)], [(Xl, Xf), (Xf, Xl)]]),
+        gram_plan([[(Xf, Xf)], [(Xl, Xl)], [(Xl, Xf), (Xf, Xl)]], symmetric=True),
         jnp.ones(np.size(F)),
         jnp.asarray(dp_meas),
     )

@@ -161,6 +161,19 @@ def weighted_gram(plan: GramPlan, weights):
     return (entries if plan.index.shape[0] == k * k else entries[plan.full]).reshape(k, k)
 
 
+def reading_forms(plan: GramPlan, M):
+    """Per group g and reading i, ``sum_(A, B) in group g  A_i^T M B_i`` (A_i: row i of A), as a
+    tuple of (n,) vectors, for a (k, k) matrix M: every reading's quadratic forms (e.g. leverages,
+    M the posterior covariance) from the plan's column products, n m_g operations a group
+    instead of the n k^2 of forming M's products with the designs."""
+    k = int(round(np.sqrt(plan.full.shape[0])))
+    sizes = [Q.shape[1] for Q in plan.products]
+    terms = jnp.asarray(plan.coef)[plan.full] * jnp.reshape(M, (k * k, 1))
+    c = jnp.zeros(sum(sizes) + 1).at[jnp.asarray(plan.index)[plan.full]].add(terms)
+    offsets = np.cumsum([0] + sizes)
+    return tuple(Q @ c[offsets[g] : offsets[g + 1]] for g, Q in enumerate(plan.products))
+
+
 def draw_coefficients(post: LinearPosterior, z):
     """Exact draw beta = m + A^{-1/2} z; z (k,) standard normal."""
     return post.mean + jax.scipy.linalg.solve_triangular(post.chol.T, z, lower=False)

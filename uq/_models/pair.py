@@ -55,6 +55,7 @@ from uq._inference.linear import (
     weighted_gram,
 )
 from uq._inference.loo import loglik_idata
+from uq._inference.sampler import INDEPENDENCE_MIX
 from uq._models.saved import provenance_of
 from uq._physics.quantities import BAR_PA, force_noise_var
 
@@ -313,9 +314,11 @@ def fit_over_tests(
     stand,
     desc,
     sampler_settings=None,
+    mix=INDEPENDENCE_MIX,
 ):
     """``cls.from_posterior`` of the one driver's fit of ``model`` to ``data`` (one problem, the
-    seed's exact draws, no replicates until asked for), with the fit's provenance."""
+    seed's exact draws, no replicates until asked for), with the fit's provenance. ``mix``: the
+    sampler's moves (``uq._inference.sampler.INDEPENDENCE_MIX`` unless the model says otherwise)."""
     post = fit_collapsed(
         model,
         data,
@@ -325,6 +328,7 @@ def fit_over_tests(
         seeds=[seed],
         predictive=False,  # 2 x n replicates per draw: made when asked for, not on every fit
         desc=desc,
+        mix=mix,
     )
     prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
     return cls.from_posterior(post, rec, orders, geometry, stand, provenance=prov)

@@ -30,6 +30,7 @@ Pipeline (models in ``uq._models.diagnose``):
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -120,7 +121,6 @@ class Fit:
         self.posterior = posterior
         theta = posterior.theta.reshape(-1, M.N_THETA)
         beta = posterior.beta.reshape(theta.shape[0], -1)
-        muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
         ll = np.concatenate(
             [
                 posterior.loglik["z"].reshape(theta.shape[0], -1),
@@ -129,20 +129,35 @@ class Fit:
             axis=1,
         )[:, M.scored_rows(d)]
         ok = np.all(np.isfinite(ll), axis=1)
-        self.ll, self.muF, self.muL, self.beta, self.sigma = (
-            ll[ok],
-            muF[ok],
-            muL[ok],
-            beta[ok],
-            sigma[ok],
-        )
-        self.theta = theta[ok]
+        self.ll, self.beta, self.theta = ll[ok], beta[ok], theta[ok]
+        self._means_of = (theta, beta, data, ok)  # for ``_means``, on first use
         self.n_params = sum(M.N_PARAMS[m] for m in self.names)
         if bar is not None:
             bar.update(1)
         if loo:
             self.loo = psis(self.ll[None], reff=1.0)  # independent Laplace draws
             self.elpd = self.loo.elpd
+
+    @functools.cached_property
+    def _means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The mean force, mean piston and noise sd of every row at every kept draw (muF, muL,
+        sigma), made on first use: only the base and the final model's residuals need them, not
+        the screening's candidates (the same numbers as made with the fit)."""
+        theta, beta, data, ok = self._means_of
+        muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
+        return muF[ok], muL[ok], sigma[ok]
+
+    @property
+    def muF(self) -> np.ndarray:
+        return self._means[0]
+
+    @property
+    def muL(self) -> np.ndarray:
+        return self._means[1]
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return self._means[2]
 
     def magnitude(self, name: str, n_tests: int, ctx) -> np.ndarray:
         """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table

@@ -79,8 +79,8 @@ class GramPlan(NamedTuple):
     Entry (j, k) of ``A^T diag(w) B`` is ``w @ (A[:, j] * B[:, k])``. Polynomial designs repeat the
     same column products up to a constant many times over (t^a t^b = t^(a+b)), so each group keeps
     only its distinct products (``products[g]``, (n, m_g)) and every Gram entry gathers its terms
-    from them (``index``, ``coef``: (k*k, T), pointing into the concatenated moments w_g @ products[g]
-    followed by one zero). For the surface model this is 420 moments instead of a 51 x 51 Gram
+    from them (``index``, ``coef``: (E, T) for E entries, pointing into the concatenated moments
+    w_g @ products[g] followed by one zero). For the surface model this is 420 moments instead of a 51 x 51 Gram
     from 814 rows: about 12 times fewer operations per noise draw, and one matrix product for all
     walkers at once. A plan of a symmetric sum (``symmetric=True``) holds the lower triangle's
     entries only, half the gathers, and ``full`` mirrors them, so the matrix is exactly symmetric."""

@@ -52,6 +52,18 @@ def test_limits_are_the_binomial_and_the_normal_maximum():
     assert 1 - (1 - 2 * stats.norm.sf(z)) ** 19 == pytest.approx(a, rel=1e-9)
 
 
+def test_limits_are_scipy_stats_numbers_exactly():
+    """The rule is computed with scipy.special (no scipy.stats import on the commands' path): the
+    same numbers as scipy.stats' binom.cdf and norm.isf, to the bit, over many sizes."""
+    for n in (1, 2, 5, 19, 37, 80, 407):
+        for T in (1, 3, 11):
+            a = ALPHA / (2 * T)
+            b = stats.binom(n, LEVEL)
+            k_ref = min(k for k in range(n + 1) if b.cdf(k) > a)
+            z_ref = float(stats.norm.isf((1.0 - (1.0 - a) ** (1.0 / n)) / 2.0))
+            assert limits(n, T) == (k_ref, z_ref)
+
+
 def test_a_model_that_is_right_passes_and_its_false_alarms_stay_within_alpha():
     """200 seeded campaigns read from the model's own predictive: the check passes in all but a
     few (ALPHA = 1 %, so at most 7 of 200: the binomial's 0.999 quantile is 7), and the fraction

@@ -12,7 +12,15 @@ from pathlib import Path
 import numpy as np
 
 import uq
-from uq._diagnose.maxwell import P_SHAPE, _derivative_weights, _pattern, campaign_table, shapes
+from uq._diagnose.maxwell import (
+    P_SHAPE,
+    _derivative_weights,
+    _pattern,
+    campaign_table,
+    chi2_logsf,
+    chi2_sf,
+    shapes,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 LAYOUT = uq.Layout(pressures_bar=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0))
@@ -126,3 +134,18 @@ def test_a_negative_break_at_high_pressure_is_read_by_its_sign_not_as_a_fade():
     # the levels above the step agree on one value: the area it implies, with its assumption
     a = out["piston_area_m2"]
     assert abs(a["mean"] - 54.82e-4 / 0.97) < 3 * a["sd"] and "conservative" in a["assumes"]
+
+
+def test_chi2_tails_are_scipy_stats_numbers_exactly():
+    """The chi-square tails of the diagnosis are scipy.special's (no scipy.stats import on the
+    command's path), the numbers scipy.stats gives, to the bit, below, at and above the median,
+    in the far tail, below the support and for no degrees of freedom."""
+    from scipy import stats
+
+    rng = np.random.default_rng(7)
+    for dof in (0, 1, 2, 3, 9, 10, 40):
+        for x in np.concatenate([rng.uniform(0.0, 3.0 * max(dof, 1), 50), [0.0, -1.0, 1e3]]):
+            for ours, ref in ((chi2_sf, stats.chi2.sf), (chi2_logsf, stats.chi2.logsf)):
+                want = float(ref(x, dof))
+                got = ours(float(x), dof)
+                assert got == want or (np.isnan(got) and np.isnan(want)), (dof, x, got, want)

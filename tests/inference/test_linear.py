@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from uq._inference.float64 import jnp
-from uq._inference.linear import gram_plan, linear_posterior, posterior_from_moments, weighted_gram
+from uq._inference.linear import (
+    gram_plan,
+    linear_posterior,
+    posterior_from_moments,
+    reading_forms,
+    weighted_gram,
+)
 
 
 def _polynomial_designs(rng, n=120, n_tests=4):
@@ -51,6 +57,46 @@ def test_gram_plan_equals_the_explicit_gram():
             )
         )
         assert np.all(np.abs(got - explicit) <= 1e-12 * scale + 1e-300)
+
+
+def test_a_symmetric_plan_gathers_the_lower_triangle_and_is_exactly_symmetric():
+    """The pair likelihood's plan (``symmetric=True``): half the entries, the explicit Gram to
+    rounding, exactly symmetric (the Cholesky factor reads one triangle); a group whose sum is
+    not symmetric is refused."""
+    rng = np.random.default_rng(3)
+    A, B = _polynomial_designs(rng)
+    groups = [[(A, A)], [(B, B)], [(B, A), (A, B)]]
+    full, half = gram_plan(groups), gram_plan(groups, symmetric=True)
+    k = A.shape[1]
+    assert half.index.shape[0] == k * (k + 1) // 2 and full.index.shape[0] == k * k
+    w = [jnp.asarray(rng.normal(size=A.shape[0])) for _ in range(3)]
+    got, want = (np.asarray(weighted_gram(p, w)) for p in (half, full))
+    assert np.array_equal(got, got.T)
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-12 * np.max(np.abs(want)))
+    with pytest.raises(ValueError, match="not symmetric"):
+        gram_plan([[(B, A)]], symmetric=True)
+
+
+def test_reading_forms_are_each_readings_quadratic_forms():
+    """``reading_forms``: per group and reading, sum over its pairs of A_i' M B_i, for a full and
+    a symmetric plan, against the explicit products."""
+    rng = np.random.default_rng(4)
+    A, B = _polynomial_designs(rng)
+    groups = [[(A, A)], [(B, B)], [(B, A), (A, B)]]
+    R = rng.normal(size=(A.shape[1], A.shape[1]))
+    M = R @ R.T
+    want = [
+        np.einsum("ij,jk,ik->i", A, M, A),
+        np.einsum("ij,jk,ik->i", B, M, B),
+        np.einsum("ij,jk,ik->i", B, M, A) + np.einsum("ij,jk,ik->i", A, M, B),
+    ]
+    for plan in (gram_plan(groups), gram_plan(groups, symmetric=True)):
+        got = reading_forms(plan, jnp.asarray(M))
+        for g, w in zip(got, want, strict=True):
+            scale = np.einsum(
+                "ij,jk,ik->i", np.abs(A) + np.abs(B), np.abs(M), np.abs(A) + np.abs(B)
+            )
+            assert np.all(np.abs(np.asarray(g) - w) <= 1e-11 * scale + 1e-300)
 
 
 def test_gram_plan_merges_only_proportional_products():

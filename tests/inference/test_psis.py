@@ -60,3 +60,24 @@ def test_psis_with_ties_and_short_tails_follows_arviz():
         got = psis(x, reff=1.0)
         np.testing.assert_allclose(got.loo_i, want_i, rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(got.pareto_k, want_k, rtol=1e-8)
+
+
+def test_the_one_reading_path_is_arviz_s_psislw_to_the_bit():
+    """The irregular readings' path (ties, as a chain's repeated draws make them; short tails) is
+    ArviZ's ``_psislw`` in numpy, without importing ArviZ: the same smoothed weights and k, exactly."""
+    from arviz.stats.stats import _psislw
+
+    from uq._inference.loo import _psislw_one
+
+    rng = np.random.default_rng(5)
+    cutoffmin = np.log(np.finfo(float).tiny)
+    for S, n_tail in ((4000, 190), (300, 52), (15, 3)):
+        ll = _loglik(rng, 1, S, 6, 0.3)[0].T
+        ll[1] = np.repeat(ll[1, : -(-S // 3)], 3)[:S]  # a chain's repeated draws
+        ll[2] = np.round(ll[2], 1)  # many ties
+        for row in ll:
+            lw = -row - np.max(-row)
+            want = _psislw(lw.copy(), -n_tail - 1, cutoffmin, False)
+            got = _psislw_one(lw, -n_tail - 1, cutoffmin)
+            assert np.array_equal(got[0], want[0])
+            assert got[1] == want[1]

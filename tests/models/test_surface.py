@@ -436,6 +436,37 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
         assert np.allclose(np.asarray(got.chol), np.asarray(ref.chol), rtol=1e-7, atol=1e-9)
 
 
+def test_pointwise_loo_from_the_plan_is_block_loo_of_the_whitened_pair():
+    """The leave-one-out densities PSIS-LOO reweights take their leverages from the Gram plan's
+    column products (``reading_forms``); they must equal ``block_loo`` of the explicitly whitened
+    (force, piston) design on data/n50, with the piston design as it is and scaled (the
+    thermodynamic model's piston factor)."""
+    import jax.numpy as jnp
+
+    from uq._models import pair
+    from uq._models import surface_likelihood as S
+
+    rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
+    d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)
+    rng = np.random.default_rng(1)
+    for theta, scale in zip(
+        S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((3, 5)),
+        (1.0, 1.03, 0.98),
+        strict=True,
+    ):
+        L11, L21, L22 = pair.cov_factors(theta, d)
+        F, L = pair.readings(theta, d)
+        yf, xf = F / L11, d.Xf / L11[:, None]
+        yl = (L - L21 * yf) / L22
+        xl = (scale * d.Xl - L21[:, None] * xf) / L22[:, None]
+        post = pair.posterior(theta, d, scale)
+        X, y = jnp.concatenate([xf, xl]), jnp.concatenate([yf, yl])
+        want = np.asarray(pair.block_loo(X, y, d.F.size, post.chol, post.mean))
+        want = want - np.log(np.asarray(L11)) - np.log(np.asarray(L22))
+        got = np.asarray(pair.pointwise_loo(theta, d, scale))
+        assert np.allclose(got, want, rtol=1e-9, atol=1e-9)
+
+
 def test_default_orders_follow_the_number_of_tests():
     """A coarse grid gets a surface its tests can fix; 7 tests or more the default itself."""
     from uq._models.surface import default_orders

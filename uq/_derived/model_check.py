@@ -28,7 +28,7 @@ residuals would itself be a model of the discrepancy between tested pressures th
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy.special import bdtr, ndtri
 
 #: the predictive intervals' level
 LEVEL = 0.90
@@ -48,10 +48,12 @@ RULE = (
 def limits(n: int, n_pressures: int, alpha: float = ALPHA) -> tuple[int, float]:
     """The rule at one pressure with ``n`` readings: the fewest readings inside that pass and the
     largest |z| that passes, each at level ``alpha / (2 n_pressures)``."""
+    # scipy.special's binomial cdf and normal quantile, the formulas of scipy.stats' binom.cdf and
+    # norm.isf (the same numbers, tested): scipy.stats costs about 1.5 CPU s to import
     a = alpha / (2 * n_pressures)
-    b = stats.binom(n, LEVEL)
-    k_min = min(k for k in range(n + 1) if b.cdf(k) > a)
-    z_max = float(stats.norm.isf((1.0 - (1.0 - a) ** (1.0 / n)) / 2.0))
+    ks = np.arange(n + 1)
+    k_min = int(ks[bdtr(ks, n, LEVEL) > a][0])
+    z_max = float(-ndtri((1.0 - (1.0 - a) ** (1.0 / n)) / 2.0))
     return k_min, z_max
 
 

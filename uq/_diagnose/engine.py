@@ -30,15 +30,15 @@ Pipeline (models in ``uq._models.diagnose``):
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.stats import chi2
 
 from uq._data.stand_description import PAPER_STAND, StandDescription
-from uq._diagnose.maxwell import campaign_table
+from uq._diagnose.maxwell import campaign_table, chi2_logsf
 from uq._inference.collapsed import Posterior, find_map, fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.linear import map_rows
@@ -121,7 +121,6 @@ class Fit:
         self.posterior = posterior
         theta = posterior.theta.reshape(-1, M.N_THETA)
         beta = posterior.beta.reshape(theta.shape[0], -1)
-        muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
         ll = np.concatenate(
             [
                 posterior.loglik["z"].reshape(theta.shape[0], -1),
@@ -130,20 +129,35 @@ class Fit:
             axis=1,
         )[:, M.scored_rows(d)]
         ok = np.all(np.isfinite(ll), axis=1)
-        self.ll, self.muF, self.muL, self.beta, self.sigma = (
-            ll[ok],
-            muF[ok],
-            muL[ok],
-            beta[ok],
-            sigma[ok],
-        )
-        self.theta = theta[ok]
+        self.ll, self.beta, self.theta = ll[ok], beta[ok], theta[ok]
+        self._means_of = (theta, beta, data, ok)  # for ``_means``, on first use
         self.n_params = sum(M.N_PARAMS[m] for m in self.names)
         if bar is not None:
             bar.update(1)
         if loo:
             self.loo = psis(self.ll[None], reff=1.0)  # independent Laplace draws
             self.elpd = self.loo.elpd
+
+    @functools.cached_property
+    def _means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The mean force, mean piston and noise sd of every row at every kept draw (muF, muL,
+        sigma), made on first use: only the base and the final model's residuals need them, not
+        the screening's candidates (the same numbers as made with the fit)."""
+        theta, beta, data, ok = self._means_of
+        muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
+        return muF[ok], muL[ok], sigma[ok]
+
+    @property
+    def muF(self) -> np.ndarray:
+        return self._means[0]
+
+    @property
+    def muL(self) -> np.ndarray:
+        return self._means[1]
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return self._means[2]
 
     def magnitude(self, name: str, n_tests: int, ctx) -> np.ndarray:
         """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table
@@ -263,7 +277,7 @@ def _group_stats(r, z, sel, unit_scale):
     zs = z[sel]
 
     mean_z = float(zs.mean()) if k else 0.0
-    log_p = float(chi2.logsf(np.sum(zs**2), k)) if k else 0.0
+    log_p = chi2_logsf(float(np.sum(zs**2)), k) if k else 0.0
     stat = abs(mean_z) * math.sqrt(k)
     return {
         "n": k,

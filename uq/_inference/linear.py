@@ -79,28 +79,39 @@ class GramPlan(NamedTuple):
     Entry (j, k) of ``A^T diag(w) B`` is ``w @ (A[:, j] * B[:, k])``. Polynomial designs repeat the
     same column products up to a constant many times over (t^a t^b = t^(a+b)), so each group keeps
     only its distinct products (``products[g]``, (n, m_g)) and every Gram entry gathers its terms
-    from them (``index``, ``coef``: (k*k, T), pointing into the concatenated moments w_g @ products[g]
-    followed by one zero). For the surface model this is 420 moments instead of a 51 x 51 Gram
+    from them (``index``, ``coef``: (E, T) for E entries, pointing into the concatenated moments
+    w_g @ products[g] followed by one zero). For the surface model this is 420 moments instead of a 51 x 51 Gram
     from 814 rows: about 12 times fewer operations per noise draw, and one matrix product for all
-    walkers at once."""
+    walkers at once. A plan of a symmetric sum (``symmetric=True``) holds the lower triangle's
+    entries only, half the gathers, and ``full`` mirrors them, so the matrix is exactly symmetric."""
 
     products: tuple  # (n, m_g) per weight group
-    index: np.ndarray  # (k*k, T) int
-    coef: np.ndarray  # (k*k, T)
+    index: np.ndarray  # (E, T) int: E = k*k entries, or k (k + 1) / 2 of a symmetric plan
+    coef: np.ndarray  # (E, T)
+    full: np.ndarray  # (k*k,) int: the entry of each element of the (k, k) matrix
 
 
-def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
+def gram_plan(groups, *, rtol: float = 1e-12, symmetric: bool = False) -> GramPlan:
     """Plan for ``weighted_gram``: ``groups`` is a sequence, one entry per weight vector, of
     sequences of (A, B) design pairs (each (n, k), numpy, the same k). Column products equal up
-    to a constant (checked to ``rtol`` of their norm, not just hashed) share one moment."""
+    to a constant (checked to ``rtol`` of their norm, not just hashed) share one moment.
+    ``symmetric``: every group's sum is symmetric for any weights (pairs (A, A), or (A, B) with
+    (B, A)); only the lower triangle is planned (checked: ValueError otherwise)."""
     k = np.shape(groups[0][0][0])[1]
-    products, entries, offset = [], [[] for _ in range(k * k)], 0
+    if symmetric:
+        _require_symmetric(groups, rtol)
+    lower = np.tril_indices(k)
+    position = np.arange(k * k).reshape(k, k)
+    if symmetric:
+        position[lower] = np.arange(lower[0].size)
+        position.T[lower] = np.arange(lower[0].size)
+    products, entries, offset = [], [[] for _ in range(int(position.max()) + 1)], 0
     for pairs in groups:
         unique, buckets = [], {}
         for A, B in pairs:
             A, B = np.asarray(A, float), np.asarray(B, float)
             for j in range(k):
-                cols = A[:, j : j + 1] * B
+                cols = A[:, j : j + 1] * (B[:, : j + 1] if symmetric else B)
                 norms = np.linalg.norm(cols, axis=0)
                 for kk in np.flatnonzero(norms > 0):
                     v = cols[:, kk] / norms[kk]
@@ -115,18 +126,29 @@ def gram_plan(groups, *, rtol: float = 1e-12) -> GramPlan:
                         buckets[key].append(u)
                     ref = unique[u][1]
                     scale = (cols[:, kk] @ ref) / (ref @ ref)
-                    entries[j * k + kk].append((offset + u, scale))
+                    entries[position[j, kk]].append((offset + u, scale))
         products.append(
             np.stack([col for _, col in unique], axis=1) if unique else np.zeros((A.shape[0], 0))
         )
         offset += len(unique)
     width = max(1, max(len(e) for e in entries))
-    index = np.full((k * k, width), offset, dtype=np.int32)  # ``offset``: the zero moment
-    coef = np.zeros((k * k, width))
+    index = np.full((len(entries), width), offset, dtype=np.int32)  # ``offset``: the zero moment
+    coef = np.zeros((len(entries), width))
     for i, e in enumerate(entries):
         for t, (u, scale) in enumerate(e):
             index[i, t], coef[i, t] = u, scale
-    return GramPlan(tuple(products), index, coef)
+    return GramPlan(tuple(products), index, coef, position.reshape(-1).astype(np.int32))
+
+
+def _require_symmetric(groups, rtol: float) -> None:
+    """Each group's sum at random weights is a symmetric matrix (to ``rtol`` of its scale)."""
+    rng = np.random.default_rng(0)
+    for pairs in groups:
+        n = np.shape(pairs[0][0])[0]
+        w = rng.uniform(0.5, 1.5, n)
+        G = sum(np.asarray(A, float).T @ (w[:, None] * np.asarray(B, float)) for A, B in pairs)
+        if not np.allclose(G, G.T, rtol=0.0, atol=rtol * 10 * max(np.max(np.abs(G)), 1e-300)):
+            raise ValueError("gram_plan(symmetric=True): a group's sum is not symmetric")
 
 
 def weighted_gram(plan: GramPlan, weights):
@@ -134,8 +156,22 @@ def weighted_gram(plan: GramPlan, weights):
     moments = jnp.concatenate(
         [w @ Q for w, Q in zip(weights, plan.products, strict=True)] + [jnp.zeros(1)]
     )
-    k = int(round(np.sqrt(plan.index.shape[0])))
-    return jnp.sum(moments[plan.index] * plan.coef, axis=-1).reshape(k, k)
+    k = int(round(np.sqrt(plan.full.shape[0])))
+    entries = jnp.sum(moments[plan.index] * plan.coef, axis=-1)
+    return (entries if plan.index.shape[0] == k * k else entries[plan.full]).reshape(k, k)
+
+
+def reading_forms(plan: GramPlan, M):
+    """Per group g and reading i, ``sum_(A, B) in group g  A_i^T M B_i`` (A_i: row i of A), as a
+    tuple of (n,) vectors, for a (k, k) matrix M: every reading's quadratic forms (e.g. leverages,
+    M the posterior covariance) from the plan's column products, n m_g operations a group
+    instead of the n k^2 of forming M's products with the designs."""
+    k = int(round(np.sqrt(plan.full.shape[0])))
+    sizes = [Q.shape[1] for Q in plan.products]
+    terms = jnp.asarray(plan.coef)[plan.full] * jnp.reshape(M, (k * k, 1))
+    c = jnp.zeros(sum(sizes) + 1).at[jnp.asarray(plan.index)[plan.full]].add(terms)
+    offsets = np.cumsum([0] + sizes)
+    return tuple(Q @ c[offsets[g] : offsets[g + 1]] for g, Q in enumerate(plan.products))
 
 
 def draw_coefficients(post: LinearPosterior, z):

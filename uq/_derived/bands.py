@@ -34,12 +34,12 @@ the same code runs on Table 1 itself (one "draw" per test) or on a posterior.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from uq._inference.summary import band
 from uq._inference.summary import estimate as _estimate
 from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA, force_noise_var
@@ -60,8 +60,12 @@ class Band:
 
     @classmethod
     def of(cls, draws: np.ndarray, level: float = LEVEL) -> Band:
-        m, lo, hi = band(draws, axis=0, level=level)
-        return cls(m, lo, hi)
+        """The band of ``draws`` (D, ...) over its first axis (``uq._inference.summary.band``'s
+        numbers: both quantiles from one partition of the draws, not one each)."""
+        d = np.asarray(draws, float)
+        a = (1.0 - level) / 2.0
+        lo, hi = np.quantile(d, [a, 1.0 - a], axis=0)
+        return cls(d.mean(axis=0), lo, hi)
 
     def contains(self, values) -> np.ndarray:
         v = np.asarray(values)
@@ -363,14 +367,12 @@ def bands_from_coefficients(
     x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
     ref, note = choose_reference(p_bar, reference_bar, has_vol)
     u, u_top = x - x0_m, x_max - x0_m
-    rng = np.random.default_rng(seed)
-    # the predictive draws' normals, force's then piston's, as one (T, D, G) block each (the
-    # stream the bands have always used); the curves themselves are made one test at a time, so
-    # a campaign holds one test's (D, G) arrays per quantity instead of every test's
-    z = None if noise is None else rng.standard_normal((2, *force.shape[:2], x.size))
+    normals = (
+        None if noise is None else _Normals(np.random.default_rng(seed), force.shape[:2], x.size)
+    )
     feff_ref = None if ref is None else -S * _slope(piston[ref], u)
     sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
-    feff_sel = np.empty((sel.size, force.shape[1], x.size))
+    across = _Across()  # F_eff's largest, smallest and summed value over the tests in sel
     tests = []
     for t in range(T):
         q = _curve_quantities(
@@ -383,10 +385,10 @@ def bands_from_coefficients(
             feff_ref,
             None if noise is None else np.asarray(noise, float)[t],
             None if noise_ref_force is None else np.asarray(noise_ref_force, float)[t],
-            None if z is None else z[:, t],
+            None if normals is None else normals.next_test(),
         )
         if t in sel:
-            feff_sel[np.searchsorted(sel, t)] = q["feff"]
+            across.add(q["feff"])
         present = [
             n
             for n in q
@@ -412,7 +414,7 @@ def bands_from_coefficients(
     }
     if extra_heights is not None:
         heights = dict(extra_heights)
-    scatter, scatter_at = _scatter(p_bar[sel], force[sel], feff_sel, heights, x0_m, level)
+    scatter, scatter_at = _scatter(p_bar[sel], force[sel], across, heights, x0_m, level)
     return CampaignBands(
         x,
         float(x0_m),
@@ -426,6 +428,50 @@ def bands_from_coefficients(
         int(force.shape[1]),
         int(seed),
     )
+
+
+class _Normals:
+    """The predictive draws' normals, one test's (2, D, G) block at a time, from the stream the
+    bands have always used: ``rng.standard_normal((2, T, D, G))``, every test's force normals
+    first, then every test's piston normals. Two generators read that stream, one from its start
+    (force) and a copy moved past the T force blocks (piston), so that a campaign holds one test's
+    normals instead of all of them (64 MB on data/n50 at 2000 draws); numpy's generator draws a
+    block of normals as the same values whether in one call or in consecutive ones (tested)."""
+
+    def __init__(self, rng: np.random.Generator, shape: tuple[int, int], n_grid: int):
+        self._size = (int(shape[1]), int(n_grid))
+        self._force = rng
+        self._piston = copy.deepcopy(rng)
+        for _ in range(int(shape[0])):  # past the force normals, one block at a time
+            self._piston.standard_normal(self._size)
+
+    def next_test(self) -> np.ndarray:
+        """The next test's (2, D, G) normals: force's, piston's."""
+        return np.stack(
+            [self._force.standard_normal(self._size), self._piston.standard_normal(self._size)]
+        )
+
+
+class _Across:
+    """F_eff's largest, smallest and summed value across the tests added (in order), per draw and
+    height: the scatter of :func:`feff_scatter` without holding every test's (D, G) curves."""
+
+    def __init__(self):
+        self.n, self.hi, self.lo, self.sum = 0, None, None, None
+
+    def add(self, feff: np.ndarray) -> None:
+        if self.n == 0:
+            self.hi, self.lo, self.sum = feff.copy(), feff.copy(), feff.copy()
+        else:
+            np.maximum(self.hi, feff, out=self.hi)
+            np.minimum(self.lo, feff, out=self.lo)
+            self.sum += feff
+        self.n += 1
+
+    def scatter(self) -> np.ndarray:
+        """:func:`feff_scatter` of the tests added (the same numbers: numpy sums over the first
+        axis of an array one row after the other, as ``add`` does)."""
+        return 100.0 * 0.5 * (self.hi - self.lo) / (self.sum / self.n)
 
 
 def _curve_quantities(p_bar, force, piston, u, u_top, S, feff_ref, noise, f_ref, z) -> dict:
@@ -487,11 +533,12 @@ def _at_x0(p_bar: float, force, b_L, b_L_ref, S: float) -> dict:
     return out
 
 
-def _scatter(p_bar, force, feff, heights: dict, x0_m: float, level: float):
-    """Scatter of F_eff over the tests at >= scatter_min_bar (None with fewer than two), on the grid and at heights."""
+def _scatter(p_bar, force, across: _Across, heights: dict, x0_m: float, level: float):
+    """Scatter of F_eff over the tests at >= scatter_min_bar (None with fewer than two), on the
+    grid (``across``: their F_eff curves) and at heights."""
     if p_bar.size < 2:
         return None, {}
-    scatter = Band.of(feff_scatter(feff), level)
+    scatter = Band.of(across.scatter(), level)
     hx = np.array(list(heights.values()), float)
     fh = _poly(force, hx - x0_m) / (p_bar * BAR_PA)[:, None, None]  # (T', D, H)
     sh = feff_scatter(fh)  # (D, H)

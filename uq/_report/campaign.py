@@ -153,9 +153,11 @@ def _band_note_after_layout(fig, ax, title: str, widths, factor: float, unit: st
     """:func:`_band_note` of the laid-out figure, laid out once: the title's two lines are set
     (with a stand-in second line) before the one layout pass, and the layout is then kept
     (``set_layout_engine("none")``), so that saving the figure does not lay it out again (the
-    constrained layout of a figure with a dozen residual panels costs about a second a pass)."""
+    constrained layout of a figure with a dozen residual panels costs about a second a pass).
+    The layout engine is run by itself, not through a draw of the whole figure, which would
+    draw every band and point once more for nothing (the same figure to the byte)."""
     ax.set_title(title.format("the curves' 90 % bands are at most 0.000 N wide (seen)"), fontsize=9)
-    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
+    fig.get_layout_engine().execute(fig)  # the axes' final size, for the band's width in points
     fig.set_layout_engine("none")
     return _band_note(ax, widths, factor, unit)
 

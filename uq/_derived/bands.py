@@ -387,15 +387,17 @@ def bands_from_coefficients(
             None if noise_ref_force is None else np.asarray(noise_ref_force, float)[t],
             None if normals is None else normals.next_test(),
         )
-        if t in sel:
-            across.add(q["feff"])
-        present = [
-            n
-            for n in q
-            if (n not in OWN_VOLUME or has_vol[t]) and (n not in REF_VOLUME or ref is not None)
-        ]
-        B = {n: Band.of(q[n], level) for n in present}
-        sim = {n: SimultaneousBand.of(q[n], level) for n in SIMULTANEOUS if n in present}
+        B, sim = {}, {}
+        for n, curves in q:  # each quantity's (D, G) curves reduced to bands, then dropped
+            if n == "feff" and t in sel:
+                across.add(curves)
+            if (n in OWN_VOLUME and not has_vol[t]) or (n in REF_VOLUME and ref is None):
+                continue
+            B[n] = Band.of(curves, level)
+            if n in SIMULTANEOUS:
+                sim[n] = SimultaneousBand.of(curves, level)
+            del curves
+        sim = {n: sim[n] for n in SIMULTANEOUS if n in sim}
         at0 = _at_x0(
             p_bar[t],
             force[t],
@@ -474,45 +476,47 @@ class _Across:
         return 100.0 * 0.5 * (self.hi - self.lo) / (self.sum / self.n)
 
 
-def _curve_quantities(p_bar, force, piston, u, u_top, S, feff_ref, noise, f_ref, z) -> dict:
-    """Every banded curve of one test, (D, G) per name, from its coefficient draws force, piston
-    (D, 4) on the grid u = x - x0: u_top its largest height, feff_ref (D, G) the reference test's
-    -S dL/dx (None: no reference), noise (D, 3) and f_ref (G,) the relative noise term's force
-    level (None: each draw's own |force|), z (2, D, G) the predictive draws' normals (None: no
-    noise, predictive curves equal to the mean curves)."""
+def _curve_quantities(p_bar, force, piston, u, u_top, S, feff_ref, noise, f_ref, z):
+    """Every banded curve of one test, (name, (D, G) curves) one after the other (so that the
+    caller holds only the few curves the next ones are made from), from its coefficient draws
+    force, piston (D, 4) on the grid u = x - x0: u_top its largest height, feff_ref (D, G) the
+    reference test's -S dL/dx (None: no reference), noise (D, 3) and f_ref (G,) the relative
+    noise term's force level (None: each draw's own |force|), z (2, D, G) the predictive draws'
+    normals (None: no noise, predictive curves equal to the mean curves)."""
     P = _poly(force, u)  # (D, G)
-    L = _poly(piston, u)
-    L_top = _poly(piston, np.atleast_1d(u_top))  # (D, 1)
-    p_pa = p_bar * BAR_PA
-    feff_vol = -S * _slope(piston, u)  # NaN for a force-only test
-    trad_own = p_pa * feff_vol
-    trad_ref = p_pa * (feff_ref if feff_ref is not None else np.full_like(feff_vol, np.nan))
+    yield "force", P
     if noise is not None:
         sd_f = np.sqrt(
             force_noise_var(noise[:, 0:1], noise[:, 1:2], np.abs(P) if f_ref is None else f_ref)
         )
-        P_pred = P + sd_f * z[0]
-        L_pred = L + noise[:, 2:3] * z[1]
+        yield "force_pred", P + sd_f * z[0]
+        del sd_f
     else:
-        P_pred, L_pred = P, L
+        yield "force_pred", P
+    L = _poly(piston, u)
+    yield "piston", L
+    yield "piston_pred", L + noise[:, 2:3] * z[1] if noise is not None else L
+    L_top = _poly(piston, np.atleast_1d(u_top))  # (D, 1)
+    yield "dV", S * (L - L_top)
+    del L
+    p_pa = p_bar * BAR_PA
+    yield "feff", P / p_pa
+    feff_vol = -S * _slope(piston, u)  # NaN for a force-only test
+    yield "feff_volume", feff_vol
+    trad_own = p_pa * feff_vol
+    del feff_vol
+    yield "trad_own", trad_own
+    trad_ref = p_pa * (feff_ref if feff_ref is not None else np.full_like(trad_own, np.nan))
+    yield "trad_ref", trad_ref
+    yield "spread_own", trad_own - P
+    with np.errstate(divide="ignore", invalid="ignore"):  # not across a yield: the caller's too
+        pct = 100.0 * (trad_own - P) / P
+    del trad_own
+    yield "spread_own_pct", pct
+    yield "spread_ref", trad_ref - P
     with np.errstate(divide="ignore", invalid="ignore"):
-        pct_own = 100.0 * (trad_own - P) / P
-        pct_ref = 100.0 * (trad_ref - P) / P
-    return {
-        "force": P,
-        "force_pred": P_pred,
-        "piston": L,
-        "piston_pred": L_pred,
-        "dV": S * (L - L_top),
-        "feff": P / p_pa,
-        "feff_volume": feff_vol,
-        "trad_own": trad_own,
-        "trad_ref": trad_ref,
-        "spread_own": trad_own - P,
-        "spread_own_pct": pct_own,
-        "spread_ref": trad_ref - P,
-        "spread_ref_pct": pct_ref,
-    }
+        pct = 100.0 * (trad_ref - P) / P
+    yield "spread_ref_pct", pct
 
 
 def _at_x0(p_bar: float, force, b_L, b_L_ref, S: float) -> dict:

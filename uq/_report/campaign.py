@@ -88,9 +88,12 @@ def _pressure_colours(pressures):
     return [cmap(norm(v)) for v in p], ScalarMappable(norm=norm, cmap=cmap)
 
 
-def _colour_bar(fig, axes, mappable, pressures) -> None:
-    """The pressure colour bar beside ``axes``, the tested pressures marked on it."""
-    bar = fig.colorbar(mappable, ax=axes, pad=0.015, fraction=0.04, aspect=30)
+def _colour_bar(fig, axes, mappable, pressures, cax=None) -> None:
+    """The pressure colour bar beside ``axes`` (or in ``cax``), the tested pressures marked on it."""
+    if cax is not None:
+        bar = fig.colorbar(mappable, cax=cax)
+    else:
+        bar = fig.colorbar(mappable, ax=axes, pad=0.015, fraction=0.04, aspect=30)
     bar.set_label("overpressure p_u (bar); tested pressures marked")
     for p in pressures:
         bar.ax.axhline(p, color="k", lw=0.6)
@@ -149,38 +152,57 @@ def _band_note(ax, widths, factor: float, unit: str) -> str:
     return f"the curves' 90 % bands are at most {widest:.3g} {unit} wide ({seen})"
 
 
-def _band_note_after_layout(fig, ax, title: str, widths, factor: float, unit: str) -> str:
-    """:func:`_band_note` of the laid-out figure, laid out once: the title's two lines are set
-    (with a stand-in second line) before the one layout pass, and the layout is then kept
-    (``set_layout_engine("none")``), so that saving the figure does not lay it out again (the
-    constrained layout of a figure with a dozen residual panels costs about a second a pass).
-    The layout engine is run by itself, not through a draw of the whole figure, which would
-    draw every band and point once more for nothing (the same figure to the byte)."""
-    ax.set_title(title.format("the curves' 90 % bands are at most 0.000 N wide (seen)"), fontsize=9)
-    fig.get_layout_engine().execute(fig)  # the axes' final size, for the band's width in points
-    fig.set_layout_engine("none")
-    return _band_note(ax, widths, factor, unit)
-
-
 def _residual_grid(fig, gs, n: int, cols: int):
-    """``n`` small axes in the rows of ``gs`` below its first, sharing their x axis."""
+    """``n`` small axes in the cells of ``gs``, row by row, sharing their x axis."""
     axes = []
     for i in range(n):
-        ax = fig.add_subplot(gs[1 + i // cols, i % cols], sharex=axes[0] if axes else None)
+        ax = fig.add_subplot(gs[i // cols, i % cols], sharex=axes[0] if axes else None)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
         axes.append(ax)
     return axes
 
 
+#: Figures 2 and 3's fixed layout, inches: the margins, the colour bar beside the main axes, the
+#: residual panels' height and the gaps between them (what constrained layout chose for them on
+#: data/n50, with room for the tick labels of any campaign's residuals)
+RESIDUAL_LAYOUT = SimpleNamespace(
+    left=0.62, right=0.771, top=0.413, bottom=0.66, bar_pad=0.138, bar_width=0.113,
+    below_main=0.69, panel=1.063, row_gap=0.61, col_gap=0.44,
+)  # fmt: skip
+
+
 def _with_residuals(n: int):
-    """A figure with a main axes on top and a grid of ``n`` residual panels below it."""
+    """A figure with a main axes on top (a colour bar axes beside it) and a grid of ``n``
+    residual panels below it, at fixed places (:data:`RESIDUAL_LAYOUT`): no layout engine, whose
+    passes over a dozen panels' tick labels cost about a second each, and the main axes' size,
+    which the band note needs, is known before anything is drawn. Returns (figure, main axes,
+    colour bar axes, residual axes)."""
     plt = pyplot()
+    k = RESIDUAL_LAYOUT
     cols = min(n, 6)
     rows = -(-n // cols)
-    fig = plt.figure(figsize=(10.5, 4.8 + 1.55 * rows), layout="constrained")
-    gs = fig.add_gridspec(1 + rows, cols, height_ratios=[3.2] + [1.0] * rows)
-    return fig, fig.add_subplot(gs[0, :]), _residual_grid(fig, gs, n, cols)
+    W, H = 10.5, 4.8 + 1.55 * rows
+    fig = plt.figure(figsize=(W, H))
+    grid_top = k.bottom + rows * k.panel + (rows - 1) * k.row_gap  # inches from the bottom
+    main_bottom = grid_top + k.below_main
+    main = fig.add_axes(
+        (k.left / W, main_bottom / H, 1 - (k.left + k.right) / W, 1 - (main_bottom + k.top) / H)
+    )
+    bar = fig.add_axes(
+        (
+            (W - k.right + k.bar_pad) / W,
+            main_bottom / H,
+            k.bar_width / W,
+            1 - (main_bottom + k.top) / H,
+        )
+    )
+    width = (W - k.left - k.right - (cols - 1) * k.col_gap) / cols
+    gs = fig.add_gridspec(
+        rows, cols, left=k.left / W, right=1 - k.right / W, bottom=k.bottom / H, top=grid_top / H,
+        wspace=k.col_gap / width, hspace=k.row_gap / k.panel,
+    )  # fmt: skip
+    return fig, main, bar, _residual_grid(fig, gs, n, cols)
 
 
 def _residual_panel(ax, x, h, r, curve: Band, pred: Band, scale, color, p_bar):
@@ -217,7 +239,7 @@ def _residual_key(fig) -> None:
         Patch(color="0.3", alpha=0.7, lw=0, label="the curve's 90 % band (its pressure's colour)"),
         Patch(color="0.5", alpha=0.2, lw=0, label="a new reading's 90 % band"),
     ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=7, frameon=False)
 
 
 def _residual_labels(fig, axes, ylabel: str) -> None:
@@ -233,7 +255,7 @@ def _curves_and_residuals(cb, pairs, curve, points, residuals, ylabel, rlabel, t
     ``curve(tb)``: (band, scale to the axis' unit); ``points(tf, tb)``: the readings in the band's
     unit; ``residuals(tf, tb)``: :func:`_residual_panel`'s residuals, curve band, new reading's band
     and scale."""
-    fig, ax, res = _with_residuals(len(pairs))
+    fig, ax, cax, res = _with_residuals(len(pairs))
     x = cb.x_m * MM
     colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
     widths = []
@@ -246,9 +268,9 @@ def _curves_and_residuals(cb, pairs, curve, points, residuals, ylabel, rlabel, t
     _mark_x0(ax, cb.x0_m * MM)
     ax.set(xlabel="height x (mm)", ylabel=ylabel)
     ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
+    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs], cax=cax)
     _residual_labels(fig, res, rlabel)
-    note = _band_note_after_layout(fig, ax, title, widths, 1e3, unit)
+    note = _band_note(ax, widths, 1e3, unit)  # the layout is fixed: the axes' size is known
     ax.set_title(title.format(f"{note}; below: {below}"), fontsize=9)
     return fig
 

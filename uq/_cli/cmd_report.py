@@ -130,7 +130,7 @@ def command_report(args) -> int:
         comments=list(rec.comments),
         surface=surface,
         comparison=comparison,
-        jobs=None,  # per-test figures in worker processes, one per CPU
+        jobs=None,  # per-test figures in this process and a worker process per further CPU
         figure_format=args.figures,
         reference=reference,
         units=output_units(rec, "input") if args.units == "input" else None,

@@ -624,10 +624,13 @@ def _workers_ignore_interrupts():
 
 
 class _TestFigures:
-    """The per-test figures (the slow part of a report: about 1 s each), drawn by ``jobs``
-    spawned worker processes while the page and the campaign figures are made in this one.
-    Workers get plain data (recordings, mean coefficients, bands) and import only matplotlib and
-    this module, not JAX; the bytes (PNG or SVG) are the same as drawn here (tested)."""
+    """The per-test figures (the slow part of a report: about half a CPU second each), drawn by
+    ``jobs`` processes: ``jobs - 1`` spawned workers, which start on them while the page and the
+    campaign figures are made in this one, and this one, which then draws those the workers have
+    not started, from the last back (:meth:`results`). A worker costs its own imports (matplotlib
+    and this module: about 0.8 CPU s), so this process counts as one of the ``jobs``. Workers get
+    plain data (recordings, mean coefficients, bands) and import only matplotlib and this module,
+    not JAX; the bytes (PNG or SVG) are the same wherever a figure is drawn (tested)."""
 
     MIN_TESTS = 4  # below this, starting workers costs more than it saves
 
@@ -652,15 +655,23 @@ class _TestFigures:
             with _workers_ignore_interrupts():
                 # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
                 self._pool = concurrent.futures.ProcessPoolExecutor(
-                    max_workers=min(jobs, len(self._work)),
+                    max_workers=min(jobs - 1, len(self._work)),
                     mp_context=multiprocessing.get_context("spawn"),
                     initializer=_ignore_interrupts,
                 )
                 # the workers start here (spawn launches them all at the first submit)
                 self._futures = [self._pool.submit(encoded_test_figure, *w) for w in self._work]
 
-    def result(self, i: int) -> bytes:
-        return self._futures[i].result() if self._pool else encoded_test_figure(*self._work[i])
+    def results(self) -> list[bytes]:
+        """Every test's figure bytes, in order: those no worker has started are drawn here (from
+        the last back, while the workers go on from the first; a cancelled future was never
+        started, and those before one that could not be cancelled are all started)."""
+        here = {}
+        for i in reversed(range(len(self._work))):
+            if self._pool and not self._futures[i].cancel():
+                break
+            here[i] = encoded_test_figure(*self._work[i])
+        return [here[i] if i in here else self._futures[i].result() for i in range(len(self._work))]
 
     def __enter__(self):
         return self
@@ -961,11 +972,9 @@ def _draw_figures(
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format, units), alt)
         for stem, fig, alt in drawn
     }
-    for i, tf in enumerate(cf.tests):
+    for tf, data in zip(cf.tests, test_figures.results(), strict=True):
         stem = f"test_{tf.pressure_bar:g}bar"
-        figs[stem] = Figure(
-            f"{stem}.{figure_format}", test_figures.result(i), f"{tf.pressure_bar:g} bar"
-        )
+        figs[stem] = Figure(f"{stem}.{figure_format}", data, f"{tf.pressure_bar:g} bar")
     for f in figs.values():
         write_bytes_atomic(out / f.name, f.data)
     return figs
@@ -997,7 +1006,8 @@ def write_report(
     ``uq report --surface`` does; this function only renders, it fits nothing. ``comments``
     replaces the recordings' leading ``#`` lines. Every file is written atomically; PNGs an earlier
     report left behind are removed. The per-test figures are drawn in this process by default;
-    ``jobs=N`` draws them in N worker processes (``None``: one per CPU; ``uq report`` does so),
+    ``jobs=N`` draws them in N processes, this one and N - 1 workers, which start on them while
+    this one draws the campaign's figures (``None``: one per CPU; ``uq report`` does so),
     with the same bytes either way. Workers are started by spawning (this process may hold a JAX
     runtime, which forking can deadlock), and a spawned worker imports the calling script again:
     with ``jobs`` other than 1, call ``write_report`` from a script only under

@@ -623,18 +623,56 @@ def _workers_ignore_interrupts():
         signal.signal(signal.SIGINT, handler)
 
 
+def _warm_up() -> None:
+    """A figure worker's first task: import matplotlib (this module is imported to run it)."""
+    pyplot()
+
+
+class FigureWorkers:
+    """The worker processes that draw a report's per-test figures (``write_report(...,
+    jobs=workers)``), started ahead: ``jobs`` processes draw them, this one and ``jobs - 1``
+    spawned workers (``None``: one per CPU), none for fewer than ``MIN_TESTS`` tests (starting a
+    worker costs more than it saves). The workers start at once and import matplotlib and this
+    module (about 0.8 CPU s each), so started before the fit (``uq report`` does) their imports
+    run beside it instead of after it. A context manager: leaving it stops the workers.
+    Workers are spawned, not forked: this process may hold a JAX runtime, which fork can
+    deadlock; a spawned worker imports the calling script again (hence the ``__main__`` guard
+    :func:`write_report` asks of scripts)."""
+
+    MIN_TESTS = 4
+
+    def __init__(self, jobs: int | None = None, n_tests: int | None = None):
+        self.jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
+        n = self.jobs - 1 if n_tests is None else min(self.jobs - 1, n_tests)
+        self.pool = None
+        if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
+            with _workers_ignore_interrupts():
+                self.pool = concurrent.futures.ProcessPoolExecutor(
+                    max_workers=n,
+                    mp_context=multiprocessing.get_context("spawn"),
+                    initializer=_ignore_interrupts,
+                )
+                self.pool.submit(_warm_up)  # spawn launches the workers at the first submit
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.pool:
+            self.pool.shutdown(cancel_futures=True)
+
+
 class _TestFigures:
     """The per-test figures (the slow part of a report: about half a CPU second each), drawn by
-    ``jobs`` processes: ``jobs - 1`` spawned workers, which start on them while the page and the
-    campaign figures are made in this one, and this one, which then draws those the workers have
-    not started, from the last back (:meth:`results`). A worker costs its own imports (matplotlib
-    and this module: about 0.8 CPU s), so this process counts as one of the ``jobs``. Workers get
-    plain data (recordings, mean coefficients, bands) and import only matplotlib and this module,
-    not JAX; the bytes (PNG or SVG) are the same wherever a figure is drawn (tested)."""
+    the ``workers`` (a :class:`FigureWorkers`), which start on them while the page and the
+    campaign figures are made in this process, and by this process, which then draws those the
+    workers have not started, from the last back (:meth:`results`). Workers get plain data
+    (recordings, mean coefficients, bands) and import only matplotlib and this module, not JAX;
+    the bytes (PNG or SVG) are the same wherever a figure is drawn (tested)."""
 
-    MIN_TESTS = 4  # below this, starting workers costs more than it saves
-
-    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png", units=None):
+    def __init__(
+        self, cf, cb: CampaignBands, workers: FigureWorkers, figure_format="png", units=None
+    ):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
             (
@@ -650,17 +688,10 @@ class _TestFigures:
             )
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
-        self._pool, self._futures = None, []
-        if jobs > 1 and len(self._work) >= self.MIN_TESTS:
-            with _workers_ignore_interrupts():
-                # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
-                self._pool = concurrent.futures.ProcessPoolExecutor(
-                    max_workers=min(jobs - 1, len(self._work)),
-                    mp_context=multiprocessing.get_context("spawn"),
-                    initializer=_ignore_interrupts,
-                )
-                # the workers start here (spawn launches them all at the first submit)
-                self._futures = [self._pool.submit(encoded_test_figure, *w) for w in self._work]
+        self._pool = workers.pool if len(self._work) >= FigureWorkers.MIN_TESTS else None
+        self._futures = []
+        if self._pool:
+            self._futures = [self._pool.submit(encoded_test_figure, *w) for w in self._work]
 
     def results(self) -> list[bytes]:
         """Every test's figure bytes, in order: those no worker has started are drawn here (from
@@ -677,8 +708,8 @@ class _TestFigures:
         return self
 
     def __exit__(self, *exc):
-        if self._pool:
-            self._pool.shutdown(cancel_futures=True)
+        for f in self._futures:  # the workers may outlive this report (they are the caller's)
+            f.cancel()
 
 
 # ----------------------------------------------------------------------------- HTML
@@ -991,7 +1022,7 @@ def write_report(
     surface=None,
     comparison: dict | None = None,
     surface_page: str | None = None,
-    jobs: int | None = 1,
+    jobs: int | FigureWorkers | None = 1,
     figure_format: str = "png",
     reference: Reference | str | None = "auto",
     units=None,
@@ -1007,7 +1038,8 @@ def write_report(
     replaces the recordings' leading ``#`` lines. Every file is written atomically; PNGs an earlier
     report left behind are removed. The per-test figures are drawn in this process by default;
     ``jobs=N`` draws them in N processes, this one and N - 1 workers, which start on them while
-    this one draws the campaign's figures (``None``: one per CPU; ``uq report`` does so),
+    this one draws the campaign's figures (``None``: one per CPU; a :class:`FigureWorkers`:
+    workers started ahead, as ``uq report`` does before it fits),
     with the same bytes either way. Workers are started by spawning (this process may hold a JAX
     runtime, which forking can deadlock), and a spawned worker imports the calling script again:
     with ``jobs`` other than 1, call ``write_report`` from a script only under
@@ -1044,8 +1076,11 @@ def write_report(
             surface_page = write_model_page(
                 surface, surface.to_json(comparison), stage, figure_format=figure_format
             ).name
-        n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
-        with _TestFigures(cf, cb, n_jobs, figure_format, units) as test_figures:
+        own = None if isinstance(jobs, FigureWorkers) else FigureWorkers(jobs, len(cf.tests))
+        with (
+            own or contextlib.nullcontext(),
+            _TestFigures(cf, cb, own or jobs, figure_format, units) as test_figures,
+        ):
             page, names = _write_page(
                 cf, cb, stage, test_figures, comments, surface_page, figure_format, reference, units
             )

@@ -362,3 +362,23 @@ def test_scatter_band_is_feff_scatter_of_every_tests_curves():
     np.testing.assert_array_equal(cb.scatter.mean, s.mean(axis=0))
     np.testing.assert_array_equal(cb.scatter.lo, np.quantile(s, a, axis=0))
     np.testing.assert_array_equal(cb.scatter.hi, np.quantile(s, 1.0 - a, axis=0))
+
+
+def test_on_test_gets_each_tests_bands_as_they_are_made():
+    """on_test(t, bands, grid) is called once per test, in order, with the PressureBands the
+    campaign's bands then hold, and the grid a figure of them needs."""
+    t = table1()
+    seen = []
+    cb = bands_from_coefficients(
+        t.pressures_bar,
+        t.force[:, None, :],
+        t.piston[:, None, :],
+        x_grid=X_GRID,
+        x0_m=PAPER_X0_M,
+        piston_area_m2=PAPER_PISTON_AREA_M2,
+        on_test=lambda i, tb, grid: seen.append((i, tb, grid)),
+    )
+    assert [i for i, _, _ in seen] == list(range(len(cb.tests)))
+    assert all(tb is cb.tests[i] for i, tb, _ in seen)
+    grid = seen[0][2]
+    assert grid.x_m is cb.x_m and grid.x0_m == cb.x0_m and grid.reference_bar == cb.reference_bar

@@ -83,15 +83,17 @@ def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path, 
     """write_report's worker processes (the default on a multi-core machine) change nothing:
     every PNG and the page are byte for byte those of jobs=1 (the footer's date fixed, as
     SOURCE_DATE_EPOCH does for a reproducible page: the two pages may be written a minute apart).
-    The workers are started ahead, as uq report does (jobs=2 makes the same FigureWorkers(2, n)
-    itself); the figures they have not started when this process is done with the campaign's
-    are drawn here (which ones depends on timing: every figure must be the same either way)."""
+    The workers are started ahead and given each test's figure as soon as its bands are made, as
+    uq report does (jobs=2 makes the same FigureWorkers(2, n) itself and asks for the figures in
+    write_report); the figures they have not started when this process is done with the
+    campaign's are drawn here (which ones depends on timing: every figure must be the same)."""
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")
     cb = campaign_bands(n50_fit, n_draws=200, seed=0)
     write_report(n50_fit, tmp_path / "one", bands=cb, jobs=1)
     with FigureWorkers(2, len(n50_fit.tests)) as workers:
         assert workers.pool is not None
-        write_report(n50_fit, tmp_path / "two", bands=cb, jobs=workers)
+        ahead = campaign_bands(n50_fit, n_draws=200, seed=0, on_test=workers.ahead(n50_fit))
+        write_report(n50_fit, tmp_path / "two", bands=ahead, jobs=workers)
     names = sorted(p.name for p in (tmp_path / "one").iterdir())
     assert names == sorted(p.name for p in (tmp_path / "two").iterdir()) and len(names) == 6 + len(
         n50_fit.tests

@@ -123,7 +123,11 @@ def command_report(args) -> int:
                 model=args.model or registry.default("report"),
             )
         t_fit = time.perf_counter() - t0
-        cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
+        units = output_units(rec, "input") if args.units == "input" else None
+        # each test's figure goes to the workers as soon as its bands are made
+        cb = campaign_bands(
+            cf, n_draws=args.draws, seed=args.seed, on_test=workers.ahead(cf, args.figures, units)
+        )
         path = write_report(
             cf,
             args.out,
@@ -135,7 +139,7 @@ def command_report(args) -> int:
             jobs=workers,
             figure_format=args.figures,
             reference=reference,
-            units=output_units(rec, "input") if args.units == "input" else None,
+            units=units,
         )
     t_all = time.perf_counter() - t0
     print(

@@ -37,6 +37,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -344,6 +345,7 @@ def bands_from_coefficients(
     extra_heights: dict | None = None,
     seed: int = 0,
     level: float = LEVEL,
+    on_test=None,
 ) -> CampaignBands:
     """Bands from coefficient draws.
 
@@ -355,7 +357,9 @@ def bands_from_coefficients(
     bands); noise_ref_force (T, G): the force level F_ref of the relative noise term on the grid,
     as the fit used it (its least-squares curve; default: each draw's own |force|); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
     label -> height (m) where the scatter is also reported (defaults: x0, x_max, x_min of the
-    grid and 75 mm).
+    grid and 75 mm); on_test(t, bands, grid): called with each test's index and
+    :class:`PressureBands` as soon as they are made (grid: x_m, x0_m, reference_bar), so that
+    its figure can be drawn while the next test's bands are made (``uq report`` does).
     """
     p_bar = np.asarray(pressures_bar, float)
     force = np.asarray(force, float)
@@ -366,6 +370,9 @@ def bands_from_coefficients(
     S = float(piston_area_m2)
     x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
     ref, note = choose_reference(p_bar, reference_bar, has_vol)
+    grid = SimpleNamespace(
+        x_m=x, x0_m=float(x0_m), reference_bar=None if ref is None else float(p_bar[ref])
+    )
     u, u_top = x - x0_m, x_max - x0_m
     normals = (
         None if noise is None else _Normals(np.random.default_rng(seed), force.shape[:2], x.size)
@@ -408,6 +415,8 @@ def bands_from_coefficients(
         tests.append(
             PressureBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B)
         )
+        if on_test is not None:
+            on_test(t, tests[-1], grid)
     heights = {
         "x0": x0_m,
         "x_max": float(x.max()),
@@ -572,12 +581,13 @@ def campaign_bands(
     seed: int = 0,
     x_grid=None,
     reference_bar: float = REFERENCE_BAR,
+    on_test=None,
 ) -> CampaignBands:
     """Bands of a fitted campaign (:class:`uq._models.cubic_results.CampaignFit`, or anything with ``.recordings``
     and ``.tests`` holding ``pressure_bar``, ``test.height_m`` and ``flat(name)``).
 
     Subsamples ``n_draws`` draws per test (seeded), evaluates on ``x_grid`` (default: the data's
-    height range, ``n_grid`` points).
+    height range, ``n_grid`` points); ``on_test``: as :func:`bands_from_coefficients`'.
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -614,6 +624,7 @@ def campaign_bands(
         noise_ref_force=_noise_reference(cf.tests, x),
         reference_bar=reference_bar,
         seed=int(rng.integers(2**31)),
+        on_test=on_test,
     )
     return dataclasses.replace(cb, seed=int(seed))
 

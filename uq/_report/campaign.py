@@ -645,6 +645,7 @@ class FigureWorkers:
         self.jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
         n = self.jobs - 1 if n_tests is None else min(self.jobs - 1, n_tests)
         self.pool = None
+        self._ahead = {}  # test index -> (its bands, format, units, the future of its figure)
         if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
             with _workers_ignore_interrupts():
                 self.pool = concurrent.futures.ProcessPoolExecutor(
@@ -654,12 +655,45 @@ class FigureWorkers:
                 )
                 self.pool.submit(_warm_up)  # spawn launches the workers at the first submit
 
+    def ahead(self, cf, figure_format: str = "png", units=None):
+        """An ``on_test`` for :func:`uq._derived.bands.campaign_bands`: each test's figure goes
+        to the workers as soon as its bands are made, so that they draw while this process makes
+        the next test's bands; :func:`write_report` given these workers, the same format and
+        units, and those bands uses these figures instead of asking for them again."""
+
+        def on_test(t, tb, grid):
+            if self.pool is not None:
+                w = _work_item(cf.tests[t], tb, grid, figure_format, units)
+                self._ahead[t] = (
+                    tb,
+                    figure_format,
+                    units,
+                    self.pool.submit(encoded_test_figure, *w),
+                )
+
+        return on_test
+
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         if self.pool:
             self.pool.shutdown(cancel_futures=True)
+
+
+def _work_item(tf, tb, grid, figure_format: str, units) -> tuple:
+    """The arguments of :func:`encoded_test_figure` for one test: plain data a worker can take."""
+    return (
+        tf.test,
+        tf.flat("force").mean(0),
+        tf.x0_m,
+        tb,
+        grid,
+        figure_format,
+        _piston(tf),
+        tf.convergence.converged,
+        units,
+    )
 
 
 class _TestFigures:
@@ -675,33 +709,26 @@ class _TestFigures:
     ):
         grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
         self._work = [
-            (
-                tf.test,
-                tf.flat("force").mean(0),
-                tf.x0_m,
-                tb,
-                grid,
-                figure_format,
-                _piston(tf),
-                tf.convergence.converged,
-                units,
-            )
+            _work_item(tf, tb, grid, figure_format, units)
             for tf, tb in zip(cf.tests, cb.tests, strict=True)
         ]
         self._pool = workers.pool if len(self._work) >= FigureWorkers.MIN_TESTS else None
         self._futures = []
         if self._pool:
-            self._futures = [self._pool.submit(encoded_test_figure, *w) for w in self._work]
+            for i, tb in enumerate(cb.tests):  # the figures asked for ahead, if of these bands
+                tb0, fmt0, units0, future = workers._ahead.get(i, (None, None, None, None))
+                if not (tb0 is tb and fmt0 == figure_format and units0 is units):
+                    future = self._pool.submit(encoded_test_figure, *self._work[i])
+                self._futures.append(future)
 
     def results(self) -> list[bytes]:
         """Every test's figure bytes, in order: those no worker has started are drawn here (from
-        the last back, while the workers go on from the first; a cancelled future was never
-        started, and those before one that could not be cancelled are all started)."""
+        the last back, while the workers go on from the first: a future that can be cancelled
+        was never started)."""
         here = {}
         for i in reversed(range(len(self._work))):
-            if self._pool and not self._futures[i].cancel():
-                break
-            here[i] = encoded_test_figure(*self._work[i])
+            if not self._pool or self._futures[i].cancel():
+                here[i] = encoded_test_figure(*self._work[i])
         return [here[i] if i in here else self._futures[i].result() for i in range(len(self._work))]
 
     def __enter__(self):

@@ -333,6 +333,52 @@ def test_predictive_bands_use_one_block_of_normals_per_campaign():
         P_pred = P + np.sqrt(20.0**2 + (0.004 * np.abs(P)) ** 2) * z[0, k]
         L_pred = L + 2e-5 * z[1, k]
         lo, hi = np.quantile(P_pred, [0.05, 0.95], axis=0)
+        # the normals are read test by test, by two generators on that one stream
         np.testing.assert_allclose(tb.force_pred.lo, lo, rtol=1e-12)
         np.testing.assert_allclose(tb.force_pred.hi, hi, rtol=1e-12)
         np.testing.assert_allclose(tb.piston_pred.mean, L_pred.mean(axis=0), rtol=1e-12)
+        np.testing.assert_allclose(tb.piston_pred.lo, np.quantile(L_pred, 0.05, axis=0), rtol=1e-12)
+
+
+def test_scatter_band_is_feff_scatter_of_every_tests_curves():
+    """The scatter is summed up test by test (largest, smallest, sum) instead of from every
+    test's F_eff curves at once: the same numbers to the bit as feff_scatter of the stacked curves."""
+    t = table1()
+    rng = np.random.default_rng(3)
+    D, x = 200, np.linspace(0.07, 0.15, 31)
+    force = t.force[:, None, :] * (1.0 + 1e-3 * rng.standard_normal((t.force.shape[0], D, 1)))
+    cb = bands_from_coefficients(
+        t.pressures_bar,
+        force,
+        None,
+        x_grid=x,
+        x0_m=PAPER_X0_M,
+        piston_area_m2=PAPER_PISTON_AREA_M2,
+    )
+    sel = np.asarray(t.pressures_bar) >= 1.0
+    p_pa = np.asarray(t.pressures_bar)[sel] * 1e5
+    feff = cubic(force[sel][:, :, None, :], x - PAPER_X0_M) / p_pa[:, None, None]
+    s, a = feff_scatter(feff), (1.0 - 0.9) / 2.0  # the tails as the bands compute them
+    np.testing.assert_array_equal(cb.scatter.mean, s.mean(axis=0))
+    np.testing.assert_array_equal(cb.scatter.lo, np.quantile(s, a, axis=0))
+    np.testing.assert_array_equal(cb.scatter.hi, np.quantile(s, 1.0 - a, axis=0))
+
+
+def test_on_test_gets_each_tests_bands_as_they_are_made():
+    """on_test(t, bands, grid) is called once per test, in order, with the PressureBands the
+    campaign's bands then hold, and the grid a figure of them needs."""
+    t = table1()
+    seen = []
+    cb = bands_from_coefficients(
+        t.pressures_bar,
+        t.force[:, None, :],
+        t.piston[:, None, :],
+        x_grid=X_GRID,
+        x0_m=PAPER_X0_M,
+        piston_area_m2=PAPER_PISTON_AREA_M2,
+        on_test=lambda i, tb, grid: seen.append((i, tb, grid)),
+    )
+    assert [i for i, _, _ in seen] == list(range(len(cb.tests)))
+    assert all(tb is cb.tests[i] for i, tb, _ in seen)
+    grid = seen[0][2]
+    assert grid.x_m is cb.x_m and grid.x0_m == cb.x0_m and grid.reference_bar == cb.reference_bar

@@ -10,7 +10,7 @@ import pytest
 from uq._cli.main import main
 from uq._data.rows import leading_comments
 from uq._derived.bands import campaign_bands
-from uq._report.campaign import write_report
+from uq._report.campaign import FigureWorkers, write_report
 
 
 def _check_page(out, n_tests):
@@ -82,11 +82,18 @@ def test_an_unconverged_fit_opens_with_a_banner_and_every_figure_is_stamped(tmp_
 def test_figures_drawn_by_workers_are_the_figures_drawn_here(n50_fit, tmp_path, monkeypatch):
     """write_report's worker processes (the default on a multi-core machine) change nothing:
     every PNG and the page are byte for byte those of jobs=1 (the footer's date fixed, as
-    SOURCE_DATE_EPOCH does for a reproducible page: the two pages may be written a minute apart)."""
+    SOURCE_DATE_EPOCH does for a reproducible page: the two pages may be written a minute apart).
+    The workers are started ahead and given each test's figure as soon as its bands are made, as
+    uq report does (jobs=2 makes the same FigureWorkers(2, n) itself and asks for the figures in
+    write_report); the figures they have not started when this process is done with the
+    campaign's are drawn here (which ones depends on timing: every figure must be the same)."""
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")
     cb = campaign_bands(n50_fit, n_draws=200, seed=0)
     write_report(n50_fit, tmp_path / "one", bands=cb, jobs=1)
-    write_report(n50_fit, tmp_path / "two", bands=cb, jobs=2)
+    with FigureWorkers(2, len(n50_fit.tests)) as workers:
+        assert workers.pool is not None
+        ahead = campaign_bands(n50_fit, n_draws=200, seed=0, on_test=workers.ahead(n50_fit))
+        write_report(n50_fit, tmp_path / "two", bands=ahead, jobs=workers)
     names = sorted(p.name for p in (tmp_path / "one").iterdir())
     assert names == sorted(p.name for p in (tmp_path / "two").iterdir()) and len(names) == 6 + len(
         n50_fit.tests

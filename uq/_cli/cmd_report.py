@@ -22,7 +22,7 @@ from uq._derived.bands import campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.files import emit_json
 from uq._models import registry
-from uq._report.campaign import MIN_DRAWS, omitted_lines, write_report
+from uq._report.campaign import MIN_DRAWS, FigureWorkers, omitted_lines, write_report
 from uq._report.html import FIGURE_FORMATS
 
 
@@ -103,38 +103,44 @@ def command_report(args) -> int:
         from uq._data.recordings import COMMAND_NEEDS, require
 
         require(rec, COMMAND_NEEDS["surface"])
-    t0 = time.perf_counter()
-    settings = settings_from(args)
-    cf = fit_campaign(
-        rec, seed=args.seed, settings=settings, stand=stand, pressure_ar1=args.pressure_ar1
-    )
-    surface = comparison = None
-    if args.surface:
-        from uq._derived.comparison import fit_both
-
-        surface, _, comparison = fit_both(
-            rec,
-            seed=args.seed,
-            settings=settings,
-            stand=stand,
-            cubic_fit=cf,
-            model=args.model or registry.default("report"),
+    # the figure workers (one per further CPU) start now: their imports run beside the fit
+    with FigureWorkers(None, len(rec.tests)) as workers:
+        t0 = time.perf_counter()
+        settings = settings_from(args)
+        cf = fit_campaign(
+            rec, seed=args.seed, settings=settings, stand=stand, pressure_ar1=args.pressure_ar1
         )
-    t_fit = time.perf_counter() - t0
-    cb = campaign_bands(cf, n_draws=args.draws, seed=args.seed)
-    path = write_report(
-        cf,
-        args.out,
-        bands=cb,
-        seed=args.seed,
-        comments=list(rec.comments),
-        surface=surface,
-        comparison=comparison,
-        jobs=None,  # per-test figures in worker processes, one per CPU
-        figure_format=args.figures,
-        reference=reference,
-        units=output_units(rec, "input") if args.units == "input" else None,
-    )
+        surface = comparison = None
+        if args.surface:
+            from uq._derived.comparison import fit_both
+
+            surface, _, comparison = fit_both(
+                rec,
+                seed=args.seed,
+                settings=settings,
+                stand=stand,
+                cubic_fit=cf,
+                model=args.model or registry.default("report"),
+            )
+        t_fit = time.perf_counter() - t0
+        units = output_units(rec, "input") if args.units == "input" else None
+        # each test's figure goes to the workers as soon as its bands are made
+        cb = campaign_bands(
+            cf, n_draws=args.draws, seed=args.seed, on_test=workers.ahead(cf, args.figures, units)
+        )
+        path = write_report(
+            cf,
+            args.out,
+            bands=cb,
+            seed=args.seed,
+            comments=list(rec.comments),
+            surface=surface,
+            comparison=comparison,
+            jobs=workers,
+            figure_format=args.figures,
+            reference=reference,
+            units=units,
+        )
     t_all = time.perf_counter() - t0
     print(
         f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; fit {t_fit:.1f} s, report {t_all - t_fit:.1f} s"

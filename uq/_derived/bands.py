@@ -34,12 +34,13 @@ the same code runs on Table 1 itself (one "draw" per test) or on a posterior.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
-from uq._inference.summary import band
 from uq._inference.summary import estimate as _estimate
 from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA, force_noise_var
@@ -60,8 +61,12 @@ class Band:
 
     @classmethod
     def of(cls, draws: np.ndarray, level: float = LEVEL) -> Band:
-        m, lo, hi = band(draws, axis=0, level=level)
-        return cls(m, lo, hi)
+        """The band of ``draws`` (D, ...) over its first axis (``uq._inference.summary.band``'s
+        numbers: both quantiles from one partition of the draws, not one each)."""
+        d = np.asarray(draws, float)
+        a = (1.0 - level) / 2.0
+        lo, hi = np.quantile(d, [a, 1.0 - a], axis=0)
+        return cls(d.mean(axis=0), lo, hi)
 
     def contains(self, values) -> np.ndarray:
         v = np.asarray(values)
@@ -340,6 +345,7 @@ def bands_from_coefficients(
     extra_heights: dict | None = None,
     seed: int = 0,
     level: float = LEVEL,
+    on_test=None,
 ) -> CampaignBands:
     """Bands from coefficient draws.
 
@@ -351,7 +357,9 @@ def bands_from_coefficients(
     bands); noise_ref_force (T, G): the force level F_ref of the relative noise term on the grid,
     as the fit used it (its least-squares curve; default: each draw's own |force|); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
     label -> height (m) where the scatter is also reported (defaults: x0, x_max, x_min of the
-    grid and 75 mm).
+    grid and 75 mm); on_test(t, bands, grid): called with each test's index and
+    :class:`PressureBands` as soon as they are made (grid: x_m, x0_m, reference_bar), so that
+    its figure can be drawn while the next test's bands are made (``uq report`` does).
     """
     p_bar = np.asarray(pressures_bar, float)
     force = np.asarray(force, float)
@@ -362,15 +370,16 @@ def bands_from_coefficients(
     S = float(piston_area_m2)
     x_max = np.full(T, x.max()) if x_max_m is None else np.asarray(x_max_m, float)
     ref, note = choose_reference(p_bar, reference_bar, has_vol)
+    grid = SimpleNamespace(
+        x_m=x, x0_m=float(x0_m), reference_bar=None if ref is None else float(p_bar[ref])
+    )
     u, u_top = x - x0_m, x_max - x0_m
-    rng = np.random.default_rng(seed)
-    # the predictive draws' normals, force's then piston's, as one (T, D, G) block each (the
-    # stream the bands have always used); the curves themselves are made one test at a time, so
-    # a campaign holds one test's (D, G) arrays per quantity instead of every test's
-    z = None if noise is None else rng.standard_normal((2, *force.shape[:2], x.size))
+    normals = (
+        None if noise is None else _Normals(np.random.default_rng(seed), force.shape[:2], x.size)
+    )
     feff_ref = None if ref is None else -S * _slope(piston[ref], u)
     sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
-    feff_sel = np.empty((sel.size, force.shape[1], x.size))
+    across = _Across()  # F_eff's largest, smallest and summed value over the tests in sel
     tests = []
     for t in range(T):
         q = _curve_quantities(
@@ -383,17 +392,19 @@ def bands_from_coefficients(
             feff_ref,
             None if noise is None else np.asarray(noise, float)[t],
             None if noise_ref_force is None else np.asarray(noise_ref_force, float)[t],
-            None if z is None else z[:, t],
+            None if normals is None else normals.next_test(),
         )
-        if t in sel:
-            feff_sel[np.searchsorted(sel, t)] = q["feff"]
-        present = [
-            n
-            for n in q
-            if (n not in OWN_VOLUME or has_vol[t]) and (n not in REF_VOLUME or ref is not None)
-        ]
-        B = {n: Band.of(q[n], level) for n in present}
-        sim = {n: SimultaneousBand.of(q[n], level) for n in SIMULTANEOUS if n in present}
+        B, sim = {}, {}
+        for n, curves in q:  # each quantity's (D, G) curves reduced to bands, then dropped
+            if n == "feff" and t in sel:
+                across.add(curves)
+            if (n in OWN_VOLUME and not has_vol[t]) or (n in REF_VOLUME and ref is None):
+                continue
+            B[n] = Band.of(curves, level)
+            if n in SIMULTANEOUS:
+                sim[n] = SimultaneousBand.of(curves, level)
+            del curves
+        sim = {n: sim[n] for n in SIMULTANEOUS if n in sim}
         at0 = _at_x0(
             p_bar[t],
             force[t],
@@ -404,6 +415,8 @@ def bands_from_coefficients(
         tests.append(
             PressureBands(float(p_bar[t]), float(x_max[t]), at_x0=at0, simultaneous=sim, **B)
         )
+        if on_test is not None:
+            on_test(t, tests[-1], grid)
     heights = {
         "x0": x0_m,
         "x_max": float(x.max()),
@@ -412,7 +425,7 @@ def bands_from_coefficients(
     }
     if extra_heights is not None:
         heights = dict(extra_heights)
-    scatter, scatter_at = _scatter(p_bar[sel], force[sel], feff_sel, heights, x0_m, level)
+    scatter, scatter_at = _scatter(p_bar[sel], force[sel], across, heights, x0_m, level)
     return CampaignBands(
         x,
         float(x0_m),
@@ -428,45 +441,91 @@ def bands_from_coefficients(
     )
 
 
-def _curve_quantities(p_bar, force, piston, u, u_top, S, feff_ref, noise, f_ref, z) -> dict:
-    """Every banded curve of one test, (D, G) per name, from its coefficient draws force, piston
-    (D, 4) on the grid u = x - x0: u_top its largest height, feff_ref (D, G) the reference test's
-    -S dL/dx (None: no reference), noise (D, 3) and f_ref (G,) the relative noise term's force
-    level (None: each draw's own |force|), z (2, D, G) the predictive draws' normals (None: no
-    noise, predictive curves equal to the mean curves)."""
+class _Normals:
+    """The predictive draws' normals, one test's (2, D, G) block at a time, from the stream the
+    bands have always used: ``rng.standard_normal((2, T, D, G))``, every test's force normals
+    first, then every test's piston normals. Two generators read that stream, one from its start
+    (force) and a copy moved past the T force blocks (piston), so that a campaign holds one test's
+    normals instead of all of them (64 MB on data/n50 at 2000 draws); numpy's generator draws a
+    block of normals as the same values whether in one call or in consecutive ones (tested)."""
+
+    def __init__(self, rng: np.random.Generator, shape: tuple[int, int], n_grid: int):
+        self._size = (int(shape[1]), int(n_grid))
+        self._force = rng
+        self._piston = copy.deepcopy(rng)
+        for _ in range(int(shape[0])):  # past the force normals, one block at a time
+            self._piston.standard_normal(self._size)
+
+    def next_test(self) -> np.ndarray:
+        """The next test's (2, D, G) normals: force's, piston's."""
+        return np.stack(
+            [self._force.standard_normal(self._size), self._piston.standard_normal(self._size)]
+        )
+
+
+class _Across:
+    """F_eff's largest, smallest and summed value across the tests added (in order), per draw and
+    height: the scatter of :func:`feff_scatter` without holding every test's (D, G) curves."""
+
+    def __init__(self):
+        self.n, self.hi, self.lo, self.sum = 0, None, None, None
+
+    def add(self, feff: np.ndarray) -> None:
+        if self.n == 0:
+            self.hi, self.lo, self.sum = feff.copy(), feff.copy(), feff.copy()
+        else:
+            np.maximum(self.hi, feff, out=self.hi)
+            np.minimum(self.lo, feff, out=self.lo)
+            self.sum += feff
+        self.n += 1
+
+    def scatter(self) -> np.ndarray:
+        """:func:`feff_scatter` of the tests added (the same numbers: numpy sums over the first
+        axis of an array one row after the other, as ``add`` does)."""
+        return 100.0 * 0.5 * (self.hi - self.lo) / (self.sum / self.n)
+
+
+def _curve_quantities(p_bar, force, piston, u, u_top, S, feff_ref, noise, f_ref, z):
+    """Every banded curve of one test, (name, (D, G) curves) one after the other (so that the
+    caller holds only the few curves the next ones are made from), from its coefficient draws
+    force, piston (D, 4) on the grid u = x - x0: u_top its largest height, feff_ref (D, G) the
+    reference test's -S dL/dx (None: no reference), noise (D, 3) and f_ref (G,) the relative
+    noise term's force level (None: each draw's own |force|), z (2, D, G) the predictive draws'
+    normals (None: no noise, predictive curves equal to the mean curves)."""
     P = _poly(force, u)  # (D, G)
-    L = _poly(piston, u)
-    L_top = _poly(piston, np.atleast_1d(u_top))  # (D, 1)
-    p_pa = p_bar * BAR_PA
-    feff_vol = -S * _slope(piston, u)  # NaN for a force-only test
-    trad_own = p_pa * feff_vol
-    trad_ref = p_pa * (feff_ref if feff_ref is not None else np.full_like(feff_vol, np.nan))
+    yield "force", P
     if noise is not None:
         sd_f = np.sqrt(
             force_noise_var(noise[:, 0:1], noise[:, 1:2], np.abs(P) if f_ref is None else f_ref)
         )
-        P_pred = P + sd_f * z[0]
-        L_pred = L + noise[:, 2:3] * z[1]
+        yield "force_pred", P + sd_f * z[0]
+        del sd_f
     else:
-        P_pred, L_pred = P, L
+        yield "force_pred", P
+    L = _poly(piston, u)
+    yield "piston", L
+    yield "piston_pred", L + noise[:, 2:3] * z[1] if noise is not None else L
+    L_top = _poly(piston, np.atleast_1d(u_top))  # (D, 1)
+    yield "dV", S * (L - L_top)
+    del L
+    p_pa = p_bar * BAR_PA
+    yield "feff", P / p_pa
+    feff_vol = -S * _slope(piston, u)  # NaN for a force-only test
+    yield "feff_volume", feff_vol
+    trad_own = p_pa * feff_vol
+    del feff_vol
+    yield "trad_own", trad_own
+    trad_ref = p_pa * (feff_ref if feff_ref is not None else np.full_like(trad_own, np.nan))
+    yield "trad_ref", trad_ref
+    yield "spread_own", trad_own - P
+    with np.errstate(divide="ignore", invalid="ignore"):  # not across a yield: the caller's too
+        pct = 100.0 * (trad_own - P) / P
+    del trad_own
+    yield "spread_own_pct", pct
+    yield "spread_ref", trad_ref - P
     with np.errstate(divide="ignore", invalid="ignore"):
-        pct_own = 100.0 * (trad_own - P) / P
-        pct_ref = 100.0 * (trad_ref - P) / P
-    return {
-        "force": P,
-        "force_pred": P_pred,
-        "piston": L,
-        "piston_pred": L_pred,
-        "dV": S * (L - L_top),
-        "feff": P / p_pa,
-        "feff_volume": feff_vol,
-        "trad_own": trad_own,
-        "trad_ref": trad_ref,
-        "spread_own": trad_own - P,
-        "spread_own_pct": pct_own,
-        "spread_ref": trad_ref - P,
-        "spread_ref_pct": pct_ref,
-    }
+        pct = 100.0 * (trad_ref - P) / P
+    yield "spread_ref_pct", pct
 
 
 def _at_x0(p_bar: float, force, b_L, b_L_ref, S: float) -> dict:
@@ -487,11 +546,12 @@ def _at_x0(p_bar: float, force, b_L, b_L_ref, S: float) -> dict:
     return out
 
 
-def _scatter(p_bar, force, feff, heights: dict, x0_m: float, level: float):
-    """Scatter of F_eff over the tests at >= scatter_min_bar (None with fewer than two), on the grid and at heights."""
+def _scatter(p_bar, force, across: _Across, heights: dict, x0_m: float, level: float):
+    """Scatter of F_eff over the tests at >= scatter_min_bar (None with fewer than two), on the
+    grid (``across``: their F_eff curves) and at heights."""
     if p_bar.size < 2:
         return None, {}
-    scatter = Band.of(feff_scatter(feff), level)
+    scatter = Band.of(across.scatter(), level)
     hx = np.array(list(heights.values()), float)
     fh = _poly(force, hx - x0_m) / (p_bar * BAR_PA)[:, None, None]  # (T', D, H)
     sh = feff_scatter(fh)  # (D, H)
@@ -521,12 +581,13 @@ def campaign_bands(
     seed: int = 0,
     x_grid=None,
     reference_bar: float = REFERENCE_BAR,
+    on_test=None,
 ) -> CampaignBands:
     """Bands of a fitted campaign (:class:`uq._models.cubic_results.CampaignFit`, or anything with ``.recordings``
     and ``.tests`` holding ``pressure_bar``, ``test.height_m`` and ``flat(name)``).
 
     Subsamples ``n_draws`` draws per test (seeded), evaluates on ``x_grid`` (default: the data's
-    height range, ``n_grid`` points).
+    height range, ``n_grid`` points); ``on_test``: as :func:`bands_from_coefficients`'.
 
     >>> import uq
     >>> rec = uq.simulate("n50", seed=1, layout=uq.Layout(pressures_bar=(1.0, 5.0), step_m=0.01))
@@ -563,6 +624,7 @@ def campaign_bands(
         noise_ref_force=_noise_reference(cf.tests, x),
         reference_bar=reference_bar,
         seed=int(rng.integers(2**31)),
+        on_test=on_test,
     )
     return dataclasses.replace(cb, seed=int(seed))
 

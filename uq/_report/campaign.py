@@ -88,9 +88,12 @@ def _pressure_colours(pressures):
     return [cmap(norm(v)) for v in p], ScalarMappable(norm=norm, cmap=cmap)
 
 
-def _colour_bar(fig, axes, mappable, pressures) -> None:
-    """The pressure colour bar beside ``axes``, the tested pressures marked on it."""
-    bar = fig.colorbar(mappable, ax=axes, pad=0.015, fraction=0.04, aspect=30)
+def _colour_bar(fig, axes, mappable, pressures, cax=None) -> None:
+    """The pressure colour bar beside ``axes`` (or in ``cax``), the tested pressures marked on it."""
+    if cax is not None:
+        bar = fig.colorbar(mappable, cax=cax)
+    else:
+        bar = fig.colorbar(mappable, ax=axes, pad=0.015, fraction=0.04, aspect=30)
     bar.set_label("overpressure p_u (bar); tested pressures marked")
     for p in pressures:
         bar.ax.axhline(p, color="k", lw=0.6)
@@ -149,36 +152,57 @@ def _band_note(ax, widths, factor: float, unit: str) -> str:
     return f"the curves' 90 % bands are at most {widest:.3g} {unit} wide ({seen})"
 
 
-def _band_note_after_layout(fig, ax, title: str, widths, factor: float, unit: str) -> str:
-    """:func:`_band_note` of the laid-out figure, laid out once: the title's two lines are set
-    (with a stand-in second line) before the one layout pass, and the layout is then kept
-    (``set_layout_engine("none")``), so that saving the figure does not lay it out again (the
-    constrained layout of a figure with a dozen residual panels costs about a second a pass)."""
-    ax.set_title(title.format("the curves' 90 % bands are at most 0.000 N wide (seen)"), fontsize=9)
-    fig.draw_without_rendering()  # the axes' final size, for the band's width in points
-    fig.set_layout_engine("none")
-    return _band_note(ax, widths, factor, unit)
-
-
 def _residual_grid(fig, gs, n: int, cols: int):
-    """``n`` small axes in the rows of ``gs`` below its first, sharing their x axis."""
+    """``n`` small axes in the cells of ``gs``, row by row, sharing their x axis."""
     axes = []
     for i in range(n):
-        ax = fig.add_subplot(gs[1 + i // cols, i % cols], sharex=axes[0] if axes else None)
+        ax = fig.add_subplot(gs[i // cols, i % cols], sharex=axes[0] if axes else None)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
         axes.append(ax)
     return axes
 
 
+#: Figures 2 and 3's fixed layout, inches: the margins, the colour bar beside the main axes, the
+#: residual panels' height and the gaps between them (what constrained layout chose for them on
+#: data/n50, with room for the tick labels of any campaign's residuals)
+RESIDUAL_LAYOUT = SimpleNamespace(
+    left=0.62, right=0.771, top=0.413, bottom=0.66, bar_pad=0.138, bar_width=0.113,
+    below_main=0.69, panel=1.063, row_gap=0.61, col_gap=0.44,
+)  # fmt: skip
+
+
 def _with_residuals(n: int):
-    """A figure with a main axes on top and a grid of ``n`` residual panels below it."""
+    """A figure with a main axes on top (a colour bar axes beside it) and a grid of ``n``
+    residual panels below it, at fixed places (:data:`RESIDUAL_LAYOUT`): no layout engine, whose
+    passes over a dozen panels' tick labels cost about a second each, and the main axes' size,
+    which the band note needs, is known before anything is drawn. Returns (figure, main axes,
+    colour bar axes, residual axes)."""
     plt = pyplot()
+    k = RESIDUAL_LAYOUT
     cols = min(n, 6)
     rows = -(-n // cols)
-    fig = plt.figure(figsize=(10.5, 4.8 + 1.55 * rows), layout="constrained")
-    gs = fig.add_gridspec(1 + rows, cols, height_ratios=[3.2] + [1.0] * rows)
-    return fig, fig.add_subplot(gs[0, :]), _residual_grid(fig, gs, n, cols)
+    W, H = 10.5, 4.8 + 1.55 * rows
+    fig = plt.figure(figsize=(W, H))
+    grid_top = k.bottom + rows * k.panel + (rows - 1) * k.row_gap  # inches from the bottom
+    main_bottom = grid_top + k.below_main
+    main = fig.add_axes(
+        (k.left / W, main_bottom / H, 1 - (k.left + k.right) / W, 1 - (main_bottom + k.top) / H)
+    )
+    bar = fig.add_axes(
+        (
+            (W - k.right + k.bar_pad) / W,
+            main_bottom / H,
+            k.bar_width / W,
+            1 - (main_bottom + k.top) / H,
+        )
+    )
+    width = (W - k.left - k.right - (cols - 1) * k.col_gap) / cols
+    gs = fig.add_gridspec(
+        rows, cols, left=k.left / W, right=1 - k.right / W, bottom=k.bottom / H, top=grid_top / H,
+        wspace=k.col_gap / width, hspace=k.row_gap / k.panel,
+    )  # fmt: skip
+    return fig, main, bar, _residual_grid(fig, gs, n, cols)
 
 
 def _residual_panel(ax, x, h, r, curve: Band, pred: Band, scale, color, p_bar):
@@ -215,7 +239,7 @@ def _residual_key(fig) -> None:
         Patch(color="0.3", alpha=0.7, lw=0, label="the curve's 90 % band (its pressure's colour)"),
         Patch(color="0.5", alpha=0.2, lw=0, label="a new reading's 90 % band"),
     ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=7, frameon=False)
 
 
 def _residual_labels(fig, axes, ylabel: str) -> None:
@@ -231,7 +255,7 @@ def _curves_and_residuals(cb, pairs, curve, points, residuals, ylabel, rlabel, t
     ``curve(tb)``: (band, scale to the axis' unit); ``points(tf, tb)``: the readings in the band's
     unit; ``residuals(tf, tb)``: :func:`_residual_panel`'s residuals, curve band, new reading's band
     and scale."""
-    fig, ax, res = _with_residuals(len(pairs))
+    fig, ax, cax, res = _with_residuals(len(pairs))
     x = cb.x_m * MM
     colours, sm = _pressure_colours([tb.pressure_bar for _, tb in pairs])
     widths = []
@@ -244,9 +268,9 @@ def _curves_and_residuals(cb, pairs, curve, points, residuals, ylabel, rlabel, t
     _mark_x0(ax, cb.x0_m * MM)
     ax.set(xlabel="height x (mm)", ylabel=ylabel)
     ax.grid(alpha=0.3)
-    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs])
+    _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in pairs], cax=cax)
     _residual_labels(fig, res, rlabel)
-    note = _band_note_after_layout(fig, ax, title, widths, 1e3, unit)
+    note = _band_note(ax, widths, 1e3, unit)  # the layout is fixed: the axes' size is known
     ax.set_title(title.format(f"{note}; below: {below}"), fontsize=9)
     return fig
 
@@ -599,51 +623,120 @@ def _workers_ignore_interrupts():
         signal.signal(signal.SIGINT, handler)
 
 
-class _TestFigures:
-    """The per-test figures (the slow part of a report: about 1 s each), drawn by ``jobs``
-    spawned worker processes while the page and the campaign figures are made in this one.
-    Workers get plain data (recordings, mean coefficients, bands) and import only matplotlib and
-    this module, not JAX; the bytes (PNG or SVG) are the same as drawn here (tested)."""
+def _warm_up() -> None:
+    """A figure worker's first task: import matplotlib (this module is imported to run it)."""
+    pyplot()
 
-    MIN_TESTS = 4  # below this, starting workers costs more than it saves
 
-    def __init__(self, cf, cb: CampaignBands, jobs: int, figure_format: str = "png", units=None):
-        grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
-        self._work = [
-            (
-                tf.test,
-                tf.flat("force").mean(0),
-                tf.x0_m,
-                tb,
-                grid,
-                figure_format,
-                _piston(tf),
-                tf.convergence.converged,
-                units,
-            )
-            for tf, tb in zip(cf.tests, cb.tests, strict=True)
-        ]
-        self._pool, self._futures = None, []
-        if jobs > 1 and len(self._work) >= self.MIN_TESTS:
+class FigureWorkers:
+    """The worker processes that draw a report's per-test figures (``write_report(...,
+    jobs=workers)``), started ahead: ``jobs`` processes draw them, this one and ``jobs - 1``
+    spawned workers (``None``: one per CPU), none for fewer than ``MIN_TESTS`` tests (starting a
+    worker costs more than it saves). The workers start at once and import matplotlib and this
+    module (about 0.8 CPU s each), so started before the fit (``uq report`` does) their imports
+    run beside it instead of after it. A context manager: leaving it stops the workers.
+    Workers are spawned, not forked: this process may hold a JAX runtime, which fork can
+    deadlock; a spawned worker imports the calling script again (hence the ``__main__`` guard
+    :func:`write_report` asks of scripts)."""
+
+    MIN_TESTS = 4
+
+    def __init__(self, jobs: int | None = None, n_tests: int | None = None):
+        self.jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
+        n = self.jobs - 1 if n_tests is None else min(self.jobs - 1, n_tests)
+        self.pool = None
+        self._ahead = {}  # test index -> (its bands, format, units, the future of its figure)
+        if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
             with _workers_ignore_interrupts():
-                # spawn, not fork: this process may hold a JAX runtime, which fork can deadlock
-                self._pool = concurrent.futures.ProcessPoolExecutor(
-                    max_workers=min(jobs, len(self._work)),
+                self.pool = concurrent.futures.ProcessPoolExecutor(
+                    max_workers=n,
                     mp_context=multiprocessing.get_context("spawn"),
                     initializer=_ignore_interrupts,
                 )
-                # the workers start here (spawn launches them all at the first submit)
-                self._futures = [self._pool.submit(encoded_test_figure, *w) for w in self._work]
+                self.pool.submit(_warm_up)  # spawn launches the workers at the first submit
 
-    def result(self, i: int) -> bytes:
-        return self._futures[i].result() if self._pool else encoded_test_figure(*self._work[i])
+    def ahead(self, cf, figure_format: str = "png", units=None):
+        """An ``on_test`` for :func:`uq._derived.bands.campaign_bands`: each test's figure goes
+        to the workers as soon as its bands are made, so that they draw while this process makes
+        the next test's bands; :func:`write_report` given these workers, the same format and
+        units, and those bands uses these figures instead of asking for them again."""
+
+        def on_test(t, tb, grid):
+            if self.pool is not None:
+                w = _work_item(cf.tests[t], tb, grid, figure_format, units)
+                self._ahead[t] = (
+                    tb,
+                    figure_format,
+                    units,
+                    self.pool.submit(encoded_test_figure, *w),
+                )
+
+        return on_test
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
+        if self.pool:
+            self.pool.shutdown(cancel_futures=True)
+
+
+def _work_item(tf, tb, grid, figure_format: str, units) -> tuple:
+    """The arguments of :func:`encoded_test_figure` for one test: plain data a worker can take."""
+    return (
+        tf.test,
+        tf.flat("force").mean(0),
+        tf.x0_m,
+        tb,
+        grid,
+        figure_format,
+        _piston(tf),
+        tf.convergence.converged,
+        units,
+    )
+
+
+class _TestFigures:
+    """The per-test figures (the slow part of a report: about half a CPU second each), drawn by
+    the ``workers`` (a :class:`FigureWorkers`), which start on them while the page and the
+    campaign figures are made in this process, and by this process, which then draws those the
+    workers have not started, from the last back (:meth:`results`). Workers get plain data
+    (recordings, mean coefficients, bands) and import only matplotlib and this module, not JAX;
+    the bytes (PNG or SVG) are the same wherever a figure is drawn (tested)."""
+
+    def __init__(
+        self, cf, cb: CampaignBands, workers: FigureWorkers, figure_format="png", units=None
+    ):
+        grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
+        self._work = [
+            _work_item(tf, tb, grid, figure_format, units)
+            for tf, tb in zip(cf.tests, cb.tests, strict=True)
+        ]
+        self._pool = workers.pool if len(self._work) >= FigureWorkers.MIN_TESTS else None
+        self._futures = []
         if self._pool:
-            self._pool.shutdown(cancel_futures=True)
+            for i, tb in enumerate(cb.tests):  # the figures asked for ahead, if of these bands
+                tb0, fmt0, units0, future = workers._ahead.get(i, (None, None, None, None))
+                if not (tb0 is tb and fmt0 == figure_format and units0 is units):
+                    future = self._pool.submit(encoded_test_figure, *self._work[i])
+                self._futures.append(future)
+
+    def results(self) -> list[bytes]:
+        """Every test's figure bytes, in order: those no worker has started are drawn here (from
+        the last back, while the workers go on from the first: a future that can be cancelled
+        was never started)."""
+        here = {}
+        for i in reversed(range(len(self._work))):
+            if not self._pool or self._futures[i].cancel():
+                here[i] = encoded_test_figure(*self._work[i])
+        return [here[i] if i in here else self._futures[i].result() for i in range(len(self._work))]
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for f in self._futures:  # the workers may outlive this report (they are the caller's)
+            f.cancel()
 
 
 # ----------------------------------------------------------------------------- HTML
@@ -937,11 +1030,9 @@ def _draw_figures(
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format, units), alt)
         for stem, fig, alt in drawn
     }
-    for i, tf in enumerate(cf.tests):
+    for tf, data in zip(cf.tests, test_figures.results(), strict=True):
         stem = f"test_{tf.pressure_bar:g}bar"
-        figs[stem] = Figure(
-            f"{stem}.{figure_format}", test_figures.result(i), f"{tf.pressure_bar:g} bar"
-        )
+        figs[stem] = Figure(f"{stem}.{figure_format}", data, f"{tf.pressure_bar:g} bar")
     for f in figs.values():
         write_bytes_atomic(out / f.name, f.data)
     return figs
@@ -958,7 +1049,7 @@ def write_report(
     surface=None,
     comparison: dict | None = None,
     surface_page: str | None = None,
-    jobs: int | None = 1,
+    jobs: int | FigureWorkers | None = 1,
     figure_format: str = "png",
     reference: Reference | str | None = "auto",
     units=None,
@@ -973,7 +1064,9 @@ def write_report(
     ``uq report --surface`` does; this function only renders, it fits nothing. ``comments``
     replaces the recordings' leading ``#`` lines. Every file is written atomically; PNGs an earlier
     report left behind are removed. The per-test figures are drawn in this process by default;
-    ``jobs=N`` draws them in N worker processes (``None``: one per CPU; ``uq report`` does so),
+    ``jobs=N`` draws them in N processes, this one and N - 1 workers, which start on them while
+    this one draws the campaign's figures (``None``: one per CPU; a :class:`FigureWorkers`:
+    workers started ahead, as ``uq report`` does before it fits),
     with the same bytes either way. Workers are started by spawning (this process may hold a JAX
     runtime, which forking can deadlock), and a spawned worker imports the calling script again:
     with ``jobs`` other than 1, call ``write_report`` from a script only under
@@ -1010,8 +1103,11 @@ def write_report(
             surface_page = write_model_page(
                 surface, surface.to_json(comparison), stage, figure_format=figure_format
             ).name
-        n_jobs = (os.cpu_count() or 1) if jobs is None else jobs
-        with _TestFigures(cf, cb, n_jobs, figure_format, units) as test_figures:
+        own = None if isinstance(jobs, FigureWorkers) else FigureWorkers(jobs, len(cf.tests))
+        with (
+            own or contextlib.nullcontext(),
+            _TestFigures(cf, cb, own or jobs, figure_format, units) as test_figures,
+        ):
             page, names = _write_page(
                 cf, cb, stage, test_figures, comments, surface_page, figure_format, reference, units
             )

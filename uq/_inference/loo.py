@@ -230,10 +230,16 @@ def psis_loo(loglik: np.ndarray, reff: float = 1.0) -> tuple[np.ndarray, np.ndar
     n_tail = int(np.ceil(min(S / 5.0, 3 * (S / reff) ** 0.5)))
     cutoffmin = np.log(np.finfo(float).tiny)
     lw = -ll - np.max(-ll, axis=1, keepdims=True)
-    order = np.argsort(lw, axis=1)
-    srt = np.take_along_axis(lw, order, axis=1)
-    cut = srt[:, S - n_tail - 1]
-    regular = (n_tail > 4) & (srt[:, S - n_tail] > cut) & (cut > cutoffmin)
+    # only the cut and the tail need their order: the n_tail + 1 largest weights of each reading,
+    # found by a partition and then sorted (the same order statistics as a full sort)
+    # (fewer than 5 tail draws: no reading is fitted here, and S may be too small to cut)
+    top = np.argpartition(lw, max(S - n_tail - 1, 0), axis=1)[:, max(S - n_tail - 1, 0) :]
+    vals = np.take_along_axis(lw, top, axis=1)
+    ascending = np.argsort(vals, axis=1)
+    top = np.take_along_axis(top, ascending, axis=1)
+    vals = np.take_along_axis(vals, ascending, axis=1)
+    cut = vals[:, 0]
+    regular = (n_tail > 4) & (vals[:, min(1, S - 1)] > cut) & (cut > cutoffmin)
     k = np.full(n, np.inf)
     probs = np.arange(0.5, n_tail) / n_tail
     for lo in range(0, n, PSIS_CHUNK):
@@ -241,20 +247,14 @@ def psis_loo(loglik: np.ndarray, reff: float = 1.0) -> tuple[np.ndarray, np.ndar
         if rows.size == 0:
             continue
         ecut = np.exp(cut[rows])[:, None]
-        tails = np.exp(srt[rows, S - n_tail :]) - ecut
+        tails = np.exp(vals[rows, 1:]) - ecut
         kk, sigma = _gpd_fit(tails)
         k[rows] = kk
-        fit = rows[np.isfinite(kk)]
-        smooth = np.log(
-            _gpd_quantiles(probs, kk[np.isfinite(kk)], sigma[np.isfinite(kk)])
-            + ecut[np.isfinite(kk)]
-        )
-        new = np.take_along_axis(lw[fit], order[fit], axis=1)
-        new[:, S - n_tail :] = smooth
-        placed = np.empty_like(new)
-        np.put_along_axis(placed, order[fit], new, axis=1)
-        placed[placed > 0] = 0.0
-        lw[fit] = placed
+        ok = np.isfinite(kk)
+        smooth = np.log(_gpd_quantiles(probs, kk[ok], sigma[ok]) + ecut[ok])
+        # the tail's weights replaced by the smoothed ones, in the tail's order; none above 0
+        fit = rows[ok]
+        lw[fit[:, None], top[fit, 1:]] = np.minimum(smooth, 0.0)
     for i in np.flatnonzero(~regular):  # ArviZ's one-reading algorithm for the irregular ones
         lw[i], k[i] = _psislw_one(-ll[i] - np.max(-ll[i]), -n_tail - 1, cutoffmin)
     lw = lw - _logsumexp(lw)[:, None]

@@ -287,38 +287,47 @@ def test_ctrl_c_inside_a_finaliser_still_stops_the_command():
     )
 
 
-def test_a_second_interrupt_after_the_interrupted_line_still_exits_130(campaign):
-    """A second Ctrl-C (or the first delivered again by the finaliser guard above) that lands
-    after the command has printed its one line, while Python shuts down, does not turn exit 130
-    into death by SIGINT (-2): the program ignores SIGINT once it has stopped for one."""
-    code = textwrap.dedent(
+def _fit_program(body: str, campaign) -> subprocess.CompletedProcess:
+    """``uq fit CAMPAIGN`` run as the program (``main()`` reading ``sys.argv``), at a terminal,
+    with its command replaced by ``interrupted(args)`` from ``body`` (and what ``body`` needs)."""
+    code = textwrap.dedent(body) + textwrap.dedent(
         f"""
-        import _thread, sys, threading, time
+        import sys
         import uq._cli.cmd_basic as cmd
-
-        def interrupted(args):
-            # the second interrupt arrives 0.2 s later, after main has returned
-            threading.Timer(0.2, _thread.interrupt_main).start()
-            raise KeyboardInterrupt
-
-        cmd.command_fit = interrupted
         from uq._cli.main import main
 
+        cmd.command_fit = interrupted
         sys.argv = ["uq", "fit", {str(campaign)!r}]
         status = main()
-        time.sleep(1.0)  # Python's shutdown, where the second interrupt would land
+        time.sleep(1.0)  # Python's shutdown, where a late interrupt would land
         raise SystemExit(status)
         """
     )
-    proc = subprocess.run(
-        _as_at_a_terminal([sys.executable, "-c", code]),
+    return subprocess.run(
+        _as_at_a_terminal([sys.executable, "-c", "import time\n" + code]),
         capture_output=True,
         text=True,
         env=_env(),
         timeout=60,
     )
-    lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("WARNING")]
-    assert proc.returncode == 130 and lines == ["uq fit: interrupted"], proc.stderr
+
+
+def test_a_second_interrupt_after_the_interrupted_line_still_exits_130(campaign):
+    """A second Ctrl-C (or the first delivered again by the finaliser guard above) that lands
+    after the command has printed its one line, while Python shuts down, does not turn exit 130
+    into death by SIGINT (-2): the program ignores SIGINT once it has stopped for one."""
+    proc = _fit_program(
+        """
+        import _thread, threading
+
+        def interrupted(args):
+            # the second interrupt arrives 0.2 s later, after main has returned
+            threading.Timer(0.2, _thread.interrupt_main).start()
+            raise KeyboardInterrupt
+        """,
+        campaign,
+    )
+    assert proc.returncode == 130 and _no_traceback(proc) == ["uq fit: interrupted"], proc.stderr
 
 
 def test_main_called_in_a_process_leaves_its_interrupt_handler_alone():
@@ -348,11 +357,8 @@ def test_an_interrupt_wrapped_by_python_is_still_an_interrupt(campaign):
     """Ctrl-C landing while a class body is created (matplotlib's import, in a report) reaches
     the command as ``RuntimeError: Error calling __set_name__ ...`` with the KeyboardInterrupt as
     its cause: still the one interrupted line and 130, not an internal error (exit 3)."""
-    code = textwrap.dedent(
-        f"""
-        import sys
-        import uq._cli.cmd_basic as cmd
-
+    proc = _fit_program(
+        """
         class Descriptor:
             def __set_name__(self, owner, name):
                 raise KeyboardInterrupt
@@ -360,20 +366,7 @@ def test_an_interrupt_wrapped_by_python_is_still_an_interrupt(campaign):
         def interrupted(args):
             class Formatter:
                 locs = Descriptor()
-
-        cmd.command_fit = interrupted
-        from uq._cli.main import main
-
-        sys.argv = ["uq", "fit", {str(campaign)!r}]
-        raise SystemExit(main())
-        """
+        """,
+        campaign,
     )
-    proc = subprocess.run(
-        _as_at_a_terminal([sys.executable, "-c", code]),
-        capture_output=True,
-        text=True,
-        env=_env(),
-        timeout=60,
-    )
-    lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("WARNING")]
-    assert proc.returncode == 130 and lines == ["uq fit: interrupted"], proc.stderr
+    assert proc.returncode == 130 and _no_traceback(proc) == ["uq fit: interrupted"], proc.stderr

@@ -20,9 +20,8 @@ from uq._derived.bands import (
 X_GRID = np.linspace(0.065, 0.155, 181)
 
 
-@pytest.fixture(scope="module")
-def paper_bands():
-    """Table 1 itself as a one-draw 'posterior'."""
+def _table1_bands(**options):
+    """The bands of Table 1 itself as a one-draw 'posterior' (``options`` to the bands)."""
     t = table1()
     return bands_from_coefficients(
         t.pressures_bar,
@@ -31,7 +30,14 @@ def paper_bands():
         x_grid=X_GRID,
         x0_m=PAPER_X0_M,
         piston_area_m2=PAPER_PISTON_AREA_M2,
+        **options,
     )
+
+
+@pytest.fixture(scope="module")
+def paper_bands():
+    """Table 1 itself as a one-draw 'posterior'."""
+    return _table1_bands()
 
 
 def test_feff_at_x0_is_a_over_p(paper_bands):
@@ -367,17 +373,8 @@ def test_scatter_band_is_feff_scatter_of_every_tests_curves():
 def test_on_test_gets_each_tests_bands_as_they_are_made():
     """on_test(t, bands, grid) is called once per test, in order, with the PressureBands the
     campaign's bands then hold, and the grid a figure of them needs."""
-    t = table1()
     seen = []
-    cb = bands_from_coefficients(
-        t.pressures_bar,
-        t.force[:, None, :],
-        t.piston[:, None, :],
-        x_grid=X_GRID,
-        x0_m=PAPER_X0_M,
-        piston_area_m2=PAPER_PISTON_AREA_M2,
-        on_test=lambda i, tb, grid: seen.append((i, tb, grid)),
-    )
+    cb = _table1_bands(on_test=lambda i, tb, grid: seen.append((i, tb, grid)))
     assert [i for i, _, _ in seen] == list(range(len(cb.tests)))
     assert all(tb is cb.tests[i] for i, tb, _ in seen)
     grid = seen[0][2]

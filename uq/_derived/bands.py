@@ -41,6 +41,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from uq._inference.summary import band
 from uq._inference.summary import estimate as _estimate
 from uq._physics.cubic import cubic, cubic_slope
 from uq._physics.quantities import BAR_PA, force_noise_var
@@ -61,12 +62,8 @@ class Band:
 
     @classmethod
     def of(cls, draws: np.ndarray, level: float = LEVEL) -> Band:
-        """The band of ``draws`` (D, ...) over its first axis (``uq._inference.summary.band``'s
-        numbers: both quantiles from one partition of the draws, not one each)."""
-        d = np.asarray(draws, float)
-        a = (1.0 - level) / 2.0
-        lo, hi = np.quantile(d, [a, 1.0 - a], axis=0)
-        return cls(d.mean(axis=0), lo, hi)
+        """The band of ``draws`` (D, ...) over its first axis (``uq._inference.summary.band``)."""
+        return cls(*band(draws, axis=0, level=level))
 
     def contains(self, values) -> np.ndarray:
         v = np.asarray(values)

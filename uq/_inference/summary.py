@@ -21,10 +21,12 @@ def estimate(draws, axis=None) -> dict:
 
 
 def band(draws, axis=0, level=0.90) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mean, lower, upper) of an equal-tailed ``level`` band over ``axis``."""
+    """(mean, lower, upper) of an equal-tailed ``level`` band over ``axis`` (both quantiles from
+    one partition of the draws: the same numbers as one call each)."""
     d = np.asarray(draws, float)
     a = (1.0 - level) / 2.0
-    return d.mean(axis=axis), np.quantile(d, a, axis=axis), np.quantile(d, 1.0 - a, axis=axis)
+    lo, hi = np.quantile(d, [a, 1.0 - a], axis=axis)
+    return d.mean(axis=axis), lo, hi
 
 
 def thin_step(n: int, max_draws: int | None) -> int:

@@ -447,7 +447,7 @@ def _json_rows(d: Path, csv: Path, fit: Path):
             "--allow-unconverged",
         ],
         "calibrate": ["calibrate", "--reps", "1", "--truth", "prior"],
-        "batch": ["batch", d / "batch.csv", "--out", d / "batch"],
+        "batch": ["batch", d / "batch.csv", "--out", d / "batch", "--allow-unconverged"],
         "plan": [
             "plan",
             csv,

@@ -3,6 +3,9 @@ loaded without tracing, keyed by shapes and statics, robust to a damaged file.""
 
 from __future__ import annotations
 
+import os
+import time
+
 import jax
 import jax.monitoring
 import numpy as np
@@ -62,7 +65,7 @@ def test_exported_program_is_jax_jit_to_the_bit_and_loads_without_tracing(folder
     args = _bfgs_args(_data())
     plain = jax.jit(collapsed._bfgs.fun, static_argnums=0)(*args)
     first = _Persistent(collapsed._bfgs.fun, (0,))(*args)
-    files = list(folder.glob("_bfgs-*.jaxexport"))
+    files = list(folder.rglob("_bfgs-*.jaxexport"))
     assert len(files) == 1
     again, traced = _traced(lambda: _Persistent(collapsed._bfgs.fun, (0,))(*args))
     assert not [n for n in traced if "_bfgs" in n or "flat" in n], traced
@@ -76,20 +79,20 @@ def test_programs_are_keyed_by_shape_and_static_arguments(folder):
     fn = _Persistent(collapsed._bfgs.fun, (0,))
     fn(*_bfgs_args(_data(0.01)))
     fn(*_bfgs_args(_data(0.015)))
-    assert len(list(folder.glob("_bfgs-*.jaxexport"))) == 2
+    assert len(list(folder.rglob("_bfgs-*.jaxexport"))) == 2
 
     rows = np.linspace(-1.0, 1.0, 32)[:, None]
     lp = _Persistent(collapsed._log_prob_problems.fun, (0,))
     out = lp(lambda th, d: -0.5 * jax.numpy.sum(th**2) * d, rows[None], np.ones(1))
     np.testing.assert_allclose(out[0], -0.5 * rows[:, 0] ** 2)
-    assert not list(folder.glob("_log_prob_problems-*"))
+    assert not list(folder.rglob("_log_prob_problems-*"))
 
 
 def test_a_damaged_file_is_exported_again(folder):
     args = _bfgs_args(_data())
     plain = jax.jit(collapsed._bfgs.fun, static_argnums=0)(*args)
     _Persistent(collapsed._bfgs.fun, (0,))(*args)
-    (path,) = folder.glob("_bfgs-*.jaxexport")
+    (path,) = folder.rglob("_bfgs-*.jaxexport")
     path.write_bytes(b"not a program")
     _equal(plain, _Persistent(collapsed._bfgs.fun, (0,))(*args))
     _equal(plain, _Persistent(collapsed._bfgs.fun, (0,))(*args))  # the rewritten file
@@ -103,7 +106,26 @@ def test_the_key_covers_the_package_source(folder, monkeypatch):
     _Persistent(collapsed._bfgs.fun, (0,))(*args)
     monkeypatch.setattr(exported, "environment_key", lambda: "other code")
     _Persistent(collapsed._bfgs.fun, (0,))(*args)
-    assert len(list(folder.glob("_bfgs-*.jaxexport"))) == 2
+    assert len(list(folder.rglob("_bfgs-*.jaxexport"))) == 2
+
+
+def test_other_environments_unused_for_keep_days_are_deleted(folder):
+    """Programs of other code or versions sit in other subfolders: those unused for KEEP_DAYS
+    days (and files of the flat layout before subfolders) are deleted when a process first uses
+    the folder; a recently used one is kept, and this environment's folder is marked as used."""
+    old_time = time.time() - (exported.KEEP_DAYS + 1) * 86400.0
+    stale, recent, flat = folder / ("0" * 24), folder / ("1" * 24), folder / "_bfgs-old.jaxexport"
+    for d in (stale, recent):
+        d.mkdir()
+        (d / "_bfgs-x.jaxexport").write_bytes(b"program")
+    flat.write_bytes(b"program")
+    for p in (stale / "_bfgs-x.jaxexport", stale, flat):
+        os.utime(p, (old_time, old_time))
+    _Persistent(collapsed._bfgs.fun, (0,))(*_bfgs_args(_data()))
+    here = folder / exported.environment_key()[:24]
+    assert sorted(p.name for p in folder.iterdir()) == sorted([recent.name, here.name])
+    assert len(list(here.glob("_bfgs-*.jaxexport"))) == 1
+    assert here.stat().st_mtime > time.time() - 3600.0
 
 
 def test_nothing_is_kept_with_the_cache_off(monkeypatch, tmp_path):
@@ -147,7 +169,7 @@ def test_a_second_uq_fit_loads_its_programs_imports_less_and_gives_the_same_json
         return json.loads(r.stdout.strip().splitlines()[-1]), out.read_bytes()
 
     (rc1, _), first = fit(1)
-    assert list((tmp_path / "cache" / exported.FOLDER).glob("_bfgs-*.jaxexport"))
+    assert list((tmp_path / "cache" / exported.FOLDER).rglob("_bfgs-*.jaxexport"))
     (rc2, imported), second = fit(2)
     assert rc1 == rc2 and imported == []
     assert first == second

@@ -16,7 +16,10 @@ static arguments (module-level functions by qualified name), the argument tree a
 shape and dtype, the versions of Python, jax, jaxlib, optimistix, equinox, lineax and numpy
 (whose constants are traced in), the JAX flags that change tracing, and every file of the ``uq``
 package, code and data (any change to uq's code makes new names, so a stale program is never
-loaded; stale files are never read again).
+loaded). The files of one such environment are kept in a subfolder of their own, named by the
+environment's hash and marked as used by every process that uses it; the first time a process
+uses the folder, the subfolders of other environments (other versions of uq or of its
+dependencies, other code) that no process has used for ``KEEP_DAYS`` days are deleted.
 Files are written atomically (``uq._io.files``), so a reader sees a whole program or none; one
 that cannot be read is exported again and overwritten. Nothing is kept when the compilation
 cache is off (``UQ_CACHE_DIR=off``), for arguments that are not all arrays, or for static
@@ -34,7 +37,9 @@ import hashlib
 import importlib.metadata
 import importlib.util
 import os
+import shutil
 import sys
+import time
 import types
 from pathlib import Path
 
@@ -48,6 +53,8 @@ export = jax.export
 
 #: the subfolder of JAX's compilation cache the exported programs are kept in
 FOLDER = "uq-exported"
+#: days after which another environment's programs, unused, are deleted
+KEEP_DAYS = 30
 #: distributions whose code is traced into uq's programs
 TRACED_PACKAGES = ("jax", "jaxlib", "optimistix", "equinox", "lineax", "numpy")
 #: JAX flags that change what a function traces to
@@ -93,6 +100,28 @@ def environment_key() -> str:
         h.update(str(path.relative_to(root)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()
+
+
+@functools.cache
+def _environment_folder(where: Path, key: str) -> Path:
+    """This environment's subfolder of ``where``, marked as used now; other environments'
+    entries that were not used for ``KEEP_DAYS`` days are deleted (module docstring). Once a
+    process."""
+    here = where / key[:24]
+    try:
+        here.mkdir(parents=True, exist_ok=True)
+        os.utime(here)
+        others = [p for p in where.iterdir() if p != here]
+    except OSError:  # a cache that cannot be written: its programs are still read
+        return here
+    cutoff = time.time() - KEEP_DAYS * 86400.0
+    for other in others:
+        try:
+            if other.stat().st_mtime < cutoff:
+                shutil.rmtree(other) if other.is_dir() else other.unlink()
+        except OSError:  # deleted by another process meanwhile, or not ours to delete
+            pass
+    return here
 
 
 def _weak(x) -> bool:
@@ -171,7 +200,9 @@ class _Persistent:
         h.update(str(tree).encode())
         for x in leaves:
             h.update(f"{x.shape}{np.dtype(x.dtype).str}{_weak(x)};".encode())
-        path = where / f"{self.fun.__name__}-{h.hexdigest()[:40]}.jaxexport"
+        path = _environment_folder(where, environment_key()) / (
+            f"{self.fun.__name__}-{h.hexdigest()[:40]}.jaxexport"
+        )
         try:
             exported = export.deserialize(bytearray(path.read_bytes()))
         except Exception:  # absent, or unreadable: export it (again)
@@ -183,7 +214,6 @@ class _Persistent:
                 return None
             try:
                 data = exported.serialize()
-                os.makedirs(where, exist_ok=True)
                 write_bytes_atomic(path, bytes(data))
             except Exception:  # not kept (not serialisable, or the cache cannot be written):
                 pass  # no reason to fail a fit, nor to trace the function again

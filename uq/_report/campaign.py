@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
+import io
 import multiprocessing
 import os
 import signal
@@ -29,6 +30,7 @@ from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import (
+    DPI,
     FIGURE_FORMATS,
     Figure,
     check_format,
@@ -432,17 +434,24 @@ def figure_scatter(cb: CampaignBands, paper_values: bool = True):
     return fig
 
 
-def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None):
+#: the per-test figure's size, inches
+TEST_FIGSIZE = (14, 7.6)
+
+
+def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None, fig=None):
     """Six panels for one test: force, residuals, piston, F_eff, traditional vs measured, spread.
 
     ``t`` the test's recordings (PressureTest), ``force_mean`` the posterior-mean force
     coefficients (paper basis), ``piston_m`` the L readings its volume block fitted (default
     ``t.piston_m``; L = -V / S for a volume column): plain data, so that the figure can be drawn
     in another process. A force-only test's volume panels say so instead; a test in unknown order
-    (no branch and step) shows its readings without branch markers.
+    (no branch and step) shows its readings without branch markers. ``fig``: a figure of
+    :func:`test_canvas` to draw on (its last test's data are taken off first), else a new one.
     """
-    plt = pyplot()
-    fig, axs = plt.subplots(2, 3, figsize=(14, 7.6))
+    if fig is None:
+        fig, axs = pyplot().subplots(2, 3, figsize=TEST_FIGSIZE)
+    else:
+        axs = _cleared(fig)
     x = cb.x_m * MM
     h = t.height_m * MM
     comp = t.compression
@@ -535,6 +544,43 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     return fig
 
 
+_canvas = threading.local()
+
+
+def test_canvas():
+    """This thread's figure for the per-test figures (:func:`figure_test`'s ``fig``), made once.
+
+    Most of a new figure's cost is in making its six axes and their ticks (about a third of a
+    per-test figure's CPU time); the eleven figures of a report are the same six panels with other
+    data, so one figure is kept and its data artists replaced, with the same pixels as a new
+    figure's (tested). Not pyplot's: nothing closes it (``encode``'s ``close`` leaves it alone).
+    """
+    fig = getattr(_canvas, "fig", None)
+    if fig is None:
+        from matplotlib.figure import Figure  # reason: optional and heavy, loaded only where used
+
+        fig = _canvas.fig = Figure(figsize=TEST_FIGSIZE)
+        fig.subplots(2, 3)
+    return fig
+
+
+def _cleared(fig):
+    """The axes of a :func:`test_canvas` figure (2 x 3), emptied as a new figure's are: no lines,
+    shades, texts or legend, no data limits, the view (0, 1) autoscaled; the figure's own texts
+    but its title (the NOT CONVERGED stamp) removed. The axes, their ticks and labels stay."""
+    for text in [t for t in fig.texts if t is not fig._suptitle]:
+        text.remove()
+    for ax in fig.axes:
+        for artist in (*ax.lines, *ax.collections, *ax.texts):
+            artist.remove()
+        if ax.legend_ is not None:
+            ax.legend_.remove()
+        ax.relim()  # no artists left: no data limits, the next artist's replace them
+        ax.set_xlim(0, 1, auto=True)
+        ax.set_ylim(0, 1, auto=True)
+    return np.asarray(fig.axes).reshape(2, 3)
+
+
 def _readings(ax, h, y, comp) -> None:
     """The readings (heights ``h`` mm, values ``y``) marked by branch, or plain for a test in
     unknown order (``comp`` None: one pass, no branches to tell apart)."""
@@ -576,7 +622,9 @@ def encoded_test_figure(
     """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns), stamped NOT
     CONVERGED when the test's fit failed its convergence rules; ``units``: second axes in the
     recordings' units (``uq report --units input``)."""
-    fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m)
+    # a second axis per unit adds axes to the figure: a new figure then, not the kept one
+    canvas = test_canvas() if units is None else None
+    fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m, canvas)
     if not converged:
         stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
     return encode(fig, figure_format, units)
@@ -624,8 +672,11 @@ def _workers_ignore_interrupts():
 
 
 def _warm_up() -> None:
-    """A figure worker's first task: import matplotlib (this module is imported to run it)."""
+    """A figure worker's first task, done while the fit runs: import matplotlib (this module is
+    imported to run it) and make its :func:`test_canvas`, drawn once (its axes, ticks, renderer
+    and fonts made then, not on the first test's figure)."""
     pyplot()
+    test_canvas().savefig(io.BytesIO(), format="png", dpi=DPI)
 
 
 class FigureWorkers:

@@ -9,8 +9,10 @@ written beside the page; every write is atomic (``uq._io.files``). The page is t
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import contextlib
+import functools
 import io
 import multiprocessing
 import os
@@ -697,6 +699,10 @@ class FigureWorkers:
         n = self.jobs - 1 if n_tests is None else min(self.jobs - 1, n_tests)
         self.pool = None
         self._ahead = {}  # test index -> (its bands, format, units, the future of its figure)
+        self._lock = threading.RLock()
+        self._waiting = collections.deque()  # (future, function, arguments) not yet given out
+        self._given = 0  # tasks a worker has and has not finished
+        self._n = n
         if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
             with _workers_ignore_interrupts():
                 self.pool = concurrent.futures.ProcessPoolExecutor(
@@ -704,7 +710,47 @@ class FigureWorkers:
                     mp_context=multiprocessing.get_context("spawn"),
                     initializer=_ignore_interrupts,
                 )
-                self.pool.submit(_warm_up)  # spawn launches the workers at the first submit
+                for _ in range(n):  # spawn launches the workers at the first submit
+                    self.submit(_warm_up)
+
+    def submit(self, fn, *args) -> concurrent.futures.Future:
+        """``fn(*args)`` in a worker, given to it only when it has nothing else to do, so that
+        until then the task can be cancelled (``Future.cancel``) and done by this process instead.
+        (A ``ProcessPoolExecutor`` hands a worker its next tasks ahead, where they can no longer
+        be cancelled: the command's process then waited for up to two figures it could have drawn.)
+        """
+        future = concurrent.futures.Future()
+        with self._lock:
+            self._waiting.append((future, fn, args))
+        self._give_out()
+        return future
+
+    def _give_out(self) -> None:
+        with self._lock:
+            while self._given < self._n and self._waiting:
+                future, fn, args = self._waiting.popleft()
+                if not future.set_running_or_notify_cancel():
+                    continue  # cancelled: this process does it
+                try:
+                    task = self.pool.submit(fn, *args)
+                except RuntimeError as e:  # the pool is shut down (leaving the context)
+                    future.set_exception(e)
+                    continue
+                self._given += 1
+                task.add_done_callback(functools.partial(self._finished, future))
+
+    def _finished(self, future, task) -> None:
+        """A worker's task is done (called in the pool's thread): its result to ``future``, the
+        next waiting task to the worker."""
+        with self._lock:
+            self._given -= 1
+        if task.cancelled():
+            future.set_exception(concurrent.futures.CancelledError())
+        elif task.exception() is not None:
+            future.set_exception(task.exception())
+        else:
+            future.set_result(task.result())
+        self._give_out()
 
     def ahead(self, cf, figure_format: str = "png", units=None):
         """An ``on_test`` for :func:`uq._derived.bands.campaign_bands`: each test's figure goes
@@ -715,12 +761,7 @@ class FigureWorkers:
         def on_test(t, tb, grid):
             if self.pool is not None:
                 w = _work_item(cf.tests[t], tb, grid, figure_format, units)
-                self._ahead[t] = (
-                    tb,
-                    figure_format,
-                    units,
-                    self.pool.submit(encoded_test_figure, *w),
-                )
+                self._ahead[t] = (tb, figure_format, units, self.submit(encoded_test_figure, *w))
 
         return on_test
 
@@ -729,6 +770,10 @@ class FigureWorkers:
 
     def __exit__(self, *exc):
         if self.pool:
+            with self._lock:
+                for future, _, _ in self._waiting:
+                    future.cancel()
+                self._waiting.clear()
             self.pool.shutdown(cancel_futures=True)
 
 
@@ -769,7 +814,7 @@ class _TestFigures:
             for i, tb in enumerate(cb.tests):  # the figures asked for ahead, if of these bands
                 tb0, fmt0, units0, future = workers._ahead.get(i, (None, None, None, None))
                 if not (tb0 is tb and fmt0 == figure_format and units0 is units):
-                    future = self._pool.submit(encoded_test_figure, *self._work[i])
+                    future = workers.submit(encoded_test_figure, *self._work[i])
                 self._futures.append(future)
 
     def results(self) -> list[bytes]:

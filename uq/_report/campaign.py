@@ -686,8 +686,9 @@ class FigureWorkers:
     jobs=workers)``), started ahead: ``jobs`` processes draw them, this one and ``jobs - 1``
     spawned workers (``None``: one per CPU), none for fewer than ``MIN_TESTS`` tests (starting a
     worker costs more than it saves). The workers start at once and import matplotlib and this
-    module (about 0.8 CPU s each), so started before the fit (``uq report`` does) their imports
-    run beside it instead of after it. A context manager: leaving it stops the workers.
+    module (about 0.8 CPU s each) and make and draw their kept per-test figure
+    (:func:`test_canvas`), so started before the fit (``uq report`` does) this runs beside the fit
+    instead of after it. A context manager: leaving it stops the workers.
     Workers are spawned, not forked: this process may hold a JAX runtime, which fork can
     deadlock; a spawned worker imports the calling script again (hence the ``__main__`` guard
     :func:`write_report` asks of scripts)."""
@@ -793,12 +794,14 @@ def _work_item(tf, tb, grid, figure_format: str, units) -> tuple:
 
 
 class _TestFigures:
-    """The per-test figures (the slow part of a report: about half a CPU second each), drawn by
-    the ``workers`` (a :class:`FigureWorkers`), which start on them while the page and the
-    campaign figures are made in this process, and by this process, which then draws those the
-    workers have not started, from the last back (:meth:`results`). Workers get plain data
+    """The per-test figures (the slow part of a report: about 0.4 CPU s each), drawn by the
+    ``workers`` (a :class:`FigureWorkers`), which start on them while the page and the campaign
+    figures are made in this process, and by this process, which then draws those no worker has
+    started, from the last back (:meth:`results`; a worker is given its next figure only when it
+    is done with the last, so that none waits in a worker's queue). Workers get plain data
     (recordings, mean coefficients, bands) and import only matplotlib and this module, not JAX;
-    the bytes (PNG or SVG) are the same wherever a figure is drawn (tested)."""
+    every process draws them on its one kept figure (:func:`test_canvas`), and the bytes (PNG or
+    SVG) are the same wherever a figure is drawn (tested)."""
 
     def __init__(
         self, cf, cb: CampaignBands, workers: FigureWorkers, figure_format="png", units=None

@@ -72,6 +72,8 @@ MIN_DRAWS = 10  # fewer posterior draws give no 90 % band worth drawing
 # Each figure_* function returns a matplotlib figure; _draw_figures encodes it as PNG or SVG
 # (uq._report.html.encode). Tests by pressure share one colour map (viridis, cut before its pale
 # end so the last curve stays visible on white) with a colour bar, not a legend of ten entries.
+# Legends say loc="best", matplotlib's default: left to the default, a search for the place that
+# takes over a second (a loaded machine) warns, which the tests (warnings are errors) then fail on.
 
 LINE_PT = 1.2  # width of the posterior-mean lines, points
 
@@ -431,7 +433,7 @@ def figure_scatter(cb: CampaignBands, paper_values: bool = True):
         f"Scatter of F_eff across the {len(cb.scatter_pressures_bar)} tests with p_u ≥ 1 bar",
         fontsize=10,
     )
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
     ax.grid(alpha=0.3)
     return fig
 
@@ -466,7 +468,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     _readings(ax, h, t.force_N * 1e-3, comp)
     ax.plot([], [], color="0.5", alpha=0.4, lw=6, label="pointwise 90 % predictive band")
     ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="force (eq. 8)")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
 
     ax = axs[0, 1]
     fit_pts = cubic(force_mean, t.height_m - x0_m)
@@ -499,7 +501,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
         ylabel="effective area (cm²)",
         title="effective area, two ways (eq. 1)",
     )
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
 
     ax = axs[1, 1]
     _fill(ax, x, tb.force, 1e-3, "tab:green", label="measured P(x)")
@@ -518,7 +520,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     else:
         _absent(ax, "no traditional force:\nno test has a volume curve", x, y=0.15)
     ax.set(xlabel="height x (mm)", ylabel="force (kN)", title="traditional vs measured force")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
 
     ax = axs[1, 2]
     if tb.has_volume:
@@ -533,7 +535,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
             label=f"{cb.reference_bar:g}-bar volume curve",
             ls=":",
         )
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="best")
     else:
         _absent(ax, "no spread: no test has a volume curve", x)
     ax.axhline(0, color="k", lw=0.6)

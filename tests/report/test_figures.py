@@ -127,3 +127,68 @@ def test_report_with_svg_figures_replaces_the_png_ones(small_fit, tmp_path):
     assert page.count("data:image/svg+xml;base64,") == len(svgs)
     assert "data:image/png" not in page
     assert f"the same SVG files ({len(svgs)})" in page
+
+
+def _test_figure_kinds(cf, cb):
+    """One test's figure inputs (as a worker gets them) in the shapes a report can show: a y axis
+    with an offset text, with its volume curve, force-only beside other tests' volume, force-only
+    in a force-only campaign, in unknown order, and not converged (stamped)."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    tf, tb = cf.tests[1], cb.tests[1]
+    grid = SimpleNamespace(x_m=cb.x_m, x0_m=cb.x0_m, reference_bar=cb.reference_bar)
+    own = dict.fromkeys(("piston", "piston_pred", "dV", "feff_volume", "trad_own", "spread_own"))
+    force_only = replace(tb, **own, spread_own_pct=None)
+    no_volume = replace(force_only, trad_ref=None, spread_ref=None, spread_ref_pct=None)
+    unordered = replace(tf.test, compression=None, step=None)
+    far = 1000.0  # m: the piston panel's ticks share their leading digits (an offset text)
+    offset = replace(
+        tb,
+        piston=campaign.Band(tb.piston.mean + far, tb.piston.lo + far, tb.piston.hi + far),
+        piston_pred=campaign.Band(
+            tb.piston_pred.mean + far, tb.piston_pred.lo + far, tb.piston_pred.hi + far
+        ),
+    )
+    mean = tf.flat("force").mean(0)
+    kinds = [
+        (tf.test, offset, tf.piston_m + far, True),
+        (tf.test, tb, tf.piston_m, True),
+        (replace(tf.test, piston_m=None), force_only, None, True),
+        (replace(tf.test, piston_m=None), no_volume, None, True),
+        (unordered, tb, tf.piston_m, True),
+        (tf.test, tb, tf.piston_m, False),
+        (cf.tests[0].test, cb.tests[0], cf.tests[0].piston_m, True),
+    ]
+    return [(t, mean, tf.x0_m, b, grid, piston, ok) for t, b, piston, ok in kinds]
+
+
+def test_per_test_figures_on_the_kept_figure_are_those_of_a_new_figure(small_fit, monkeypatch):
+    """The per-test figures are drawn on one figure kept per process (campaign.test_canvas), its
+    last test's data taken off first: every figure, whatever the previous one showed (volume
+    panels or their reasons, branch markers, the NOT CONVERGED stamp), has the bytes of the same
+    figure drawn on a new figure, as PNG and as SVG. The kept figure's titles stay at the top of
+    their axes; a figure with an offset text on a y axis, which can make matplotlib move a title,
+    is drawn on a new figure instead (the first kind)."""
+    cf, cb = small_fit
+    kinds = _test_figure_kinds(cf, cb)
+    figure_test, on = campaign.figure_test, []
+
+    def drawn_on(*args):
+        on.append("kept" if args[-1] is not None else "new")
+        return figure_test(*args)
+
+    for fmt, drawn in (("png", kinds), ("svg", kinds[:3])):
+        for t, mean, x0, tb, grid, piston, ok in drawn:
+            on.clear()
+            with monkeypatch.context() as m:
+                m.setattr(campaign, "figure_test", drawn_on)
+                kept = campaign.encoded_test_figure(t, mean, x0, tb, grid, fmt, piston, ok)
+            assert on == (["kept", "new"] if tb is kinds[0][3] else ["kept"])
+            fig = campaign.figure_test(t, mean, x0, tb, grid, piston)
+            if not ok:
+                campaign.stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
+            fig.canvas.draw()
+            offsets = [ax.yaxis.offsetText.get_text() for ax in fig.axes]
+            assert any(offsets) == (tb is kinds[0][3]), offsets
+            assert kept == encode(fig, fmt), (fmt, tb.has_volume, t.compression is None, ok)

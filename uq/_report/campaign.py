@@ -9,8 +9,11 @@ written beside the page; every write is atomic (``uq._io.files``). The page is t
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import contextlib
+import functools
+import io
 import multiprocessing
 import os
 import signal
@@ -29,6 +32,7 @@ from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
 from uq._report.html import (
+    DPI,
     FIGURE_FORMATS,
     Figure,
     check_format,
@@ -68,6 +72,8 @@ MIN_DRAWS = 10  # fewer posterior draws give no 90 % band worth drawing
 # Each figure_* function returns a matplotlib figure; _draw_figures encodes it as PNG or SVG
 # (uq._report.html.encode). Tests by pressure share one colour map (viridis, cut before its pale
 # end so the last curve stays visible on white) with a colour bar, not a legend of ten entries.
+# Legends say loc="best", matplotlib's default: left to the default, a search for the place that
+# takes over a second (a loaded machine) warns, which the tests (warnings are errors) then fail on.
 
 LINE_PT = 1.2  # width of the posterior-mean lines, points
 
@@ -427,22 +433,29 @@ def figure_scatter(cb: CampaignBands, paper_values: bool = True):
         f"Scatter of F_eff across the {len(cb.scatter_pressures_bar)} tests with p_u ≥ 1 bar",
         fontsize=10,
     )
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
     ax.grid(alpha=0.3)
     return fig
 
 
-def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None):
+#: the per-test figure's size, inches
+TEST_FIGSIZE = (14, 7.6)
+
+
+def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None, fig=None):
     """Six panels for one test: force, residuals, piston, F_eff, traditional vs measured, spread.
 
     ``t`` the test's recordings (PressureTest), ``force_mean`` the posterior-mean force
     coefficients (paper basis), ``piston_m`` the L readings its volume block fitted (default
     ``t.piston_m``; L = -V / S for a volume column): plain data, so that the figure can be drawn
     in another process. A force-only test's volume panels say so instead; a test in unknown order
-    (no branch and step) shows its readings without branch markers.
+    (no branch and step) shows its readings without branch markers. ``fig``: a figure of
+    :func:`test_canvas` to draw on (its last test's data are taken off first), else a new one.
     """
-    plt = pyplot()
-    fig, axs = plt.subplots(2, 3, figsize=(14, 7.6))
+    if fig is None:
+        fig, axs = pyplot().subplots(2, 3, figsize=TEST_FIGSIZE)
+    else:
+        axs = _cleared(fig)
     x = cb.x_m * MM
     h = t.height_m * MM
     comp = t.compression
@@ -455,7 +468,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     _readings(ax, h, t.force_N * 1e-3, comp)
     ax.plot([], [], color="0.5", alpha=0.4, lw=6, label="pointwise 90 % predictive band")
     ax.set(xlabel="height x (mm)", ylabel="force P (kN)", title="force (eq. 8)")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
 
     ax = axs[0, 1]
     fit_pts = cubic(force_mean, t.height_m - x0_m)
@@ -488,7 +501,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
         ylabel="effective area (cm²)",
         title="effective area, two ways (eq. 1)",
     )
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
 
     ax = axs[1, 1]
     _fill(ax, x, tb.force, 1e-3, "tab:green", label="measured P(x)")
@@ -507,7 +520,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     else:
         _absent(ax, "no traditional force:\nno test has a volume curve", x, y=0.15)
     ax.set(xlabel="height x (mm)", ylabel="force (kN)", title="traditional vs measured force")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="best")
 
     ax = axs[1, 2]
     if tb.has_volume:
@@ -522,7 +535,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
             label=f"{cb.reference_bar:g}-bar volume curve",
             ls=":",
         )
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="best")
     else:
         _absent(ax, "no spread: no test has a volume curve", x)
     ax.axhline(0, color="k", lw=0.6)
@@ -533,6 +546,57 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     fig.suptitle(f"test at p_u = {tb.pressure_bar:g} bar", fontsize=11)
     fig.subplots_adjust(left=0.06, right=0.99, bottom=0.07, top=0.92, wspace=0.25, hspace=0.3)
     return fig
+
+
+_canvas = threading.local()
+
+
+def test_canvas():
+    """This thread's figure for the per-test figures (:func:`figure_test`'s ``fig``), made once.
+
+    A new figure spends about a sixth of its CPU time making its six axes and their ticks; the
+    eleven figures of a report are the same six panels with other data, so one figure is kept
+    (for the thread's life: a few MB) and its data artists replaced, with the same bytes as a new
+    figure's (tested). Not pyplot's: nothing closes it (``encode``'s ``close`` leaves it alone).
+    """
+    fig = getattr(_canvas, "fig", None)
+    if fig is None:
+        import matplotlib  # reason: optional and heavy, loaded only where used
+        from matplotlib.backends.backend_agg import (  # reason: optional and heavy, loaded only where used
+            FigureCanvasAgg,
+        )
+        from matplotlib.figure import Figure  # reason: optional and heavy, loaded only where used
+
+        # Titles placed at the top of their axes, as matplotlib places them unless a top x axis
+        # or the y axis' offset text (1e3, +2.5e2) is in the way; it checks this on every draw,
+        # laying out the y ticks a second time (about 0.06 CPU s a figure). The figures have no
+        # top axis, and one whose y axis has an offset text is drawn again on a new figure
+        # (encoded_test_figure), so that every title is where matplotlib puts it.
+        with matplotlib.rc_context({"axes.titley": 1.0}):
+            fig = _canvas.fig = Figure(figsize=TEST_FIGSIZE)
+            fig.subplots(2, 3)
+        # its own Agg canvas: the renderer, and the text sizes matplotlib measured with it and
+        # keeps by renderer, then last from one figure to the next (a figure without one gets a
+        # new canvas and renderer at every save)
+        FigureCanvasAgg(fig)
+    return fig
+
+
+def _cleared(fig):
+    """The axes of a :func:`test_canvas` figure (2 x 3), emptied as a new figure's are: no lines,
+    shades, texts or legend, no data limits, the view (0, 1) autoscaled; the figure's own texts
+    but its title (the NOT CONVERGED stamp) removed. The axes, their ticks and labels stay."""
+    for text in [t for t in fig.texts if t is not fig._suptitle]:
+        text.remove()
+    for ax in fig.axes:
+        for artist in (*ax.lines, *ax.collections, *ax.texts):
+            artist.remove()
+        if ax.legend_ is not None:
+            ax.legend_.remove()
+        ax.relim()  # no artists left: no data limits, the next artist's replace them
+        ax.set_xlim(0, 1, auto=True)
+        ax.set_ylim(0, 1, auto=True)
+    return np.asarray(fig.axes).reshape(2, 3)
 
 
 def _readings(ax, h, y, comp) -> None:
@@ -576,10 +640,16 @@ def encoded_test_figure(
     """:func:`figure_test` as PNG or SVG bytes (what a figure worker returns), stamped NOT
     CONVERGED when the test's fit failed its convergence rules; ``units``: second axes in the
     recordings' units (``uq report --units input``)."""
-    fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m)
-    if not converged:
-        stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
-    return encode(fig, figure_format, units)
+    # a second axis per unit adds axes to the figure: a new figure then, not the kept one
+    canvas = test_canvas() if units is None else None
+    while True:
+        fig = figure_test(t, force_mean, x0_m, tb, cb, piston_m, canvas)
+        if not converged:
+            stamp_unconverged(fig, f"the {t.pressure_bar:g} bar test")
+        data = encode(fig, figure_format, units)
+        if canvas is None or not any(ax.yaxis.offsetText.get_text() for ax in canvas.axes):
+            return data
+        canvas = None  # an offset text may move a title (test_canvas): matplotlib places them
 
 
 def not_converged(cf) -> tuple[str, list[str]]:
@@ -624,8 +694,11 @@ def _workers_ignore_interrupts():
 
 
 def _warm_up() -> None:
-    """A figure worker's first task: import matplotlib (this module is imported to run it)."""
+    """A figure worker's first task, done while the fit runs: import matplotlib (this module is
+    imported to run it) and make its :func:`test_canvas`, drawn once (its axes, ticks, renderer
+    and fonts made then, not on the first test's figure)."""
     pyplot()
+    test_canvas().savefig(io.BytesIO(), format="png", dpi=DPI)
 
 
 class FigureWorkers:
@@ -633,8 +706,9 @@ class FigureWorkers:
     jobs=workers)``), started ahead: ``jobs`` processes draw them, this one and ``jobs - 1``
     spawned workers (``None``: one per CPU), none for fewer than ``MIN_TESTS`` tests (starting a
     worker costs more than it saves). The workers start at once and import matplotlib and this
-    module (about 0.8 CPU s each), so started before the fit (``uq report`` does) their imports
-    run beside it instead of after it. A context manager: leaving it stops the workers.
+    module (about 0.8 CPU s each) and make and draw their kept per-test figure
+    (:func:`test_canvas`), so started before the fit (``uq report`` does) this runs beside the fit
+    instead of after it. A context manager: leaving it stops the workers.
     Workers are spawned, not forked: this process may hold a JAX runtime, which fork can
     deadlock; a spawned worker imports the calling script again (hence the ``__main__`` guard
     :func:`write_report` asks of scripts)."""
@@ -646,6 +720,10 @@ class FigureWorkers:
         n = self.jobs - 1 if n_tests is None else min(self.jobs - 1, n_tests)
         self.pool = None
         self._ahead = {}  # test index -> (its bands, format, units, the future of its figure)
+        self._lock = threading.RLock()
+        self._waiting = collections.deque()  # (future, function, arguments) not yet given out
+        self._given = 0  # tasks a worker has and has not finished
+        self._n = n
         if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
             with _workers_ignore_interrupts():
                 self.pool = concurrent.futures.ProcessPoolExecutor(
@@ -653,7 +731,47 @@ class FigureWorkers:
                     mp_context=multiprocessing.get_context("spawn"),
                     initializer=_ignore_interrupts,
                 )
-                self.pool.submit(_warm_up)  # spawn launches the workers at the first submit
+                for _ in range(n):  # spawn launches the workers at the first submit
+                    self.submit(_warm_up)
+
+    def submit(self, fn, *args) -> concurrent.futures.Future:
+        """``fn(*args)`` in a worker, given to it only when it has nothing else to do, so that
+        until then the task can be cancelled (``Future.cancel``) and done by this process instead.
+        (A ``ProcessPoolExecutor`` hands a worker its next tasks ahead, where they can no longer
+        be cancelled: the command's process then waited for up to two figures it could have drawn.)
+        """
+        future = concurrent.futures.Future()
+        with self._lock:
+            self._waiting.append((future, fn, args))
+        self._give_out()
+        return future
+
+    def _give_out(self) -> None:
+        with self._lock:
+            while self._given < self._n and self._waiting:
+                future, fn, args = self._waiting.popleft()
+                if not future.set_running_or_notify_cancel():
+                    continue  # cancelled: this process does it
+                try:
+                    task = self.pool.submit(fn, *args)
+                except RuntimeError as e:  # the pool is shut down (leaving the context)
+                    future.set_exception(e)
+                    continue
+                self._given += 1
+                task.add_done_callback(functools.partial(self._finished, future))
+
+    def _finished(self, future, task) -> None:
+        """A worker's task is done (called in the pool's thread): its result to ``future``, the
+        next waiting task to the worker."""
+        with self._lock:
+            self._given -= 1
+        if task.cancelled():
+            future.set_exception(concurrent.futures.CancelledError())
+        elif task.exception() is not None:
+            future.set_exception(task.exception())
+        else:
+            future.set_result(task.result())
+        self._give_out()
 
     def ahead(self, cf, figure_format: str = "png", units=None):
         """An ``on_test`` for :func:`uq._derived.bands.campaign_bands`: each test's figure goes
@@ -664,12 +782,7 @@ class FigureWorkers:
         def on_test(t, tb, grid):
             if self.pool is not None:
                 w = _work_item(cf.tests[t], tb, grid, figure_format, units)
-                self._ahead[t] = (
-                    tb,
-                    figure_format,
-                    units,
-                    self.pool.submit(encoded_test_figure, *w),
-                )
+                self._ahead[t] = (tb, figure_format, units, self.submit(encoded_test_figure, *w))
 
         return on_test
 
@@ -678,6 +791,10 @@ class FigureWorkers:
 
     def __exit__(self, *exc):
         if self.pool:
+            with self._lock:
+                for future, _, _ in self._waiting:
+                    future.cancel()
+                self._waiting.clear()
             self.pool.shutdown(cancel_futures=True)
 
 
@@ -697,12 +814,14 @@ def _work_item(tf, tb, grid, figure_format: str, units) -> tuple:
 
 
 class _TestFigures:
-    """The per-test figures (the slow part of a report: about half a CPU second each), drawn by
-    the ``workers`` (a :class:`FigureWorkers`), which start on them while the page and the
-    campaign figures are made in this process, and by this process, which then draws those the
-    workers have not started, from the last back (:meth:`results`). Workers get plain data
+    """The per-test figures (the slow part of a report: about 0.35 CPU s each), drawn by the
+    ``workers`` (a :class:`FigureWorkers`), which start on them while the page and the campaign
+    figures are made in this process, and by this process, which then draws those no worker has
+    started, from the last back (:meth:`results`; a worker is given its next figure only when it
+    is done with the last, so that none waits in a worker's queue). Workers get plain data
     (recordings, mean coefficients, bands) and import only matplotlib and this module, not JAX;
-    the bytes (PNG or SVG) are the same wherever a figure is drawn (tested)."""
+    every process draws them on its one kept figure (:func:`test_canvas`), and the bytes (PNG or
+    SVG) are the same wherever a figure is drawn (tested)."""
 
     def __init__(
         self, cf, cb: CampaignBands, workers: FigureWorkers, figure_format="png", units=None
@@ -718,7 +837,7 @@ class _TestFigures:
             for i, tb in enumerate(cb.tests):  # the figures asked for ahead, if of these bands
                 tb0, fmt0, units0, future = workers._ahead.get(i, (None, None, None, None))
                 if not (tb0 is tb and fmt0 == figure_format and units0 is units):
-                    future = self._pool.submit(encoded_test_figure, *self._work[i])
+                    future = workers.submit(encoded_test_figure, *self._work[i])
                 self._futures.append(future)
 
     def results(self) -> list[bytes]:

@@ -26,6 +26,9 @@ from markupsafe import Markup
 from uq._io.errors import InputError
 
 DPI = 90
+#: zlib's level for the PNGs: 3 takes about 60 % of the time of Pillow's default 6 (about 20 ms
+#: less a figure) for files under 1 % larger; the pixels are the same at every level
+PNG_COMPRESSION = 3
 
 
 def pyplot():
@@ -70,7 +73,12 @@ def encode(fig, figure_format: str = "png", units=None) -> bytes:
         if figure_format == "svg":
             fig.savefig(buf, format="svg", metadata={"Date": None})
         else:
-            fig.savefig(buf, format=check_format(figure_format), dpi=DPI)
+            fig.savefig(
+                buf,
+                format=check_format(figure_format),
+                dpi=DPI,
+                pil_kwargs={"compress_level": PNG_COMPRESSION},
+            )
     pyplot().close(fig)
     return buf.getvalue()
 

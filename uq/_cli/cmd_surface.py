@@ -69,18 +69,14 @@ def command_surface(args) -> int:
     if args.select and entry.select_orders is None:
         raise InputError(f"option --select: the {entry.name} model has no candidate orders to rank")
     rec = load(args)
-
-    def fit_model():
-        if args.select:
-            return entry.order_selection()(rec, seed=args.seed, settings=settings, stand=stand)[0]
-        return entry.fit_function()(rec, seed=args.seed, settings=settings, stand=stand)
-
+    if args.select:
+        fit, _ = entry.order_selection()(rec, seed=args.seed, settings=settings, stand=stand)
+    else:
+        fit = entry.fit_function()(rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
-    if args.no_compare:
-        fit = fit_model()
-    else:  # the cubics are fitted in a thread beside the model (fit_both)
-        fit, _, comparison = fit_both(
-            rec, seed=args.seed, settings=settings, stand=stand, fit_model=fit_model
+    if not args.no_compare:
+        _, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
         )
     res = fit.to_json(comparison)
     PRINTERS.get(fit.name, _print_model)(rec, fit, res)

@@ -25,12 +25,7 @@ it the same way for all of them:
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import dataclasses
-import threading
-from collections.abc import Callable
-from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.special import logsumexp
@@ -139,35 +134,10 @@ def force_side(rec):
     )
 
 
-class CubicSide(NamedTuple):
-    """The per-pressure cubics' part of a comparison that needs nothing of the other model: their
-    pointwise log-likelihoods side by side and the PSIS-LOO of them (:func:`cubic_side`)."""
-
-    plain: np.ndarray  # (C, D, n) at the drawn coefficients
-    loo: Loo  # PSIS-LOO of the exact leave-one-out densities given the noise
-    plain_loo: Loo  # PSIS-LOO at the drawn coefficients
-
-
-def cubic_side(cubic_fit) -> CubicSide:
-    """:class:`CubicSide` of ``cubic_fit`` (made where the cubics were fitted: in the thread that
-    fits them beside the other model, :func:`fit_both`)."""
-    plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
-    loo = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
-    return CubicSide(plain, loo, psis(plain))
-
-
-def compare(
-    surface_fit,
-    cubic_fit,
-    *,
-    seed: int = 0,
-    settings: Settings = Settings(),
-    cubics: CubicSide | None = None,
-) -> dict:
+def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
     """PSIS-LOO of a model over all tests (its registry ``name`` keys the document) against the
     per-pressure cubics, per (force, piston) reading (module docstring); the ``comparison``
-    document of the JSON results. ``cubics``: :func:`cubic_side` of ``cubic_fit``, if made
-    already."""
+    document of the JSON results."""
     name = surface_fit.name
     if getattr(surface_fit, "posterior", None) is None:  # a model plugged in without one
         return {
@@ -180,12 +150,13 @@ def compare(
         raise ValueError(
             "the force surface is compared with cubics fitted to the force alone (force_side)"
         )
-    cub_plain, loo_c, plain_c = cubic_side(cubic_fit) if cubics is None else cubics
+    cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.n_coefficients, 8 * len(cubic_fit.tests)
     if force_only:
         n_c = sum(t.posterior.beta.shape[-1] for t in cubic_fit.tests)
     loo_s = psis(surface_fit.loglik_loo)
+    loo_c = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
     k_psis = float(np.max(loo_c.pareto_k))
     loo_s, loo_c, how = remedy(
         loo_s,
@@ -193,7 +164,7 @@ def compare(
         refit=(None, _cubic_refit(cubic_fit, settings, seed)),
         kfold_both=_kfold_both(surface_fit, cubic_fit, seed=seed),
     )
-    plain_s = psis(sur_plain)
+    plain_s, plain_c = psis(sur_plain), psis(cub_plain)
     names = (name, "per-pressure cubics")
     return {
         "model": name,
@@ -223,99 +194,19 @@ def compare(
 
 
 def fit_both(
-    rec,
-    *,
-    seed: int,
-    settings: Settings,
-    stand,
-    surface_fit=None,
-    cubic_fit=None,
-    model=None,
-    fit_model: Callable[[], Any] | None = None,
+    rec, *, seed: int, settings: Settings, stand, surface_fit=None, cubic_fit=None, model=None
 ):
     """A model over all tests (``model``: a registry name, default the registry's default model)
     and the per-pressure cubics of ``rec`` with the same settings (either fit may be given already)
     and their :func:`compare` document: (model fit, cubics, comparison). The cubics compared are
     fitted to :func:`force_side` of ``rec``: a catalogue's own cubic fit (its volume column fitted
-    as L) is not the comparison's, and a given one is then replaced. ``fit_model``: a function
-    of no arguments that fits the model (``uq surface``'s choice of model and orders), instead of
-    the registry's fit of ``model``.
-
-    Where the cubics must be fitted they are fitted in a thread beside the model's fit, with their
-    part of the comparison (:func:`cubic_side`): each fit draws from its own seeded generators, and
-    JAX and numpy release the interpreter while they compute, so the two share the machine's cores
-    and the results are those of one fit after the other, to the bit (tested)."""
-    if surface_fit is None and fit_model is None:
+    as L) is not the comparison's, and a given one is then replaced."""
+    if surface_fit is None:
         name = registry.default("margin") if model is None else model
-
-        def fit_model():
-            return registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
-
-    side = None
+        surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
     if cubic_fit is None or force_side(rec) is not rec:
-
-        def cubics():
-            fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
-            return fit, cubic_side(fit)
-
-        if surface_fit is None:
-            with beside(cubics) as worker:
-                surface_fit = fit_model()
-                cubic_fit, side = worker.result()
-        else:
-            cubic_fit, side = cubics()
-    elif surface_fit is None:
-        surface_fit = fit_model()
-    comparison = compare(surface_fit, cubic_fit, seed=seed, settings=settings, cubics=side)
-    return surface_fit, cubic_fit, comparison
-
-
-class _Stopped(Exception):
-    """Raised in a :func:`beside` thread to stop it when its caller fails (a Ctrl-C)."""
-
-
-class _Beside(threading.Thread):
-    """A thread that runs ``fn`` and keeps its result or its exception (:func:`beside`)."""
-
-    def __init__(self, fn: Callable[[], Any]):
-        super().__init__(name="uq-beside")
-        self.fn, self.value, self.error = fn, None, None
-
-    def run(self) -> None:
-        try:
-            self.value = self.fn()
-        except BaseException as exc:  # handed to the caller by result()
-            self.error = exc
-
-    def result(self):
-        """``fn``'s result, once the thread has finished; its exception raised here."""
-        self.join()
-        if self.error is not None:
-            raise self.error
-        return self.value
-
-    def stop(self) -> None:
-        """Stop the thread at its next Python instruction (JAX's and numpy's compiled code
-        between them take milliseconds) and wait for it."""
-        if self.is_alive():
-            ctypes.pythonapi.PyThreadState_SetAsyncExc(
-                ctypes.c_ulong(self.ident), ctypes.py_object(_Stopped)
-            )
-        self.join()
-
-
-@contextlib.contextmanager
-def beside(fn: Callable[[], Any]):
-    """Run ``fn`` in a thread while the block runs; the block takes its result with
-    ``worker.result()``. If the block fails (a Ctrl-C while the model is fitted), the thread is
-    stopped before the failure goes on, so the process does not wait for it to finish."""
-    worker = _Beside(fn)
-    worker.start()
-    try:
-        yield worker
-    except BaseException:
-        worker.stop()
-        raise
+        cubic_fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
+    return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 
 def words(c: dict) -> str:

@@ -25,12 +25,13 @@ Standard errors of a difference are sqrt(n Var(diff)) over the pointwise differe
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import ndtr, ndtri
+
+from uq._inference.threads import THREADS, side_by_side
 
 #: a PSIS-LOO term is unreliable when its Pareto k exceeds this (Vehtari et al. 2017/2024)
 PARETO_K_MAX = 0.7
@@ -217,12 +218,6 @@ def _gpd_inverse_one(probs: np.ndarray, kappa: float, sigma: float) -> np.ndarra
 
 #: observations smoothed together (the GPD fit holds (chunk, 30 + sqrt(M), M) numbers)
 PSIS_CHUNK = 256
-#: threads that smooth the chunks of readings side by side (numpy releases the GIL in its
-#: element-wise functions, partitions and sorts, which are nearly all of the cost): each reading is
-#: smoothed alone, so the result does not depend on the chunks or the threads (tested)
-PSIS_THREADS = max(
-    1, min(2, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
-)
 
 
 def _psis_chunk(ll: np.ndarray, n_tail: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -261,7 +256,7 @@ def _psis_chunk(ll: np.ndarray, n_tail: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 def psis_loo(
-    loglik: np.ndarray, reff: float = 1.0, *, chunk: int = PSIS_CHUNK, threads: int = PSIS_THREADS
+    loglik: np.ndarray, reff: float = 1.0, *, chunk: int = PSIS_CHUNK, threads: int = THREADS
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """PSIS-LOO of ``loglik`` (n, S): S draws of n readings' log-likelihoods -> (loo_i (n,),
     pareto_k (n,), p_loo). ArviZ's algorithm (``psislw`` then ``loo``), vectorised over readings:
@@ -275,13 +270,7 @@ def psis_loo(
     n, S = ll.shape
     n_tail = int(np.ceil(min(S / 5.0, 3 * (S / reff) ** 0.5)))
     parts = [ll[lo : lo + chunk] for lo in range(0, n, chunk)] or [ll]
-    if threads > 1 and len(parts) > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=min(threads, len(parts))) as pool:
-            done = list(pool.map(lambda p: _psis_chunk(p, n_tail), parts))
-    else:
-        done = [_psis_chunk(p, n_tail) for p in parts]
+    done = side_by_side(lambda p: _psis_chunk(p, n_tail), parts, threads=threads)
     loo_i, k, lse = (np.concatenate(a) for a in zip(*done, strict=True))
     lppd = float(np.sum(lse - np.log(S)))
     return loo_i, k, lppd - float(np.sum(loo_i))

@@ -28,13 +28,11 @@ are computed on such chains: ``uq._inference.convergence``.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import importlib
 import math
 import sys
-import threading
 import warnings
 from dataclasses import dataclass
 
@@ -412,20 +410,6 @@ def _tau(chain: np.ndarray) -> np.ndarray:
     return tau[0] if single else tau
 
 
-@contextlib.contextmanager
-def _quiet():
-    """RuntimeWarnings of -inf log-probabilities silenced: numpy's floating-point ones by
-    ``np.errstate`` (a context of the thread), and in the main thread every RuntimeWarning, as
-    before. The warnings filters are the process's: two threads that each set and restore them
-    would undo each other's (a sampler may run in a thread beside another:
-    ``uq._derived.comparison.fit_both``), so other threads leave them alone."""
-    with np.errstate(all="ignore"), contextlib.ExitStack() as stack:
-        if threading.current_thread() is threading.main_thread():
-            stack.enter_context(warnings.catch_warnings())
-            warnings.simplefilter("ignore", RuntimeWarning)
-        yield
-
-
 def _starts(log_prob, centers, chols, n_walkers: int, rng, tries: int = 20) -> np.ndarray:
     """Overdispersed starting walkers with finite log-probability (bad draws redrawn).
 
@@ -443,7 +427,8 @@ def _starts(log_prob, centers, chols, n_walkers: int, rng, tries: int = 20) -> n
     p0 = draw(1.0, (K, n_walkers, D))
     shrink = 1.0
     for i in range(2 * tries):
-        with _quiet():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
             bad = ~np.isfinite(np.asarray(log_prob(p0), float))
         if not bad.any():
             return p0
@@ -543,7 +528,8 @@ def _run_many(
     n_steps, target = 0, settings.min_steps
     while True:
         step = max(1, min(target, settings.max_steps) - n_steps)
-        with _quiet():  # -inf log-prob proposals
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals
             state = sampler.run_mcmc(state, step, progress=False)
         n_steps += step
         bar.update(step)

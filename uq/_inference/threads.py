@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 
@@ -43,8 +44,6 @@ def side_by_side(fn: Callable[[Any], Any], items: Iterable, *, threads: int = TH
     items = list(items)
     if threads <= 1 or len(items) <= 1:
         return [fn(x) for x in items]
-    from concurrent.futures import ThreadPoolExecutor
-
     pool = ThreadPoolExecutor(max_workers=min(threads, len(items)), thread_name_prefix="uq")
     try:
         return list(pool.map(fn, items))

@@ -81,3 +81,19 @@ def test_the_one_reading_path_is_arviz_s_psislw_to_the_bit():
             got = _psislw_one(lw, -n_tail - 1, cutoffmin)
             assert np.array_equal(got[0], want[0])
             assert got[1] == want[1]
+
+
+def test_psis_is_the_same_for_any_chunks_and_threads():
+    """The readings are smoothed in chunks by threads side by side: each reading on its own, so
+    every chunking and thread count gives the same loo_i, Pareto k and p_loo, to the bit (with
+    tied and short-tailed readings among them, which take the one-reading path)."""
+    from uq._inference.loo import psis_loo
+
+    rng = np.random.default_rng(7)
+    ll = _loglik(rng, 1, 1200, 700, 0.1)[0].T.copy()
+    ll[3] = np.round(ll[3], 1)  # ties: the one-reading path
+    want = psis_loo(ll, 1.0, chunk=ll.shape[0], threads=1)
+    for chunk, threads in ((256, 2), (100, 3), (1, 2), (333, 1)):
+        got = psis_loo(ll, 1.0, chunk=chunk, threads=threads)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        assert got[2] == want[2]

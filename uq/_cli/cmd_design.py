@@ -92,7 +92,6 @@ def _number_list(text: str) -> tuple[float, ...]:
 polytropic = option_type(_polytropic)
 dvdp = option_type(_dvdp)
 number_list = option_type(_number_list)
-polytropic.__name__, dvdp.__name__, number_list.__name__ = "value or range", "L/bar", "list"
 
 
 def add_sealed_options(
@@ -309,6 +308,7 @@ def command_design(args) -> int:
     from uq._derived import design as D
     from uq._derived.comparison import fit_both
     from uq._derived.model_check import predictive_check
+    from uq._io.files import emit_json
 
     t0 = time.perf_counter()
     entry = registry.entry(args.model)
@@ -357,9 +357,19 @@ def command_design(args) -> int:
             for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
         }
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
-    _sheet_and_json(
-        args, rec, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
-    )
+    if args.out:
+        from uq._report.design import write_design_sheet
+
+        page = write_design_sheet(
+            doc,
+            args.out,
+            curves=curves,
+            reconstructed=any("RECONSTRUCTED" in c.upper() for c in rec.comments),
+            figure_format=args.figures,
+        )
+        print(f"  data sheet: {page}")
+    print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    emit_json(doc, args.json)
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
     record_misfit(args, check)
     return 0
@@ -427,26 +437,7 @@ def _print_force_only(rec, model, doc) -> None:
     print_check(doc["model_check"])
 
 
-def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
-    """The data sheet (``--out``), the timing line and the JSON, for both kinds of campaign."""
-    from uq._io.files import emit_json
-
-    if args.out:
-        from uq._report.design import write_design_sheet
-
-        page = write_design_sheet(
-            doc,
-            args.out,
-            curves=curves,
-            reconstructed=any("RECONSTRUCTED" in c.upper() for c in rec.comments),
-            figure_format=args.figures,
-        )
-        print(f"  data sheet: {page}")
-    print(f"  {timing}")
-    emit_json(doc, args.json)
-
-
-def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
+def est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
     return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
 
 
@@ -471,14 +462,14 @@ def _print_sealed(rec, model, doc) -> None:
         f"{doc['height_m'] * 1e3:g} mm, {doc['charge_bar']:g} bar, {doc['volume_l']:g} L, {n_words}{res}"
     )
     print(
-        f"  load {_est(doc['load_N'])} N, rate {_est(doc['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
-        f"{_est(doc['natural_frequency_Hz'], 1, '.3f')} Hz (mean [90 % interval])"
+        f"  load {est(doc['load_N'])} N, rate {est(doc['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
+        f"{est(doc['natural_frequency_Hz'], 1, '.3f')} Hz (mean [90 % interval])"
     )
     if "transmissibility" in doc:
         t = doc["transmissibility"]
         print(
-            f"  at {t['forcing_Hz']:g} Hz: transmissibility {_est(t['transmissibility'], 1, '.3f')}, isolation "
-            f"{_est(t['isolation_pct'], 1, '.1f')} % (undamped)"
+            f"  at {t['forcing_Hz']:g} Hz: transmissibility {est(t['transmissibility'], 1, '.3f')}, isolation "
+            f"{est(t['isolation_pct'], 1, '.1f')} % (undamped)"
         )
     statement = doc["assumptions"][0]
     at = min(

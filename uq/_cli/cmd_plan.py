@@ -291,7 +291,7 @@ def _check_model(args, rec, targets) -> None:
 # ----------------------------------------------------------------------------- the fit
 
 
-def _choose(args, rec, targets, stand, settings):
+def _fit(args, rec, targets, stand, settings):
     """(fit to plan with, model description): the model ``uq margin`` would choose, or the user's."""
     from uq._derived.comparison import fit_both, force_side
     from uq._derived.margin import choose
@@ -587,7 +587,7 @@ def command_plan(args) -> int:
     _check_model(args, rec, targets)
     cand, heights = _candidates(args, rec, targets)
     P.required_tests(targets, [t.pressure_bar for t in rec.tests], cand)  # refuses before the fit
-    fit, info = _choose(args, rec, targets, stand, settings)
+    fit, info = _fit(args, rec, targets, stand, settings)
     conv = getattr(fit, "converged", None)
     info["converged"] = bool(fit.convergence.converged if conv is None else conv)
     plan = P.make_plan(

@@ -292,7 +292,15 @@ def _check_model(args, rec, targets) -> None:
 
 
 def _fit(args, rec, targets, stand, settings):
-    """(fit to plan with, model description): the model ``uq margin`` would choose, or the user's."""
+    """(fit to plan with, model description with ``converged``): the model ``uq margin`` would
+    choose, or the user's."""
+    fit, info = _choose(args, rec, targets, stand, settings)
+    conv = getattr(fit, "converged", None)
+    info["converged"] = bool(fit.convergence.converged if conv is None else conv)
+    return fit, info
+
+
+def _choose(args, rec, targets, stand, settings):
     from uq._derived.comparison import fit_both, force_side
     from uq._derived.margin import choose
 
@@ -588,8 +596,6 @@ def command_plan(args) -> int:
     cand, heights = _candidates(args, rec, targets)
     P.required_tests(targets, [t.pressure_bar for t in rec.tests], cand)  # refuses before the fit
     fit, info = _fit(args, rec, targets, stand, settings)
-    conv = getattr(fit, "converged", None)
-    info["converged"] = bool(fit.convergence.converged if conv is None else conv)
     plan = P.make_plan(
         frames_of(fit, args.draws),
         targets,

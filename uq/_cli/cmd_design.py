@@ -287,20 +287,6 @@ def _check_before_fit(args, rec) -> None:
     check_design(ranges, _design_from(args))
 
 
-def _default_heights(rec, x_c: float):
-    import numpy as np
-
-    lo, hi = rec.height_range_m
-    xs = np.arange(np.ceil(lo * 100 - 1e-9), np.floor(hi * 100 + 1e-9) + 1) / 100.0
-    return np.unique(np.round(np.concatenate([[lo, hi, x_c], xs]), 6))
-
-
-def _default_charges(rec):
-    p = sorted({t.pressure_bar for t in rec.tests})
-    top = [v for v in p if v >= 1.0]
-    return tuple(top if len(top) >= 2 else p)
-
-
 def command_design(args) -> int:
     import numpy as np
 
@@ -318,15 +304,17 @@ def command_design(args) -> int:
     rec = load(args, needs=("piston", "order") if entry.needs_volume else ("order",))
     _check_before_fit(args, rec)
     x_c = args.height_mm * 1e-3
-    heights = (
-        np.asarray(args.sheet_heights_mm, float) * 1e-3
-        if args.sheet_heights_mm
-        else _default_heights(rec, x_c)
-    )
+    if args.sheet_heights_mm:
+        heights = np.asarray(args.sheet_heights_mm, float) * 1e-3
+    else:  # every 10 mm of the tested range, its ends and the design height
+        lo, hi = rec.height_range_m
+        xs = np.arange(np.ceil(lo * 100 - 1e-9), np.floor(hi * 100 + 1e-9) + 1) / 100.0
+        heights = np.unique(np.round(np.concatenate([[lo, hi, x_c], xs]), 6))
     tested = sorted({t.pressure_bar for t in rec.tests})
     # the isobaric table also at the design charge when it was not tested (the sheet marks it)
     pressures = sorted(set(tested) | {float(args.charge_bar)})
-    charges = args.charges_bar or _default_charges(rec)
+    top = [v for v in tested if v >= 1.0]  # the frequency chart's default: from 1 bar up
+    charges = args.charges_bar or tuple(top if len(top) >= 2 else tested)
     # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS

@@ -436,7 +436,12 @@ def command_margin(args) -> int:
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
             f"seed {meta['seed']}, uq {meta['uq_version']}); no refit"
         )
-        _warn_if_recordings_changed(meta)
+        p = Path(meta["recordings_path"])
+        if p.is_file() and sha256_of(p) != meta["recordings_sha256"]:
+            print(
+                f"  warning: {p} has changed since the fit was saved (sha256 differs); the answer is for the recordings "
+                "as they were then"
+            )
     if args.save_fit is not None:
         ans.save(
             args.save_fit,
@@ -474,15 +479,6 @@ def command_margin(args) -> int:
     record_convergence(args, diagnostics["converged"], "the fit the answers come from")
     record_misfit(args, check)
     return 0
-
-
-def _warn_if_recordings_changed(meta: dict) -> None:
-    p = Path(meta["recordings_path"])
-    if p.is_file() and sha256_of(p) != meta["recordings_sha256"]:
-        print(
-            f"  warning: {p} has changed since the fit was saved (sha256 differs); the answer is for the recordings "
-            "as they were then"
-        )
 
 
 def _not_rising(res) -> str:

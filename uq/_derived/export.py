@@ -650,7 +650,8 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
 
     def every(d):
         out = summarise(d, grid.quantiles)
-        return {k: out[k] for k in ("mean", "sd", *sorted(set(out) - {"mean", "sd"}, key=_q))}
+        qs = sorted(set(out) - {"mean", "sd"}, key=lambda k: float(k[1:]))  # q05 -> 5
+        return {k: out[k] for k in ("mean", "sd", *qs)}
 
     sealed = {
         "heights_m": h,
@@ -676,11 +677,6 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
         "pressure_bar": every(pressure),
     }
     return replace(grid, sealed=sealed, notes=tuple(notes))
-
-
-def _q(name: str) -> float:
-    """The quantile of a statistic's name (``q05`` -> 5)."""
-    return float(name[1:])
 
 
 def _sealed_words(design) -> list[str]:

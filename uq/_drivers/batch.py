@@ -635,12 +635,6 @@ def run_serial(jobs: list[dict], on_row=None) -> list[dict]:
 # ----------------------------------------------------------------------------- summary
 
 
-def _ordered(rows: list[dict], jobs: list[dict]) -> list[dict]:
-    """Rows in catalogue order (Dask finishes them in any order; the summary should not depend on it)."""
-    pos = {(j["campaign"], j["task"]): i for i, j in enumerate(jobs)}
-    return sorted(rows, key=lambda r: pos[(r["campaign"], r["task"])])
-
-
 def verdicts(rows: list[dict]) -> list[dict]:
     """One verdict per campaign, in the rows' order: "failed" when one of its tasks failed, "not
     converged" when one of its fits (done now or skipped as done before) failed its convergence
@@ -735,4 +729,7 @@ def run_batch(
             )
         else:
             rows += run_batched(todo, on_row, size=size)
-    return write_summary(_ordered(rows, jobs), out_dir, catalogue)
+    # in catalogue order: Dask finishes them in any order, and the summary should not depend on it
+    pos = {(j["campaign"], j["task"]): i for i, j in enumerate(jobs)}
+    rows.sort(key=lambda r: pos[(r["campaign"], r["task"])])
+    return write_summary(rows, out_dir, catalogue)

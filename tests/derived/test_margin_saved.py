@@ -245,7 +245,7 @@ def test_queries_file(surface_saved, tmp_path, capsys):
 
 def test_queries_without_saved_fit_fits_once(campaign, cubics_saved, monkeypatch, tmp_path, capsys):
     """Without --fit: one fit (here the saved cubics handed in, to skip the sampler) answers every row."""
-    import uq._cli.cmd_margin
+    import uq._derived.comparison
     import uq._derived.margin
 
     q = tmp_path / "q.csv"
@@ -253,7 +253,9 @@ def test_queries_without_saved_fit_fits_once(campaign, cubics_saved, monkeypatch
     calls = []
     saved = uq._derived.margin.load_answer(cubics_saved[0])
     monkeypatch.setattr(
-        uq._cli.cmd_margin, "_fit_and_choose", lambda *a: calls.append(1) or (*saved[:2], saved[2])
+        uq._derived.comparison,
+        "fit_and_choose",
+        lambda *a, **k: calls.append(1) or (*saved[:2], saved[2]),
     )
     out = tmp_path / "q.json"
     assert (
@@ -301,12 +303,14 @@ def test_queries_bad_row_exit_2(body, row, column, words, surface_saved, tmp_pat
 
 
 def test_bad_row_refused_before_reading_or_fitting(campaign, monkeypatch, tmp_path, capsys):
-    import uq._cli.cmd_margin
     import uq._cli.common
+    import uq._derived.comparison
 
     calls = []
     monkeypatch.setattr(uq._cli.common, "load", lambda *a, **k: calls.append("load"))
-    monkeypatch.setattr(uq._cli.cmd_margin, "_fit_and_choose", lambda *a, **k: calls.append("fit"))
+    monkeypatch.setattr(
+        uq._derived.comparison, "fit_and_choose", lambda *a, **k: calls.append("fit")
+    )
     q = tmp_path / "q.csv"
     q.write_text("height_mm,load_N\n110,8000\n110,-1\n")
     assert run(["margin", campaign[1], "--queries", q]) == 2

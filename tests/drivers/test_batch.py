@@ -117,7 +117,7 @@ def test_hash_changes_with_data_task_options_and_version(campaigns, monkeypatch)
     assert h != _batch.job_hash(
         _batch.Campaign("a", campaigns / "c2.csv", ("fit",), {"seed": 1}), "fit"
     )
-    monkeypatch.setattr(_batch, "_version", lambda: "0.0.0-other")
+    monkeypatch.setattr(_batch, "__version__", "0.0.0-other")
     assert h != _batch.job_hash(c, "fit")
 
 

@@ -489,14 +489,6 @@ def _bars(pressures) -> str:
     return ", ".join(f"{p:g}" for p in pressures) + " bar"
 
 
-def _units_words(which: str) -> str:
-    return (
-        "units of the recordings, u = x - x0 in their height unit"
-        if which == "input"
-        else "SI, u = x - x0 in m, as uq fit --json"
-    )
-
-
 def _print_fit_table(rec, result: dict, units) -> None:
     """The per-test summary, in the units asked for (``--units``): the force's a_P with its 90 %
     interval, b_L, the deviation measures and the worst R-hat and ESS."""
@@ -576,7 +568,12 @@ def command_fit(args) -> int:
 
         header, rows = coefficient_table(cf, JSON_UNITS if args.units == "si" else units)
         write_text_atomic(args.csv, csv_text(header, rows))
-        print(f"coefficient table: {args.csv} ({len(rows)} rows, {_units_words(args.units)})")
+        words = (
+            "units of the recordings, u = x - x0 in their height unit"
+            if args.units == "input"
+            else "SI, u = x - x0 in m, as uq fit --json"
+        )
+        print(f"coefficient table: {args.csv} ({len(rows)} rows, {words})")
     if args.out:  # the posteriors and fit.json whole or not at all (a full disk leaves none)
         with staged_folder(args.out, last=("fit.json",)) as stage:
             paths = cf.save_posteriors(stage)

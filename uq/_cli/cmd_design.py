@@ -92,7 +92,6 @@ def _number_list(text: str) -> tuple[float, ...]:
 polytropic = option_type(_polytropic)
 dvdp = option_type(_dvdp)
 number_list = option_type(_number_list)
-polytropic.__name__, dvdp.__name__, number_list.__name__ = "value or range", "L/bar", "list"
 
 
 def add_sealed_options(
@@ -288,20 +287,6 @@ def _check_before_fit(args, rec) -> None:
     check_design(ranges, _design_from(args))
 
 
-def _default_heights(rec, x_c: float):
-    import numpy as np
-
-    lo, hi = rec.height_range_m
-    xs = np.arange(np.ceil(lo * 100 - 1e-9), np.floor(hi * 100 + 1e-9) + 1) / 100.0
-    return np.unique(np.round(np.concatenate([[lo, hi, x_c], xs]), 6))
-
-
-def _default_charges(rec):
-    p = sorted({t.pressure_bar for t in rec.tests})
-    top = [v for v in p if v >= 1.0]
-    return tuple(top if len(top) >= 2 else p)
-
-
 def command_design(args) -> int:
     import numpy as np
 
@@ -309,6 +294,7 @@ def command_design(args) -> int:
     from uq._derived import design as D
     from uq._derived.comparison import fit_both
     from uq._derived.model_check import predictive_check
+    from uq._io.files import emit_json
 
     t0 = time.perf_counter()
     entry = registry.entry(args.model)
@@ -318,15 +304,17 @@ def command_design(args) -> int:
     rec = load(args, needs=("piston", "order") if entry.needs_volume else ("order",))
     _check_before_fit(args, rec)
     x_c = args.height_mm * 1e-3
-    heights = (
-        np.asarray(args.sheet_heights_mm, float) * 1e-3
-        if args.sheet_heights_mm
-        else _default_heights(rec, x_c)
-    )
+    if args.sheet_heights_mm:
+        heights = np.asarray(args.sheet_heights_mm, float) * 1e-3
+    else:  # every 10 mm of the tested range, its ends and the design height
+        lo, hi = rec.height_range_m
+        xs = np.arange(np.ceil(lo * 100 - 1e-9), np.floor(hi * 100 + 1e-9) + 1) / 100.0
+        heights = np.unique(np.round(np.concatenate([[lo, hi, x_c], xs]), 6))
     tested = sorted({t.pressure_bar for t in rec.tests})
     # the isobaric table also at the design charge when it was not tested (the sheet marks it)
     pressures = sorted(set(tested) | {float(args.charge_bar)})
-    charges = args.charges_bar or _default_charges(rec)
+    top = [v for v in tested if v >= 1.0]  # the frequency chart's default: from 1 bar up
+    charges = args.charges_bar or tuple(top if len(top) >= 2 else tested)
     # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
@@ -357,9 +345,19 @@ def command_design(args) -> int:
             for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
         }
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
-    _sheet_and_json(
-        args, rec, doc, curves, f"{time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)"
-    )
+    if args.out:
+        from uq._report.design import write_design_sheet
+
+        page = write_design_sheet(
+            doc,
+            args.out,
+            curves=curves,
+            reconstructed=any("RECONSTRUCTED" in c.upper() for c in rec.comments),
+            figure_format=args.figures,
+        )
+        print(f"  data sheet: {page}")
+    print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
+    emit_json(doc, args.json)
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")
     record_misfit(args, check)
     return 0
@@ -427,26 +425,7 @@ def _print_force_only(rec, model, doc) -> None:
     print_check(doc["model_check"])
 
 
-def _sheet_and_json(args, rec, doc: dict, curves, timing: str) -> None:
-    """The data sheet (``--out``), the timing line and the JSON, for both kinds of campaign."""
-    from uq._io.files import emit_json
-
-    if args.out:
-        from uq._report.design import write_design_sheet
-
-        page = write_design_sheet(
-            doc,
-            args.out,
-            curves=curves,
-            reconstructed=any("RECONSTRUCTED" in c.upper() for c in rec.comments),
-            figure_format=args.figures,
-        )
-        print(f"  data sheet: {page}")
-    print(f"  {timing}")
-    emit_json(doc, args.json)
-
-
-def _est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
+def est(e: dict, scale: float = 1.0, fmt: str = ".0f") -> str:
     return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
 
 
@@ -471,14 +450,14 @@ def _print_sealed(rec, model, doc) -> None:
         f"{doc['height_m'] * 1e3:g} mm, {doc['charge_bar']:g} bar, {doc['volume_l']:g} L, {n_words}{res}"
     )
     print(
-        f"  load {_est(doc['load_N'])} N, rate {_est(doc['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
-        f"{_est(doc['natural_frequency_Hz'], 1, '.3f')} Hz (mean [90 % interval])"
+        f"  load {est(doc['load_N'])} N, rate {est(doc['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
+        f"{est(doc['natural_frequency_Hz'], 1, '.3f')} Hz (mean [90 % interval])"
     )
     if "transmissibility" in doc:
         t = doc["transmissibility"]
         print(
-            f"  at {t['forcing_Hz']:g} Hz: transmissibility {_est(t['transmissibility'], 1, '.3f')}, isolation "
-            f"{_est(t['isolation_pct'], 1, '.1f')} % (undamped)"
+            f"  at {t['forcing_Hz']:g} Hz: transmissibility {est(t['transmissibility'], 1, '.3f')}, isolation "
+            f"{est(t['isolation_pct'], 1, '.1f')} % (undamped)"
         )
     statement = doc["assumptions"][0]
     at = min(

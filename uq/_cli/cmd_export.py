@@ -47,7 +47,7 @@ EXPORT_OPTIONS = {
 }
 
 
-def _parsed(parse: str, what: str):
+def _parsed(parse: str):
     """An option type parsing its text with ``uq._derived.export``'s function ``parse`` (imported
     when an option is parsed)."""
 
@@ -56,7 +56,6 @@ def _parsed(parse: str, what: str):
 
         return getattr(export, parse)(text)
 
-    check.__name__ = what
     return option_type(check)
 
 
@@ -90,20 +89,20 @@ def configure_export(p) -> None:
     )
     p.add_argument(
         "--heights-mm",
-        type=_parsed("parse_heights_mm", "heights"),
+        type=_parsed("parse_heights_mm"),
         metavar="LIST|A:B:STEP",
         help="heights of the grid, mm: 65,80,100 or 65:155:5 (default: every tested height)",
     )
     p.add_argument(
         "--pressures-bar",
-        type=_parsed("parse_pressures_bar", "pressures"),
+        type=_parsed("parse_pressures_bar"),
         metavar="LIST",
         help="overpressures of the grid, bar (default: the tested pressures); between tested "
         "pressures the model answers",
     )
     p.add_argument(
         "--quantiles",
-        type=_parsed("parse_quantiles", "quantiles"),
+        type=_parsed("parse_quantiles"),
         default="0.05,0.5,0.95",
         metavar="LIST",
         help="posterior quantiles written beside the mean",

@@ -173,22 +173,18 @@ def _design_answer(args, ans, q: dict) -> dict:
 
 
 QUERY_COLUMNS = ("height_mm", "load_N", "prob", "pressure_bar", "tolerance_pct")
-_OPTION_OF = {
-    "height_mm": "--height-mm",
-    "load_N": "--load-N",
-    "prob": "--prob",
-    "pressure_bar": "--pressure-bar",
-    "tolerance_pct": "--tolerance-pct",
-}
+
+
+def _option(column: str) -> str:
+    """The option of a query column (``height_mm`` -> ``--height-mm``)."""
+    return "--" + column.replace("_", "-")
 
 
 def _place(q: dict, column: str) -> str:
     """Where a query's value came from: ``option --x`` on the command line, or ``Q.csv, row N, column 'c'``."""
     from uq._io.errors import where
 
-    return (
-        f"option {_OPTION_OF[column]}" if q["row"] is None else where(q["file"], q["row"], column)
-    )
+    return f"option {_option(column)}" if q["row"] is None else where(q["file"], q["row"], column)
 
 
 def _check_query(q: dict) -> None:
@@ -285,7 +281,7 @@ def _queries_from(args) -> list[dict]:
         for c in ("height_mm", "load_N"):
             if given[c] is not None:
                 raise InputError(
-                    f"option {_OPTION_OF[c]}: not with --queries (the queries file gives each row's {c})"
+                    f"option {_option(c)}: not with --queries (the queries file gives each row's {c})"
                 )
         return read_queries(args.queries, given)
     if (
@@ -298,16 +294,14 @@ def _queries_from(args) -> list[dict]:
     for c in ("height_mm", "load_N"):
         if given[c] is None:
             raise InputError(
-                f"option {_OPTION_OF[c]}: required (or give the queries in a CSV with --queries)"
+                f"option {_option(c)}: required (or give the queries in a CSV with --queries)"
             )
     q = {"file": None, "row": None} | given
     _check_query(q)
     return [q]
 
 
-def _check_ranges(
-    q: dict, height_range_m, pressure_range_bar, model_word: str = "the model"
-) -> None:
+def _check_ranges(q: dict, height_range_m, pressure_range_bar) -> None:
     """Heights and pressures outside the tested ranges, refused before any fitting or answering (no extrapolation)."""
     lo, hi = height_range_m
     h = q["height_mm"] * 1e-3
@@ -319,7 +313,7 @@ def _check_ranges(
     if q["pressure_bar"] is not None and not plo - 1e-9 <= q["pressure_bar"] <= phi + 1e-9:
         raise InputError(
             f"{_place(q, 'pressure_bar')}: overpressure {q['pressure_bar']:g} bar is outside the tested pressures "
-            f"{plo:g}..{phi:g} bar; {model_word} does not extrapolate"
+            f"{plo:g}..{phi:g} bar; the model does not extrapolate"
         )
 
 
@@ -403,7 +397,7 @@ def command_margin(args) -> int:
                 f"fit again with FILE.csv --model {args.model} --save-fit"
             )
         for q in queries:
-            _check_ranges(q, ans.height_range_m, ans.pressure_range_bar, "the model")
+            _check_ranges(q, ans.height_range_m, ans.pressure_range_bar)
         diagnostics = {"warnings": meta["warnings"], "converged": meta["converged"]}
         source, rec = args.fit, None
         # the check made when the fit was saved (uq margin --save-fit), else none: no readings
@@ -412,6 +406,7 @@ def command_margin(args) -> int:
         )
     else:
         from uq._cli.common import settings_from
+        from uq._derived.comparison import fit_and_choose
 
         args.model = args.model or AUTO
         stand = stand_from(args)  # a bad --stand file is refused before the recordings are read
@@ -424,7 +419,9 @@ def command_margin(args) -> int:
         tested = [t.pressure_bar for t in rec.tests]
         for q in queries:
             _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
-        ans, info, diagnostics = _fit_and_choose(args, rec, stand)
+        ans, info, diagnostics = fit_and_choose(
+            rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand
+        )
         source = rec.path
         check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points
     # every answer before anything is written; with a queries file each row gets its own answer
@@ -439,7 +436,12 @@ def command_margin(args) -> int:
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
             f"seed {meta['seed']}, uq {meta['uq_version']}); no refit"
         )
-        _warn_if_recordings_changed(meta)
+        p = Path(meta["recordings_path"])
+        if p.is_file() and sha256_of(p) != meta["recordings_sha256"]:
+            print(
+                f"  warning: {p} has changed since the fit was saved (sha256 differs); the answer is for the recordings "
+                "as they were then"
+            )
     if args.save_fit is not None:
         ans.save(
             args.save_fit,
@@ -477,15 +479,6 @@ def command_margin(args) -> int:
     record_convergence(args, diagnostics["converged"], "the fit the answers come from")
     record_misfit(args, check)
     return 0
-
-
-def _warn_if_recordings_changed(meta: dict) -> None:
-    p = Path(meta["recordings_path"])
-    if p.is_file() and sha256_of(p) != meta["recordings_sha256"]:
-        print(
-            f"  warning: {p} has changed since the fit was saved (sha256 differs); the answer is for the recordings "
-            "as they were then"
-        )
 
 
 def _not_rising(res) -> str:
@@ -570,25 +563,14 @@ def _print_table(source, ans, info, queries, results) -> None:
         )
 
 
-def _fit_and_choose(args, rec, stand):
-    """Fit what ``--model`` needs (``uq._derived.comparison.fit_and_choose``)."""
-    from uq._cli.common import settings_from
-    from uq._derived.comparison import fit_and_choose
-
-    return fit_and_choose(
-        rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand
-    )
-
-
 def _print_design(q: dict, d: dict, several: bool) -> None:
-    def est(e, scale=1.0, fmt=".3f"):
-        return f"{e['mean'] * scale:{fmt}} [{e['q05'] * scale:{fmt}}, {e['q95'] * scale:{fmt}}]"
+    from uq._cli.cmd_design import est
 
     head = f"  row {q['row']}: " if several else "  "
     print(
-        f"{head}sealed at {q['height_mm']:g} mm carrying {q['load_N']:g} N (charge {est(d['charge_bar'])} bar, "
+        f"{head}sealed at {q['height_mm']:g} mm carrying {q['load_N']:g} N (charge {est(d['charge_bar'], 1, '.3f')} bar, "
         f"{d['volume_l']:g} L): rate {est(d['rate_N_per_m'], 1e-3, '.1f')} kN/m, natural frequency "
-        f"{est(d['natural_frequency_Hz'])} Hz"
+        f"{est(d['natural_frequency_Hz'], 1, '.3f')} Hz"
     )
     pr = q["prob"]
     if "frequency_below" in d:

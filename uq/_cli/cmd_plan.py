@@ -46,14 +46,6 @@ def _grid(text: str, what: str):
     return tuple(sorted({round(v, 9) for v in vals}))
 
 
-def _pressures(text: str):
-    return _grid(text, "pressures in bar")
-
-
-def _heights(text: str):
-    return _grid(text, "heights in mm")
-
-
 def _theta_updates(text: str) -> int:
     """``--theta-updates``: 0 (off) or a number of simulated sets, at most ``MAX_THETA_UPDATES``."""
     try:
@@ -69,10 +61,8 @@ def _theta_updates(text: str) -> int:
 
 MAX_THETA_UPDATES = 20000
 theta_updates_count = option_type(_theta_updates)
-theta_updates_count.__name__ = "number of sets"
-pressures_grid = option_type(_pressures)
-heights_grid = option_type(_heights)
-pressures_grid.__name__, heights_grid.__name__ = "list or range", "list or range"
+pressures_grid = option_type(lambda text: _grid(text, "pressures in bar"))
+heights_grid = option_type(lambda text: _grid(text, "heights in mm"))
 
 
 def configure_plan(p) -> None:
@@ -82,6 +72,7 @@ def configure_plan(p) -> None:
         add_recordings,
         add_sampling,
         add_stand,
+        finite_float,
         nonnegative_float,
         positive_float,
         positive_int,
@@ -187,21 +178,12 @@ def configure_plan(p) -> None:
     )
     d.add_argument(
         "--dvdp-l-per-bar",
-        type=option_type(_dvdp_number),
+        type=finite_float,
         default=0.0,
         help="how the volume at the design height changes with pressure, L/bar (default 0, an "
         "assumption the answer states)",
     )
     add_stand(p)
-
-
-def _dvdp_number(text: str) -> float:
-    from uq._io.values import finite_float
-
-    return finite_float(text)
-
-
-_dvdp_number.__name__ = "L/bar"
 
 
 # ----------------------------------------------------------------------------- checks before the fit
@@ -322,13 +304,9 @@ def _choose(args, rec, targets, stand, settings):
     from uq._derived.comparison import fit_both, force_side
     from uq._derived.margin import choose
 
-    if args.model == registry.CUBICS:
-        cub = registry.fit(
-            args.model, force_side(rec), seed=args.seed, settings=settings, stand=stand
-        )
-        return cub, {"name": cub.name, "why": f"chosen by the user (--model {args.model})"}
     if args.model != AUTO:
-        fit = registry.fit(args.model, rec, seed=args.seed, settings=settings, stand=stand)
+        data = force_side(rec) if args.model == registry.CUBICS else rec
+        fit = registry.fit(args.model, data, seed=args.seed, settings=settings, stand=stand)
         return fit, {"name": fit.name, "why": f"chosen by the user (--model {args.model})"}
     fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand)
     ans, info = choose(fit, cub, comparison)
@@ -518,7 +496,7 @@ def _template(args, rec, plan) -> str:
     n = sum(len(t["heights_m"]) for t in plan.tests)
     lines.append(
         f"# {PLANNED_MARK}: {n} planned readings in {len(plan.tests)} new tests "
-        f"(uq plan {' '.join(args.target_specs)}), model {plan.label}"
+        f"(uq plan {' '.join(f'--target {s}' for s in args.target)}), model {plan.label}"
     )
     lines.append(
         "# fill in force_N"
@@ -601,17 +579,13 @@ def plot(plan, path) -> None:
 
 
 def command_plan(args) -> int:
-    from uq._cli.common import check_output_path, load, settings_from, stand_from
+    from uq._cli.common import load, settings_from, stand_from
     from uq._derived import plan as P
     from uq._derived.plan_frames import frames_of
     from uq._io.files import emit_json, write_text_atomic
 
-    t0 = time.perf_counter()
-    for option, value in (("--template", args.template), ("--plot", args.plot)):
-        if value is not None:
-            check_output_path(value, option, "file")
+    t0 = time.perf_counter()  # --template and --plot are checked with every output (uq._cli.main)
     targets = _targets(args)
-    args.target_specs = [f"--target {s}" for s in args.target]
     settings = settings_from(args)
     fitted = (registry.default("margin"), registry.CUBICS) if args.model == AUTO else (args.model,)
     settings.require_walkers(max(registry.entry(m).n_sampled for m in fitted))
@@ -622,17 +596,13 @@ def command_plan(args) -> int:
     cand, heights = _candidates(args, rec, targets)
     P.required_tests(targets, [t.pressure_bar for t in rec.tests], cand)  # refuses before the fit
     fit, info = _fit(args, rec, targets, stand, settings)
-    builder = frames_of(fit, args.draws)
-    target_sd = None
-    if args.target_sd is not None:
-        target_sd = list(args.target_sd)
     plan = P.make_plan(
-        builder,
+        frames_of(fit, args.draws),
         targets,
         heights,
         cand,
         max_readings=args.max_readings,
-        target_sd=target_sd,
+        target_sd=None if args.target_sd is None else list(args.target_sd),
         cost_per_pressure=args.cost_per_pressure_readings,
         theta_updates=args.theta_updates,
         theta_pool=args.theta_pool,

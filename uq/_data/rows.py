@@ -114,7 +114,7 @@ def read_table(
         rows, comments, chosen = _workbook_rows(path, raw, kind, sheet)
         name = f"{path}, sheet '{chosen}'"
         table = _layout(name, rows, comments, None, is_column, header_row, units_row)
-        return _with(table, sheet=chosen, sha256=digest)
+        return replace(table, sheet=chosen, sha256=digest)
     if sheet is not None:
         raise InputError(
             f"sheet: {sheet!r}: {path} is CSV text, not a workbook (.xlsx, .ods)", param="sheet"
@@ -122,11 +122,7 @@ def read_table(
     table = table_from_text(
         _decode(path, raw), path, is_column, header_row=header_row, units_row=units_row
     )
-    return _with(table, sha256=digest)
-
-
-def _with(table: Table, **changes) -> Table:
-    return replace(table, **changes)
+    return replace(table, sha256=digest)
 
 
 def _read_bytes(path: str) -> bytes:
@@ -288,13 +284,11 @@ def table_from_text(
     ]
     if not numbered:
         raise InputError(f"{name}: empty file, expected a header row and data rows")
-    k = _header_index(
-        name, [(n, line) for n, line in numbered], lambda line: _hits(line, is_column), header_row
-    )
+    k = _header_index(name, numbered, lambda line: _hits(line, is_column), header_row)
     sep = _delimiter(numbered[k][1], is_column)
     rows = [(n, _fields(name, n, line, sep)) for n, line in numbered]
     table = _layout(name, rows, leading_comments(lines), sep, is_column, header_row, units_row, k)
-    return _with(table, sha256=hashlib.sha256(text.encode("utf-8")).hexdigest())
+    return replace(table, sha256=hashlib.sha256(text.encode("utf-8")).hexdigest())
 
 
 def _hits(header_line: str, is_column, sep: str | None = None) -> int:

@@ -112,13 +112,9 @@ def _tests(doc: dict, path: str) -> list[tuple[float, dict, str]]:
     for i, t in enumerate(tests):
         if not isinstance(t, dict):
             raise InputError(f"{path}: tests[{i}]: expected an object, got {type(t).__name__}")
-        p = (
-            _number(t.get("pressure_bar"), path, f"tests[{i}].pressure_bar")
-            if "pressure_bar" in t
-            else None
-        )
-        if p is None:
+        if "pressure_bar" not in t:
             raise InputError(f"{path}: tests[{i}].pressure_bar: missing")
+        p = _number(t["pressure_bar"], path, f"tests[{i}].pressure_bar")
         label = f"tests[{i}] ({p:g} bar)"
         for q, _, other in out:
             if abs(q - p) <= PRESSURE_ATOL_BAR:

@@ -55,24 +55,10 @@ def coefficient_table(cf, units: OutputUnits = JSON_UNITS) -> tuple[list[str], l
             for k, name in enumerate(names):
                 scale, unit = units.coefficient(block, k)
                 d = draws[:, k] * scale
-                q05, q50, q95 = np.quantile(d, (0.05, 0.5, 0.95))
                 v = variables.get(name, {})
-                rows.append(
-                    [
-                        p,
-                        block,
-                        name,
-                        unit,
-                        float(d.mean()),
-                        float(d.std(ddof=1)),
-                        float(q05),
-                        float(q50),
-                        float(q95),
-                        float(v.get("r_hat", np.nan)),
-                        float(v.get("ess_bulk", np.nan)),
-                        x0,
-                    ]
-                )
+                stats = [d.mean(), d.std(ddof=1), *np.quantile(d, (0.05, 0.5, 0.95))]
+                stats += [v.get("r_hat", np.nan), v.get("ess_bulk", np.nan)]  # COEFFICIENT_STATS
+                rows.append([p, block, name, unit, *map(float, stats), x0])
     return header, rows
 
 
@@ -129,12 +115,9 @@ class ExportGrid:
     n_draws: int = 0
     sealed: dict | None = None
 
-    def quantity(self, key: str) -> Quantity:
-        return next(q for q in self.quantities if q.key == key)
-
     def stats(self, key: str) -> dict[str, np.ndarray]:
         """ "mean", "sd" and each quantile's name -> (H, P) arrays, in the unit used inside."""
-        return self.quantity(key).stats
+        return next(q for q in self.quantities if q.key == key).stats
 
 
 #: the quantiles every JSON estimate object carries whatever ``--quantiles`` asks (the contract's
@@ -667,7 +650,8 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
 
     def every(d):
         out = summarise(d, grid.quantiles)
-        return {k: out[k] for k in ("mean", "sd", *sorted(set(out) - {"mean", "sd"}, key=_q))}
+        qs = sorted(set(out) - {"mean", "sd"}, key=lambda k: float(k[1:]))  # q05 -> 5
+        return {k: out[k] for k in ("mean", "sd", *qs)}
 
     sealed = {
         "heights_m": h,
@@ -693,11 +677,6 @@ def sealed_export(grid: ExportGrid, model, design) -> ExportGrid:
         "pressure_bar": every(pressure),
     }
     return replace(grid, sealed=sealed, notes=tuple(notes))
-
-
-def _q(name: str) -> float:
-    """The quantile of a statistic's name (``q05`` -> 5)."""
-    return float(name[1:])
 
 
 def _sealed_words(design) -> list[str]:

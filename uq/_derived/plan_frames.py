@@ -597,31 +597,34 @@ class CubicFrames:
         prior_prec = 1.0 / self.prior_sd**2
         for j in range(T0 + J):
             P[:, j * b : (j + 1) * b, j * b : (j + 1) * b] = np.diag(prior_prec)
+
+        def condition(sl, Z, y_over_sd):  # one tested block: its readings' precision and mean
+            P[:, sl, sl] += np.einsum("snk,snl->skl", Z, Z)
+            rhs = np.einsum("snk,sn->sk", Z, y_over_sd)
+            m[:, sl] = np.linalg.solve(P[:, sl, sl], rhs[..., None])[..., 0]
+
         for i, d in enumerate(self.datas):
             X = np.asarray(d.X)[:, :4]
             s0, rel, sL = self._noise[i]
             sf = np.sqrt(force_noise_var(s0[:, None], rel[:, None], np.asarray(d.ref_force)[None]))
             y = np.asarray(d.force if hasattr(d, "piston") else d.y)
-            sl = slice(i * b, i * b + 4)
-            Zf = X[None] / sf[..., None]
-            P[:, sl, sl] += np.einsum("snk,snl->skl", Zf, Zf)
-            rhs = np.einsum("snk,sn->sk", Zf, y[None] / sf)
-            m[:, sl] = np.linalg.solve(P[:, sl, sl], rhs[..., None])[..., 0]
+            condition(slice(i * b, i * b + 4), X[None] / sf[..., None], y[None] / sf)
             if not self.force_only:
-                sp = slice(i * b + 4, i * b + 8)
-                Zl = X[None] / sL[:, None, None]
-                P[:, sp, sp] += np.einsum("snk,snl->skl", Zl, Zl)
-                rhs = np.einsum("snk,sn->sk", Zl, np.asarray(d.piston)[None] / sL[:, None])
-                m[:, sp] = np.linalg.solve(P[:, sp, sp], rhs[..., None])[..., 0]
+                Zl, yl = X[None] / sL[:, None, None], np.asarray(d.piston)[None] / sL[:, None]
+                condition(slice(i * b + 4, i * b + 8), Zl, yl)
         nearest = [int(np.argmin(np.abs(self.tested - p))) for p in new]
         x0 = self.x0_m
 
-        def reading_rows(j, heights_m):
+        def reading_sds(j, heights_m):
+            """The heights, the force's sd of each reading (S, n) and the piston's (S,)."""
             x = np.asarray(heights_m, float).reshape(-1)
-            X = np.asarray(cubic.basis(x - x0))  # (n, 4)
             s0, rel, sL = self._noise[nearest[j]]
             ref = np.abs(self.mean_force(x, np.full(x.shape, new[j])))
-            sf = np.sqrt(force_noise_var(s0[:, None], rel[:, None], ref[None]))  # (S, n)
+            return x, np.sqrt(force_noise_var(s0[:, None], rel[:, None], ref[None])), sL
+
+        def reading_rows(j, heights_m):
+            x, sf, sL = reading_sds(j, heights_m)
+            X = np.asarray(cubic.basis(x - x0))  # (n, 4)
             r = 1 if self.force_only else 2
             Z = np.zeros((S, x.size, r, k))
             o = (T0 + j) * b
@@ -632,10 +635,7 @@ class CubicFrames:
 
         def reading_noise(j, heights_m):
             """The force's and the piston's sd of each reading (independent), as a diagonal factor."""
-            x = np.asarray(heights_m, float).reshape(-1)
-            s0, rel, sL = self._noise[nearest[j]]
-            ref = np.abs(self.mean_force(x, np.full(x.shape, new[j])))
-            sf = np.sqrt(force_noise_var(s0[:, None], rel[:, None], ref[None]))  # (S, n)
+            x, sf, sL = reading_sds(j, heights_m)
             r = 1 if self.force_only else 2
             C = np.zeros((S, x.size, r, r))
             C[..., 0, 0] = sf

@@ -257,10 +257,6 @@ def read_catalogue(path) -> list[Campaign]:
 # ----------------------------------------------------------------------------- jobs
 
 
-def _version() -> str:
-    return __version__
-
-
 def job_hash(c: Campaign, task: str) -> str:
     """Content hash deciding a rerun: recordings bytes, stand bytes, task, options, package version."""
     h = hashlib.sha256()
@@ -269,7 +265,7 @@ def job_hash(c: Campaign, task: str) -> str:
         h.update(Path(c.options["stand"]).read_bytes())
     opts = {k: v for k, v in c.options.items() if k != "stand"}
     h.update(
-        json.dumps({"task": task, "options": opts, "version": _version()}, sort_keys=True).encode()
+        json.dumps({"task": task, "options": opts, "version": __version__}, sort_keys=True).encode()
     )
     return h.hexdigest()
 
@@ -300,6 +296,18 @@ def _stamp(job: dict) -> dict | None:
     return stamp.get("row") if stamp.get("hash") == job["hash"] else None
 
 
+def _failed_row(job: dict, seconds, error: str = "") -> dict:
+    """A job's summary row, failed until it is done (the keys in the summary's order)."""
+    return {k: job[k] for k in ("campaign", "task", "file")} | {
+        "status": "failed",
+        "seconds": seconds,
+        "converged": None,
+        "result": "",
+        "output": "",
+        "error": error,
+    }
+
+
 def _one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
@@ -314,17 +322,7 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
     Returns the summary row; on success the stamp is written last, so a crash leaves no stamp."""
 
     out = Path(job["out"])
-    row = {
-        "campaign": job["campaign"],
-        "task": job["task"],
-        "file": job["file"],
-        "status": "failed",
-        "seconds": 0.0,
-        "converged": None,
-        "result": "",
-        "output": "",
-        "error": "",
-    }
+    row = _failed_row(job, 0.0)
     t0 = time.perf_counter()
     try:
         # stale stamp of other inputs: gone before new outputs appear
@@ -345,7 +343,7 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
             dumps_json(
                 {
                     "hash": job["hash"],
-                    "version": _version(),
+                    "version": __version__,
                     "task": job["task"],
                     "options": job["options"],
                     "file": job["file"],
@@ -469,11 +467,9 @@ BATCH_CAMPAIGNS = 50
 # ----------------------------------------------------------------------------- running
 
 
-def worker_env(threads: int = 1) -> dict:
+def worker_env() -> dict:
     """Environment of LocalCluster workers: one compute thread each, so two workers fill two cores
     instead of fighting over them (XLA's CPU backend otherwise starts a thread per core)."""
-    if threads != 1:
-        return {}
     flags = os.environ.get("XLA_FLAGS", "")
     extra = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
     return {
@@ -543,20 +539,7 @@ def run_dask(
             except (
                 Exception
             ) as exc:  # the worker itself died (KilledWorker, out of memory): its rows fail
-                got = [
-                    {
-                        "campaign": j["campaign"],
-                        "task": j["task"],
-                        "file": j["file"],
-                        "status": "failed",
-                        "seconds": None,
-                        "converged": None,
-                        "result": "",
-                        "output": "",
-                        "error": _one_line(exc),
-                    }
-                    for j in futures[fut]
-                ]
+                got = [_failed_row(j, None, _one_line(exc)) for j in futures[fut]]
             for row in got:
                 rows.append(row)
                 if on_row:
@@ -652,12 +635,6 @@ def run_serial(jobs: list[dict], on_row=None) -> list[dict]:
 # ----------------------------------------------------------------------------- summary
 
 
-def _ordered(rows: list[dict], jobs: list[dict]) -> list[dict]:
-    """Rows in catalogue order (Dask finishes them in any order; the summary should not depend on it)."""
-    pos = {(j["campaign"], j["task"]): i for i, j in enumerate(jobs)}
-    return sorted(rows, key=lambda r: pos[(r["campaign"], r["task"])])
-
-
 def verdicts(rows: list[dict]) -> list[dict]:
     """One verdict per campaign, in the rows' order: "failed" when one of its tasks failed, "not
     converged" when one of its fits (done now or skipped as done before) failed its convergence
@@ -690,7 +667,7 @@ def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
     counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "skipped", "failed")}
     result = {
         "catalogue": str(catalogue),
-        "version": _version(),
+        "version": __version__,
         "counts": counts,
         "not_converged": sum(r["status"] != "failed" and r.get("converged") is False for r in rows),
         "verdicts": verdicts(rows),
@@ -702,22 +679,17 @@ def write_summary(rows: list[dict], out_dir, catalogue) -> dict:
     w.writerows({k: ("" if r.get(k) is None else r.get(k)) for k in SUMMARY_COLUMNS} for r in rows)
     write_text_atomic(out / "summary.csv", buf.getvalue())
     write_text_atomic(out / "summary.json", dumps_json(result))
-    write_text_atomic(out / "index.html", _index_html(result))
-    return result
-
-
-def _index_html(result: dict) -> str:
-    """index.html: the template ``batch_index.html`` of ``uq._report`` (autoescaped)."""
-
-    return render(
+    index = render(  # the template batch_index.html of uq._report (autoescaped)
         "batch_index.html",
-        rows=result["campaigns"],
-        catalogue=Path(result["catalogue"]).name,
-        counts=result["counts"],
+        rows=rows,
+        catalogue=Path(catalogue).name,
+        counts=counts,
         not_converged=result["not_converged"],
         verdicts=result["verdicts"],
-        version=_version(),
+        version=__version__,
     )
+    write_text_atomic(out / "index.html", index)
+    return result
 
 
 # ----------------------------------------------------------------------------- command
@@ -757,4 +729,7 @@ def run_batch(
             )
         else:
             rows += run_batched(todo, on_row, size=size)
-    return write_summary(_ordered(rows, jobs), out_dir, catalogue)
+    # in catalogue order: Dask finishes them in any order, and the summary should not depend on it
+    pos = {(j["campaign"], j["task"]): i for i, j in enumerate(jobs)}
+    rows.sort(key=lambda r: pos[(r["campaign"], r["task"])])
+    return write_summary(rows, out_dir, catalogue)

@@ -129,6 +129,7 @@ class CalibrationResult:
         n = self.inside90.shape[0]
         p_sbc = [_sbc_p(self.ranks[:, j]) for j in range(len(self.names))]
         p_holm = _holm(p_sbc)
+        region = {"50": _region(n, 0.5), "90": _region(n, 0.9)}
         out = {
             "truth": self.truth_kind,
             "noise_model": self.noise,
@@ -143,22 +144,19 @@ class CalibrationResult:
                 "low_force_third": float(self.predictive[:, 0].mean()),
                 "high_force_third": float(self.predictive[:, 1].mean()),
             },
-            "acceptance_region_99pct": {"50": _region(n, 0.5), "90": _region(n, 0.9)},
+            "acceptance_region_99pct": region,
             "quantities": {},
         }
         for j, name in enumerate(self.names):
             hist = np.histogram(self.ranks[:, j], bins=10, range=(0, N_RANKS + 1))[0]
+            c50, c90 = int(self.inside50[:, j].sum()), int(self.inside90[:, j].sum())
             out["quantities"][name] = {
                 "coverage50": float(self.inside50[:, j].mean()),
                 "coverage90": float(self.inside90[:, j].mean()),
-                "covered50": int(self.inside50[:, j].sum()),
-                "covered90": int(self.inside90[:, j].sum()),
-                "in_region50": _region(n, 0.5)[0]
-                <= int(self.inside50[:, j].sum())
-                <= _region(n, 0.5)[1],
-                "in_region90": _region(n, 0.9)[0]
-                <= int(self.inside90[:, j].sum())
-                <= _region(n, 0.9)[1],
+                "covered50": c50,
+                "covered90": c90,
+                "in_region50": region["50"][0] <= c50 <= region["50"][1],
+                "in_region90": region["90"][0] <= c90 <= region["90"][1],
                 "mean_width90": None if self.width90 is None else float(self.width90[:, j].mean()),
                 "sbc_rank_histogram": hist.tolist(),
                 "sbc_uniformity_p": p_sbc[j],

@@ -765,59 +765,37 @@ def fit_collapsed(
     optima = _optima(model, datas, act, lp)
     if seeds is None:
         seeds = [seed + 1 + i for i in range(len(datas))] if many else [seed + 1]
-    if method == "laplace":
-        posts = []
-        for d, opt, s in zip(datas, optima, seeds, strict=True):
-            rng = np.random.default_rng(s)
-            sub = rng.multivariate_normal(
-                opt.theta[dims], opt.cov, size=n_laplace, method="cholesky"
+    if method == "laplace":  # one chain of draws from each optimum's normal approximation
+        runs = [None] * len(seeds)
+        thetas = [
+            expand(
+                np.random.default_rng(s).multivariate_normal(
+                    opt.theta[dims], opt.cov, size=n_laplace, method="cholesky"
+                )[None]
             )
-            theta = np.zeros((1, n_laplace, act.size))
-            theta[0][:, dims] = sub
-            posts.append(
-                _finish(
-                    model,
-                    d,
-                    theta,
-                    opt,
-                    seed=s,
-                    method="laplace",
-                    chains=None,
-                    lp=None,
-                    predictive=predictive,
-                    t0=t0,
-                )
-            )
-        return posts if many else posts[0]
-    if method != "emcee":
+            for opt, s in zip(optima, seeds, strict=True)
+        ]
+    elif method == "emcee":
+        starts = np.stack([o.theta[dims] for o in optima]), np.stack([o.cov for o in optima])
+        names = [model.theta_names[i] for i in dims]
+        runs = run_many(lp, *starts, names, seed=seed, settings=settings, desc=desc, mix=mix)
+        runs = [thin(ch, max_draws) for ch in runs]
+        thetas = [expand(ch.samples) for ch in runs]
+    else:
         raise ValueError(f"method must be 'emcee' or 'laplace', got {method!r}")
-    names = [model.theta_names[i] for i in dims]
-    runs = run_many(
-        lp,
-        np.stack([o.theta[dims] for o in optima]),
-        np.stack([o.cov for o in optima]),
-        names,
-        seed=seed,
-        settings=settings,
-        desc=desc,
-        mix=mix,
-    )
-    posts = []
-    for d, opt, ch, s in zip(datas, optima, runs, seeds, strict=True):
-        ch = thin(ch, max_draws)
-        theta = expand(ch.samples)
-        posts.append(
-            _finish(
-                model,
-                d,
-                theta,
-                opt,
-                seed=s,
-                method="emcee",
-                chains=ch,
-                lp=ch.log_prob,
-                predictive=predictive,
-                t0=t0,
-            )
+    posts = [
+        _finish(
+            model,
+            d,
+            theta,
+            opt,
+            seed=s,
+            method=method,
+            chains=ch,
+            lp=None if ch is None else ch.log_prob,
+            predictive=predictive,
+            t0=t0,
         )
+        for d, opt, theta, ch, s in zip(datas, optima, thetas, runs, seeds, strict=True)
+    ]
     return posts if many else posts[0]

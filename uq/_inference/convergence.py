@@ -82,11 +82,6 @@ class Failure(enum.Enum):
         "the posterior is unusable; report it as a bug"
     )
 
-    @property
-    def extends_run(self) -> bool:
-        """Whether running longer can cure it (the acceptance fraction does not change with length)."""
-        return self not in (Failure.ACCEPTANCE, Failure.NONFINITE)
-
 
 @dataclass(frozen=True)
 class Problem:

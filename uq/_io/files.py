@@ -131,24 +131,17 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
             raise (_no_room(path, exc) or exc) from None
         return path
 
-    def fill(fd, tmp):
+    # a temporary file beside path, written, fsynced and renamed over it, the folder fsynced; on
+    # any failure the temporary file is removed
+    _make_parent(path)
+    fd, tmp = _open_tmp_beside(path)
+    try:
         with os.fdopen(fd, "wb") as fh:
             if mode is not None:
                 os.fchmod(fh.fileno(), mode)
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-
-    return _replace_atomically(path, fill)
-
-
-def _replace_atomically(path: Path, fill) -> Path:
-    """A temporary file beside ``path`` (``fill(fd, tmp)`` writes, fsyncs and closes it), renamed
-    over ``path``, the folder fsynced; on any failure the temporary file is removed."""
-    _make_parent(path)
-    fd, tmp = _open_tmp_beside(path)
-    try:
-        fill(fd, tmp)
         os.replace(tmp, path)
     except BaseException as exc:
         if os.path.exists(tmp):

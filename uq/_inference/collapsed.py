@@ -742,6 +742,7 @@ def fit_collapsed(
     desc: str | None = None,
     seeds: list[int] | None = None,
     mix: tuple[float, float, float] = INDEPENDENCE_MIX,
+    proposal: str = "half",
 ):
     """Fit ``model`` to ``data`` (one problem) or to a list of data (several problems, one emcee run).
 
@@ -751,7 +752,8 @@ def fit_collapsed(
     bool: the coordinates of theta that are free (the others are held at zero). ``seeds``: the
     seed of each problem's exact draws (default: derived from ``seed``). ``predictive``: whether
     the posterior's InferenceData carries posterior-predictive replicates (made, as every part
-    beyond the draws, only when first asked for). Returns a :class:`Posterior` (or a list of them
+    beyond the draws, only when first asked for). ``mix``, ``proposal``: the sampler's moves
+    (``uq._inference.sampler.run_many``). Returns a :class:`Posterior` (or a list of them
     for a list of data).
     """
     many = isinstance(data, list)
@@ -801,6 +803,7 @@ def fit_collapsed(
         settings=settings,
         desc=desc,
         mix=mix,
+        proposal=proposal,
     )
     posts = []
     for d, opt, ch, s in zip(datas, optima, runs, seeds, strict=True):

@@ -447,14 +447,14 @@ def test_emcee_without_scipy_stats_still_has_a_working_kde_move():
 
 
 def test_held_independence_keeps_the_target_whatever_its_proposal():
-    """The held move (``proposal="held"``) proposes from a Student t fixed between refits; its
-    Metropolis factor must make it keep the target whatever that t is. Held at a t fitted to
-    draws of a wrong Gaussian (mean shifted by one sd in every coordinate, covariance halved and
-    its correlations dropped), the move alone must keep the 4-dimensional correlated Gaussian's
+    """The held move (``proposal="held"``) proposes from a fixed density between refits; its
+    Metropolis factor must make it keep the target whatever that density is. Held at the proposal
+    fitted to draws of a wrong Gaussian (mean shifted by half an sd in every coordinate,
+    covariance doubled), the move alone must keep the 4-dimensional correlated Gaussian's
     variance (v = mean r^2 / D of the whitened walkers, as for the other moves above) within
     1.2 % and the whitened mean within 0.03. 32 ensembles of 32 walkers, 800 steps, fixed seed:
     v's standard error from the 32 ensembles must be below 0.35 % (the power guard of the test
-    above); a factor of the wrong sign gives v of about 0.6."""
+    above; measured 0.15 %)."""
     from uq._inference import sampler
 
     groups, walkers, steps, seed = 32, 32, 800, 20

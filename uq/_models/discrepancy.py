@@ -738,7 +738,7 @@ def min_heights_needed(orders: surface.Orders, piston: bool) -> int:
 
 
 #: how the sampler's independence move fits its proposal (``uq._inference.sampler.PROPOSALS``):
-#: to each ensemble's own latest draws, held fixed between refits (``_HeldIndependence``)
+#: to each ensemble's own draws during the burn-in, then held fixed (``_HeldIndependence``)
 PROPOSAL = "held"
 #: the sampler's moves (weights of DE, DE-snooker, independence)
 MIX = INDEPENDENCE_MIX

@@ -742,6 +742,7 @@ def fit_collapsed(
     desc: str | None = None,
     seeds: list[int] | None = None,
     mix: tuple[float, float, float] = INDEPENDENCE_MIX,
+    proposal: str = "half",
 ):
     """Fit ``model`` to ``data`` (one problem) or to a list of data (several problems, one emcee run).
 
@@ -751,7 +752,8 @@ def fit_collapsed(
     bool: the coordinates of theta that are free (the others are held at zero). ``seeds``: the
     seed of each problem's exact draws (default: derived from ``seed``). ``predictive``: whether
     the posterior's InferenceData carries posterior-predictive replicates (made, as every part
-    beyond the draws, only when first asked for). Returns a :class:`Posterior` (or a list of them
+    beyond the draws, only when first asked for). ``mix``, ``proposal``: the sampler's moves
+    (``uq._inference.sampler.run_many``). Returns a :class:`Posterior` (or a list of them
     for a list of data).
     """
     many = isinstance(data, list)
@@ -778,7 +780,9 @@ def fit_collapsed(
     elif method == "emcee":
         starts = np.stack([o.theta[dims] for o in optima]), np.stack([o.cov for o in optima])
         names = [model.theta_names[i] for i in dims]
-        runs = run_many(lp, *starts, names, seed=seed, settings=settings, desc=desc, mix=mix)
+        runs = run_many(
+            lp, *starts, names, seed=seed, settings=settings, desc=desc, mix=mix, proposal=proposal
+        )
         runs = [thin(ch, max_draws) for ch in runs]
         thetas = [expand(ch.samples) for ch in runs]
     else:

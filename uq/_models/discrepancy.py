@@ -66,7 +66,7 @@ from uq._data.stand_description import PAPER_STAND, StandDescription
 from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import LOG_2PI, gaussian_loglik, posterior_from_moments
-from uq._inference.sampler import Settings, min_walkers_for_independence
+from uq._inference.sampler import INDEPENDENCE_MIX, Settings, min_walkers_for_independence
 from uq._io.errors import InputError
 from uq._models import discrepancy_gp as gp
 from uq._models import pair, surface, surface_force, surface_likelihood
@@ -737,22 +737,29 @@ def min_heights_needed(orders: surface.Orders, piston: bool) -> int:
     return span_degree(orders) + (2 if piston else 1)
 
 
+#: how the sampler's independence move fits its proposal (``uq._inference.sampler.PROPOSALS``):
+#: to each ensemble's own draws during the burn-in, then held fixed (``_HeldIndependence``)
+PROPOSAL = "held"
+#: the sampler's moves (weights of DE, DE-snooker, independence)
+MIX = INDEPENDENCE_MIX
 #: walkers per ensemble and sampled parameter (``walkers_for``)
-WALKERS_PER_PARAMETER = 10
+WALKERS_PER_PARAMETER = 5
 
 
 def walkers_for(settings, ndim: int):
     """``settings`` with at least ``WALKERS_PER_PARAMETER`` walkers per sampled parameter in each
-    ensemble (92 for the nine of the full model, 60 for the force-only six), and at least what the
-    sampler's independence move needs (uq._inference.sampler.min_walkers_for_independence). Its
-    Student-t proposal is fitted to the other half of the ensemble; the parameters' posterior is
-    skewed (the force floor, the length scale), and with few walkers the fitted proposal is too
-    rough. Measured on data/n50 (seed 20201, the eight parameters before phi): 36 walkers,
-    acceptance 0.137 (below the sampler's rule, 0.15) and 2612 steps; 48, 0.154 and 2211 steps;
-    64, 0.183 and 1410 steps, the least CPU of the three. With phi (nine), on an n50-ripple
-    campaign of 7 tests (seed 29001): 72 walkers, acceptance 0.140 and 2194 steps; 92, 0.150 and
-    1796 steps at the same CPU (108 s). (With the default 32 the independence move is switched off
-    altogether.)"""
+    ensemble (48 for the nine of the full model, 32 for the force-only six), and at least what the
+    sampler's independence move needs (uq._inference.sampler.min_walkers_for_independence).
+
+    The sampler's held proposal (``PROPOSAL``) is fitted to each ensemble's own latest draws, a
+    few thousand, so it does not need many walkers; only its first 100 steps use the Student t
+    fitted to the other half of the ensemble. Measured on data/n50 (seed 20201, an earlier form
+    of the proposal: 10 degrees of freedom, no burn-in floor): 92 walkers, 463 steps and 44 CPU
+    s; 48 walkers, 513 steps and 26 CPU s. With the half-ensemble proposal of every step (the sampler's default), which the
+    nine parameters' skewed posterior (the force floor, the length scale) makes rough with few
+    walkers, 92 walkers were needed: 1524 steps and about 120 CPU s (36 walkers of eight
+    parameters, acceptance 0.137, below the sampler's rule, 0.15). (With the default 32 the
+    independence move is switched off altogether.)"""
     need = max(min_walkers_for_independence(ndim), WALKERS_PER_PARAMETER * ndim)
     need = 4 * math.ceil(need / 4)
     return settings if settings.n_walkers >= need else dataclasses.replace(settings, n_walkers=need)
@@ -813,4 +820,6 @@ def fit_discrepancy(
         stand=stand,
         desc="discrepancy sampling",
         sampler_settings=walkers_for(settings or Settings(), len(model.theta_names)),
+        mix=MIX,
+        proposal=PROPOSAL,
     )

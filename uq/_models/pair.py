@@ -315,10 +315,12 @@ def fit_over_tests(
     desc,
     sampler_settings=None,
     mix=INDEPENDENCE_MIX,
+    proposal="half",
 ):
     """``cls.from_posterior`` of the one driver's fit of ``model`` to ``data`` (one problem, the
     seed's exact draws, no replicates until asked for), with the fit's provenance. ``mix``: the
-    sampler's moves (``uq._inference.sampler.INDEPENDENCE_MIX`` unless the model says otherwise)."""
+    sampler's moves (``uq._inference.sampler.INDEPENDENCE_MIX`` unless the model says otherwise),
+    ``proposal`` how its independence move fits its proposal (``uq._inference.sampler.run_many``)."""
     post = fit_collapsed(
         model,
         data,
@@ -329,6 +331,7 @@ def fit_over_tests(
         predictive=False,  # 2 x n replicates per draw: made when asked for, not on every fit
         desc=desc,
         mix=mix,
+        proposal=proposal,
     )
     prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
     return cls.from_posterior(post, rec, orders, geometry, stand, provenance=prov)

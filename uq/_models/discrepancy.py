@@ -751,15 +751,15 @@ def walkers_for(settings, ndim: int):
     ensemble (48 for the nine of the full model, 32 for the force-only six), and at least what the
     sampler's independence move needs (uq._inference.sampler.min_walkers_for_independence).
 
-    The sampler's held proposal (``PROPOSAL``) is fitted to each ensemble's own latest draws, a
-    few thousand, so it does not need many walkers; only its first 100 steps use the Student t
-    fitted to the other half of the ensemble. Measured on data/n50 (seed 20201, an earlier form
-    of the proposal: 10 degrees of freedom, no burn-in floor): 92 walkers, 463 steps and 44 CPU
-    s; 48 walkers, 513 steps and 26 CPU s. With the half-ensemble proposal of every step (the sampler's default), which the
-    nine parameters' skewed posterior (the force floor, the length scale) makes rough with few
-    walkers, 92 walkers were needed: 1524 steps and about 120 CPU s (36 walkers of eight
-    parameters, acceptance 0.137, below the sampler's rule, 0.15). (With the default 32 the
-    independence move is switched off altogether.)"""
+    The sampler's held proposal (``PROPOSAL``) is fitted during the burn-in to each ensemble's own
+    draws, a few thousand, so it does not need many walkers; only its first 100 steps use the
+    Student t fitted to the other half of the ensemble. Measured on data/n50 (seed 20201, an
+    earlier form of the proposal: 10 degrees of freedom, no burn-in floor): 92 walkers, 463
+    steps and 44 CPU s; 48 walkers, 513 steps and 26 CPU s. With the half-ensemble proposal of
+    every step (the sampler's default), which the nine parameters' skewed posterior (the force
+    floor, the length scale) makes rough with few walkers, 92 walkers were needed: 1524 steps and
+    about 120 CPU s (36 walkers of eight parameters, acceptance 0.137, below the sampler's rule,
+    0.15). (With the default 32 the independence move is switched off altogether.)"""
     need = max(min_walkers_for_independence(ndim), WALKERS_PER_PARAMETER * ndim)
     need = 4 * math.ceil(need / 4)
     return settings if settings.n_walkers >= need else dataclasses.replace(settings, n_walkers=need)

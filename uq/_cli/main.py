@@ -348,16 +348,24 @@ def _caused_by_interrupt(exc: BaseException) -> bool:
 def _interrupted(name: str, as_program: bool) -> int:
     """The one line and status 130 of a command stopped by Ctrl-C.
 
-    After that the process only exits: a second Ctrl-C (a second press, or the first one
-    delivered again by ``_interrupts_are_not_lost``'s timer) landing while Python shuts down
-    (joining the figure workers' threads, running finalisers) would raise KeyboardInterrupt where
-    nothing catches it, and Python then kills itself with SIGINT: exit status -2 instead of 130,
-    after the one line was printed. So SIGINT is ignored from here on (a pending
-    ``_thread.interrupt_main`` does nothing then), only when ``main`` is the program (the ``uq``
-    script, ``python -m``), not when a caller runs it in its own process."""
-    if as_program and threading.current_thread() is threading.main_thread():
+    When ``main`` is the program (the ``uq`` script, ``python -m``), the process then exits at
+    once (``os._exit`` after flushing stdout and stderr), without Python's shutdown: the command
+    has stopped, its outputs are written atomically or not at all and its figure workers are
+    joined, and Python's shutdown (joining threads, running finalisers, resetting the signal
+    handlers) is where a second Ctrl-C, or the first delivered again by
+    ``_interrupts_are_not_lost``'s timer, could still end the process by SIGINT: exit status -2
+    instead of 130, after the one line was printed (seen about once in ten runs of
+    ``uq report``'s Ctrl-C test on a loaded machine, with SIGINT already ignored from here on).
+    When a caller runs ``main(argv)`` in its own process, the status is returned."""
+    if not as_program:
+        return _fail(name, "interrupted", EXIT_INTERRUPTED)
+    if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    return _fail(name, "interrupted", EXIT_INTERRUPTED)
+    _fail(name, "interrupted", EXIT_INTERRUPTED)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(EXIT_INTERRUPTED)
 
 
 def main(argv: list[str] | None = None) -> int:

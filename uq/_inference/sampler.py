@@ -705,11 +705,10 @@ def _run_many(
         step = max(1, min(target, settings.max_steps) - n_steps)
         if held is None:
             pieces = [step]
-        else:  # refitted every HELD_REFIT steps of the burn-in, the rules checked every chunk
+        else:  # the rules checked every chunk; in the burn-in, refitted every HELD_REFIT steps
             step = min(step, settings.chunk)
-            pieces = [HELD_REFIT] * (step // HELD_REFIT) + [step % HELD_REFIT] * bool(
-                step % HELD_REFIT
-            )
+            q, r = divmod(step, HELD_REFIT)
+            pieces = [step] if n_steps >= settings.min_steps else [HELD_REFIT] * q + [r] * bool(r)
         for piece in pieces:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # -inf log-prob proposals

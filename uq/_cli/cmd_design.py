@@ -340,10 +340,8 @@ def command_design(args) -> int:
     doc["model_check"] = check
     doc["source"] = _source(args, rec, fit)
     if rec.has_piston and args.out:
-        curves = {
-            float(p): D.sealed_curve(model, design, grid, charge_bar=p)
-            for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
-        }
+        charges = [float(r["charge_bar"]) for r in doc["frequency_chart"]["rows"]]
+        curves = dict(zip(charges, D.sealed_curves(model, design, charges, grid), strict=True))
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
     if args.out:
         from uq._report.design import write_design_sheet

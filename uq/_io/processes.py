@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import pickle
 import signal
 import threading
 
@@ -61,7 +62,8 @@ class WorkerDied(RuntimeError):
 
 
 def _run(send, fn, args, kwargs) -> None:
-    """The worker: ``fn(*args, **kwargs)`` or the exception it raised, sent back pickled."""
+    """The worker: ``(True, fn(*args, **kwargs))`` or ``(False, the exception it raised)``,
+    pickled straight into the pipe (no copy of a large answer held in memory first)."""
     ignore_interrupts()
     from uq._io.progress import set_enabled
 
@@ -69,13 +71,13 @@ def _run(send, fn, args, kwargs) -> None:
     try:
         answer = (True, fn(*args, **kwargs))
     except BaseException as exc:  # noqa: BLE001 - every failure goes back to the caller
-        answer = (False, exc)
-    try:
-        send.send(answer)
-    except Exception as exc:  # an answer that does not pickle: why, in a line
-        what = f"{type(answer[1]).__name__}: {answer[1]}" if not answer[0] else "the answer"
-        send.send((False, RuntimeError(f"{what} (could not be sent back: {exc})")))
-    send.close()
+        try:
+            pickle.dumps(exc)
+            answer = (False, exc)
+        except Exception as why:  # an exception that does not pickle: its type and line
+            answer = (False, RuntimeError(f"{type(exc).__name__}: {exc} ({why})"))
+    with open(send.fileno(), "wb", closefd=False) as out:
+        pickle.dump(answer, out, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 class Beside:
@@ -97,8 +99,9 @@ class Beside:
 
     def result(self):
         try:
-            ok, answer = self._answer.recv()
-        except EOFError:
+            with open(self._answer.fileno(), "rb", closefd=False) as f:
+                ok, answer = pickle.load(f)
+        except (EOFError, pickle.UnpicklingError):
             self._process.join()
             code = self._process.exitcode
             how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit status {code}"

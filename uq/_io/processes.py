@@ -23,6 +23,8 @@ import pickle
 import signal
 import threading
 
+from uq._io.progress import set_enabled
+
 
 def cores() -> int:
     """The CPUs this process may run on."""
@@ -65,8 +67,6 @@ def _run(send, fn, args, kwargs) -> None:
     """The worker: ``(True, fn(*args, **kwargs))`` or ``(False, the exception it raised)``,
     pickled straight into the pipe (no copy of a large answer held in memory first)."""
     ignore_interrupts()
-    from uq._io.progress import set_enabled
-
     set_enabled(False)  # the calling process draws its own bar on the same terminal
     try:
         answer = (True, fn(*args, **kwargs))

@@ -198,10 +198,10 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
 
 #: readings from which :func:`fit_both` fits the cubics in a worker process when asked (``jobs``).
 #: The cubics' fit and pointwise terms cost about 5 ms CPU a reading (measured: 0.9 s at 185
-#: readings, 2.2 s at data/n50's 407); the worker's own imports 2.5-3 CPU s, and the model's fit it
-#: runs beside can be shorter than those (the surface: 1.7 s on a 185-reading campaign of five
-#: tests). Below about 250 readings the worker would take off less than half the CPU it adds, and
-#: may be waited for (docs/speed.md).
+#: readings, 2.2 s at data/n50's 407); the worker adds about 1.4 CPU s (its imports, sending the fit
+#: back), and the model's fit it runs beside can be shorter than its start (the surface: 1.7 s on
+#: a 185-reading campaign of five tests). Below about 250 readings the worker would add more CPU
+#: than it takes off the command's process, and may be waited for (docs/speed.md).
 WORKER_MIN_READINGS = 250
 
 

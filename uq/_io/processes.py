@@ -6,8 +6,8 @@ side in processes. Workers are spawned, not forked: the calling process may hold
 which fork can deadlock; a spawned worker imports the calling script again (as
 ``__mp_main__``: a script that starts workers needs an ``if __name__ == "__main__":`` guard,
 which is why the library starts none unless asked). A spawned worker pays for its own imports
-(JAX and numpy: about the import floor of docs/speed.md, 2.5-3 CPU s), so work goes to one only
-where it takes longer than that.
+(numpy, JAX and uq's modules for a fit: about 1 CPU s), so work goes to one only where it takes
+longer than that.
 
 Ctrl-C reaches every process of the terminal's group: workers ignore it from their first
 instruction on (:func:`interrupts_ignored`), and the process that started them answers it (one

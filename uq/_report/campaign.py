@@ -16,7 +16,6 @@ import functools
 import io
 import multiprocessing
 import os
-import signal
 import threading
 from pathlib import Path
 from types import SimpleNamespace
@@ -28,6 +27,7 @@ from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.errors import InputError
 from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
+from uq._io.processes import ignore_interrupts, interrupts_ignored
 from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
@@ -666,33 +666,6 @@ def not_converged(cf) -> tuple[str, list[str]]:
     ]
 
 
-def _ignore_interrupts() -> None:
-    """A figure worker's initializer: leave Ctrl-C to the process that started it."""
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-@contextlib.contextmanager
-def _workers_ignore_interrupts():
-    """Processes started in this block ignore Ctrl-C from their first instruction on.
-
-    Ctrl-C reaches every process of the terminal's group, and a spawned worker is still importing
-    (matplotlib, this module) when it arrives: it would print a traceback each. Only this process
-    may answer it (one line, exit 130). An ignored signal stays ignored across exec, and Python
-    keeps it so. The cost: a Ctrl-C in the few milliseconds the workers take to start is ignored
-    here too (press it again). (Only the main thread can set handlers; elsewhere nothing is done.)
-    """
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, handler)
-
-
 def _warm_up() -> None:
     """A figure worker's first task, done while the fit runs: import matplotlib (this module is
     imported to run it) and make its :func:`test_canvas`, drawn once (its axes, ticks, renderer
@@ -725,11 +698,11 @@ class FigureWorkers:
         self._given = 0  # tasks a worker has and has not finished
         self._n = n
         if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
-            with _workers_ignore_interrupts():
+            with interrupts_ignored():
                 self.pool = concurrent.futures.ProcessPoolExecutor(
                     max_workers=n,
                     mp_context=multiprocessing.get_context("spawn"),
-                    initializer=_ignore_interrupts,
+                    initializer=ignore_interrupts,
                 )
                 for _ in range(n):  # spawn launches the workers at the first submit
                     self.submit(_warm_up)

@@ -138,6 +138,14 @@ def _children(pid: int) -> list[str]:
     return kids
 
 
+def _running(pid: str) -> bool:
+    """The process exists and has not exited (a zombie waits to be reaped: not running)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
 def _ignores_sigint(pid: int) -> bool:
     """The process ignores SIGINT now (its SigIgn mask in /proc): uq report does while it starts
     its figure workers, so that they inherit the ignore (a Ctrl-C then is lost: press it again)."""
@@ -152,10 +160,19 @@ def _ignores_sigint(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
-def test_ctrl_c_in_uq_report_prints_one_line_and_exits_130(campaign, tmp_path):
-    """Ctrl-C at a terminal reaches the whole process group, figure workers included."""
+@pytest.mark.parametrize("name", ["report", "surface"])
+def test_ctrl_c_with_workers_prints_one_line_and_exits_130(name, campaign, tmp_path):
+    """Ctrl-C at a terminal reaches the whole process group, workers included: uq report's figure
+    workers, uq surface's worker fitting the cubics (data/n50: enough readings for one); none is
+    left running."""
     env = _env(UQ_CACHE_DIR=str(tmp_path / "cache"))
-    argv = _uq("report", campaign, "--out", tmp_path / "rep", "--draws", 50, *QUICK)
+    if name == "report":
+        argv = _uq("report", campaign, "--out", tmp_path / "rep", "--draws", 50, *QUICK)
+    else:
+        n50 = Path(__file__).parents[2] / "data" / "n50" / "recordings.csv"
+        # the default sampler (seconds of steps): a short run could end before the Ctrl-C lands,
+        # which then finds a finished command (exit 0)
+        argv = _uq("surface", n50)
     proc = subprocess.Popen(
         _as_at_a_terminal(argv),
         process_group=0,
@@ -165,8 +182,8 @@ def test_ctrl_c_in_uq_report_prints_one_line_and_exits_130(campaign, tmp_path):
         env=env,
     )
     try:
-        # the figure workers are started (resource tracker + a worker for each CPU but the one
-        # uq report draws in itself; they start before the fit) and are still importing
+        # the workers are started (resource tracker + uq report's worker for each CPU but the
+        # one it draws in itself, before the fit; uq surface's one, before the surface's fit)
         seen, stable_since = 0, time.monotonic()
         while proc.poll() is None:
             n = len(_children(proc.pid))
@@ -180,14 +197,19 @@ def test_ctrl_c_in_uq_report_prints_one_line_and_exits_130(campaign, tmp_path):
             ):
                 break
             time.sleep(0.02)
-        assert proc.poll() is None, "the report finished before the workers were seen"
+        assert proc.poll() is None, f"uq {name} finished before the workers were seen"
+        workers = _children(proc.pid)
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("WARNING")]
-    assert proc.returncode == 130 and lines == ["uq report: interrupted"], err
+    assert proc.returncode == 130 and lines == [f"uq {name}: interrupted"], err
+    deadline = time.monotonic() + 10  # the resource tracker exits once its pipe closes
+    while any(map(_running, workers)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(map(_running, workers)), "a worker was left running"
 
 
 def test_library_in_a_plain_script_without_main_guard(tmp_path):

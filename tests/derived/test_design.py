@@ -16,7 +16,9 @@ from uq._derived.design import (
     frequency_chart,
     isobaric_table,
     sealed_curve,
+    sealed_curves,
     sealed_draws,
+    sealed_paths,
 )
 from uq._io.errors import InputError
 from uq._stand.sealed_test import sealed_truth
@@ -163,6 +165,20 @@ def test_volume_uncertainty_and_polytropic_range_are_propagated():
     A = s.volume_area_m2(np.array(0.112), 5.0)
     want = -P_x + n * (5 * BAR + 101325.0) * A * A / v_c
     assert np.allclose(path.rate_N_per_m[:, 0], want, rtol=1e-6)
+    # several charges in one pass give each charge's own path and curve, to the bit (the element's
+    # splines are per column; more than one block of draws: CHUNK_DRAWS = 250 < 400)
+    charges = [3.0, None, 7.5]
+    many, _ = sealed_paths(grid, d, charges, heights_m=[0.1, 0.112])
+    for c, got in zip(charges, many, strict=True):
+        one, _ = sealed_draws(grid, d, c, heights_m=[0.1, 0.112])
+        assert all(np.array_equal(a, b) for a, b in zip(got, one, strict=True))
+    curves = sealed_curves(m, d, [3.0, 7.5], grid)
+    for c, got in zip([3.0, 7.5], curves, strict=True):
+        want = sealed_curve(m, d, grid, charge_bar=c)
+        assert got["omitted_reason"] == want["omitted_reason"]
+        assert np.array_equal(got["load_N"]["q95"], want["load_N"]["q95"])
+    with pytest.raises(InputError, match="12 bar is outside"):
+        sealed_paths(grid, d, [5.0, 12.0])
     out = design_point(m, d)
     assert (
         out["polytropic"] == pytest.approx(1.2)

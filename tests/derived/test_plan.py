@@ -567,6 +567,7 @@ def test_discrepancy_planned_precision_is_the_models_on_the_combined_campaign(ta
     from plan_helpers import discrepancy_builder
 
     from uq._models import discrepancy as dev
+    from uq._models.discrepancy_fit import p_ref_pa
 
     file = _first_tests(table1_four, 3)
     b = discrepancy_builder(file, n_draws=3)
@@ -579,9 +580,15 @@ def test_discrepancy_planned_precision_is_the_models_on_the_combined_campaign(ta
     d = dev.dev_data(table1_four, o, PAPER_STAND)
     force, lever = b.reference(hs, np.full(hs.shape, new[0]))
     n0 = file.n_points
+    # phi's p_ref is the file's (the frame's theta draws are the file's fit's), not the combined
+    # campaign's highest pressure: its columns scaled back (they are linear in p_ref)
+    n_k = d.s.size
+    D = np.asarray(d.D).copy()
+    D[:, :, 2 * n_k :] *= p_ref_pa(b.tested) / p_ref_pa(np.concatenate([b.tested, new]))
     d = d._replace(  # the file's references are the file's fit's, the planned ones the frame's
         phat=jnp.concatenate([b.data.phat, jnp.asarray(force)]),
         feff_hat=jnp.concatenate([b.data.feff_hat, jnp.asarray(lever)]),
+        D=jnp.asarray(D),
     )
     assert d.phat.shape[0] == n0 + hs.size
     for s in range(frame.n_draws):

@@ -318,13 +318,15 @@ def command_design(args) -> int:
     # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
-    fit = registry.fit(answering, rec, seed=args.seed, settings=settings, stand=stand)
     comparison = None
     if rec.has_piston and not args.no_compare and entry.over_all_tests:
         # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
-        _, _, comparison = fit_both(
-            rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
+        # (fitted beside the model, in a worker)
+        fit, _, comparison = fit_both(
+            rec, seed=args.seed, settings=settings, stand=stand, model=answering, jobs=None
         )
+    else:
+        fit = registry.fit(answering, rec, seed=args.seed, settings=settings, stand=stand)
     check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
     model = fit.on_draws(args.draws)
     curves = None
@@ -340,10 +342,8 @@ def command_design(args) -> int:
     doc["model_check"] = check
     doc["source"] = _source(args, rec, fit)
     if rec.has_piston and args.out:
-        curves = {
-            float(p): D.sealed_curve(model, design, grid, charge_bar=p)
-            for p in (r["charge_bar"] for r in doc["frequency_chart"]["rows"])
-        }
+        charges = [float(r["charge_bar"]) for r in doc["frequency_chart"]["rows"]]
+        curves = dict(zip(charges, D.sealed_curves(model, design, charges, grid), strict=True))
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
     if args.out:
         from uq._report.design import write_design_sheet

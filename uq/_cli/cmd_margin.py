@@ -420,7 +420,12 @@ def command_margin(args) -> int:
         for q in queries:
             _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
         ans, info, diagnostics = fit_and_choose(
-            rec, model=args.model, seed=args.seed, settings=settings_from(args), stand=stand
+            rec,
+            model=args.model,
+            seed=args.seed,
+            settings=settings_from(args),
+            stand=stand,
+            jobs=None,  # the cubics fitted beside the model, in a worker (fit_both)
         )
         source = rec.path
         check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points

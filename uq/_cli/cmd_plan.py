@@ -308,7 +308,7 @@ def _choose(args, rec, targets, stand, settings):
         data = force_side(rec) if args.model == registry.CUBICS else rec
         fit = registry.fit(args.model, data, seed=args.seed, settings=settings, stand=stand)
         return fit, {"name": fit.name, "why": f"chosen by the user (--model {args.model})"}
-    fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand)
+    fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand, jobs=None)
     ans, info = choose(fit, cub, comparison)
     info = {k: v for k, v in info.items() if k in ("why", "comparison")}
     if ans is cub:

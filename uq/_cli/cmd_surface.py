@@ -69,14 +69,20 @@ def command_surface(args) -> int:
     if args.select and entry.select_orders is None:
         raise InputError(f"option --select: the {entry.name} model has no candidate orders to rank")
     rec = load(args)
+    fit = comparison = None
     if args.select:
         fit, _ = entry.order_selection()(rec, seed=args.seed, settings=settings, stand=stand)
-    else:
+    elif args.no_compare:
         fit = entry.fit_function()(rec, seed=args.seed, settings=settings, stand=stand)
-    comparison = None
-    if not args.no_compare:
-        _, _, comparison = fit_both(
-            rec, seed=args.seed, settings=settings, stand=stand, surface_fit=fit
+    if not args.no_compare:  # the cubics fitted beside the model, in a worker (fit_both)
+        fit, _, comparison = fit_both(
+            rec,
+            seed=args.seed,
+            settings=settings,
+            stand=stand,
+            surface_fit=fit,
+            model=args.model,
+            jobs=None,
         )
     res = fit.to_json(comparison)
     PRINTERS.get(fit.name, _print_model)(rec, fit, res)

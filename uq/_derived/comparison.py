@@ -26,6 +26,8 @@ it the same way for all of them:
 from __future__ import annotations
 
 import dataclasses
+import functools
+from contextlib import nullcontext
 
 import numpy as np
 from scipy.special import logsumexp
@@ -45,6 +47,7 @@ from uq._inference.loo import (
     verdict,
 )
 from uq._inference.sampler import Settings
+from uq._io.processes import Beside, cores
 from uq._models import registry
 from uq._models.cubic_fit import collapsed_model, fit_campaign
 
@@ -193,19 +196,61 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
     }
 
 
+#: readings from which :func:`fit_both` fits the cubics in a worker process when asked (``jobs``).
+#: The cubics' fit and pointwise terms cost about 5 ms CPU a reading (measured: 0.9 s at 185
+#: readings, 2.2 s at data/n50's 407); the worker adds about 1.4 CPU s (its imports, sending the fit
+#: back), and the model's fit it runs beside can be shorter than its start (the surface: 1.7 s on
+#: a 185-reading campaign of five tests). Below about 250 readings the worker would add more CPU
+#: than it takes off the command's process, and may be waited for (docs/speed.md).
+WORKER_MIN_READINGS = 250
+
+
+def _cubics(rec, *, seed: int, settings: Settings, stand):
+    """The per-pressure cubics of :func:`force_side` of ``rec`` with the pointwise terms
+    :func:`compare` reads (made here: in a worker, so that they come back with the fit)."""
+    cub = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
+    for t in cub.tests:
+        t.posterior.loglik_total(), t.posterior.loglik_loo
+    return cub
+
+
 def fit_both(
-    rec, *, seed: int, settings: Settings, stand, surface_fit=None, cubic_fit=None, model=None
+    rec,
+    *,
+    seed: int,
+    settings: Settings,
+    stand,
+    surface_fit=None,
+    cubic_fit=None,
+    model=None,
+    jobs: int | None = 1,
 ):
     """A model over all tests (``model``: a registry name, default the registry's default model)
     and the per-pressure cubics of ``rec`` with the same settings (either fit may be given already)
     and their :func:`compare` document: (model fit, cubics, comparison). The cubics compared are
     fitted to :func:`force_side` of ``rec``: a catalogue's own cubic fit (its volume column fitted
-    as L) is not the comparison's, and a given one is then replaced."""
-    if surface_fit is None:
-        name = registry.default("margin") if model is None else model
-        surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
-    if cubic_fit is None or force_side(rec) is not rec:
-        cubic_fit = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
+    as L) is not the comparison's, and a given one is then replaced.
+
+    ``jobs``: processes that fit (None: one per CPU); with two or more, both fits to make and at
+    least ``WORKER_MIN_READINGS`` readings, the cubics are fitted in a spawned worker process
+    beside the model's fit here (``uq._io.processes.Beside``): the same fits and comparison, to
+    the bit. A script that asks for it needs an ``if __name__ == "__main__":`` guard."""
+    fit_cubics = functools.partial(_cubics, rec, seed=seed, settings=settings, stand=stand)
+    if cubic_fit is not None and force_side(rec) is rec:
+        fit_cubics = None
+    jobs = cores() if jobs is None else jobs
+    beside = (
+        fit_cubics is not None
+        and surface_fit is None
+        and jobs >= 2
+        and rec.n_points >= WORKER_MIN_READINGS
+    )
+    with Beside("fitting the per-pressure cubics", fit_cubics) if beside else nullcontext() as w:
+        if surface_fit is None:
+            name = registry.default("margin") if model is None else model
+            surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
+        if fit_cubics is not None:
+            cubic_fit = w.result() if beside else fit_cubics()
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 
@@ -218,17 +263,24 @@ def words(c: dict) -> str:
     )
 
 
-def fit_and_choose(rec, *, model: str = AUTO, seed: int = 0, settings=None, stand=None):
+def fit_and_choose(
+    rec, *, model: str = AUTO, seed: int = 0, settings=None, stand=None, jobs: int | None = 1
+):
     """Fit what ``model`` needs (``auto``: the registry's default model over all tests and the
     per-pressure cubics, compared by PSIS-LOO with the same settings, ``uq._derived.comparison``;
     a registry name: that model alone) and choose the answering model (:func:`choose`); returns
-    (answering model, model description, merged sampler diagnostics)."""
+    (answering model, model description, merged sampler diagnostics). ``jobs``: :func:`fit_both`'s."""
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
     fit = cub = comparison = None
     if model == AUTO:
         fit, cub, comparison = fit_both(
-            rec, seed=seed, settings=settings, stand=stand, model=registry.default("margin")
+            rec,
+            seed=seed,
+            settings=settings,
+            stand=stand,
+            model=registry.default("margin"),
+            jobs=jobs,
         )
     elif registry.entry(model).over_all_tests:
         fit = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)

@@ -346,8 +346,11 @@ def sealed_draws(
     ``charge_bar`` may hold one charge pressure per posterior draw, (S,) (a design margin: the
     pressure at which each draw carries the load); V_c is then the volume at each draw's own charge
     (measured in the loaded state)."""
-    if grid.height_m != design.height_m:
-        raise ValueError("the grid was built for another design height")
+    (path,), statement = sealed_paths(grid, design, [charge_bar], heights_m)
+    return path, statement
+
+
+def _check_charge(grid: DesignGrid, design: SealedDesign, charge_bar) -> np.ndarray:
     p_c = np.asarray(design.charge_bar if charge_bar is None else charge_bar, float)
     if p_c.ndim not in (0, 1) or (p_c.ndim == 1 and p_c.size != grid.n_draws):
         raise ValueError(f"charge_bar: a number or one per draw ({grid.n_draws}), got {p_c.shape}")
@@ -357,12 +360,24 @@ def sealed_draws(
         raise InputError(
             f"charge pressure {float(bad):g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
         )
+    return p_c
+
+
+def sealed_paths(
+    grid: DesignGrid, design: SealedDesign, charges_bar, heights_m=None
+) -> tuple[list[SealedPath], str]:
+    """:func:`sealed_draws` for several charges (each as its ``charge_bar``) at once: the element's
+    pressure splines, most of the cost, are made once per block of draws for all of them."""
+    if grid.height_m != design.height_m:
+        raise ValueError("the grid was built for another design height")
+    charges = [_check_charge(grid, design, c) for c in charges_bar]
     heights = grid.heights if heights_m is None else np.asarray(heights_m, float).reshape(-1)
     v_c, n = grid.draw_inputs(design)
     vol = grid.volume(design, v_c)
     # the gas law is solved height by height: the element is needed only at the asked heights and x_c
     sub = np.unique([int(np.argmin(np.abs(grid.heights - x))) for x in (*heights, grid.height_m)])
-    parts = []
+    parts = [[] for _ in charges]
+    x_c = np.array([grid.height_m])
     for lo in range(0, grid.n_draws, CHUNK_DRAWS):
         sl = slice(lo, lo + CHUNK_DRAWS)
         el = GridElement(
@@ -373,23 +388,26 @@ def sealed_draws(
             vol.volume_m3[sl][:, sub],
             grid.area[sl][:, sub],
         )
-        x_c = np.array([grid.height_m])
-        p_here = np.broadcast_to(p_c if p_c.ndim == 0 else p_c[sl], (el.n_draws,)) * BAR_PA
-        # one charge per draw (a design margin): V_c was measured in the loaded state, at that charge
-        v_charge = v_c[sl] if p_c.ndim == 1 else el.volume_m3(x_c, p_here[:, None])[:, 0]
-        charge = Charge(
-            grid.height_m,
-            p_here,
-            v_charge,
-            n[sl],
-            design.reservoir_l / L_PER_M3,
-            design.p_atm_bar * BAR_PA,
+        for p_c, out in zip(charges, parts, strict=True):
+            p_here = np.broadcast_to(p_c if p_c.ndim == 0 else p_c[sl], (el.n_draws,)) * BAR_PA
+            # one charge per draw (a design margin): V_c was measured in the loaded state, at that charge
+            v_charge = v_c[sl] if p_c.ndim == 1 else el.volume_m3(x_c, p_here[:, None])[:, 0]
+            charge = Charge(
+                grid.height_m,
+                p_here,
+                v_charge,
+                n[sl],
+                design.reservoir_l / L_PER_M3,
+                design.p_atm_bar * BAR_PA,
+            )
+            out.append(sealed_path(el, heights, charge, pressure_bounds_pa=el.pressure_bounds_pa))
+    paths = [
+        SealedPath(
+            heights, *(np.concatenate([getattr(p, f) for p in ps]) for f in SealedPath._fields[1:])
         )
-        parts.append(sealed_path(el, heights, charge, pressure_bounds_pa=el.pressure_bounds_pa))
-    path = SealedPath(
-        heights, *(np.concatenate([getattr(p, f) for p in parts]) for f in SealedPath._fields[1:])
-    )
-    return path, vol.statement
+        for ps in parts
+    ]
+    return paths, vol.statement
 
 
 def _polytropic_words(design: SealedDesign) -> str:
@@ -474,9 +492,19 @@ def sealed_curve(
     at the grid heights where every draw's path pressure stays within the tested pressures.
     ``charge_bar``: another charge at the design height, with the design's volume assumption (as
     the frequency chart's charges)."""
+    return sealed_curves(model, design, [charge_bar], grid)[0]
+
+
+def sealed_curves(model, design: SealedDesign, charges_bar, grid: DesignGrid | None = None) -> list:
+    """:func:`sealed_curve` for each of ``charges_bar`` (None: the design's charge), in one pass over
+    the draws (:func:`sealed_paths`)."""
     check_design(model, design)
     grid = grid or DesignGrid(model, design.height_m)
-    path, statement = sealed_draws(grid, design, charge_bar)
+    paths, statement = sealed_paths(grid, design, charges_bar)
+    return [_curve(model, grid, design, path, statement) for path in paths]
+
+
+def _curve(model, grid: DesignGrid, design: SealedDesign, path: SealedPath, statement: str) -> dict:
     ok = path.in_range.all(axis=0)
     out = {"height_m": grid.heights[ok]}
     for key, draws, scale in (

@@ -12,28 +12,22 @@ time deadlock, both waiting for results no worker computes, with or without JAX'
 CPU dispatch; programs without one ran 3000 times in each of two threads without a hang
 (reproduced 2026-11-27: ``uq diagnose`` with its candidate fits in two threads hung on its
 first run, and a two-thread loop of a batched Cholesky stopped within seconds in 3 runs of 4).
-So the fits of ``uq surface`` (the model and the per-pressure cubics) and of ``uq diagnose``'s
-screening run one after the other.
+So ``uq diagnose``'s screening fits run one after the other, and the fits of a model
+comparison (the model and the per-pressure cubics) side by side in two processes
+(``uq._io.processes.Beside``, ``uq._derived.comparison.fit_both``).
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
+from uq._io.processes import cores
 
 #: threads of :func:`side_by_side` by default: two (the machines uq is written for have two cores
 #: and more, and a third thread mostly waits), one on a one-core machine
-THREADS = max(1, min(2, _cores()))
+THREADS = max(1, min(2, cores()))
 
 
 def side_by_side(fn: Callable[[Any], Any], items: Iterable, *, threads: int = THREADS) -> list:

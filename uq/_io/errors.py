@@ -22,6 +22,9 @@ class InputError(ValueError):
         super().__init__(message)
         self.param = param
 
+    def __reduce__(self):  # pickled with its param (an error sent back by a worker process)
+        return _input_error, (str(self), self.param)
+
     def for_cli(self, options: dict[str, str]) -> InputError:
         """The same error worded for the command line, ``options`` mapping library parameters to
         command-line options: a leading ``param:`` becomes ``option --x:`` and every backticked
@@ -32,6 +35,10 @@ class InputError(ValueError):
         for name, option in options.items():
             text = text.replace(f"`{name}`", option)
         return InputError(text)
+
+
+def _input_error(message: str, param: str | None) -> InputError:
+    return InputError(message, param=param)
 
 
 def where(path: str, row: int | None = None, column: str | None = None) -> str:

@@ -17,7 +17,6 @@ import functools
 import io
 import multiprocessing
 import os
-import signal
 import sys
 import threading
 from pathlib import Path
@@ -30,6 +29,7 @@ from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.errors import InputError
 from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
+from uq._io.processes import ignore_interrupts, interrupts_ignored
 from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
@@ -687,13 +687,12 @@ def not_converged(cf) -> tuple[str, list[str]]:
 
 
 def _worker_start() -> None:
-    """A figure worker's initializer: leave Ctrl-C to the process that started it, and end
-    without the interpreter's teardown of its modules and objects (about 0.15 s, for which the
-    command's process waited when it stopped the workers): a worker has nothing to close (its
-    figures went back through the pool's pipe), so an exit handler flushes its output and ends
-    it at once."""
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """A figure worker's initializer: leave Ctrl-C to the process that started it
+    (:func:`uq._io.processes.ignore_interrupts`), and end without the interpreter's teardown of its
+    modules and objects (about 0.15 s, for which the command's process waited when it stopped the
+    workers): a worker has nothing to close (its figures went back through the pool's pipe), so an
+    exit handler flushes its output and ends it at once."""
+    ignore_interrupts()
     atexit.register(_end_now)
 
 
@@ -701,27 +700,6 @@ def _end_now() -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)
-
-
-@contextlib.contextmanager
-def _workers_ignore_interrupts():
-    """Processes started in this block ignore Ctrl-C from their first instruction on.
-
-    Ctrl-C reaches every process of the terminal's group, and a spawned worker is still importing
-    (matplotlib, this module) when it arrives: it would print a traceback each. Only this process
-    may answer it (one line, exit 130). An ignored signal stays ignored across exec, and Python
-    keeps it so. The cost: a Ctrl-C in the few milliseconds the workers take to start is ignored
-    here too (press it again). (Only the main thread can set handlers; elsewhere nothing is done.)
-    """
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, handler)
 
 
 def _warm_up() -> None:
@@ -756,7 +734,7 @@ class FigureWorkers:
         self._given = 0  # tasks a worker has and has not finished
         self._n = n
         if n >= 1 and (n_tests is None or n_tests >= self.MIN_TESTS):
-            with _workers_ignore_interrupts():
+            with interrupts_ignored():
                 self.pool = concurrent.futures.ProcessPoolExecutor(
                     max_workers=n,
                     mp_context=multiprocessing.get_context("spawn"),

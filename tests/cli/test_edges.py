@@ -6,6 +6,7 @@ workers and in a re-imported script: only a separate process shows them).
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -392,3 +393,25 @@ def test_an_interrupt_wrapped_by_python_is_still_an_interrupt(campaign):
         campaign,
     )
     assert proc.returncode == 130 and _no_traceback(proc) == ["uq fit: interrupted"], proc.stderr
+
+
+def test_program_ends_without_pythons_shutdown_and_keeps_its_output_and_status(campaign, tmp_path):
+    """``uq`` as a program ends with os._exit once its streams are flushed (uq._cli.main._exit_now):
+    a JSON document on stdout arrives whole, the command's status is the process's, and a reader
+    that goes away early gives the shell's status for SIGPIPE."""
+    argv = _uq("fit", campaign, "--json", "-", *QUICK)
+    done = subprocess.run(argv, capture_output=True, text=True, env=_env())
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["tests"]  # the whole document, flushed before the exit
+    bad = subprocess.run(
+        _uq("fit", tmp_path / "none.csv"), capture_output=True, text=True, env=_env()
+    )
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1
+    # a reader that reads nothing and goes away: the command's output meets a broken pipe
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        gone = subprocess.run(argv, stdout=write_end, stderr=subprocess.PIPE, env=_env())
+    finally:
+        os.close(write_end)
+    assert gone.returncode == 141, gone.stderr

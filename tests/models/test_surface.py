@@ -186,15 +186,18 @@ def test_compare_with_cubics(n50_surface, n50_fit):
 # is carried by tests/inference/test_loo.py and the engine's K-fold by tests/diagnose/test_diagnose.py
 def test_comparison_beyond_the_refit_limit_is_kfold_of_both(n50_surface, n50_fit, monkeypatch):
     """Every PSIS term made unreliable (Pareto k threshold 0): more than MAX_REFITS of them, so
-    both models are scored by 10-fold cross-validation on the same folds, and the verdict agrees
-    with PSIS-LOO's on n50 (the cubics, by far)."""
+    both models are scored by 10-fold cross-validation on the same folds, and the verdict is
+    PSIS-LOO's on n50 (the cubics, by far) where PSIS-LOO gives one (the surface's own largest
+    Pareto k is near the 0.7 rule on n50: with some seeds PSIS-LOO refuses, which is what the
+    K-fold is there for)."""
     from uq._inference import loo
 
     psis_verdict = compare_with_cubics(n50_surface, n50_fit)["better"]
+    assert psis_verdict in ("per-pressure cubics", "refused")
     monkeypatch.setattr(loo, "PARETO_K_MAX", 0.0)
     c = compare_with_cubics(n50_surface, n50_fit, seed=1)
     assert "here: 10-fold cross-validation" in c["method"]
-    assert c["cubics"]["n_pareto_k_above_0.7"] == 0 and c["better"] == psis_verdict
+    assert c["cubics"]["n_pareto_k_above_0.7"] == 0 and c["better"] == "per-pressure cubics"
 
 
 def test_exact_refit_agrees_with_integrated_psis_where_k_is_low(n50_fit):

@@ -192,3 +192,40 @@ def test_per_test_figures_on_the_kept_figure_are_those_of_a_new_figure(small_fit
             offsets = [ax.yaxis.offsetText.get_text() for ax in fig.axes]
             assert any(offsets) == (tb is kinds[0][3]), offsets
             assert kept == encode(fig, fmt), (fmt, tb.has_volume, t.compression is None, ok)
+
+
+@pytest.mark.parametrize("name", ["force", "volume", "feff", "traditional", "scatter"])
+def test_campaign_figures_with_titles_fixed_at_the_top_are_matplotlibs(small_fit, name):
+    """The campaign's figures are made with their titles at the top of their axes (campaign.
+    _encoded, as the per-test figures are): the bytes of the figure made as matplotlib places
+    its titles, stamped NOT CONVERGED or not, as PNG and SVG."""
+    cf, cb = small_fit
+
+    def make(_=None):
+        if name == "scatter":
+            return campaign.figure_scatter(cb)
+        return getattr(campaign, f"figure_{name}")(cf, cb)
+
+    for fmt, stamp in (("png", ""), ("png", "1 of 3 tests (5 bar)"), ("svg", "")):
+        fig = make()
+        if stamp:
+            campaign.stamp_unconverged(fig, stamp)
+        assert campaign._encoded(make, fmt, None, stamp) == encode(fig, fmt), (fmt, stamp)
+
+
+def test_a_figure_with_an_offset_text_is_made_again_where_matplotlib_places_titles():
+    """An offset text on a y axis (+1e6) can make matplotlib move a title: such a figure is made
+    a second time without the fixed titles, and its bytes are those of matplotlib's placement."""
+    made = []
+
+    def make(fixed=False):
+        made.append(fixed)
+        fig = pyplot().figure(figsize=(4, 3))
+        ax = fig.add_subplot()
+        ax.plot([0.0, 1.0], [1e6, 1e6 + 1.0])
+        ax.set_title("a title over an offset text")
+        return fig
+
+    data = campaign._encoded(make, "png")
+    assert made == [True, False]
+    assert data == encode(make(), "png")

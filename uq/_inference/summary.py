@@ -21,12 +21,34 @@ def estimate(draws, axis=None) -> dict:
 
 
 def band(draws, axis=0, level=0.90) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mean, lower, upper) of an equal-tailed ``level`` band over ``axis`` (both quantiles from
-    one partition of the draws: the same numbers as one call each)."""
+    """(mean, lower, upper) of an equal-tailed ``level`` band over ``axis`` (:func:`quantiles`)."""
     d = np.asarray(draws, float)
     a = (1.0 - level) / 2.0
-    lo, hi = np.quantile(d, [a, 1.0 - a], axis=axis)
+    lo, hi = quantiles(d, (a, 1.0 - a), axis)
     return d.mean(axis=axis), lo, hi
+
+
+def quantiles(draws, qs, axis=0) -> np.ndarray:
+    """``np.quantile(draws, qs, axis=axis)`` (its default, linear method): the same numbers (a
+    tie of -0.0 and 0.0 may come out as either) at about a third of the cost. numpy partitions
+    the draws once around every rank it needs, on a path several times slower than its
+    (vectorised) partition around one rank; here each quantile's two neighbouring order
+    statistics come from one partition around one rank, and numpy interpolates between them
+    (``np.quantile`` of the pair at the fractional rank: the same arithmetic). A NaN among the
+    draws gives NaN, as numpy does."""
+    x = np.moveaxis(np.asarray(draws, float), axis, -1).copy()  # partitioned in place
+    n = x.shape[-1]
+    out = []
+    for q in qs:
+        rank = (n - 1) * q  # numpy's, as it computes it
+        k = int(np.floor(rank))
+        if not 0 <= k < n - 1:  # the largest draw, a single one, or q out of [0, 1]: numpy's way
+            out.append(np.quantile(x, q, axis=-1))
+            continue
+        x.partition(k, axis=-1)
+        pair = np.stack([x[..., k], x[..., k + 1 :].min(axis=-1)])
+        out.append(np.quantile(pair, rank - k, axis=0))
+    return np.where(np.isnan(x).any(axis=-1), np.nan, np.stack(out))[()]
 
 
 def thin_step(n: int, max_draws: int | None) -> int:

@@ -35,17 +35,10 @@ NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 #: the sampler's moves for the (force, piston) surface's five noise logs (DE, DE-snooker,
 #: independence t; ``uq._inference.sampler.effective_mix``): mostly independence proposals, a
 #: tenth DE moves so that a posterior far from Gaussian is still explored. On data/n50 (default
-#: settings, the half-ensemble proposal) the convergence rules passed after 699, 724 and 877 steps (seeds 2, 3, 4) where the
+#: settings) the convergence rules pass after 699, 724 and 877 steps (seeds 2, 3, 4) where the
 #: sampler's default mixture (0.2, 0.1, 0.7) needed 1016, 1676 and 1166 (855-1676 over seeds
 #: 0-5): about a third fewer calls of the log posterior for the same rules (docs/speed.md).
 MIX = (0.1, 0.0, 0.9)
-#: how its independence move fits its proposal (``uq._inference.sampler.PROPOSALS``): to each
-#: ensemble's own draws during the burn-in, then held fixed (``_HeldIndependence``, as the
-#: discrepancy surface's). On data/n50 (default settings, seeds 20201-20205) the rules passed
-#: after 894, 970, 634, 800 and 629 steps (mean 785, 6.9 CPU s) where the half-ensemble proposal
-#: needed 1147, 892, 1101, 986 and 1154 (mean 1056, 9.0 CPU s), every run converged, the five
-#: noise parameters' 5 % and 95 % quantiles within the seeds' spread (docs/speed.md).
-PROPOSAL = "held"
 
 
 # ----------------------------------------------------------------------------- likelihood
@@ -178,7 +171,6 @@ def fit_surface(
         stand=stand,
         desc="surface sampling",
         mix=INDEPENDENCE_MIX if force_only else MIX,
-        proposal="half" if force_only else PROPOSAL,
     )
 
 

@@ -365,22 +365,14 @@ def _interrupted(name: str, as_program: bool) -> int:
 
 
 def _exit_now(status: int) -> None:
-    """End the program with ``status`` once stdout and stderr are flushed (``os._exit``), without
-    Python's shutdown. That shutdown does nothing a command needs: its outputs are written
-    atomically and closed, its worker processes joined and a Dask cluster closed before it
-    returns; but after JAX's import it takes 0.5-0.7 s of wall time (JAX's backends, finalisers,
-    every module torn down), which the user waited for, and a Ctrl-C that lands in it ends the
-    process by SIGINT. A reader of stdout that went away (``| head``) gets the shell's status for
-    SIGPIPE, as inside a command."""
-    try:
-        sys.stdout.flush()
-    except BrokenPipeError:
-        status = EXIT_BROKEN_PIPE
-    except OSError:  # stdout closed or its disk full: the command has said what it could
-        status = status or EXIT_INPUT
-    with contextlib.suppress(Exception):
-        sys.stderr.flush()
-    os._exit(status)
+    """End the program with ``status`` (``uq._io.processes.exit_now``: stdout and stderr flushed,
+    without Python's shutdown). That shutdown does nothing a command needs: its outputs are written
+    atomically and closed, its worker processes joined and a Dask cluster closed before it returns;
+    but after JAX's import it takes 0.5-0.7 s of wall time, which the user waited for, and a
+    Ctrl-C that lands in it ends the process by SIGINT."""
+    from uq._io.processes import exit_now  # reason: multiprocessing, needed only at the end
+
+    exit_now(status, broken_pipe=EXIT_BROKEN_PIPE, unwritable=EXIT_INPUT)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -21,6 +21,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+import sys
 import threading
 
 from uq._io.progress import set_enabled
@@ -32,6 +33,23 @@ def cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+def exit_now(status: int = 0, *, broken_pipe: int = 141, unwritable: int = 2) -> None:
+    """End this process with ``status`` once stdout and stderr are flushed (``os._exit``), without
+    Python's shutdown (after JAX's or matplotlib's import it takes tenths of a second and does
+    nothing a finished command or worker needs). A reader of stdout that went away gives
+    ``broken_pipe`` (the shell's status for SIGPIPE), stdout closed or its disk full
+    ``unwritable`` unless the status already says something went wrong."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        status = broken_pipe
+    except OSError:
+        status = status or unwritable
+    with contextlib.suppress(Exception):
+        sys.stderr.flush()
+    os._exit(status)
 
 
 def ignore_interrupts() -> None:

@@ -17,7 +17,6 @@ import functools
 import io
 import multiprocessing
 import os
-import sys
 import threading
 from pathlib import Path
 from types import SimpleNamespace
@@ -29,7 +28,7 @@ from uq._derived.bands import Band, CampaignBands, campaign_bands
 from uq._inference.convergence import CLI_ADVICE
 from uq._io.errors import InputError
 from uq._io.files import remove_stale, staged_folder, write_bytes_atomic, write_text_atomic
-from uq._io.processes import ignore_interrupts, interrupts_ignored
+from uq._io.processes import exit_now, ignore_interrupts, interrupts_ignored
 from uq._io.version import __version__, date_stamp
 from uq._physics.cubic import cubic
 from uq._physics.quantities import BAR_PA
@@ -693,13 +692,7 @@ def _worker_start() -> None:
     workers): a worker has nothing to close (its figures went back through the pool's pipe), so an
     exit handler flushes its output and ends it at once."""
     ignore_interrupts()
-    atexit.register(_end_now)
-
-
-def _end_now() -> None:
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
+    atexit.register(exit_now, 0)
 
 
 def _warm_up() -> None:

@@ -3,10 +3,20 @@ read back exactly by h5netcdf (uq's reader) and by ArviZ, with zlib only where i
 
 from __future__ import annotations
 
+import re
+import struct
+import time
+
 import numpy as np
 import pytest
 
-from uq._io.netcdf import netcdf_bytes, read_netcdf, write_netcdf_atomic
+from uq._io.netcdf import (
+    _lookup3,
+    _without_root_times,
+    netcdf_bytes,
+    read_netcdf,
+    write_netcdf_atomic,
+)
 
 xr = pytest.importorskip("xarray")
 
@@ -72,7 +82,43 @@ def test_zlib_on_integers_and_booleans_not_on_floats(tmp_path):
         assert f["posterior"].variables["a_P"].compression is None
 
 
-def test_same_bytes_for_the_same_groups():
-    """Deterministic output: the file has no time stamps or other run-dependent bytes."""
+def test_same_bytes_for_the_same_groups_in_another_second():
+    """Deterministic output: the file has no time stamps or other run-dependent bytes. HDF5 keeps
+    times to the second, and netCDF-C stores them in the root group's header: the two files are
+    written in different seconds, so this fails if the zeroing of those times is undone."""
     groups, attrs = _groups()
-    assert netcdf_bytes(groups, attrs) == netcdf_bytes(groups, attrs)
+    first = netcdf_bytes(groups, attrs)
+    time.sleep(1.0 - time.time() % 1.0 + 0.05)
+    assert netcdf_bytes(groups, attrs) == first
+
+
+def test_the_root_times_zeroed_under_a_valid_checksum(tmp_path):
+    """What netCDF-C wrote, with the root group's four times zeroed and its header's checksum made
+    anew: the same checksum function gives every object header's stored checksum, and HDF5 (which
+    verifies them on reading) reads the file."""
+    import h5py
+
+    groups, attrs = _groups()
+    tree = {"/": xr.Dataset(attrs=attrs)} | {f"/{g}": d for g, d in groups.items()}
+    raw = bytes(xr.DataTree.from_dict(tree).to_netcdf(None, engine="netcdf4"))
+    headers = [m.start() for m in re.finditer(b"OHDR", raw)]
+    assert len(headers) > 10
+    timed = [o for o in headers if raw[o + 5] & 0x20]
+    (root,) = struct.unpack_from("<Q", raw, 36)
+    assert timed == [root]  # only the root group has times
+    for o in headers:
+        flags = raw[o + 5]
+        at = o + 6 + (16 if flags & 0x20 else 0) + (4 if flags & 0x10 else 0)
+        width = 1 << (flags & 3)
+        end = at + width + int.from_bytes(raw[at : at + width], "little")
+        assert _lookup3(raw[o:end]) == struct.unpack_from("<I", raw, end)[0]
+    fixed = _without_root_times(raw)
+    assert raw[root + 6 : root + 22] != bytes(16)
+    assert fixed[root + 6 : root + 22] == bytes(16)
+    assert [i for i in range(len(raw)) if raw[i] != fixed[i]] != []
+    path = tmp_path / "fixed.nc"
+    path.write_bytes(fixed)
+    with h5py.File(path, "r") as f:
+        assert set(f) >= set(groups)
+        np.testing.assert_array_equal(f["posterior"]["a_P"][()], groups["posterior"]["a_P"])
+    assert _without_root_times(b"not an HDF5 file") == b"not an HDF5 file"

@@ -1289,8 +1289,11 @@ BLOCKS: dict[str, Block] = {
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
 TIMING = re.compile(r"(?<![\w.])\d+(?:\.\d+)? s\b")  # "11.5 s": wall times differ run to run
 #: Numbers may differ between machines in their last digits (floating-point sums in another
-#: order, another BLAS): equal within this relative tolerance or one unit of the last digit shown.
-RTOL = 2e-3
+#: order, another BLAS; XLA compiles for the CPU's own vector instructions, so a seeded chain can
+#: leave its twin's path at rounding level on a CPU without AVX2 and its Monte Carlo estimates move
+#: a little: an ESS of 7146 on one machine kind was 7124 on another): equal within this relative
+#: tolerance or one unit of the last digit shown.
+RTOL = 5e-3
 
 
 def _close(a: str, b: str) -> bool:

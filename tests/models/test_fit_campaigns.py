@@ -13,7 +13,9 @@ from uq._models.cubic import MAX_DRAWS, MODEL, prepare
 from uq._models.cubic_fit import fit_campaign, fit_campaigns
 from uq._models.cubic_fit import test_seeds as seeds_of
 
-SETTINGS = uq.Settings(n_walkers=16, n_ensembles=2, max_steps=400)
+# max_steps: room to converge on any machine (the run stops when the rules pass; at 400 one
+# seeded test stopped at ESS 276 on a CPU whose rounding sent its chains another way)
+SETTINGS = uq.Settings(n_walkers=16, n_ensembles=2, max_steps=2000)
 
 
 @pytest.fixture(scope="module")

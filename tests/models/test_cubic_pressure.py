@@ -140,7 +140,7 @@ def test_ar1_exact_draws_are_the_conjugate_posterior(short_ar_data):
     cov = np.linalg.inv(A)
     mean = cov @ Z.T @ Si @ y
     keys = jax.random.split(jax.random.PRNGKey(3), 4000)
-    draws = np.asarray(jax.vmap(lambda k: CP.ar1_draw(jnp.asarray(theta), k, d))(keys))
+    draws = np.asarray(jax.vmap(lambda k: CP.ar1_draw_linear(jnp.asarray(theta), k, d))(keys))
     sd = np.sqrt(np.diag(cov))
     z = (draws.mean(0) - mean) / (sd / np.sqrt(draws.shape[0]))
     assert np.all(np.abs(z) < 4.5)

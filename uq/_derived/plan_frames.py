@@ -297,11 +297,8 @@ class PairFrames:
         th = self.theta[rows]
         Xf = _draws(Xf, th.shape[0])
         if self.force_only:
-            s0, rel, kp = (np.exp(th[:, i])[:, None] for i in range(3))
-            sd = np.sqrt(
-                force_noise_var(s0, rel, np.asarray(d.phat)[None])
-                + (kp * np.asarray(d.dp_pa) * np.asarray(d.feff_hat)) ** 2
-            )
+            phat, lever, hold = (np.asarray(a) for a in (d.phat, d.feff_hat, d.dp_pa))
+            sd = self._noise_factors(th, phat, lever, hold, None)[..., 0, 0]
             y = np.asarray(d.F) - np.asarray(d.feff_hat) * np.asarray(d.dp_meas)
             return Xf / sd[..., None], y[None] / sd
         L11, L21, L22 = (np.asarray(a) for a in jax.vmap(lambda t: pair.cov_factors(t[:5], d))(th))
@@ -684,12 +681,10 @@ class CubicFrames:
             reading_rows=reading_rows,
             reading_noise=reading_noise,
             force_rows=force_rows,
-            area_rows=None,
             extra_force_var=extra_force_var,
             rows_follow_tests=True,
             volume_why="the per-pressure cubics do not interpolate the volume-derived area between "
             "tested pressures (plan with `model` surface)",
-            key=(),
         )
 
     def key(self, after_bar) -> tuple:

@@ -106,15 +106,6 @@ class Frame:
         if S <= n:
             return self
         idx = np.linspace(0, S - 1, n).round().astype(int)
-        rows = self.reading_rows
-
-        noise = self.reading_noise
-
-        def reading_rows(j, heights_m):
-            return rows(j, heights_m)[idx]
-
-        def reading_noise(j, heights_m):
-            return noise(j, heights_m)[idx]
 
         def per_draw(fn, ndim):
             """``fn`` with its per-draw results (``ndim`` dimensions) on the kept draws."""
@@ -131,8 +122,8 @@ class Frame:
             self,
             precision=self.precision[idx],
             mean=self.mean[idx],
-            reading_rows=reading_rows,
-            reading_noise=None if noise is None else reading_noise,
+            reading_rows=per_draw(self.reading_rows, 4),
+            reading_noise=per_draw(self.reading_noise, 4),
             force_rows=per_draw(self.force_rows, 3),
             area_rows=per_draw(self.area_rows, 3),
             extra_force_var=per_draw(self.extra_force_var, 2),

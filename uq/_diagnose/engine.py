@@ -31,6 +31,7 @@ Pipeline (models in ``uq._models.diagnose``):
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -275,9 +276,8 @@ def _group_stats(r, z, sel, unit_scale):
     if k == 0:
         return {"n": 0}  # dropped by ``where``
     zs = z[sel]
-
-    mean_z = float(zs.mean()) if k else 0.0
-    log_p = chi2_logsf(float(np.sum(zs**2)), k) if k else 0.0
+    mean_z = float(zs.mean())
+    log_p = chi2_logsf(float(np.sum(zs**2)), k)
     stat = abs(mean_z) * math.sqrt(k)
     return {
         "n": k,
@@ -351,30 +351,22 @@ def _regions(res, meta, min_run: int = 4) -> list[dict]:
         for ti in np.unique(meta["test"]):
             idx = np.where(meta["test"] == ti)[0]
             idx = idx[np.argsort(meta["step"][idx])]
-            out = np.abs(z[idx]) > 1.645
-            start = None
-            for j in range(idx.size + 1):
-                if (
-                    j < idx.size
-                    and out[j]
-                    and (start is None or np.sign(z[idx[j]]) == np.sign(z[idx[start]]))
-                ):
-                    start = j if start is None else start
+            side = np.where(np.abs(z[idx]) > 1.645, np.sign(z[idx]), 0.0)  # 0: inside the band
+            for s, run in itertools.groupby(zip(side, idx, strict=True), key=lambda t: t[0]):
+                sel = np.array([i for _, i in run])
+                if s == 0 or sel.size < min_run:
                     continue
-                if start is not None and j - start >= min_run:
-                    sel = idx[start:j]
-                    h = meta["height_m"][sel] * 1e3
-                    regions.append(
-                        {
-                            "quantity": q,
-                            "pressure_bar": float(meta["pressure_bar"][sel[0]]),
-                            "branch": "compression" if meta["compression"][sel[0]] else "rebound",
-                            "height_mm": [float(h.min()), float(h.max())],
-                            "n_points": int(sel.size),
-                            "mean_residual": float(r[sel].mean() * (1e6 if q == "volume" else 1.0)),
-                        }
-                    )
-                start = j if (j < idx.size and out[j]) else None
+                h = meta["height_m"][sel] * 1e3
+                regions.append(
+                    {
+                        "quantity": q,
+                        "pressure_bar": float(meta["pressure_bar"][sel[0]]),
+                        "branch": "compression" if meta["compression"][sel[0]] else "rebound",
+                        "height_mm": [float(h.min()), float(h.max())],
+                        "n_points": int(sel.size),
+                        "mean_residual": float(r[sel].mean() * (1e6 if q == "volume" else 1.0)),
+                    }
+                )
     regions.sort(key=lambda g: -g["n_points"])
     return regions[:30]
 
@@ -385,16 +377,9 @@ def _flagged(w: dict) -> list[str]:
         for key in ("by_pressure", "by_height", "by_branch", "by_recording_order"):
             for g in w[q][key]:
                 if g["flagged"]:
-                    lab = next(
-                        g[k] for k in ("pressure_bar", "height_mm", "branch", "part") if k in g
-                    )
-                    lab = (
-                        f"{lab:g} bar"
-                        if isinstance(lab, float)
-                        else (f"{lab[0]:g}-{lab[1]:g} mm" if isinstance(lab, list) else lab)
-                    )
+                    k = next(k for k in ("pressure_bar", "height_mm", "branch", "part") if k in g)
                     out.append(
-                        f"{q} by {key[3:].replace('_', ' ')}: {lab} (mean residual {g['mean']:.3g} "
+                        f"{q} by {key[3:].replace('_', ' ')}: {_where_text(k, g[k])} (mean residual {g['mean']:.3g} "
                         f"{'N' if q == 'force' else 'cm^3'}, {g['outside_90_pct']:.0f}% outside the 90% band)"
                     )
     for q in w["noise_scale_vs_budget"]:

@@ -158,22 +158,6 @@ def _gradient_hessian(fn, x, active, data):
     return jax.grad(objective)(x, (active, data)), jax.hessian(objective)(x, (active, data))
 
 
-def _draw_row(theta, key, fn, data):
-    return fn(theta, key, data)
-
-
-def _pointwise_row(theta, beta, fn, data):
-    return fn(theta, beta, data)
-
-
-def _predict_row(theta, beta, key, fn, data):
-    return fn(theta, beta, key, data)
-
-
-def _loo_row(theta, fn, data):
-    return fn(theta, data)
-
-
 def replicates(model: CollapsedModel, posterior: Posterior, n_draws: int, seed: int = 0):
     """Posterior-predictive replicates of the readings ``posterior`` was fitted to (the model's
     ``predict``: the mean plus the reading noise of each draw) on at most ``n_draws`` of its draws,
@@ -186,7 +170,7 @@ def replicates(model: CollapsedModel, posterior: Posterior, n_draws: int, seed: 
     beta = np.asarray(posterior.beta).reshape(C * D, -1)
     rows, beta = (thin_rows(a, max(int(n_draws), 1)) for a in (rows, beta))
     keys = row_keys(jax.random.PRNGKey(seed), rows.shape[0])
-    out = map_rows(_predict_row, (rows, beta, keys), (posterior.data,), static=(model.predict,))
+    out = map_rows(model.predict, (rows, beta, keys), (posterior.data,))
     return {k: np.asarray(v) for k, v in out.items()}
 
 
@@ -439,9 +423,7 @@ class Posterior:
         if "loglik" not in self._cache:
             C, D = self.theta.shape[:2]
             rows, beta = self._rows()
-            ll = map_rows(
-                _pointwise_row, (rows, beta), (self.data,), static=(self._model.pointwise,)
-            )
+            ll = map_rows(self._model.pointwise, (rows, beta), (self.data,))
             self._cache["loglik"] = {k: np.asarray(v).reshape(C, D, -1) for k, v in ll.items()}
         return self._cache["loglik"]
 
@@ -455,10 +437,7 @@ class Posterior:
             C, D = self.theta.shape[:2]
             rows, beta = self._rows()
             pred = map_rows(
-                _predict_row,
-                (rows, beta, seed_row_keys(self._seed, 1, C * D)),
-                (self.data,),
-                static=(self._model.predict,),
+                self._model.predict, (rows, beta, seed_row_keys(self._seed, 1, C * D)), (self.data,)
             )
             self._cache["predictive"] = {
                 k: np.asarray(v).reshape(C, D, -1) for k, v in pred.items()
@@ -481,10 +460,9 @@ class Posterior:
         rows, beta = self._rows()
         keys = seed_row_keys(self._seed, 1, C * D)
         pred = map_rows(
-            _predict_row,
+            self._model.predict,
             tuple(thin_rows(a, max_draws) for a in (rows, beta, keys)),
             (self.data,),
-            static=(self._model.predict,),
         )
         return {k: np.asarray(v) for k, v in pred.items()}
 
@@ -498,12 +476,7 @@ class Posterior:
             C, D, nt = self.theta.shape
             sub = self.theta[:, :: thin_step(C * D, LOO_DRAWS)]
             self._cache["loglik_loo"] = np.asarray(
-                map_rows(
-                    _loo_row,
-                    (sub.reshape(-1, nt),),
-                    (self.data,),
-                    static=(self._model.pointwise_loo,),
-                )
+                map_rows(self._model.pointwise_loo, (sub.reshape(-1, nt),), (self.data,))
             ).reshape(sub.shape[0], sub.shape[1], -1)
         return self._cache["loglik_loo"]
 
@@ -511,14 +484,8 @@ class Posterior:
     def idata(self):
         """The ArviZ ``InferenceData`` (made on first use: ArviZ and xarray are slow to build)."""
         if "idata" not in self._cache:
-            self._cache["idata"] = _idata(
-                self._model,
-                self.reported,
-                self.loglik,
-                self.predictive if self._predictive else None,
-                self.data,
-                self._lp,
-                {"model": self.model, "method": self.method} | self._attrs,
+            self._cache["idata"] = self._idata(
+                self.loglik, self.predictive if self._predictive else None
             )
         return self._cache["idata"]
 
@@ -526,15 +493,24 @@ class Posterior:
         """The InferenceData without the (draws x readings) groups: posterior, observed_data and
         sample_stats (not cached). The pointwise log-likelihood and the replicates are
         recomputable exactly from these draws (:attr:`loglik`, :attr:`predictive`)."""
-        return _idata(
-            self._model,
-            self.reported,
-            None,
-            None,
-            self.data,
-            self._lp,
-            {"model": self.model, "method": self.method} | self._attrs,
-        )
+        return self._idata(None, None)
+
+    def _idata(self, loglik, predictive):
+        import arviz as az
+
+        groups = {"posterior": self.reported}
+        if loglik is not None:
+            groups["log_likelihood"] = loglik
+        if predictive is not None:
+            groups["posterior_predictive"] = predictive
+        if self._model.observed is not None:
+            groups["observed_data"] = self._model.observed(self.data)
+        if self._lp is not None:
+            groups["sample_stats"] = {"lp": self._lp}
+        attrs = {"model": self.model, "method": self.method} | self._attrs
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
+            return az.from_dict(**groups, attrs=attrs)
 
     @contextlib.contextmanager
     def transient(self):
@@ -594,23 +570,6 @@ class Posterior:
         return f"Posterior({self.model}, {self.method}, {C} x {D} draws, {self.beta.shape[-1]} coefficients, {state})"
 
 
-def _idata(model: CollapsedModel, reported, loglik, predictive, data, lp, attrs):
-    import arviz as az
-
-    groups = {"posterior": reported}
-    if loglik is not None:
-        groups["log_likelihood"] = loglik
-    if predictive is not None:
-        groups["posterior_predictive"] = predictive
-    if model.observed is not None:
-        groups["observed_data"] = model.observed(data)
-    if lp is not None:
-        groups["sample_stats"] = {"lp": lp}
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
-        return az.from_dict(**groups, attrs=attrs)
-
-
 def _finish(
     model: CollapsedModel,
     data,
@@ -630,7 +589,7 @@ def _finish(
     C, D, nt = theta.shape
     rows = theta.reshape(C * D, nt)
     keys = seed_row_keys(seed, 0, C * D)  # the first of the seed's two keys (Posterior._keys)
-    beta = np.asarray(map_rows(_draw_row, (rows, keys), (data,), static=(model.draw_linear,)))
+    beta = np.asarray(map_rows(model.draw_linear, (rows, keys), (data,)))
     reported = {
         k: np.asarray(v).reshape(C, D, *np.shape(v)[1:])
         for k, v in model.report(rows, beta, data).items()

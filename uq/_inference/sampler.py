@@ -310,18 +310,22 @@ class _GroupedIndependence(_Grouped, emcee.moves.RedBlueMove):
         return _t_proposal(sg, mean, chol, self.df, random)
 
 
-def _t_proposal(sg, mean, chol, df: float, random):
+def _t_proposal(sg, mean, chol, df: float, random, warp=None):
     """Independence proposals for walkers ``sg`` (G, ns, D) from a Student t per group (``mean``
     (G, 1, D), lower factor ``chol`` (G, D, D) of its scale, ``df``): the proposals (G ns, D) and
-    the Metropolis factors log q(x) - log q(x')."""
+    the Metropolis factors log q(x) - log q(x'). ``warp``: (forward, inverse, log slope) of a map
+    of the sampled coordinates, the t being in its image (None: in the sampled coordinates)."""
     G, ns, D = sg.shape
     z = random.randn(G, ns, D)
     w = np.sqrt(df / random.chisquare(df, size=(G, ns, 1)))
-    q = mean + w * np.einsum("gij,gnj->gni", chol, z)
+    y = mean + w * np.einsum("gij,gnj->gni", chol, z)
+    q = y if warp is None else warp[1](y)
 
     def log_q(x):  # up to a constant, which cancels in the factor
-        y = np.linalg.solve(chol[:, None], (x - mean)[..., None])[..., 0]
-        return -0.5 * (df + D) * np.log1p(np.sum(y * y, axis=-1) / df)
+        u = x if warp is None else warp[0](x)
+        v = np.linalg.solve(chol[:, None], (u - mean)[..., None])[..., 0]
+        out = -0.5 * (df + D) * np.log1p(np.sum(v * v, axis=-1) / df)
+        return out if warp is None else out + warp[2](x)
 
     return q.reshape(G * ns, D), (log_q(sg) - log_q(q)).reshape(-1)
 
@@ -454,27 +458,15 @@ class _HeldIndependence(_GroupedIndependence):
         if self.fitted is None or not self.fitted.all():
             return super().get_proposal(s, c, random)
         sg, _ = self._groups(s, c)
-        G, ns, D = sg.shape
-        df = self.df
-        z = random.randn(G, ns, D)
-        w = np.sqrt(df / random.chisquare(df, size=(G, ns, 1)))
-        y = self.mean + w * np.einsum("gij,gnj->gni", self.chol, z)
-        q = self.center + self.scale * _yeo_johnson(y, self.lam, inverse=True)
-
-        def log_q(x):  # up to a constant, which cancels in the factor
-            u = (x - self.center) / self.scale
-            v = np.linalg.solve(
-                self.chol[:, None], (_yeo_johnson(u, self.lam) - self.mean)[..., None]
-            )
-            r = np.sum(v[..., 0] ** 2, axis=-1)
-            return -0.5 * (df + D) * np.log1p(r / df) + _yeo_johnson_log_slope(u, self.lam)
-
+        warp = (
+            lambda x: _yeo_johnson((x - self.center) / self.scale, self.lam),
+            lambda y: self.center + self.scale * _yeo_johnson(y, self.lam, inverse=True),
+            lambda x: _yeo_johnson_log_slope((x - self.center) / self.scale, self.lam),
+        )
         with np.errstate(over="ignore", invalid="ignore"):
-            factor = log_q(sg) - log_q(q)
+            q, factor = _t_proposal(sg, self.mean, self.chol, self.df, random, warp)
         bad = ~np.all(np.isfinite(q), axis=-1) | ~np.isfinite(factor)
-        q = np.where(bad[..., None], sg, q)
-        factor = np.where(bad, -np.inf, factor)
-        return q.reshape(G * ns, D), factor.reshape(-1)
+        return np.where(bad[:, None], sg.reshape(q.shape), q), np.where(bad, -np.inf, factor)
 
 
 class _Sampler(emcee.EnsembleSampler):

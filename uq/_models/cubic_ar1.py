@@ -176,7 +176,7 @@ def ar1_log_prob(theta, d: AR1Data):
     return jnp.where(inside, ar1_log_prior(theta, d) + post.log_marginal, -jnp.inf)
 
 
-def ar1_draw(theta, key, d: AR1Data):
+def ar1_draw_linear(theta, key, d: AR1Data):
     return draw_exact(_ar1_post(theta, d)[0], key)
 
 
@@ -268,7 +268,6 @@ AR1 = CollapsedModel.of(
     "per-pressure cubics (eqs. 8, 9), AR(1) pressure-holding errors in recording order",
     AR_SAMPLER_NAMES,
     prefix="ar1_",
-    draw_linear=ar1_draw,
     observed=observed,
     hold_out=hold_out_by_weight,
 )

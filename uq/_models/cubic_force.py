@@ -69,7 +69,7 @@ def force_log_prob(theta, d: ForceData):
     return -0.5 * jnp.sum(z**2) + post.log_marginal
 
 
-def force_draw(theta, key, d: ForceData):
+def force_draw_linear(theta, key, d: ForceData):
     return draw_exact(_force_post(theta, d)[0], key)
 
 
@@ -111,7 +111,6 @@ FORCE_ONLY = CollapsedModel.of(
     "per-pressure cubic of the force (eq. 8), force-only test",
     FORCE_SAMPLER_NAMES,
     prefix="force_",
-    draw_linear=force_draw,
     hold_out=hold_out_by_weight,
 )
 

@@ -143,7 +143,7 @@ def measured_log_prob(theta, d: MeasuredData):
     return log_prior_noise(nat, d.prior_mean) + post.log_marginal
 
 
-def measured_draw(theta, key, d: MeasuredData):
+def measured_draw_linear(theta, key, d: MeasuredData):
     return draw_exact(_measured_post(theta, d)[0], key)
 
 
@@ -211,7 +211,6 @@ MEASURED = CollapsedModel.of(
     "per-pressure cubics (eqs. 8, 9), measured pressure as a covariate",
     SAMPLER_NAMES,
     prefix="measured_",
-    draw_linear=measured_draw,
     observed=observed,
     hold_out=hold_out_by_weight,
 )

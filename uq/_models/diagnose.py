@@ -441,20 +441,16 @@ LOG_K_BOUND = 8.0
 MAGNITUDE_BOUND = 1.0
 
 
-def _log_post(theta, mask, d: Data):
-    lp = _posterior(theta, mask, d)[0].log_marginal
-    active = jnp.concatenate([jnp.ones(2), mask[_SCALE_SWITCH]])
+def log_prob(theta, d: Data):
+    """Log posterior of the sampled parameters (N_THETA,), coefficients integrated out, for the
+    model switched on by ``d.mask``."""
+    lp = _posterior(theta, d.mask, d)[0].log_marginal
+    active = jnp.concatenate([jnp.ones(2), d.mask[_SCALE_SWITCH]])
     lp = lp - 0.5 * jnp.sum(active * (theta / THETA_PRIOR_SD) ** 2)
     inside = jnp.all(jnp.abs(theta[:2]) < LOG_K_BOUND) & jnp.all(
         jnp.abs(theta[2:]) < MAGNITUDE_BOUND
     )
     return jnp.where(inside, lp, -jnp.inf)
-
-
-def log_prob(theta, d: Data):
-    """Log posterior of the sampled parameters (N_THETA,), coefficients integrated out, for the
-    model switched on by ``d.mask``."""
-    return _log_post(theta, d.mask, d)
 
 
 def draw_linear(theta, key, d: Data):

@@ -215,22 +215,10 @@ def _with_residuals(n: int):
 def _residual_panel(ax, x, h, r, curve: Band, pred: Band, scale, color, p_bar):
     """Readings ``r`` minus the posterior-mean curve at heights ``h``, with the curve's 90 % band
     (colour) and a new reading's (grey) minus the same mean, on the grid ``x``."""
-    ax.fill_between(
-        x,
-        (pred.lo - pred.mean) * scale,
-        (pred.hi - pred.mean) * scale,
-        color="0.5",
-        alpha=0.2,
-        lw=0,
-    )
-    ax.fill_between(
-        x,
-        (curve.lo - curve.mean) * scale,
-        (curve.hi - curve.mean) * scale,
-        color=color,
-        alpha=0.7,
-        lw=0,
-    )
+    for b, c, alpha in ((pred, "0.5", 0.2), (curve, color, 0.7)):
+        ax.fill_between(
+            x, (b.lo - b.mean) * scale, (b.hi - b.mean) * scale, color=c, alpha=alpha, lw=0
+        )
     ax.plot(h, r * scale, ".", color="k", ms=2.5)
     ax.axhline(0, color="k", lw=0.5)
     ax.set_title(f"{p_bar:g} bar", fontsize=8)

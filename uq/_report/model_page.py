@@ -55,22 +55,18 @@ def figure_residual_overlay(fit, model: str | None = None):
         if comp is None:  # one pass in unknown order (a catalogue table)
             ax.plot(t.height_m * 1e3, t.force_N - at_pts, ".", ms=3, color="k", label="readings")
         else:
-            ax.plot(
-                t.height_m[comp] * 1e3,
-                (t.force_N - at_pts)[comp],
-                ".",
-                ms=3,
-                color="tab:red",
-                label="compression",
-            )
-            ax.plot(
-                t.height_m[~comp] * 1e3,
-                (t.force_N - at_pts)[~comp],
-                "x",
-                ms=3,
-                color="tab:green",
-                label="rebound",
-            )
+            for sel, mark, color, label in (
+                (comp, ".", "tab:red", "compression"),
+                (~comp, "x", "tab:green", "rebound"),
+            ):
+                ax.plot(
+                    t.height_m[sel] * 1e3,
+                    (t.force_N - at_pts)[sel],
+                    mark,
+                    ms=3,
+                    color=color,
+                    label=label,
+                )
         ax.set_title(f"{t.pressure_bar:g} bar", fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[n:]:

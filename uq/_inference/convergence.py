@@ -183,6 +183,8 @@ class Convergence:
 
     def __repr__(self) -> str:
         state = "converged" if self.converged else f"{len(self.problems)} rule(s) failed"
+        if self.method == "importance":
+            return f"Convergence({state}, importance sampling, Pareto k-hat {self.importance['pareto_k']:.2f})"
         return f"Convergence({state}, {self.n_steps} steps, burn-in {self.burn_in})"
 
 

@@ -522,21 +522,21 @@ def test_yeo_johnson_is_scipys_with_its_inverse_slope_and_exponents():
     from scipy import stats
 
     from uq._inference.sampler import (
-        _yeo_johnson,
-        _yeo_johnson_exponents,
-        _yeo_johnson_log_slope,
+        yeo_johnson,
+        yeo_johnson_exponents,
+        yeo_johnson_log_slope,
     )
 
     rng = np.random.default_rng(0)
     z = rng.standard_normal((1000, 3)) * 3
     lam = np.array([0.1, 1.0, 1.9])
-    y = _yeo_johnson(z, lam)
+    y = yeo_johnson(z, lam)
     for j in range(3):
         np.testing.assert_allclose(y[:, j], stats.yeojohnson(z[:, j], lam[j]), rtol=1e-12)
-    np.testing.assert_allclose(_yeo_johnson(y, lam, inverse=True), z, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(yeo_johnson(y, lam, inverse=True), z, rtol=1e-12, atol=1e-12)
     h = 1e-6
-    slope = np.log((_yeo_johnson(z + h, lam) - _yeo_johnson(z - h, lam)) / (2 * h)).sum(axis=-1)
-    np.testing.assert_allclose(_yeo_johnson_log_slope(z, lam), slope, atol=1e-6)
+    slope = np.log((yeo_johnson(z + h, lam) - yeo_johnson(z - h, lam)) / (2 * h)).sum(axis=-1)
+    np.testing.assert_allclose(yeo_johnson_log_slope(z, lam), slope, atol=1e-6)
     s = np.column_stack(
         [
             rng.standard_normal(1000),
@@ -547,4 +547,4 @@ def test_yeo_johnson_is_scipys_with_its_inverse_slope_and_exponents():
     )
     want = [stats.yeojohnson_normmax(s[:, j]) for j in range(s.shape[1])]
     assert all(0.1 < w < 1.9 for w in want), want
-    np.testing.assert_allclose(_yeo_johnson_exponents(s), want, atol=0.011)
+    np.testing.assert_allclose(yeo_johnson_exponents(s), want, atol=0.011)

@@ -292,7 +292,7 @@ def command_design(args) -> int:
 
     from uq._cli.common import load, settings_from, stand_from
     from uq._derived import design as D
-    from uq._derived.comparison import fit_both
+    from uq._derived.comparison import fit_both, sampler_words
     from uq._derived.model_check import predictive_check
     from uq._io.files import emit_json
 
@@ -356,6 +356,8 @@ def command_design(args) -> int:
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")
+    if sampler_words(fit):
+        print(f"  {sampler_words(fit)}")
     print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(doc, args.json)
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")

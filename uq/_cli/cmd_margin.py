@@ -470,6 +470,8 @@ def command_margin(args) -> int:
     for q, r in zip(queries, results, strict=True):
         if "design" in r:
             _print_design(q, r["design"], len(queries) > 1)
+    for note in diagnostics.get("notes", ()):
+        print(f"  {note}")
     for w in diagnostics["warnings"]:
         print(f"  warning{' (from the saved fit)' if args.fit is not None else ''}: {w}")
     refused = [q["row"] for q, r in zip(queries, results, strict=True) if "refused" in r]

@@ -53,7 +53,7 @@ def configure_surface(p) -> None:
 
 def command_surface(args) -> int:
     from uq._cli.common import load, settings_from
-    from uq._derived.comparison import fit_both
+    from uq._derived.comparison import fit_both, sampler_words
     from uq._derived.margin import describe
     from uq._derived.model_check import predictive_check
     from uq._inference.convergence import CLI_ADVICE
@@ -88,6 +88,8 @@ def command_surface(args) -> int:
     PRINTERS.get(fit.name, _print_model)(rec, fit, res)
     if comparison:
         _print_comparison(fit.name, comparison)
+    if sampler_words(fit):
+        print(f"  {sampler_words(fit)}")
     for w in res["warnings"]:
         print(f"  warning: {w}")
     if args.report:

@@ -289,7 +289,15 @@ def fit_and_choose(
     fitted = [f for f in (fit, cub) if f is not None]
     warnings = [w for f in fitted for w in f.convergence.messages(CLI_ADVICE)]
     converged = all(f.convergence.converged for f in fitted)
+    notes = [sampler_words(f) for f in fitted if sampler_words(f)]
     ans, info = choose(fit, cub, comparison, forced=model)
     if ans.omitted_reason:  # a campaign without piston readings
         info["omitted"] = ans.omitted_reason
-    return ans, info, {"warnings": warnings, "converged": bool(converged)}
+    return ans, info, {"warnings": warnings, "converged": bool(converged), "notes": notes}
+
+
+def sampler_words(fit) -> str | None:
+    """How ``fit``'s sampled parameters were sampled, where importance sampling was tried
+    (``Convergence.sampler_words``): a line the command line prints whichever way it went."""
+    words = getattr(fit.convergence, "sampler_words", None)
+    return words() if words is not None else None

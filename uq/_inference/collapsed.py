@@ -37,6 +37,7 @@ because ``active`` is an array, not a shape.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import time
 import warnings
@@ -46,7 +47,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from uq._inference.convergence import Convergence, convergence
+from uq._inference.convergence import Convergence, convergence, importance_convergence
 from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
 from uq._inference.linear import map_rows, row_keys, seed_row_keys
@@ -582,6 +583,7 @@ def _finish(
     lp,
     predictive: bool,
     t0: float,
+    importance=None,
 ) -> Posterior:
     """Step 3 of the module docstring for retained draws ``theta`` (C, D, n_theta), the reported
     variables and the verdict; step 4 (pointwise terms, replicates, InferenceData) is left to the
@@ -604,6 +606,15 @@ def _finish(
             "coefficients drawn exactly",
         }
     conv = convergence(reported, chains) if chains is not None else None
+    if importance is not None:  # tried: its draws (passed) or its refusal beside emcee's verdict
+        if importance.passed:
+            conv = importance_convergence(reported, importance)
+            attrs["sampler"] = (
+                "importance sampling (PSIS-checked) on the sampled parameters, resampled; "
+                "coefficients drawn exactly"
+            )
+        else:
+            conv = dataclasses.replace(conv, importance=importance.to_json())
     return Posterior(
         model,
         method,
@@ -702,6 +713,7 @@ def fit_collapsed(
     seeds: list[int] | None = None,
     mix: tuple[float, float, float] = INDEPENDENCE_MIX,
     proposal: str = "half",
+    importance: bool = False,
 ):
     """Fit ``model`` to ``data`` (one problem) or to a list of data (several problems, one emcee run).
 
@@ -712,8 +724,10 @@ def fit_collapsed(
     seed of each problem's exact draws (default: derived from ``seed``). ``predictive``: whether
     the posterior's InferenceData carries posterior-predictive replicates (made, as every part
     beyond the draws, only when first asked for). ``mix``, ``proposal``: the sampler's moves
-    (``uq._inference.sampler.run_many``). Returns a :class:`Posterior` (or a list of them
-    for a list of data).
+    (``uq._inference.sampler.run_many``). ``importance`` (one problem, method "emcee"): first
+    importance sampling from the MAP (``uq._inference.importance``), kept when its Pareto k-hat
+    and effective sample sizes pass, emcee otherwise (the convergence verdict says which, and
+    why). Returns a :class:`Posterior` (or a list of them for a list of data).
     """
     many = isinstance(data, list)
     datas = data if many else [data]
@@ -724,6 +738,7 @@ def fit_collapsed(
     block = max(settings.n_ensembles * settings.n_walkers // 2, 1)
     lp, expand = _campaign_log_prob(model, datas, act, block)
     optima = _optima(model, datas, act, lp)
+    tried = None  # importance sampling's result, when it was tried
     if seeds is None:
         seeds = [seed + 1 + i for i in range(len(datas))] if many else [seed + 1]
     if method == "laplace":  # one chain of draws from each optimum's normal approximation
@@ -736,6 +751,34 @@ def fit_collapsed(
             )
             for opt, s in zip(optima, seeds, strict=True)
         ]
+    elif method == "emcee" and importance and not many:
+        from uq._inference.importance import sample
+
+        names = [model.theta_names[i] for i in dims]
+        tried = sample(
+            lambda x: lp(x[None])[0],
+            optima[0].theta[dims],
+            optima[0].cov,
+            names,
+            seed=seed,
+            n_keep=max_draws,
+        )
+        if tried.passed:
+            runs, thetas = [None], [expand(tried.samples[None])]
+        else:
+            runs = run_many(
+                lp,
+                optima[0].theta[dims][None],
+                optima[0].cov[None],
+                names,
+                seed=seed,
+                settings=settings,
+                desc=desc,
+                mix=mix,
+                proposal=proposal,
+            )
+            runs = [thin(ch, max_draws) for ch in runs]
+            thetas = [expand(runs[0].samples)]
     elif method == "emcee":
         starts = np.stack([o.theta[dims] for o in optima]), np.stack([o.cov for o in optima])
         names = [model.theta_names[i] for i in dims]
@@ -753,11 +796,12 @@ def fit_collapsed(
             theta,
             opt,
             seed=s,
-            method=method,
+            method="importance" if tried is not None and tried.passed else method,
             chains=ch,
             lp=None if ch is None else ch.log_prob,
             predictive=predictive,
             t0=t0,
+            importance=tried,
         )
         for d, opt, theta, ch, s in zip(datas, optima, thetas, runs, seeds, strict=True)
     ]

@@ -106,7 +106,11 @@ class Convergence:
     """The verdict of one sampled problem: its failed rules and the numbers behind them.
 
     ``variables``: per reported variable, ``r_hat``, ``ess_bulk``, ``ess_tail``, ``mcse_mean``
-    (floats, or lists for vector variables). ``tau``: per sampled parameter.
+    (floats, or lists for vector variables). ``tau``: per sampled parameter. ``method``: how theta
+    was sampled, "emcee" or "importance" (``uq._inference.importance``: then ``variables`` holds
+    the importance estimates' ``ess_bulk`` and ``ess_tail`` per sampled parameter, there is no
+    chain, so no R-hat, tau or acceptance); ``importance``: that method's checks when it was tried
+    (``Importance.to_json``), also when it was refused and emcee sampled instead.
     """
 
     problems: tuple[Problem, ...]
@@ -118,6 +122,8 @@ class Convergence:
     tau: dict = field(default_factory=dict)
     acceptance: dict = field(default_factory=dict)
     variables: dict = field(default_factory=dict)
+    method: str = "emcee"
+    importance: dict = field(default_factory=dict)
 
     @property
     def converged(self) -> bool:
@@ -130,11 +136,30 @@ class Convergence:
     def warnings(self) -> list[str]:
         return self.messages()
 
-    def worst(self) -> tuple[float, float]:
-        """(largest R-hat, smallest bulk ESS) over every reported variable."""
-        rh = max(float(np.max(v["r_hat"])) for v in self.variables.values())
+    def worst(self) -> tuple[float | None, float]:
+        """(largest R-hat, smallest bulk ESS) over every reported variable (R-hat None for
+        importance sampling, which has no chains)."""
+        rh = [float(np.max(v["r_hat"])) for v in self.variables.values() if "r_hat" in v]
         ess = min(float(np.min(v["ess_bulk"])) for v in self.variables.values())
-        return rh, ess
+        return (max(rh) if rh else None), ess
+
+    def sampler_words(self) -> str | None:
+        """One line on how theta was sampled when importance sampling was tried (None otherwise):
+        what the user of ``uq`` is told, whichever way it went."""
+        imp = self.importance
+        if not imp:
+            return None
+        if self.method == "importance":
+            ess = min(min(v["ess_bulk"], v["ess_tail"]) for v in self.variables.values())
+            return (
+                f"sampler: importance sampling, Pareto k-hat {imp['pareto_k']:.2f} <= "
+                f"{imp['pareto_k_max']:g}, effective sample size at least {ess:.0f} (of "
+                f"{imp['n_draws']} draws)"
+            )
+        return (
+            f"sampler: emcee; importance sampling was refused ({imp['reason']}), the "
+            f"Markov chain sampled instead ({self.n_steps} steps)"
+        )
 
     def to_json(self, advice: str = CLI_ADVICE, *, variables: bool = True) -> dict:
         """The ``convergence`` document of the JSON results (docs/formats.md)."""
@@ -149,12 +174,17 @@ class Convergence:
             "tau": dict(self.tau),
             "acceptance_fraction": dict(self.acceptance),
         }
+        if self.importance:  # only where it was tried: every other document stays as it was
+            out["method"] = self.method
+            out["importance"] = dict(self.importance)
         if variables:
             out["variables"] = self.variables
         return out
 
     def __repr__(self) -> str:
         state = "converged" if self.converged else f"{len(self.problems)} rule(s) failed"
+        if self.method == "importance":
+            return f"Convergence({state}, importance sampling, Pareto k-hat {self.importance['pareto_k']:.2f})"
         return f"Convergence({state}, {self.n_steps} steps, burn-in {self.burn_in})"
 
 
@@ -429,6 +459,26 @@ def failed_rules(chains, settings, full: bool = True) -> tuple[list[Problem], in
         want = max(want, chains.burn + int(math.ceil(min(factor, 4.0) * (n - chains.burn))))
     problems += acceptance_problems(chains.acceptance, chains.accept_range)
     return problems, want
+
+
+def importance_convergence(posterior: dict, result) -> Convergence:
+    """The verdict of importance draws that passed their checks (``uq._inference.importance``):
+    only non-finite reported draws can fail it; ``variables`` holds the importance estimates'
+    ESS per sampled parameter."""
+    variables = {
+        n: {"ess_bulk": result.ess_bulk[n], "ess_tail": result.ess_tail[n]} for n in result.ess_bulk
+    }
+    return Convergence(
+        problems=tuple(nonfinite_problems(posterior)),
+        n_steps=0,
+        burn_in=0,
+        n_chains=1,
+        n_walkers=0,
+        n_draws=int(result.samples.shape[0]),
+        variables=variables,
+        method="importance",
+        importance=result.to_json(),
+    )
 
 
 def convergence(posterior: dict, chains) -> Convergence:

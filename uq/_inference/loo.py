@@ -181,6 +181,15 @@ def _psislw_one(log_weights: np.ndarray, cutoff_ind: int, cutoffmin: float):
     return x + max_x, float(k)
 
 
+def psislw(log_weights: np.ndarray) -> tuple[np.ndarray, float]:
+    """Pareto-smoothed log weights of independent draws (ArviZ's ``psislw`` with ``reff=1``: a
+    tail of min(S / 5, 3 sqrt(S)) draws, unnormalised) and the Pareto k-hat, for importance
+    sampling (``uq._inference.importance``); log_weights (S,)."""
+    S = np.size(log_weights)
+    n_tail = int(np.ceil(min(S / 5.0, 3.0 * np.sqrt(S))))
+    return _psislw_one(log_weights, -n_tail - 1, np.log(np.finfo(float).tiny))
+
+
 def _gpd_fit_one(ary: np.ndarray) -> tuple[float, float]:
     """ArviZ's ``_gpdfit`` of one sorted tail, its operations in its order (:func:`_gpd_fit` does
     many tails at once, equal to rounding)."""

@@ -342,11 +342,11 @@ HELD_REFIT = 50
 #: about how many of a group's draws its Yeo-Johnson exponents are fitted to (every k-th)
 HELD_LAMBDA_DRAWS = 1000
 #: Yeo-Johnson exponents of the held proposal are kept in this range, where the transformation
-#: maps the real line onto itself (``_yeo_johnson``)
+#: maps the real line onto itself (``yeo_johnson``)
 YJ_RANGE = (0.1, 1.9)
 
 
-def _yeo_johnson(z: np.ndarray, lam: np.ndarray, inverse: bool = False) -> np.ndarray:
+def yeo_johnson(z: np.ndarray, lam: np.ndarray, inverse: bool = False) -> np.ndarray:
     """The Yeo-Johnson transformation (Yeo & Johnson 2000, Biometrika 87, 954; scipy.stats'
     ``yeojohnson`` with a given exponent) of each column of ``z`` with its exponent in ``lam``
     (D,), or its inverse; for 0 < lam < 2 both map the real line onto itself. (scipy has the
@@ -361,20 +361,20 @@ def _yeo_johnson(z: np.ndarray, lam: np.ndarray, inverse: bool = False) -> np.nd
     return np.where(pos, v, -v)
 
 
-def _yeo_johnson_exponents(z: np.ndarray, step: float = 0.02) -> np.ndarray:
+def yeo_johnson_exponents(z: np.ndarray, step: float = 0.02) -> np.ndarray:
     """Each column's Yeo-Johnson exponent of largest normal log-likelihood (scipy.stats'
     ``yeojohnson_llf``: (lam - 1) sum sign(z) log(1 + |z|) - n/2 log var(y)) on a grid of
     ``step`` over ``YJ_RANGE``: scipy.stats' ``yeojohnson_normmax`` (Brent's method) within the
     grid's step where its optimum lies in the range (tested), without its 5 ms of overhead a
     likelihood evaluation (about 0.4 CPU s a refit of four ensembles and nine parameters)."""
     grid = np.arange(YJ_RANGE[0], YJ_RANGE[1] + step / 2, step)
-    y = _yeo_johnson(z[None], grid[:, None, None])  # (grid, n, D)
+    y = yeo_johnson(z[None], grid[:, None, None])  # (grid, n, D)
     slope = np.sum(np.sign(z) * np.log1p(np.abs(z)), axis=0)  # (D,)
     llf = (grid[:, None] - 1.0) * slope - 0.5 * len(z) * np.log(np.var(y, axis=1))
     return grid[np.argmax(llf, axis=0)]
 
 
-def _yeo_johnson_log_slope(z: np.ndarray, lam: np.ndarray) -> np.ndarray:
+def yeo_johnson_log_slope(z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """log d/dz of the transformation, summed over the columns: (1 + |z|)^(+-(lam - 1))."""
     return np.sum(np.where(z >= 0, lam - 1.0, 1.0 - lam) * np.log1p(np.abs(z)), axis=-1)
 
@@ -386,7 +386,7 @@ class _HeldIndependence(_GroupedIndependence):
 
     The proposal: each coordinate standardised by the draws' mean and sd and transformed by
     Yeo-Johnson with the exponent that makes its draws most nearly normal
-    (``_yeo_johnson_exponents``, in ``YJ_RANGE``), and a Student t (``HELD_DF``, 2) with the
+    (``yeo_johnson_exponents``, in ``YJ_RANGE``), and a Student t (``HELD_DF``, 2) with the
     transformed draws' mean and covariance; its density in the sampled coordinates carries the
     transformation's slope. Why: the half-ensemble fit has few walkers (46 for the discrepancy
     surface's nine parameters), its mean and covariance are rough and change from step to step,
@@ -444,8 +444,8 @@ class _HeldIndependence(_GroupedIndependence):
             if not np.all(scale > 0):
                 continue
             z = (x - center) / scale
-            lam = _yeo_johnson_exponents(z[:: max(1, len(z) // HELD_LAMBDA_DRAWS)])
-            y = _yeo_johnson(z, lam)
+            lam = yeo_johnson_exponents(z[:: max(1, len(z) // HELD_LAMBDA_DRAWS)])
+            y = yeo_johnson(z, lam)
             try:
                 chol = np.linalg.cholesky(np.cov(y.T))
             except np.linalg.LinAlgError:
@@ -459,9 +459,9 @@ class _HeldIndependence(_GroupedIndependence):
             return super().get_proposal(s, c, random)
         sg, _ = self._groups(s, c)
         warp = (
-            lambda x: _yeo_johnson((x - self.center) / self.scale, self.lam),
-            lambda y: self.center + self.scale * _yeo_johnson(y, self.lam, inverse=True),
-            lambda x: _yeo_johnson_log_slope((x - self.center) / self.scale, self.lam),
+            lambda x: yeo_johnson((x - self.center) / self.scale, self.lam),
+            lambda y: self.center + self.scale * yeo_johnson(y, self.lam, inverse=True),
+            lambda x: yeo_johnson_log_slope((x - self.center) / self.scale, self.lam),
         )
         with np.errstate(over="ignore", invalid="ignore"):
             q, factor = _t_proposal(sg, self.mean, self.chol, self.df, random, warp)

@@ -158,7 +158,12 @@ def two_point_weights(p_bar, nodes_bar, length):
 
 def interpolation_sd(step_over_length: float) -> float:
     """The conditional sd (relative to the amplitude) the two-point mean neglects half-way between
-    two nodes ``step_over_length`` length scales apart: the error of carrying a draw between nodes."""
+    two nodes ``step_over_length`` length scales apart: the error of carrying a draw between nodes.
+    Below ``1e-4`` (a length scale ten thousand steps long, which the weakly identified tail of a
+    campaign of few pressures reaches) the two nodes' correlation is 1 to rounding and the
+    neglected sd below 1e-6: 0."""
+    if step_over_length < 1e-4:
+        return 0.0
     x = np.array([0.0, step_over_length])
     K = matern32(x[:, None] - x[None, :], 1.0, np)
     k = matern32(step_over_length / 2 - x, 1.0, np)

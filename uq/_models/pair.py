@@ -316,11 +316,13 @@ def fit_over_tests(
     sampler_settings=None,
     mix=INDEPENDENCE_MIX,
     proposal="half",
+    importance=False,
 ):
     """``cls.from_posterior`` of the one driver's fit of ``model`` to ``data`` (one problem, the
     seed's exact draws, no replicates until asked for), with the fit's provenance. ``mix``: the
     sampler's moves (``uq._inference.sampler.INDEPENDENCE_MIX`` unless the model says otherwise),
-    ``proposal`` how its independence move fits its proposal (``uq._inference.sampler.run_many``)."""
+    ``proposal`` how its independence move fits its proposal (``uq._inference.sampler.run_many``),
+    ``importance`` whether importance sampling is tried first (``fit_collapsed``)."""
     post = fit_collapsed(
         model,
         data,
@@ -332,6 +334,7 @@ def fit_over_tests(
         desc=desc,
         mix=mix,
         proposal=proposal,
+        importance=importance,
     )
     prov = provenance_of(rec, seed=seed, settings=settings, stand=stand)
     return cls.from_posterior(post, rec, orders, geometry, stand, provenance=prov)

@@ -68,7 +68,14 @@ def test_the_driver_keeps_passing_draws_and_says_so():
     assert conv.importance["passed"] and conv.importance["pareto_k"] <= importance.K_MAX
     assert conv.to_json()["method"] == "importance"
     assert "importance sampling, Pareto k-hat" in conv.sampler_words()
-    assert conv.worst()[0] is None and conv.worst()[1] >= 400
+    # every reported variable has its R-hat and ESS (CONTRACT.md), from the kept draws split into
+    # runs, no ESS above the smallest importance ESS of the sampled parameters
+    r_hat_max, ess_min = conv.worst()
+    assert 1.0 <= r_hat_max < 1.01 and 400 <= ess_min
+    cap = min(conv.importance["ess_bulk"].values())
+    assert set(conv.variables) == set(a.reported) and conv.n_chains == 4
+    for v in conv.variables.values():
+        assert np.all(np.asarray(v["ess_bulk"]) <= cap) and np.all(np.isfinite(v["r_hat"]))
     assert b.convergence.sampler_words() is None and "method" not in b.convergence.to_json()
     ta, tb = (p.theta.reshape(-1, p.theta.shape[-1]) for p in (a, b))
     sd = tb.std(axis=0)

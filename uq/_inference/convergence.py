@@ -108,8 +108,8 @@ class Convergence:
     ``variables``: per reported variable, ``r_hat``, ``ess_bulk``, ``ess_tail``, ``mcse_mean``
     (floats, or lists for vector variables). ``tau``: per sampled parameter. ``method``: how theta
     was sampled, "emcee" or "importance" (``uq._inference.importance``: then ``variables`` holds
-    the importance estimates' ``ess_bulk`` and ``ess_tail`` per sampled parameter, there is no
-    chain, so no R-hat, tau or acceptance); ``importance``: that method's checks when it was tried
+    the statistics of the kept draws split into ``IMPORTANCE_CHAINS`` runs, and there is no tau or
+    acceptance); ``importance``: that method's checks when it was tried
     (``Importance.to_json``), also when it was refused and emcee sampled instead.
     """
 
@@ -461,37 +461,54 @@ def failed_rules(chains, settings, full: bool = True) -> tuple[list[Problem], in
     return problems, want
 
 
+#: the runs the kept importance draws are split into for their R-hat and ESS
+IMPORTANCE_CHAINS = 4
+
+
 def importance_convergence(posterior: dict, result) -> Convergence:
-    """The verdict of importance draws that passed their checks (``uq._inference.importance``):
-    only non-finite reported draws can fail it; ``variables`` holds the importance estimates'
-    ESS per sampled parameter."""
-    variables = {
-        n: {"ess_bulk": result.ess_bulk[n], "ess_tail": result.ess_tail[n]} for n in result.ess_bulk
-    }
+    """The verdict of importance draws that passed their checks (``uq._inference.importance``).
+    The kept draws (resampled, in the order of the final stage's independent draws) are split into
+    ``IMPORTANCE_CHAINS`` consecutive runs and given the chains' statistics and rules, so that every
+    reported variable carries its R-hat and ESS as a sampled one does (CONTRACT.md), each ESS at
+    most the smallest importance ESS of the sampled parameters (bulk and tail), which are in
+    ``result.to_json()``."""
+    runs = {}
+    for n, a in posterior.items():
+        a = np.asarray(a, float).reshape(-1, *np.shape(a)[2:])
+        m = a.shape[0] // IMPORTANCE_CHAINS
+        runs[n] = a[: m * IMPORTANCE_CHAINS].reshape(IMPORTANCE_CHAINS, m, *a.shape[1:])
+    per_var, diag = _reported_diagnostics(runs, n_walkers=1)
+    # resampling adds no information: no ESS above the smallest importance ESS of the sampled
+    # parameters (a kept draw's repeats are not all seen as such by the runs' autocorrelation)
+    caps = {k: min(getattr(result, k).values()) for k in ("ess_bulk", "ess_tail")}
+    for d in (*per_var.values(), *diag.values()):
+        for k, cap in caps.items():
+            d[k] = np.minimum(d[k], cap).tolist() if isinstance(d[k], list) else min(d[k], cap)
+    problems = nonfinite_problems(posterior)
+    problems += [p for p in rule_problems(diag) if p not in problems]
     return Convergence(
-        problems=tuple(nonfinite_problems(posterior)),
+        problems=tuple(problems),
         n_steps=0,
         burn_in=0,
-        n_chains=1,
+        n_chains=IMPORTANCE_CHAINS,
         n_walkers=0,
         n_draws=int(result.samples.shape[0]),
-        variables=variables,
+        variables=per_var,
         method="importance",
         importance=result.to_json(),
     )
 
 
-def convergence(posterior: dict, chains) -> Convergence:
-    """The verdict for the reported variables ``posterior`` (name -> (chains, draws, ...) arrays,
-    in the sampler's storage order) of a run ``chains``: the sampler's own failed rules first, then
-    those of the reported variables (e.g. exactly drawn coefficients)."""
+def _reported_diagnostics(posterior: dict, n_walkers: int) -> tuple[dict, dict]:
+    """Per reported variable (name -> (chains, draws, ...) arrays in storage order): its scalars'
+    R-hat, ESS and MCSE (floats, or lists for vector variables), and the worst of each."""
     per_var, diag = {}, {}
     arrays = {n: np.asarray(a, float) for n, a in posterior.items()}
     flat = {n: a.reshape(a.shape[0], a.shape[1], -1) for n, a in arrays.items()}
     sizes = {n: f.shape[-1] for n, f in flat.items()}
     if flat:  # every scalar of every variable in one vectorised call
         stacked = np.moveaxis(np.concatenate(list(flat.values()), axis=-1), -1, 0)
-        d = diagnostics(stacked, chains.n_walkers)
+        d = diagnostics(stacked, n_walkers)
     offset = 0
     for n, size in sizes.items():
         ds = {k: v[offset : offset + size] for k, v in d.items()}
@@ -504,6 +521,14 @@ def convergence(posterior: dict, chains) -> Convergence:
             "ess_bulk": _worst(ds["ess_bulk"], min),
             "ess_tail": _worst(ds["ess_tail"], min),
         }
+    return per_var, diag
+
+
+def convergence(posterior: dict, chains) -> Convergence:
+    """The verdict for the reported variables ``posterior`` (name -> (chains, draws, ...) arrays,
+    in the sampler's storage order) of a run ``chains``: the sampler's own failed rules first, then
+    those of the reported variables (e.g. exactly drawn coefficients)."""
+    per_var, diag = _reported_diagnostics(posterior, chains.n_walkers)
     problems = list(chains.problems) + nonfinite_problems(posterior)
     for p in rule_problems(diag) + acceptance_problems(chains.acceptance, chains.accept_range):
         if p not in problems:

@@ -140,6 +140,8 @@ def test_report_cli_small_campaign(small_csv, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert f"report: {out / 'report.html'}" in printed
     assert "F_eff scatter across 1, 5, 10 bar" in printed
+    # the console says it too, not only the page: the stand's file says RECONSTRUCTED
+    assert "RECONSTRUCTED recordings (the file's header says so), not measured data" in printed
     page = _check_page(out, 3)
     assert "Reconstructed data" in page
     import json

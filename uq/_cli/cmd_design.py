@@ -352,7 +352,7 @@ def command_design(args) -> int:
             doc,
             args.out,
             curves=curves,
-            reconstructed=any("RECONSTRUCTED" in c.upper() for c in rec.comments),
+            reconstructed=rec.reconstructed,
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")

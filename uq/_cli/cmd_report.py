@@ -145,6 +145,8 @@ def command_report(args) -> int:
     print(
         f"{rec.path}: {len(rec.tests)} tests, {rec.n_points} points; fit {t_fit:.1f} s, report {t_all - t_fit:.1f} s"
     )
+    if rec.reconstructed:
+        print("RECONSTRUCTED recordings (the file's header says so), not measured data")
     sc = cb.scatter_at
     if sc:
         parts = ", ".join(

@@ -185,6 +185,12 @@ class Recordings:
         return sum(t.n_points for t in self.tests)
 
     @property
+    def reconstructed(self) -> bool:
+        """The file's header says its readings are RECONSTRUCTED (made by a virtual stand, as
+        data/n50's are), not measured."""
+        return any("RECONSTRUCTED" in c.upper() for c in self.comments)
+
+    @property
     def has_piston(self) -> bool:
         """Every test has piston coordinates (the paper's volume measurement)."""
         return all(t.piston_m is not None for t in self.tests)

@@ -356,8 +356,8 @@ def command_design(args) -> int:
             figure_format=args.figures,
         )
         print(f"  data sheet: {page}")
-    if sampler_words(fit):
-        print(f"  {sampler_words(fit)}")
+    if line := sampler_words(fit):
+        print(f"  {line}")
     print(f"  {time.perf_counter() - t0:.1f} s (fit {fit.seconds:.1f} s)")
     emit_json(doc, args.json)
     record_convergence(args, fit.convergence.converged, f"{model.label}'s sampler")

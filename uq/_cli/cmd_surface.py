@@ -88,8 +88,8 @@ def command_surface(args) -> int:
     PRINTERS.get(fit.name, _print_model)(rec, fit, res)
     if comparison:
         _print_comparison(fit.name, comparison)
-    if sampler_words(fit):
-        print(f"  {sampler_words(fit)}")
+    if line := sampler_words(fit):
+        print(f"  {line}")
     for w in res["warnings"]:
         print(f"  warning: {w}")
     if args.report:

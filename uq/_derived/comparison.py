@@ -289,7 +289,7 @@ def fit_and_choose(
     fitted = [f for f in (fit, cub) if f is not None]
     warnings = [w for f in fitted for w in f.convergence.messages(CLI_ADVICE)]
     converged = all(f.convergence.converged for f in fitted)
-    notes = [sampler_words(f) for f in fitted if sampler_words(f)]
+    notes = [w for w in map(sampler_words, fitted) if w]
     ans, info = choose(fit, cub, comparison, forced=model)
     if ans.omitted_reason:  # a campaign without piston readings
         info["omitted"] = ans.omitted_reason

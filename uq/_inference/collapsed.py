@@ -738,9 +738,17 @@ def fit_collapsed(
     block = max(settings.n_ensembles * settings.n_walkers // 2, 1)
     lp, expand = _campaign_log_prob(model, datas, act, block)
     optima = _optima(model, datas, act, lp)
-    tried = None  # importance sampling's result, when it was tried
     if seeds is None:
         seeds = [seed + 1 + i for i in range(len(datas))] if many else [seed + 1]
+    names = [model.theta_names[i] for i in dims]
+    tried = None  # importance sampling's result, when it was tried; emcee below if refused
+    if method == "emcee" and importance and not many:
+        from uq._inference.importance import sample
+
+        o = optima[0]
+        tried = sample(
+            lambda x: lp(x[None])[0], o.theta[dims], o.cov, names, seed=seed, n_keep=max_draws
+        )
     if method == "laplace":  # one chain of draws from each optimum's normal approximation
         runs = [None] * len(seeds)
         thetas = [
@@ -751,37 +759,10 @@ def fit_collapsed(
             )
             for opt, s in zip(optima, seeds, strict=True)
         ]
-    elif method == "emcee" and importance and not many:
-        from uq._inference.importance import sample
-
-        names = [model.theta_names[i] for i in dims]
-        tried = sample(
-            lambda x: lp(x[None])[0],
-            optima[0].theta[dims],
-            optima[0].cov,
-            names,
-            seed=seed,
-            n_keep=max_draws,
-        )
-        if tried.passed:
-            runs, thetas = [None], [expand(tried.samples[None])]
-        else:
-            runs = run_many(
-                lp,
-                optima[0].theta[dims][None],
-                optima[0].cov[None],
-                names,
-                seed=seed,
-                settings=settings,
-                desc=desc,
-                mix=mix,
-                proposal=proposal,
-            )
-            runs = [thin(ch, max_draws) for ch in runs]
-            thetas = [expand(runs[0].samples)]
+    elif tried is not None and tried.passed:
+        runs, thetas = [None], [expand(tried.samples[None])]
     elif method == "emcee":
         starts = np.stack([o.theta[dims] for o in optima]), np.stack([o.cov for o in optima])
-        names = [model.theta_names[i] for i in dims]
         runs = run_many(
             lp, *starts, names, seed=seed, settings=settings, desc=desc, mix=mix, proposal=proposal
         )

@@ -56,7 +56,9 @@ def test_a_prior_dominated_tail_is_followed_by_the_pooled_stages():
     mode, h = g[np.argmax(dens)], 1e-4
     f = [_floored_scale(np.array([[mode + e, 0.0]]))[0] for e in (-h, 0.0, h)]
     cov = np.diag([h**2 / (2 * f[1] - f[0] - f[2]), 1.0])
-    r = importance.sample(_floored_scale, np.array([mode, 0.0]), cov, ("s", "z"), seed=1, n_keep=4000)
+    r = importance.sample(
+        _floored_scale, np.array([mode, 0.0]), cov, ("s", "z"), seed=1, n_keep=4000
+    )
     assert r.passed and r.pareto_k < importance.K_MAX
     assert r.n_draws == importance.REFITS * importance.STAGE_DRAWS
     assert len(r.stages_k) == importance.REFITS

@@ -206,8 +206,8 @@ class DiscrepancyFit(SurfaceFit):
 
     @functools.cached_property
     def nodes(self) -> tuple[np.ndarray, np.ndarray]:
-        """(node pressures (N,) ascending, deviations there (S, N, n_c)): the tested pressures and
-        the virtual ones between them."""
+        """(node pressures (N,) ascending, deviations there (n_c, S, N): channel by channel): the
+        tested pressures and the virtual ones between them."""
         tested = np.asarray(self.tested_pressures_bar, float)
         grid = gp.grid_nodes(tested)
         S, G, c = self.rows.size, grid.size, self.n_channels
@@ -228,7 +228,8 @@ class DiscrepancyFit(SurfaceFit):
             )
         allp = np.concatenate([tested, grid])
         order = np.argsort(allp, kind="stable")
-        return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
+        values = np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
+        return allp[order], np.ascontiguousarray(values.transpose(2, 0, 1))
 
     def block_draws(
         self, height_m, p_bar, blocks=None, *, check: bool = True
@@ -239,20 +240,24 @@ class DiscrepancyFit(SurfaceFit):
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
-        shape, t, p = h.shape, self.geometry.t(h.ravel()), p.ravel()
+        shape, t = h.shape, self.geometry.t(h.ravel())
+        # the weights and the two-node means depend on the pressure alone: once per distinct one
+        p, back = np.unique(p.ravel(), return_inverse=True)
+        back = back.reshape(-1)
         nodes, values = self.nodes
         if nodes.size == 1:
             i, w = np.zeros(p.size, int), np.ones((self.rows.size, p.size, 2)) * [1.0, 0.0]
-            values = np.concatenate([values, values], axis=1)
+            values = np.concatenate([values, values], axis=2)
         else:
             i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
+        w0, w1 = np.ascontiguousarray(w[..., 0]), np.ascontiguousarray(w[..., 1])
         out = {}
         for sym in self.symbols if blocks is None else blocks:
             b = self.symbols.index(sym)
-            acc = np.zeros((self.rows.size, p.size))
+            acc = np.zeros((self.rows.size, back.size))
             for k in range(self.n_k):
-                series = values[:, :, b * self.n_k + k]
-                acc += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
+                series = values[b * self.n_k + k]
+                acc += (w0 * series[:, i] + w1 * series[:, i + 1])[:, back] * t**k
             out[sym] = acc.reshape(-1, *shape)
         return out
 

@@ -325,8 +325,9 @@ class GridElement:
         k = np.clip(
             np.searchsorted(self.pressure_grid, p, side="right") - 1, 0, self.pressure_grid.size - 2
         )
-        s = np.arange(self.n_draws)[:, None]
-        c0, c1, c2, c3 = (c[m, k, s, ix[None, :]] for m in range(4))
+        # the four coefficients of draw s, height ix, interval k: one look-up by flat index
+        at = (k * self.n_draws + np.arange(self.n_draws)[:, None]) * c.shape[3] + ix
+        c0, c1, c2, c3 = np.take(c.reshape(4, -1), at, axis=1)
         d = p - self.pressure_grid[k]
         if deriv:
             return (3.0 * c0 * d + 2.0 * c1) * d + c2

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from uq._inference.summary import estimate, thin_rows
+from uq._inference.threads import side_by_side
 from uq._models import discrepancy_gp as gp
 from uq._models.linear_fit import BlockSpec
 from uq._models.surface import SurfaceFit, force_label
@@ -215,17 +216,14 @@ class DiscrepancyFit(SurfaceFit):
         rng = np.random.default_rng((seed, GRID_STREAM))
         n_all = int(np.prod(self.coefficients.shape[:2]))
         xi = rng.standard_normal((n_all, G, c))[self.rows]
-        vg = np.empty((S, G, c))
-        for a in range(0, S, GRID_CHUNK):
+        dev, scale, length = self.tested_deviations, self.channel_scale, self.hyper["length"]
+
+        def chunk(a):
             b = slice(a, a + GRID_CHUNK)
-            vg[b] = gp.draw_on_grid(
-                self.tested_deviations[b],
-                self.channel_scale[b],
-                self.hyper["length"][b],
-                tested,
-                grid,
-                xi[b],
-            )
+            return gp.draw_on_grid(dev[b], scale[b], length[b], tested, grid, xi[b])
+
+        # draws apart: chunks side by side (numpy's linear algebra releases the interpreter)
+        vg = np.concatenate(side_by_side(chunk, range(0, S, GRID_CHUNK)))
         allp = np.concatenate([tested, grid])
         order = np.argsort(allp, kind="stable")
         values = np.concatenate([self.tested_deviations, vg], axis=1)[:, order]

@@ -37,7 +37,7 @@ from uq._models.surface import summary as surface_summary
 from uq._physics.quantities import BAR_PA
 
 #: rows of draws whose grid values are computed at once (memory: chunk x nodes^2 floats)
-GRID_CHUNK = 256
+GRID_CHUNK = 64
 #: the seed stream of the virtual pressures' normals (with the fit's seed)
 GRID_STREAM = 29
 #: the deviation blocks in the order of their channels, with and without piston readings
@@ -241,7 +241,7 @@ class DiscrepancyFit(SurfaceFit):
         shape, t = h.shape, self.geometry.t(h.ravel())
         # the weights and the two-node means depend on the pressure alone: once per distinct one
         p, back = np.unique(p.ravel(), return_inverse=True)
-        back = back.reshape(-1)
+        back = slice(None) if np.array_equal(back, np.arange(h.size)) else back.reshape(-1)
         nodes, values = self.nodes
         if nodes.size == 1:
             i, w = np.zeros(p.size, int), np.ones((self.rows.size, p.size, 2)) * [1.0, 0.0]
@@ -252,7 +252,7 @@ class DiscrepancyFit(SurfaceFit):
         out = {}
         for sym in self.symbols if blocks is None else blocks:
             b = self.symbols.index(sym)
-            acc = np.zeros((self.rows.size, back.size))
+            acc = np.zeros((self.rows.size, h.size))
             for k in range(self.n_k):
                 series = values[b * self.n_k + k]
                 acc += (w0 * series[:, i] + w1 * series[:, i + 1])[:, back] * t**k

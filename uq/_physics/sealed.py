@@ -125,8 +125,9 @@ def inextensible_rate(
 
 def _log_gap(element, x, p, v_shift, log_k, n, v_r, p_atm):
     """phi(p) = ln p_abs + n ln(V + V_r) - ln K and its derivative in p_u; phi is 0 on the path."""
-    V = element.volume_m3(x, p) + v_shift
-    Vp = element.dvolume_dp(x, p)
+    both = getattr(element, "volume_and_slope", None)  # a grid element's: one look-up for both
+    V, Vp = both(x, p) if both else (element.volume_m3(x, p), element.dvolume_dp(x, p))
+    V = V + v_shift
     room = V + v_r
     with np.errstate(divide="ignore", invalid="ignore"):
         phi = (
@@ -319,6 +320,13 @@ class GridElement:
         return i
 
     def _eval(self, name, x, p, deriv=False):
+        return self._evals(name, x, p, (deriv,))[0]
+
+    def volume_and_slope(self, x, p):
+        """``volume_m3`` and ``dvolume_dp`` at the same points, from one look-up."""
+        return self._evals("V", x, p, (False, True))
+
+    def _evals(self, name, x, p, derivs):
         ix = self._index(x)
         p = np.broadcast_to(np.asarray(p, float), (self.n_draws, ix.size))
         c = self._c[name]
@@ -329,9 +337,10 @@ class GridElement:
         at = (k * self.n_draws + np.arange(self.n_draws)[:, None]) * c.shape[3] + ix
         c0, c1, c2, c3 = np.take(c.reshape(4, -1), at, axis=1)
         d = p - self.pressure_grid[k]
-        if deriv:
-            return (3.0 * c0 * d + 2.0 * c1) * d + c2
-        return ((c0 * d + c1) * d + c2) * d + c3
+        return [
+            (3.0 * c0 * d + 2.0 * c1) * d + c2 if deriv else ((c0 * d + c1) * d + c2) * d + c3
+            for deriv in derivs
+        ]
 
     def force_N(self, x, p):
         return self._eval("P", x, p)

@@ -31,6 +31,7 @@ form is an ``Element`` of six callables; posterior draws on a height x pressure 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partialmethod
 from typing import NamedTuple
 
 import numpy as np
@@ -322,10 +323,6 @@ class GridElement:
     def _eval(self, name, x, p, deriv=False):
         return self._evals(name, x, p, (deriv,))[0]
 
-    def volume_and_slope(self, x, p):
-        """``volume_m3`` and ``dvolume_dp`` at the same points, from one look-up."""
-        return self._evals("V", x, p, (False, True))
-
     def _evals(self, name, x, p, derivs):
         ix = self._index(x)
         p = np.broadcast_to(np.asarray(p, float), (self.n_draws, ix.size))
@@ -342,20 +339,11 @@ class GridElement:
             for deriv in derivs
         ]
 
-    def force_N(self, x, p):
-        return self._eval("P", x, p)
-
-    def dforce_dx(self, x, p):
-        return self._eval("Px", x, p)
-
-    def dforce_dp(self, x, p):
-        return self._eval("P", x, p, deriv=True)
-
-    def volume_m3(self, x, p):
-        return self._eval("V", x, p)
-
-    def dvolume_dx(self, x, p):
-        return self._eval("Vx", x, p)
-
-    def dvolume_dp(self, x, p):
-        return self._eval("V", x, p, deriv=True)
+    force_N = partialmethod(_eval, "P")
+    dforce_dx = partialmethod(_eval, "Px")
+    dforce_dp = partialmethod(_eval, "P", deriv=True)
+    volume_m3 = partialmethod(_eval, "V")
+    dvolume_dx = partialmethod(_eval, "Vx")
+    dvolume_dp = partialmethod(_eval, "V", deriv=True)
+    #: ``volume_m3`` and ``dvolume_dp`` at the same points from one look-up (the gas law's steps)
+    volume_and_slope = partialmethod(_evals, "V", derivs=(False, True))

@@ -47,7 +47,6 @@ from uq._inference.loo import (
     verdict,
 )
 from uq._inference.sampler import Settings
-from uq._inference.threads import ahead
 from uq._io.processes import Beside, cores
 from uq._models import registry
 from uq._models.cubic_fit import collapsed_model, fit_campaign
@@ -252,11 +251,7 @@ def fit_both(
             surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
         if fit_cubics is not None:
             cubic_fit = w.result() if beside else fit_cubics()
-    # the model's own numpy work for its answers (the discrepancy's grid draws) beside the JAX of
-    # the comparison: two cores busy instead of one
-    with ahead(getattr(surface_fit, "precompute", None)):
-        comparison = compare(surface_fit, cubic_fit, seed=seed, settings=settings)
-    return surface_fit, cubic_fit, comparison
+    return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 
 def words(c: dict) -> str:

@@ -19,7 +19,6 @@ comparison (the model and the per-pressure cubics) side by side in two processes
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -44,16 +43,3 @@ def side_by_side(fn: Callable[[Any], Any], items: Iterable, *, threads: int = TH
         return list(pool.map(fn, items))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-
-
-@contextlib.contextmanager
-def ahead(fn: Callable[[], Any] | None):
-    """``fn()`` (numpy work, never JAX programs) in a thread while the block runs (JAX programs
-    there may), waited for at the block's end, where its failure is raised; None: nothing."""
-    if fn is None:
-        yield
-        return
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="uq") as pool:
-        done = pool.submit(fn)
-        yield
-        done.result()

@@ -229,20 +229,6 @@ class DiscrepancyFit(SurfaceFit):
         values = np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
         return allp[order], np.ascontiguousarray(values.transpose(2, 0, 1))
 
-    def precompute(self) -> None:
-        """The grid draws (``nodes``), made ahead: ``fit_both`` runs this beside the model
-        comparison, whose work is JAX's (uq._inference.threads.ahead)."""
-        _ = self.nodes
-
-    def on_draws(self, n: int) -> DiscrepancyFit:
-        """The base's thinning, keeping grid draws already made (a draw's do not depend on the
-        others': the same numbers)."""
-        fewer = super().on_draws(n)
-        pos = np.searchsorted(self.rows, fewer.rows).clip(max=self.rows.size - 1)
-        if "nodes" in self.__dict__ and np.array_equal(self.rows[pos], fewer.rows):
-            fewer.__dict__["nodes"] = (self.nodes[0], np.ascontiguousarray(self.nodes[1][:, pos]))
-        return fewer
-
     def block_draws(
         self, height_m, p_bar, blocks=None, *, check: bool = True
     ) -> dict[str, np.ndarray]:

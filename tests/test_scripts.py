@@ -40,6 +40,7 @@ RUN_BY = {
     "scripts/plan_proof.py": "test_plan_proof_tiny",
     "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
+    "scripts/importance_coverage.py": "test_importance_coverage_tiny",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
     "scripts/noise_check_study.py": "test_noise_check_study_tiny",
     "scripts/sealed_coverage.py": "tests/derived/test_design.py::test_coverage_script_runs_with_tiny_settings",
@@ -428,6 +429,23 @@ def test_margin_coverage_tiny(tmp_path):
     assert {r["model"] for r in doc["rows"]} == {"surface", "cubics", "chosen"}
     assert all(r["covered"] + r["refused"] <= 1 for r in doc["rows"])
     assert "coarse pressure grids" in (tmp_path / "summary.md").read_text()
+
+
+def test_importance_coverage_tiny(tmp_path):
+    """One replication of the stored study's quickest pair at two heights: the fit's counts and
+    its draws' checks beside the stored study's counts for the same queries; an unknown pair
+    is refused naming the option."""
+    out = tmp_path / "importance.json"
+    argv = ("--pairs", "n50-kink/catalogue", "--reps", "1", "--heights-mm", "90,130")
+    proc = _run("scripts/importance_coverage.py", *argv, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(out.read_text())["summary"]["n50-kink/catalogue"]
+    assert s["reps"] == 1 and s["queries"] == 8  # two heights x four mid-pressures
+    assert 0 <= s["force_covered"][0] <= 8 and 0 <= s["force_covered"][1] <= 8
+    assert s["converged"] == 1 and s["mean_width_N"][0] > 0
+    assert "force covered" in proc.stdout
+    bad = _run("scripts/importance_coverage.py", "--pairs", "n50/none", "--out", out)
+    assert bad.returncode == 2 and "--pairs" in bad.stderr
 
 
 def test_export_n50_from_a_saved_model(n50_surface, tmp_path):

@@ -247,6 +247,10 @@ def test_frequency_chart_transmissibility_and_document():
     chart = frequency_chart(m, d, charges_bar=[1.0, 4.0, 8.0])
     loads = [r["load_N"]["mean"] for r in chart["rows"]]
     assert np.all(np.diff(loads) > 0) and not chart["omitted"]
+    # a charge refused (the charges are solved together, then one by one): the others as before
+    refused = frequency_chart(m, d, charges_bar=[1.0, 4.0, 12.0, 8.0])
+    assert refused["rows"] == chart["rows"] and len(refused["omitted"]) == 1
+    assert "12 bar is outside" in refused["omitted"][0]["reason"]
     for r in chart["rows"]:
         t = _truth(s, [0.112], charge_bar=r["charge_bar"])  # same volume assumption: C(x0) = 0
         assert r["natural_frequency_Hz"]["mean"] == pytest.approx(

@@ -333,7 +333,7 @@ def command_design(args) -> int:
     if rec.has_piston:
         design = _design_from(args)
         grid = D.DesignGrid(model, x_c)
-        doc = D.design_document(model, design, charges, grid)
+        doc, curves = D.document_and_curves(model, design, charges, grid, sheet=bool(args.out))
     else:
         doc = _force_only(args, model)
     doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
@@ -341,9 +341,6 @@ def command_design(args) -> int:
     doc["comparison"] = comparison  # None for the cubics: no other model fitted to rank against
     doc["model_check"] = check
     doc["source"] = _source(args, rec, fit)
-    if rec.has_piston and args.out:
-        charges = [float(r["charge_bar"]) for r in doc["frequency_chart"]["rows"]]
-        curves = dict(zip(charges, D.sealed_curves(model, design, charges, grid), strict=True))
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
     if args.out:
         from uq._report.design import write_design_sheet

@@ -418,9 +418,10 @@ def _polytropic_words(design: SealedDesign) -> str:
     return f"polytropic exponent n uniform in {lo:g}..{hi:g} per draw (the stroke's heat exchange unknown)"
 
 
-def _at_design(grid: DesignGrid, design: SealedDesign, charge_bar: float):
-    """Load, rate and natural-frequency draws (S,) at the design height for one charge."""
-    path, statement = sealed_draws(grid, design, charge_bar, [grid.height_m])
+def _at_design(grid: DesignGrid, design: SealedDesign, charge_bar: float, solved=None):
+    """Load, rate and natural-frequency draws (S,) at the design height for one charge (``solved``:
+    its (sealed path, statement) at that height when already made)."""
+    path, statement = solved or sealed_draws(grid, design, charge_bar, [grid.height_m])
     load, rate = path.force_N[:, 0], path.rate_N_per_m[:, 0]
     where = f"at {grid.height_m * 1e3:g} mm charged to {charge_bar:g} bar"
     return load, rate, natural_frequency_Hz(rate, load, where), statement
@@ -537,10 +538,16 @@ def frequency_chart(
     plo, phi = model.pressure_range_bar
     if charges_bar is None:
         charges_bar = np.linspace(max(plo, 1.0) if phi > 1.0 else plo, phi, N_CHART)
+    charges = np.asarray(charges_bar, float).tolist()
+    try:  # every charge in one pass over the draws; a refusal: charge by charge, to say whose
+        paths, statement = sealed_paths(grid, design, charges, [grid.height_m])
+        solved = [(path, statement) for path in paths]
+    except (InputError, RuntimeError):
+        solved = [None] * len(charges)
     rows, omitted = [], []
-    for p in np.asarray(charges_bar, float):
+    for p, done in zip(charges, solved, strict=True):
         try:
-            load, rate, freq, _ = _at_design(grid, design, float(p))
+            load, rate, freq, _ = _at_design(grid, design, p, done)
         except InputError as exc:
             omitted.append({"charge_bar": float(p), "reason": str(exc)})
             continue
@@ -560,12 +567,24 @@ def design_document(
 ) -> dict:
     """Everything ``uq design --json`` writes: the contract's keys at the design height, the sealed
     curve, the frequency chart (one model grid serves all three)."""
+    return document_and_curves(model, design, charges_bar, grid, sheet=False)[0]
+
+
+def document_and_curves(model, design, charges_bar=None, grid=None, *, sheet: bool = True):
+    """(:func:`design_document`, {charge: sealed curve} of the chart's charges: the data sheet's,
+    made in one pass over the draws with the design's own curve; empty unless ``sheet``)."""
     check_design(model, design)
     grid = grid or DesignGrid(model, design.height_m)
     out = design_point(model, design, grid)
-    out["sealed_curve"] = sealed_curve(model, design, grid)
-    out["frequency_chart"] = frequency_chart(model, design, charges_bar, grid)
-    return out
+    chart = frequency_chart(model, design, charges_bar, grid)
+    charges = [row["charge_bar"] for row in chart["rows"]] if sheet else []
+    try:
+        out["sealed_curve"], *curves = sealed_curves(model, design, [None, *charges], grid)
+    except (InputError, RuntimeError):  # the refusal the design's own curve makes, if any, first
+        out["sealed_curve"] = sealed_curve(model, design, grid)
+        curves = sealed_curves(model, design, charges, grid)
+    out["frequency_chart"] = chart
+    return out, dict(zip(charges, curves, strict=True))
 
 
 # ----------------------------------------------------------------------------- the data sheet's tables

@@ -467,7 +467,7 @@ IMPORTANCE_CHAINS = 4
 
 def importance_convergence(posterior: dict, result) -> Convergence:
     """The verdict of importance draws that passed their checks (``uq._inference.importance``).
-    The kept draws (resampled, in the order of the final stage's independent draws) are split into
+    The kept draws (resampled from every adapted stage's draws, in random order) are split into
     ``IMPORTANCE_CHAINS`` consecutive runs and given the chains' statistics and rules, so that every
     reported variable carries its R-hat and ESS as a sampled one does (docs/formats.md), each ESS at
     most the smallest importance ESS of the sampled parameters (bulk and tail), which are in

@@ -14,16 +14,27 @@ false, with the reason), and the caller samples with emcee instead.
 The proposal (``sample``): a Student t (``DF``) at the MAP with the Laplace covariance alone is
 not enough (measured on data/n50 and five simulated campaigns: k-hat 0.46-0.95, and at 0.68 the
 force floor's 5 % quantile 0.43 posterior sd off the sampler's), because the posterior of theta
-is skewed (the force floor, the length scale). So it is adapted in ``REFITS`` stages, the form of
-the sampler's held proposal (``uq._inference.sampler._HeldIndependence``): each coordinate
-standardised by the weighted draws' mean and sd and transformed by Yeo-Johnson with the exponent
-that makes its (resampled) draws most nearly normal, a t with the transformed draws' weighted
-mean and covariance; a share ``DEFENSIVE`` of every stage's draws comes from the Laplace t
+is skewed (the force floor, the length scale). So it is adapted, the form of the sampler's held
+proposal (``uq._inference.sampler._HeldIndependence``): each coordinate standardised by the
+weighted draws' mean and sd and transformed by Yeo-Johnson with the exponent that makes its
+(resampled) draws most nearly normal, a t with the transformed draws' weighted mean and
+covariance; a share ``DEFENSIVE`` of every stage's draws comes from the Laplace t
 ``DEFENSIVE_SCALE`` times as wide, and the weights use the mixture's density, so no weight can
-exceed 1 / ``DEFENSIVE`` times the Laplace t's ratio (Hesterberg 1995's defensive mixture). Only
-the last stage's ``FINAL_DRAWS`` draws, all from one fixed proposal, make the posterior: they are
-resampled systematically to ``n_keep`` equally weighted draws, so every downstream computation
-(exact coefficient draws, bands, quantiles) is that of a sampler's draws.
+exceed 1 / ``DEFENSIVE`` times the Laplace t's ratio (Hesterberg 1995's defensive mixture).
+
+The stages recycle their draws (adaptive multiple importance sampling, AMIS: Cornuet, Marin, Mira
+& Robert 2012): the first stage's ``STAGE_DRAWS`` come from the Laplace t; each of the ``REFITS``
+stages after it draws ``STAGE_DRAWS`` from the proposal fitted to all the adapted stages' draws so
+far, and those draws are weighted by the deterministic mixture of the adapted stages' proposals
+(the balance heuristic: p / mean_j q_j), so no draw is thrown away and the posterior's far tails
+(the force floor's and the length scale's, where the likelihood goes flat and the prior takes
+over), which a stage of a few thousand draws barely reaches, shape the proposals of the next. The
+adapted stages' pooled draws make the posterior: they are resampled systematically to ``n_keep``
+equally weighted draws, so every downstream computation (exact coefficient draws, bands,
+quantiles) is that of a sampler's draws. Measured against the earlier form (three adaptations, a
+last stage of 64000 draws from one proposal, 76000 evaluations) on the between-pressure study's
+ten campaigns of the paper's eleven-pressure layout: every campaign kept (k-hat at most 0.60,
+every ESS at least 958) with 24000 evaluations, where the earlier form refused four (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -43,11 +54,11 @@ from uq._inference.sampler import (
 
 #: Pareto k-hat above which importance sampling is refused (Vehtari et al. 2024): the PSIS-LOO rule's
 K_MAX = PARETO_K_MAX
-#: draws of each adaptation stage and of the final stage that makes the posterior
-STAGE_DRAWS = 4000
-FINAL_DRAWS = 64000
-#: adaptations of the proposal to the weighted draws before the final stage
-REFITS = 3
+#: draws of every stage
+STAGE_DRAWS = 3000
+#: stages after the first (the Laplace t's), each from the proposal fitted to the draws before it;
+#: their pooled draws make the posterior
+REFITS = 7
 #: degrees of freedom of the t proposals
 DF = 4.0
 #: share of every stage's draws from the widened Laplace t, and its width in Laplace sds
@@ -192,30 +203,39 @@ class Importance:
 
 def sample(log_prob, center, cov, names, *, seed: int, n_keep: int) -> Importance:
     """Importance sampling of ``log_prob`` ((m, d) -> (m,), vectorised) from the MAP ``center``
-    (d,) and Laplace covariance ``cov`` (d, d): ``REFITS`` adaptations, the final
-    ``FINAL_DRAWS``, PSIS, the checks (module docstring), and ``n_keep`` draws resampled
-    systematically from the smoothed weights. Deterministic for ``seed``."""
+    (d,) and Laplace covariance ``cov`` (d, d): the Laplace stage, ``REFITS`` adapted stages whose
+    draws are pooled under their proposals' mixture, PSIS, the checks (module docstring), and
+    ``n_keep`` draws resampled systematically from the smoothed weights. Deterministic for
+    ``seed``."""
     rng = np.random.default_rng(seed)
     center, cov = np.asarray(center, float), np.asarray(cov, float)
     defensive = (DEFENSIVE, _laplace(center, cov, DEFENSIVE_SCALE))
-
-    def stage(parts, n):
-        x = _mixture_draw(parts, rng, n)
-        with np.errstate(over="ignore", invalid="ignore"):
-            w, k = psis_weights(np.asarray(log_prob(x), float) - _mixture_log_density(parts, x))
-        return x, w, k
-
-    x, w, k = stage([(1.0 - DEFENSIVE, _laplace(center, cov)), defensive], STAGE_DRAWS)
-    ks = [k]
+    parts = [(1.0 - DEFENSIVE, _laplace(center, cov)), defensive]
+    x = _mixture_draw(parts, rng, STAGE_DRAWS)
+    with np.errstate(over="ignore", invalid="ignore"):
+        lp = np.asarray(log_prob(x), float)
+        w, k = psis_weights(lp - _mixture_log_density(parts, x))
+    ks = []
+    # the adapted stages: proposals, draws, log posteriors, and the log density of every stage's
+    # draws under every proposal (logq[j][i]: proposal j at stage i's draws)
+    props, xs, lps, logq = [], [], [], []
     for i in range(REFITS):
+        ks.append(k)
         try:
-            fitted = _fitted(x, w, rng)
+            parts = [(1.0 - DEFENSIVE, _fitted(x, w, rng)), defensive]
         except np.linalg.LinAlgError:
             return _refused(x, ks, f"the weighted draws of stage {i + 1} have no covariance")
-        x, w, k = stage(
-            [(1.0 - DEFENSIVE, fitted), defensive], FINAL_DRAWS if i == REFITS - 1 else STAGE_DRAWS
-        )
-        ks.append(k)
+        new = _mixture_draw(parts, rng, STAGE_DRAWS)
+        with np.errstate(over="ignore", invalid="ignore"):
+            lps.append(np.asarray(log_prob(new), float))
+            for j, q in enumerate(props):
+                logq[j].append(_mixture_log_density(q, new))
+            props.append(parts)
+            xs.append(new)
+            logq.append([_mixture_log_density(parts, xi) for xi in xs])
+            x = np.concatenate(xs)
+            pooled = np.logaddexp.reduce([np.concatenate(row) for row in logq], axis=0)
+            w, k = psis_weights(np.concatenate(lps) - (pooled - math.log(len(props))))
     ess = float(1.0 / np.sum(w * w))
     per = weighted_ess(x, w)
     bulk = {n: float(v) for n, v in zip(names, per["bulk"], strict=True)}
@@ -228,7 +248,10 @@ def sample(log_prob, center, cov, names, *, seed: int, n_keep: int) -> Importanc
         problem = f"effective sample size {low:.0f} < {ESS_MIN:.0f}"
     u = (rng.random() + np.arange(n_keep)) / n_keep
     idx = np.minimum(np.searchsorted(np.cumsum(w), u), len(w) - 1)
-    return Importance(x[idx], k, ess, bulk, tail, len(x), tuple(ks[:-1]), problem)
+    # in random order: resampled in order they would run stage by stage, and the kept draws split
+    # into runs (their R-hat and ESS, ``uq._inference.convergence``) must not be the stages
+    idx = idx[rng.permutation(n_keep)]
+    return Importance(x[idx], k, ess, bulk, tail, len(x), tuple(ks), problem)
 
 
 def _refused(x, ks, reason) -> Importance:

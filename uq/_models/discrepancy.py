@@ -743,8 +743,8 @@ PROPOSAL = "held"
 #: the sampler's moves (weights of DE, DE-snooker, independence)
 MIX = INDEPENDENCE_MIX
 #: theta is first importance-sampled from the MAP (``uq._inference.importance``: PSIS-checked,
-#: emcee when the checks refuse it). Measured on data/n50 (2026-11-28, 12 seeds, load average
-#: about 10): Pareto k-hat 0.39-0.66, every sampled parameter's ESS at least 760, 9-12 CPU s against
+#: emcee when the checks refuse it). Measured on data/n50 (2026-11-28, 12 seeds, idle machine):
+#: Pareto k-hat 0.33-0.57, every sampled parameter's ESS at least 883, about 3 CPU s against
 #: 29-33 for emcee; the trial behind it: docs/speed.md
 IMPORTANCE = True
 #: walkers per ensemble and sampled parameter (``walkers_for``)

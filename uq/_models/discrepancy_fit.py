@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from uq._inference.summary import estimate, thin_rows
+from uq._inference.threads import side_by_side
 from uq._models import discrepancy_gp as gp
 from uq._models.linear_fit import BlockSpec
 from uq._models.surface import SurfaceFit, force_label
@@ -36,7 +37,7 @@ from uq._models.surface import summary as surface_summary
 from uq._physics.quantities import BAR_PA
 
 #: rows of draws whose grid values are computed at once (memory: chunk x nodes^2 floats)
-GRID_CHUNK = 256
+GRID_CHUNK = 64
 #: the seed stream of the virtual pressures' normals (with the fit's seed)
 GRID_STREAM = 29
 #: the deviation blocks in the order of their channels, with and without piston readings
@@ -206,8 +207,8 @@ class DiscrepancyFit(SurfaceFit):
 
     @functools.cached_property
     def nodes(self) -> tuple[np.ndarray, np.ndarray]:
-        """(node pressures (N,) ascending, deviations there (S, N, n_c)): the tested pressures and
-        the virtual ones between them."""
+        """(node pressures (N,) ascending, deviations there (n_c, S, N): channel by channel): the
+        tested pressures and the virtual ones between them."""
         tested = np.asarray(self.tested_pressures_bar, float)
         grid = gp.grid_nodes(tested)
         S, G, c = self.rows.size, grid.size, self.n_channels
@@ -215,20 +216,18 @@ class DiscrepancyFit(SurfaceFit):
         rng = np.random.default_rng((seed, GRID_STREAM))
         n_all = int(np.prod(self.coefficients.shape[:2]))
         xi = rng.standard_normal((n_all, G, c))[self.rows]
-        vg = np.empty((S, G, c))
-        for a in range(0, S, GRID_CHUNK):
+        dev, scale, length = self.tested_deviations, self.channel_scale, self.hyper["length"]
+
+        def chunk(a):
             b = slice(a, a + GRID_CHUNK)
-            vg[b] = gp.draw_on_grid(
-                self.tested_deviations[b],
-                self.channel_scale[b],
-                self.hyper["length"][b],
-                tested,
-                grid,
-                xi[b],
-            )
+            return gp.draw_on_grid(dev[b], scale[b], length[b], tested, grid, xi[b])
+
+        # draws apart: chunks side by side (numpy's linear algebra releases the interpreter)
+        vg = np.concatenate(side_by_side(chunk, range(0, S, GRID_CHUNK)))
         allp = np.concatenate([tested, grid])
         order = np.argsort(allp, kind="stable")
-        return allp[order], np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
+        values = np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
+        return allp[order], np.ascontiguousarray(values.transpose(2, 0, 1))
 
     def block_draws(
         self, height_m, p_bar, blocks=None, *, check: bool = True
@@ -239,20 +238,24 @@ class DiscrepancyFit(SurfaceFit):
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
-        shape, t, p = h.shape, self.geometry.t(h.ravel()), p.ravel()
+        shape, t = h.shape, self.geometry.t(h.ravel())
+        # the weights and the two-node means depend on the pressure alone: once per distinct one
+        p, back = np.unique(p.ravel(), return_inverse=True)
+        back = slice(None) if np.array_equal(back, np.arange(h.size)) else back.reshape(-1)
         nodes, values = self.nodes
         if nodes.size == 1:
             i, w = np.zeros(p.size, int), np.ones((self.rows.size, p.size, 2)) * [1.0, 0.0]
-            values = np.concatenate([values, values], axis=1)
+            values = np.concatenate([values, values], axis=2)
         else:
             i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
+        w0, w1 = np.ascontiguousarray(w[..., 0]), np.ascontiguousarray(w[..., 1])
         out = {}
         for sym in self.symbols if blocks is None else blocks:
             b = self.symbols.index(sym)
-            acc = np.zeros((self.rows.size, p.size))
+            acc = np.zeros((self.rows.size, h.size))
             for k in range(self.n_k):
-                series = values[:, :, b * self.n_k + k]
-                acc += (w[..., 0] * series[:, i] + w[..., 1] * series[:, i + 1]) * t**k
+                series = values[b * self.n_k + k]
+                acc += (w0 * series[:, i] + w1 * series[:, i + 1])[:, back] * t**k
             out[sym] = acc.reshape(-1, *shape)
         return out
 

@@ -62,6 +62,13 @@ def matern32(d, length, xp=np):
     return (1.0 + r) * xp.exp(-r)
 
 
+def per_distance(d, length):
+    """``matern32(d, l_s)`` for every draw's length scale ``length`` (S,): (S, *d.shape), the same
+    numbers, each computed once per distinct |d| (a grid's distances repeat)."""
+    u, inv = np.unique(np.abs(d), return_inverse=True)
+    return matern32(u, np.asarray(length, float)[:, None])[:, inv.reshape(np.shape(d))]
+
+
 def correlation(p_bar, length, xp=np):
     """R (T, T) of the tested pressures with the jitter on its diagonal."""
     p = xp.asarray(p_bar)
@@ -126,8 +133,7 @@ def draw_on_grid(values_T, scales, length, tested_bar, grid_bar, xi):
     if G == 0:
         return np.zeros((values_T.shape[0], 0, values_T.shape[2]))
     allp = np.concatenate([np.asarray(tested_bar, float), np.asarray(grid_bar, float)])
-    d = allp[:, None] - allp[None, :]
-    R = matern32(d[None], np.asarray(length, float)[:, None, None], np) + JITTER * np.eye(T + G)
+    R = per_distance(allp[:, None] - allp[None, :], length) + JITTER * np.eye(T + G)
     Rtt, Rgt, Rgg = R[:, :T, :T], R[:, T:, :T], R[:, T:, T:]
     W = np.linalg.solve(Rtt, np.swapaxes(Rgt, 1, 2))  # (S, T, G) = R_TT^-1 R_TG
     mean = np.einsum("stg,stc->sgc", W, values_T)
@@ -144,16 +150,17 @@ def two_point_weights(p_bar, nodes_bar, length):
     nodes = np.asarray(nodes_bar, float)
     i = np.clip(np.searchsorted(nodes, p, side="right") - 1, 0, nodes.size - 2)
     pa, pb = nodes[i], nodes[i + 1]
-    ls = np.asarray(length, float)[:, None]
-    ka, kb, r = (matern32(x, ls, np) for x in (p - pa, pb - p, pb - pa))
+    ka, kb, r = (per_distance(x, length) for x in (p - pa, pb - p, pb - pa))
     den = 1.0 - r**2
     with np.errstate(invalid="ignore", divide="ignore"):
         w = np.stack([(ka - r * kb) / den, (kb - r * ka) / den], axis=-1)
     # a length scale so long that 1 - r^2 cancels (l > 1e4 node steps): the two-point mean's limit,
     # linear interpolation
-    lin = np.stack(np.broadcast_arrays((pb - p) / (pb - pa), (p - pa) / (pb - pa)), axis=-1)
     far = (den < 1e-9)[..., None]
-    return i, np.where(far, np.broadcast_to(lin, w.shape), w)
+    if far.any():
+        lin = np.stack(np.broadcast_arrays((pb - p) / (pb - pa), (p - pa) / (pb - pa)), axis=-1)
+        w = np.where(far, np.broadcast_to(lin, w.shape), w)
+    return i, w
 
 
 def interpolation_sd(step_over_length: float) -> float:

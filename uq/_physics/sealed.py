@@ -31,6 +31,7 @@ form is an ``Element`` of six callables; posterior draws on a height x pressure 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partialmethod
 from typing import NamedTuple
 
 import numpy as np
@@ -125,8 +126,9 @@ def inextensible_rate(
 
 def _log_gap(element, x, p, v_shift, log_k, n, v_r, p_atm):
     """phi(p) = ln p_abs + n ln(V + V_r) - ln K and its derivative in p_u; phi is 0 on the path."""
-    V = element.volume_m3(x, p) + v_shift
-    Vp = element.dvolume_dp(x, p)
+    both = getattr(element, "volume_and_slope", None)  # a grid element's: one look-up for both
+    V, Vp = both(x, p) if both else (element.volume_m3(x, p), element.dvolume_dp(x, p))
+    V = V + v_shift
     room = V + v_r
     with np.errstate(divide="ignore", invalid="ignore"):
         phi = (
@@ -319,33 +321,29 @@ class GridElement:
         return i
 
     def _eval(self, name, x, p, deriv=False):
+        return self._evals(name, x, p, (deriv,))[0]
+
+    def _evals(self, name, x, p, derivs):
         ix = self._index(x)
         p = np.broadcast_to(np.asarray(p, float), (self.n_draws, ix.size))
         c = self._c[name]
         k = np.clip(
             np.searchsorted(self.pressure_grid, p, side="right") - 1, 0, self.pressure_grid.size - 2
         )
-        s = np.arange(self.n_draws)[:, None]
-        c0, c1, c2, c3 = (c[m, k, s, ix[None, :]] for m in range(4))
+        # the four coefficients of draw s, height ix, interval k: one look-up by flat index
+        at = (k * self.n_draws + np.arange(self.n_draws)[:, None]) * c.shape[3] + ix
+        c0, c1, c2, c3 = np.take(c.reshape(4, -1), at, axis=1)
         d = p - self.pressure_grid[k]
-        if deriv:
-            return (3.0 * c0 * d + 2.0 * c1) * d + c2
-        return ((c0 * d + c1) * d + c2) * d + c3
+        return [
+            (3.0 * c0 * d + 2.0 * c1) * d + c2 if deriv else ((c0 * d + c1) * d + c2) * d + c3
+            for deriv in derivs
+        ]
 
-    def force_N(self, x, p):
-        return self._eval("P", x, p)
-
-    def dforce_dx(self, x, p):
-        return self._eval("Px", x, p)
-
-    def dforce_dp(self, x, p):
-        return self._eval("P", x, p, deriv=True)
-
-    def volume_m3(self, x, p):
-        return self._eval("V", x, p)
-
-    def dvolume_dx(self, x, p):
-        return self._eval("Vx", x, p)
-
-    def dvolume_dp(self, x, p):
-        return self._eval("V", x, p, deriv=True)
+    force_N = partialmethod(_eval, "P")
+    dforce_dx = partialmethod(_eval, "Px")
+    dforce_dp = partialmethod(_eval, "P", deriv=True)
+    volume_m3 = partialmethod(_eval, "V")
+    dvolume_dx = partialmethod(_eval, "Vx")
+    dvolume_dp = partialmethod(_eval, "V", deriv=True)
+    #: ``volume_m3`` and ``dvolume_dp`` at the same points from one look-up (the gas law's steps)
+    volume_and_slope = partialmethod(_evals, "V", derivs=(False, True))

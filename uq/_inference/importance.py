@@ -248,8 +248,9 @@ def sample(log_prob, center, cov, names, *, seed: int, n_keep: int) -> Importanc
         problem = f"effective sample size {low:.0f} < {ESS_MIN:.0f}"
     u = (rng.random() + np.arange(n_keep)) / n_keep
     idx = np.minimum(np.searchsorted(np.cumsum(w), u), len(w) - 1)
-    # in random order: resampled in order they would run stage by stage, and the kept draws split
-    # into runs (their R-hat and ESS, ``uq._inference.convergence``) must not be the stages
+    # in random order: systematic resampling keeps the pooled draws' order, stage by stage, and
+    # the runs the kept draws are split into (R-hat and ESS, ``uq._inference.convergence``) must
+    # not be the stages
     idx = idx[rng.permutation(n_keep)]
     return Importance(x[idx], k, ess, bulk, tail, len(x), tuple(ks), problem)
 

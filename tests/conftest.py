@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import pytest
@@ -57,3 +58,15 @@ def small_cubics(small_campaign):
     import uq
 
     return uq.fit_campaign(small_campaign, seed=4, settings=uq.Settings(max_steps=200))
+
+
+@pytest.fixture(autouse=True)
+def _sigint_handler_kept():
+    """No test leaves the process's Ctrl-C handler changed: a later test's subprocesses would
+    inherit an ignored SIGINT (tests/cli/test_edges.py checks what a child does with it)."""
+    before = signal.getsignal(signal.SIGINT)
+    yield
+    after = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, before)
+    assert after is before, f"the test left SIGINT's handler changed: {before!r} -> {after!r}"
+

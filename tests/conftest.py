@@ -69,4 +69,3 @@ def _sigint_handler_kept():
     after = signal.getsignal(signal.SIGINT)
     signal.signal(signal.SIGINT, before)
     assert after is before, f"the test left SIGINT's handler changed: {before!r} -> {after!r}"
-

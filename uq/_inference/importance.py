@@ -125,8 +125,14 @@ def _fitted(x: np.ndarray, w: np.ndarray, rng: np.random.Generator) -> _T:
     return _T(center, scale, lam, mean, np.linalg.cholesky(cov))
 
 
-def _mixture_log_density(parts: list[tuple[float, _T]], x: np.ndarray) -> np.ndarray:
-    terms = np.stack([math.log(p) + q.log_density(x) for p, q in parts])
+def _mixture_log_density(parts: list[tuple[float, _T]], x: np.ndarray, known=None) -> np.ndarray:
+    """log of sum_j p_j q_j(x); ``known``: per part, its log density at ``x`` when already made
+    (None: computed here)."""
+    logs = [
+        q.log_density(x) if k is None else k
+        for (_, q), k in zip(parts, known or [None] * len(parts), strict=True)
+    ]
+    terms = np.stack([math.log(p) + lq for (p, _), lq in zip(parts, logs, strict=True)])
     top = np.max(terms, axis=0)
     top = np.where(np.isfinite(top), top, 0.0)
     return top + np.log(np.sum(np.exp(terms - top), axis=0))
@@ -216,9 +222,10 @@ def sample(log_prob, center, cov, names, *, seed: int, n_keep: int) -> Importanc
         lp = np.asarray(log_prob(x), float)
         w, k = psis_weights(lp - _mixture_log_density(parts, x))
     ks = []
-    # the adapted stages: proposals, draws, log posteriors, and the log density of every stage's
-    # draws under every proposal (logq[j][i]: proposal j at stage i's draws)
-    props, xs, lps, logq = [], [], [], []
+    # the adapted stages: proposals, draws, log posteriors, the defensive part's log density at
+    # each stage's draws (every proposal shares it), and the log density of every stage's draws
+    # under every proposal (logq[j][i]: proposal j at stage i's draws)
+    props, xs, lps, logd, logq = [], [], [], [], []
     for i in range(REFITS):
         ks.append(k)
         try:
@@ -228,11 +235,14 @@ def sample(log_prob, center, cov, names, *, seed: int, n_keep: int) -> Importanc
         new = _mixture_draw(parts, rng, STAGE_DRAWS)
         with np.errstate(over="ignore", invalid="ignore"):
             lps.append(np.asarray(log_prob(new), float))
+            logd.append(defensive[1].log_density(new))
             for j, q in enumerate(props):
-                logq[j].append(_mixture_log_density(q, new))
+                logq[j].append(_mixture_log_density(q, new, (None, logd[-1])))
             props.append(parts)
             xs.append(new)
-            logq.append([_mixture_log_density(parts, xi) for xi in xs])
+            logq.append(
+                [_mixture_log_density(parts, a, (None, b)) for a, b in zip(xs, logd, strict=True)]
+            )
             x = np.concatenate(xs)
             pooled = np.logaddexp.reduce([np.concatenate(row) for row in logq], axis=0)
             w, k = psis_weights(np.concatenate(lps) - (pooled - math.log(len(props))))

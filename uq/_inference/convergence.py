@@ -136,12 +136,12 @@ class Convergence:
     def warnings(self) -> list[str]:
         return self.messages()
 
-    def worst(self) -> tuple[float | None, float]:
-        """(largest R-hat, smallest bulk ESS) over every reported variable (R-hat None for
-        importance sampling, which has no chains)."""
-        rh = [float(np.max(v["r_hat"])) for v in self.variables.values() if "r_hat" in v]
+    def worst(self) -> tuple[float, float]:
+        """(largest R-hat, smallest bulk ESS) over every reported variable (importance draws'
+        too: their kept draws split into runs, ``importance_convergence``)."""
+        rh = max(float(np.max(v["r_hat"])) for v in self.variables.values())
         ess = min(float(np.min(v["ess_bulk"])) for v in self.variables.values())
-        return (max(rh) if rh else None), ess
+        return rh, ess
 
     def sampler_words(self) -> str | None:
         """One line on how theta was sampled when importance sampling was tried (None otherwise):

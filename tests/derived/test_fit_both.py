@@ -1,9 +1,11 @@
-"""``fit_both``'s cubics fitted in a worker process beside the model (``jobs``): the same fits and
-comparison, to the bit, as fitted in this process with the same seed."""
+"""``fit_both``'s cubics fitted in a worker process beside the model and compared with it there
+(``jobs``): the same fits and comparison, to the bit, as fitted in this process with the same
+seed; ``fitting_both`` hands the model's fit over before the comparison is done."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from uq._data.stand_description import PAPER_STAND
 from uq._derived import comparison
@@ -28,7 +30,9 @@ def test_cubics_fitted_in_a_worker_are_those_fitted_here(small_campaign, monkeyp
     here = both(1)
     monkeypatch.setattr(comparison, "WORKER_MIN_READINGS", 0)  # the small campaign: a worker
     started, beside = [], comparison.Beside
-    monkeypatch.setattr(comparison, "Beside", lambda *a: started.append(a[0]) or beside(*a))
+    monkeypatch.setattr(
+        comparison, "Beside", lambda *a, **k: started.append(a[0]) or beside(*a, **k)
+    )
     there = both(2)
     assert started, "the cubics were not fitted in a worker"
     assert there[2] == here[2]  # the comparison document, every float to the bit
@@ -38,3 +42,28 @@ def test_cubics_fitted_in_a_worker_are_those_fitted_here(small_campaign, monkeyp
     for a, b in zip(here[1].tests, there[1].tests, strict=True):
         assert a.convergence.converged == b.convergence.converged
     assert dumps_json(here[1].to_json()) == dumps_json(there[1].to_json())
+
+
+def test_fitting_both_gives_the_fit_first_and_the_same_comparison(small_campaign, monkeypatch):
+    """The caller works with the model's fit while the worker compares; what it then gets is
+    fit_both's, and a worker that fails says so here."""
+    kw = {"seed": 4, "settings": SHORT, "stand": PAPER_STAND, "model": "surface"}
+    monkeypatch.setattr(comparison, "WORKER_MIN_READINGS", 0)
+    here = comparison.fit_both(small_campaign, jobs=1, **kw)
+    with comparison.fitting_both(small_campaign, jobs=2, **kw) as (fit, compared):
+        assert fit.name == "surface" and fit.posterior is not None  # before any comparison
+        np.testing.assert_array_equal(fit.posterior.theta, here[0].posterior.theta)
+        cub, doc = compared()
+        assert compared()[1] is doc  # computed once
+    assert doc == here[2]
+    assert dumps_json(cub.to_json()) == dumps_json(here[1].to_json())
+
+
+def test_a_comparison_that_fails_in_the_worker_is_raised_here(small_campaign, monkeypatch):
+    monkeypatch.setattr(comparison, "WORKER_MIN_READINGS", 0)
+    send = comparison._send  # the worker is sent what it cannot compare
+    monkeypatch.setattr(comparison, "_send", lambda conn, fit: send(conn, "not a fit"))
+    kw = {"seed": 4, "settings": SHORT, "stand": PAPER_STAND, "model": "surface"}
+    with comparison.fitting_both(small_campaign, jobs=2, **kw) as (fit, compared):
+        with pytest.raises(AttributeError, match="'str' object has no attribute"):
+            compared()

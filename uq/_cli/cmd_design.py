@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
+from contextlib import nullcontext
 from types import SimpleNamespace
 
 from uq._cli.common import (
@@ -292,7 +293,7 @@ def command_design(args) -> int:
 
     from uq._cli.common import load, settings_from, stand_from
     from uq._derived import design as D
-    from uq._derived.comparison import fit_both, sampler_words
+    from uq._derived.comparison import fitting_both, sampler_words
     from uq._derived.model_check import predictive_check
     from uq._io.files import emit_json
 
@@ -318,27 +319,28 @@ def command_design(args) -> int:
     # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
-    comparison = None
     if rec.has_piston and not args.no_compare and entry.over_all_tests:
-        # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics
-        # (fitted beside the model, in a worker)
-        fit, _, comparison = fit_both(
+        # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics,
+        # fitted beside the model and compared with it in a worker while the design is worked out
+        both = fitting_both(
             rec, seed=args.seed, settings=settings, stand=stand, model=answering, jobs=None
         )
-    else:
+    else:  # no comparison (None): the cubics have no other model fitted to rank against
         fit = registry.fit(answering, rec, seed=args.seed, settings=settings, stand=stand)
-    check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
-    model = fit.on_draws(args.draws)
-    curves = None
-    if rec.has_piston:
-        design = _design_from(args)
-        grid = D.DesignGrid(model, x_c)
-        doc, curves = D.document_and_curves(model, design, charges, grid, sheet=bool(args.out))
-    else:
-        doc = _force_only(args, model)
-    doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
-    doc["tested_pressures_bar"] = tested
-    doc["comparison"] = comparison  # None for the cubics: no other model fitted to rank against
+        both = nullcontext((fit, lambda: (None, None)))
+    with both as (fit, compared):
+        check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
+        model = fit.on_draws(args.draws)
+        curves = None
+        if rec.has_piston:
+            design = _design_from(args)
+            grid = D.DesignGrid(model, x_c)
+            doc, curves = D.document_and_curves(model, design, charges, grid, sheet=bool(args.out))
+        else:
+            doc = _force_only(args, model)
+        doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
+        doc["tested_pressures_bar"] = tested
+        doc["comparison"] = compared()[1]
     doc["model_check"] = check
     doc["source"] = _source(args, rec, fit)
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)

@@ -25,9 +25,11 @@ it the same way for all of them:
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
-from contextlib import nullcontext
+import multiprocessing
+import threading
 
 import numpy as np
 from scipy.special import logsumexp
@@ -207,11 +209,66 @@ WORKER_MIN_READINGS = 250
 
 def _cubics(rec, *, seed: int, settings: Settings, stand):
     """The per-pressure cubics of :func:`force_side` of ``rec`` with the pointwise terms
-    :func:`compare` reads (made here: in a worker, so that they come back with the fit)."""
+    :func:`compare` reads."""
     cub = fit_campaign(force_side(rec), seed=seed, settings=settings, stand=stand)
     for t in cub.tests:
         t.posterior.loglik_total(), t.posterior.loglik_loo
     return cub
+
+
+def _cubics_then_compare(rec, asked, *, seed: int, settings: Settings, stand):
+    """The worker of :func:`fitting_both`: the cubics, then, once the model's fit comes through
+    the pipe ``asked``, the comparison of the two: (cubics, comparison)."""
+    cub = _cubics(rec, seed=seed, settings=settings, stand=stand)
+    fit = asked.recv()
+    asked.close()
+    return cub, compare(fit, cub, seed=seed, settings=settings)
+
+
+def _send(conn, obj) -> None:
+    """``obj`` down the pipe ``conn`` (in a thread: the worker reads it only after its own fit); a
+    worker that died is reported by its :meth:`~uq._io.processes.Beside.result`."""
+    with contextlib.suppress(OSError):
+        conn.send(obj)
+    conn.close()
+
+
+@contextlib.contextmanager
+def fitting_both(rec, *, seed: int, settings: Settings, stand, model=None, jobs: int | None = 1):
+    """:func:`fit_both` in two steps, for a caller with work of its own that needs the model's fit
+    but not yet the comparison: yields (model fit, ``compared``), ``compared()`` -> (cubics,
+    comparison), computed once.
+
+    With a worker (``jobs`` >= 2 and at least ``WORKER_MIN_READINGS`` readings), the worker fits
+    the cubics beside the model's fit here and then, sent the model's fit, compares the two while
+    the caller goes on; without, ``compared()`` fits the cubics and compares here. The same fits
+    and comparison, to the bit."""
+    name = registry.default("margin") if model is None else model
+    jobs = cores() if jobs is None else jobs
+    if jobs < 2 or rec.n_points < WORKER_MIN_READINGS:
+        fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
+
+        def here():
+            cub = _cubics(rec, seed=seed, settings=settings, stand=stand)
+            return cub, compare(fit, cub, seed=seed, settings=settings)
+
+        yield fit, functools.cache(here)
+        return
+    asked, ask = multiprocessing.get_context("spawn").Pipe(duplex=False)
+    what = "fitting the per-pressure cubics and comparing them with the model"
+    kw = {"seed": seed, "settings": settings, "stand": stand}
+    with Beside(what, _cubics_then_compare, rec, asked, **kw) as worker:
+        asked.close()  # the worker's copy is left
+        fit = registry.fit(name, rec, **kw)
+        sender = threading.Thread(target=_send, args=(ask, fit), daemon=True)
+        sender.start()
+
+        @functools.cache
+        def compared():
+            sender.join()
+            return worker.result()
+
+        yield fit, compared
 
 
 def fit_both(
@@ -231,26 +288,21 @@ def fit_both(
     fitted to :func:`force_side` of ``rec``: a catalogue's own cubic fit (its volume column fitted
     as L) is not the comparison's, and a given one is then replaced.
 
-    ``jobs``: processes that fit (None: one per CPU); with two or more, both fits to make and at
-    least ``WORKER_MIN_READINGS`` readings, the cubics are fitted in a spawned worker process
-    beside the model's fit here (``uq._io.processes.Beside``): the same fits and comparison, to
-    the bit. A script that asks for it needs an ``if __name__ == "__main__":`` guard."""
-    fit_cubics = functools.partial(_cubics, rec, seed=seed, settings=settings, stand=stand)
-    if cubic_fit is not None and force_side(rec) is rec:
-        fit_cubics = None
-    jobs = cores() if jobs is None else jobs
-    beside = (
-        fit_cubics is not None
-        and surface_fit is None
-        and jobs >= 2
-        and rec.n_points >= WORKER_MIN_READINGS
-    )
-    with Beside("fitting the per-pressure cubics", fit_cubics) if beside else nullcontext() as w:
-        if surface_fit is None:
-            name = registry.default("margin") if model is None else model
-            surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
-        if fit_cubics is not None:
-            cubic_fit = w.result() if beside else fit_cubics()
+    ``jobs``: processes that fit (None: one per CPU); with two or more, no fit given and at least
+    ``WORKER_MIN_READINGS`` readings, the cubics are fitted in a spawned worker process beside the
+    model's fit here and compared with it there (:func:`fitting_both`; ``uq._io.processes.Beside``):
+    the same fits and comparison, to the bit. A script that asks for it needs an
+    ``if __name__ == "__main__":`` guard."""
+    if surface_fit is None and (cubic_fit is None or force_side(rec) is not rec):
+        with fitting_both(
+            rec, seed=seed, settings=settings, stand=stand, model=model, jobs=jobs
+        ) as (fit, compared):
+            return (fit, *compared())
+    if surface_fit is None:
+        name = registry.default("margin") if model is None else model
+        surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
+    if cubic_fit is None or force_side(rec) is not rec:
+        cubic_fit = _cubics(rec, seed=seed, settings=settings, stand=stand)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 

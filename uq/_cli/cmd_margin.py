@@ -383,7 +383,7 @@ def _check_usage(args) -> None:
 def command_margin(args) -> int:
     from uq._cli.cmd_design import print_check
     from uq._cli.common import load
-    from uq._derived.model_check import predictive_check, unavailable
+    from uq._derived.model_check import unavailable
     from uq._io.files import emit_json
 
     _check_usage(args)
@@ -425,10 +425,11 @@ def command_margin(args) -> int:
             seed=args.seed,
             settings=settings_from(args),
             stand=stand,
-            jobs=None,  # the cubics fitted beside the model, in a worker (fit_both)
+            jobs=None,  # the cubics fitted beside the model, and compared, in a worker
+            check_seed=args.seed,  # the answering model at the tested points
         )
         source = rec.path
-        check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points
+        check = diagnostics["model_check"]
     # every answer before anything is written; with a queries file each row gets its own answer
     # or its own refusal (a row the model cannot answer does not abort the others)
     results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]

@@ -389,6 +389,8 @@ def sealed_paths(
     vol = grid.volume(design, v_c)
     # the gas law is solved height by height: the element is needed only at the asked heights and x_c
     sub = np.unique([int(np.argmin(np.abs(grid.heights - x))) for x in (*heights, grid.height_m)])
+    if sub.size == grid.heights.size:  # every height: the grid's arrays as they are, not copies
+        sub = slice(None)
     parts = [[] for _ in charges]
     x_c = np.array([grid.height_m])
     for lo in range(0, grid.n_draws, CHUNK_DRAWS):

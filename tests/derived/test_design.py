@@ -426,33 +426,3 @@ def test_isobaric_volume_increment_is_the_closed_form_at_every_table_height():
         got = r["volume_increment_l"]
         assert got["mean"] == pytest.approx(exact.mean(), rel=1e-12, abs=1e-15)
         assert got["sd"] == pytest.approx(exact.std(ddof=1), rel=1e-12, abs=1e-15)
-
-
-def test_grid_slopes_and_table_estimates_are_the_plain_computations_to_the_bit():
-    """The shortcuts of the design grid and the isobaric table give the numbers of the plain
-    computations exactly: dP/dx at the grid heights is scipy's ``CubicSpline(...).derivative()``
-    evaluated there, and every table estimate is ``estimate`` of that (pressure, height)'s draws."""
-    from scipy.interpolate import CubicSpline
-
-    from uq._inference.summary import estimate
-
-    rng = np.random.default_rng(5)
-    wobble = rng.standard_normal((50, 3))
-
-    class Wobbly(SpringModel):  # draws that differ, and not cubic in x (the spline is not exact)
-        def _draws(self, a):
-            a = np.asarray(a, float)[None]
-            w0, w1, w2 = (w.reshape(-1, *[1] * (a.ndim - 1)) for w in wobble.T)
-            return a * (1 + 0.01 * w0) + 30.0 * w1 + 5.0 * w2 * np.sqrt(np.abs(a))
-
-    m = Wobbly(ThermoSpring(), n_draws=50)
-    grid = DesignGrid(m, 0.112)
-    plain = CubicSpline(grid.heights, grid.force, axis=1).derivative()(grid.heights)
-    assert np.array_equal(grid.dforce_dx, plain)
-    xs, ps = np.array([0.07, 0.1, 0.112, 0.15]), [1.0, 4.5]
-    rows = isobaric_table(m, ps, xs, 0.112)
-    for row in rows:
-        load = m.force_draws(np.array([row["height_m"]]), np.array([row["pressure_bar"]]))[:, 0]
-        for key, draws in (("load_N", load), ("feff_m2", load / (row["pressure_bar"] * BAR))):
-            want = estimate(draws)
-            assert all(row[key][k] == want[k] for k in want), key

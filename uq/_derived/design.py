@@ -34,7 +34,7 @@ import itertools
 from dataclasses import MISSING, dataclass, fields, replace
 
 import numpy as np
-from scipy.interpolate import CubicSpline, PPoly
+from scipy.interpolate import CubicSpline
 
 from uq._derived.margin import pressure_needed
 from uq._inference.summary import band, estimate
@@ -191,19 +191,6 @@ def _heights(lo: float, hi: float, x_c: float, step: float) -> np.ndarray:
     return xs
 
 
-def _knot_slopes(spline: CubicSpline) -> np.ndarray:
-    """``spline.derivative()(spline.x)`` for a spline along axis 1 of (S, H, Pn), without the
-    derivative's coefficients and the evaluation over every interval: at the start of an interval
-    the derivative is its coefficient of the linear term (what scipy's evaluation gives, 0.0 + it,
-    to the bit); only the last knot, the end of the last interval, is evaluated."""
-    c = spline.c  # (4, H - 1, S, Pn)
-    out = np.empty((c.shape[2], c.shape[1] + 1, c.shape[3]))
-    out[:, :-1] = 0.0 + c[2].transpose(1, 0, 2)
-    last = PPoly(c[:, -1:], spline.x[-2:]).derivative()(spline.x[-1:])  # (1, S, Pn)
-    out[:, -1] = last[0]
-    return out
-
-
 class DesignGrid:
     """The model's draws on a height x pressure grid around one design height (module docstring, 1).
 
@@ -232,7 +219,7 @@ class DesignGrid:
         X, P = np.meshgrid(self.heights, self.pressures_bar, indexing="ij")
         self.force = np.asarray(model.force_draws(X, P), float)
         self.area = np.asarray(model.volume_area_draws(X, P), float)
-        self.dforce_dx = _knot_slopes(CubicSpline(self.heights, self.force, axis=1))
+        self.dforce_dx = CubicSpline(self.heights, self.force, axis=1).derivative()(self.heights)
         self.n_draws = self.force.shape[0]
         self._volumes = {}
         self._prior_sd = {}

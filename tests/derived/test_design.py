@@ -426,3 +426,31 @@ def test_isobaric_volume_increment_is_the_closed_form_at_every_table_height():
         got = r["volume_increment_l"]
         assert got["mean"] == pytest.approx(exact.mean(), rel=1e-12, abs=1e-15)
         assert got["sd"] == pytest.approx(exact.std(ddof=1), rel=1e-12, abs=1e-15)
+
+
+def test_table_estimates_are_each_cells_estimate_to_the_bit():
+    """The isobaric table summarises a pressure's heights in one call per quantity; every cell is
+    ``estimate`` of that (pressure, height)'s draws, exactly (draws that differ, 50 of them)."""
+    from uq._inference.summary import estimate
+
+    wobble = np.random.default_rng(5).standard_normal((50, 3))
+
+    class Wobbly(SpringModel):
+        def _draws(self, a):
+            a = np.asarray(a, float)[None]
+            w0, w1, w2 = (w.reshape(-1, *[1] * (a.ndim - 1)) for w in wobble.T)
+            return a * (1 + 0.01 * w0) + 30.0 * w1 + 5.0 * w2 * np.sqrt(np.abs(a))
+
+    m = Wobbly(ThermoSpring(), n_draws=50)
+    rows = isobaric_table(m, [1.0, 4.5], np.array([0.07, 0.1, 0.112, 0.15]), 0.112)
+    assert len(rows) == 8
+    for row in rows:
+        load = m.force_draws(np.array([row["height_m"]]), np.array([row["pressure_bar"]]))[:, 0]
+        area = m.volume_area_draws(np.array([row["height_m"]]), np.array([row["pressure_bar"]]))
+        for key, draws in (
+            ("load_N", load),
+            ("feff_m2", load / (row["pressure_bar"] * BAR)),
+            ("volume_area_m2", area[:, 0]),
+        ):
+            want = estimate(draws)
+            assert all(row[key][k] == want[k] for k in want), key

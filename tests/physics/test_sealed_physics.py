@@ -238,3 +238,46 @@ def test_frequency_transmissibility_and_refusals():
         sealed_path(potential_element(0.028), HEIGHTS, Charge(X_C, P_C, 3.3e-3, 0.9))
     with pytest.raises(InputError, match="^volume_l:"):
         sealed_path(potential_element(0.028), HEIGHTS, Charge(X_C, P_C, -1e-3))
+
+
+def test_grid_element_drops_finished_draws_to_the_same_numbers(monkeypatch):
+    """Draws whose every height has converged leave Newton's arrays (``GridElement.on_rows``); the
+    path is the one the element gives without that (the same methods as a plain ``Element``),
+    to the bit, in range and out of it."""
+    S = 40  # draws of their own: compliance, volume, exponent and charge, each its own steps
+    el = potential_element(0.027, -0.22, np.linspace(0.0, 60e-6 / 1e5, S)[:, None], C1, -150.0)
+    xs = np.sort(np.append(np.linspace(0.065, 0.155, 19), X_C))
+    ps = np.linspace(0.1e5, 10e5, 12)
+    X, P = np.meshgrid(xs, ps, indexing="ij")
+    arrays = [
+        np.broadcast_to(f(X.reshape(1, -1), P.reshape(1, -1)), (S, X.size)).reshape(S, *X.shape)
+        for f in (el.force_N, el.dforce_dx, el.volume_m3, el.dvolume_dx)
+    ]
+    grid = GridElement(xs, ps, *arrays)
+    rng = np.random.default_rng(3)
+    charge = Charge(
+        X_C,
+        rng.uniform(1e5, 8e5, S),
+        rng.uniform(1e-3, 6e-3, S),
+        rng.uniform(1.0, 1.4, S),
+        5e-4,
+    )
+    narrowed = []
+    on_rows = GridElement.on_rows
+    monkeypatch.setattr(
+        GridElement, "on_rows", lambda self, rows: narrowed.append(len(rows)) or on_rows(self, rows)
+    )
+    a = sealed_path(grid, xs, charge, pressure_bounds_pa=grid.pressure_bounds_pa)
+    plain = Element(
+        grid.force_N,
+        grid.dforce_dx,
+        grid.dforce_dp,
+        grid.volume_m3,
+        grid.dvolume_dx,
+        grid.dvolume_dp,
+    )
+    b = sealed_path(plain, xs, charge, pressure_bounds_pa=grid.pressure_bounds_pa)
+    assert narrowed and min(narrowed) < S  # the finished draws did leave
+    assert a.in_range.any() and not a.in_range.all()
+    for name in a._fields:
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name

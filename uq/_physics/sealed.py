@@ -30,6 +30,7 @@ form is an ``Element`` of six callables; posterior draws on a height x pressure 
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from functools import partialmethod
 from typing import NamedTuple
@@ -208,23 +209,36 @@ def sealed_path(
         )
     p = np.where(np.isfinite(guess) & (guess > lo) & (guess < hi), guess, 0.5 * (lo + hi))
     done = ~in_range
+    # Newton's steps point by point; the draws (rows) whose every height is done drop out of the
+    # arrays (an element that can give a subset of its draws, ``on_rows``): the same numbers
+    rows, el, per_draw = np.arange(S), element, (v_shift, log_k, n)
+    p_r, lo_r, hi_r, done_r = p, lo, hi, done
     for _ in range(max_iter):
-        phi, dphi = _log_gap(element, x, p, v_shift, log_k, n, v_r, p_atm)
-        lo = np.where(phi < 0, p, lo)
-        hi = np.where(phi > 0, p, hi)
+        phi, dphi = _log_gap(el, x, p_r, *per_draw, v_r, p_atm)
+        lo_r = np.where(phi < 0, p_r, lo_r)
+        hi_r = np.where(phi > 0, p_r, hi_r)
         with np.errstate(divide="ignore", invalid="ignore"):
-            p_new = p - phi / dphi
-        bad = ~np.isfinite(p_new) | (p_new <= lo) | (p_new >= hi)
-        p_new = np.where(bad, 0.5 * (lo + hi), p_new)
-        step = np.abs(p_new - p)
-        p = np.where(done, p, p_new)
-        done |= (step <= rtol * (np.abs(p) + p_atm)) | (phi == 0)
-        if done.all():
+            p_new = p_r - phi / dphi
+        bad = ~np.isfinite(p_new) | (p_new <= lo_r) | (p_new >= hi_r)
+        p_new = np.where(bad, 0.5 * (lo_r + hi_r), p_new)
+        step = np.abs(p_new - p_r)
+        p_r = np.where(done_r, p_r, p_new)
+        done_r |= (step <= rtol * (np.abs(p_r) + p_atm)) | (phi == 0)
+        if done_r.all():
             break
+        going = ~done_r.all(axis=1)
+        if hasattr(element, "on_rows") and going.sum() <= 0.75 * going.size:
+            p[rows], done[rows] = p_r, done_r
+            rows = rows[going]
+            el = element.on_rows(rows)
+            per_draw = tuple(a[rows] if a.shape[0] == S else a for a in (v_shift, log_k, n))
+            p_r, lo_r, hi_r, done_r = p_r[going], lo_r[going], hi_r[going], done_r[going]
     else:
+        p[rows], done[rows] = p_r, done_r
         raise RuntimeError(
             f"sealed path: the gas law (S1) did not converge at {int((~done).sum())} of {done.size} (draw, height) points"
         )
+    p[rows] = p_r
     # heights whose path leaves the bounds are evaluated at the charge pressure (always defined), then NaN
     p = np.where(in_range, p, np.broadcast_to(p_c, shape))
     V = element.volume_m3(x, p) + v_shift
@@ -306,6 +320,16 @@ class GridElement:
                 )
             self._c[name] = CubicSpline(self.pressure_grid, a, axis=2).c  # (4, Pn-1, S, H)
         self.n_draws = int(np.asarray(force).shape[0])
+        self._rows = np.arange(self.n_draws)  # the draw each row of p_pa is evaluated for
+        self._at_heights = {}  # the grid indices of the heights asked (the same ones every step)
+
+    def on_rows(self, rows) -> GridElement:
+        """The element whose row i of p_pa is draw ``rows[i]`` of this one, its coefficients shared
+        (not copied): the draws still iterating in :func:`sealed_path`."""
+        out = copy.copy(self)
+        out._rows = self._rows[np.asarray(rows, int)]
+        out.n_draws = out._rows.size
+        return out
 
     @property
     def pressure_bounds_pa(self) -> tuple[float, float]:
@@ -313,6 +337,12 @@ class GridElement:
 
     def _index(self, x):
         x = np.asarray(x, float).reshape(-1)
+        key = x.tobytes()
+        if key not in self._at_heights:
+            self._at_heights[key] = self._find(x)
+        return self._at_heights[key]
+
+    def _find(self, x):
         i = np.clip(np.searchsorted(self.height_grid, x), 0, self.height_grid.size - 1)
         j = np.clip(i - 1, 0, self.height_grid.size - 1)
         i = np.where(np.abs(self.height_grid[j] - x) < np.abs(self.height_grid[i] - x), j, i)
@@ -331,7 +361,7 @@ class GridElement:
             np.searchsorted(self.pressure_grid, p, side="right") - 1, 0, self.pressure_grid.size - 2
         )
         # the four coefficients of draw s, height ix, interval k: one look-up by flat index
-        at = (k * self.n_draws + np.arange(self.n_draws)[:, None]) * c.shape[3] + ix
+        at = (k * c.shape[2] + self._rows[:, None]) * c.shape[3] + ix
         c0, c1, c2, c3 = np.take(c.reshape(4, -1), at, axis=1)
         d = p - self.pressure_grid[k]
         return [

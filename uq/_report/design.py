@@ -33,6 +33,29 @@ PAGE = "design.html"
 OUTPUTS = ("design_*.png", "design_*.svg", PAGE, "design.csv", "design.json")
 
 
+#: the figures' margins, inches (left, right, bottom, top) and the gap between two panels: fixed,
+#: room for a title, axis labels and five-digit tick labels (a layout pass, matplotlib's
+#: constrained layout, drew every figure twice for margins that come out about the same)
+MARGINS_IN = (0.8, 0.2, 0.55, 0.35)
+GAP_IN = 0.85
+
+
+def _subplots(ncols: int, size_in: tuple[float, float]):
+    """A figure of ``ncols`` panels side by side with the sheet's fixed margins."""
+    w, h = size_in
+    left, right, bottom, top = MARGINS_IN
+    fig, axes = pyplot().subplots(1, ncols, figsize=size_in)
+    panel = (w - left - right - (ncols - 1) * GAP_IN) / ncols
+    fig.subplots_adjust(
+        left=left / w,
+        right=1 - right / w,
+        bottom=bottom / h,
+        top=1 - top / h,
+        wspace=GAP_IN / panel,
+    )
+    return fig, axes
+
+
 def _colours(n: int):
     plt = pyplot()
     cmap = plt.get_cmap("viridis")
@@ -49,8 +72,7 @@ def figure_sealed_curves(doc: dict, curves: dict):
     """The sealed load-deflection curves, one per charge pressure of the chart (charged at the
     design height), each with its 90 % band, and the design charge's own curve in black (dashed
     when the charge was not a tested pressure); the design height dotted."""
-    plt = pyplot()
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.0, 4.4), layout="constrained")
+    fig, (ax, ax2) = _subplots(2, (11.0, 4.4))
     cols = _colours(len(curves))
     design = doc.get("sealed_curve")
     drawn = [
@@ -90,9 +112,8 @@ def figure_sealed_curves(doc: dict, curves: dict):
 def figure_frequency_chart(doc: dict):
     """Natural frequency against load at the design height, one point per charge pressure with
     its 90 % intervals in both directions (the catalogue's chart)."""
-    plt = pyplot()
     rows = doc["frequency_chart"]["rows"]
-    fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
+    fig, ax = _subplots(1, (7.2, 4.4))
     L = np.array([[r["load_N"][k] for k in ("mean", "q05", "q95")] for r in rows]) * 1e-3
     F = np.array([[r["natural_frequency_Hz"][k] for k in ("mean", "q05", "q95")] for r in rows])
     ax.fill_between(
@@ -148,10 +169,9 @@ def figure_frequency_chart(doc: dict):
 
 def figure_isobaric(doc: dict):
     """The isobaric loads of the table against height, one line per pressure, 90 % bands."""
-    plt = pyplot()
     rows = doc["isobaric"]
     ps = sorted({r["pressure_bar"] for r in rows})
-    fig, ax = plt.subplots(figsize=(7.2, 4.4), layout="constrained")
+    fig, ax = _subplots(1, (7.2, 4.4))
     for c, p in zip(_colours(len(ps)), ps, strict=True):
         rr = sorted((r for r in rows if r["pressure_bar"] == p), key=lambda r: r["height_m"])
         x = np.array([r["height_m"] for r in rr]) * 1e3

@@ -340,19 +340,25 @@ def command_design(args) -> int:
             doc = _force_only(args, model)
         doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
         doc["tested_pressures_bar"] = tested
+        source = _source(args, rec, fit)
+        if args.out:  # the sheet's figures need no comparison: drawn while it runs
+            from uq._report.design import design_figures, write_design_sheet
+
+            figures = design_figures(
+                doc | {"source": source}, curves=curves, figure_format=args.figures
+            )
         doc["comparison"] = compared()[1]
     doc["model_check"] = check
-    doc["source"] = _source(args, rec, fit)
+    doc["source"] = source
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
     if args.out:
-        from uq._report.design import write_design_sheet
-
         page = write_design_sheet(
             doc,
             args.out,
             curves=curves,
             reconstructed=rec.reconstructed,
             figure_format=args.figures,
+            figures=figures,
         )
         print(f"  data sheet: {page}")
     if line := sampler_words(fit):

@@ -334,18 +334,11 @@ def _isobaric_matrix(doc: dict, key: str, scale: float):
     return ps, out, [_is_tested(doc, p) for p in ps]
 
 
-def write_design_sheet(
-    doc: dict,
-    out_dir,
-    *,
-    curves: dict | None = None,
-    reconstructed: bool = False,
-    figure_format: str = "png",
-) -> Path:
-    """``out_dir/design.html`` with ``design.csv``, ``design.json`` and the figures (PNG or SVG),
-    written together into a staged folder and moved in at the end; returns the page's path."""
+def design_figures(doc: dict, *, curves: dict | None = None, figure_format: str = "png") -> dict:
+    """The sheet's figures, encoded ({stem: Figure}): they need the design's numbers and the
+    sampler's verdict (``doc["source"]``), not the model comparison, so ``uq design`` draws them
+    while the comparison is still running in its worker."""
     check_format(figure_format)
-    out = Path(out_dir)
     sealed = doc.get("rate_N_per_m") is not None
     figs = {"design_isobaric": (figure_isobaric(doc), "isobaric load against height by pressure")}
     if sealed:
@@ -358,10 +351,29 @@ def write_design_sheet(
     if not doc["source"]["converged"]:
         for fig, _ in figs.values():
             stamp_unconverged(fig, f"{doc['model']}'s sampler")
-    figures = {
+    return {
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, (fig, alt) in figs.items()
     }
+
+
+def write_design_sheet(
+    doc: dict,
+    out_dir,
+    *,
+    curves: dict | None = None,
+    reconstructed: bool = False,
+    figure_format: str = "png",
+    figures: dict | None = None,
+) -> Path:
+    """``out_dir/design.html`` with ``design.csv``, ``design.json`` and the figures (PNG or SVG;
+    ``figures``: :func:`design_figures` of ``doc`` when drawn already), written together into a
+    staged folder and moved in at the end; returns the page's path."""
+    check_format(figure_format)
+    out = Path(out_dir)
+    sealed = doc.get("rate_N_per_m") is not None
+    if figures is None:
+        figures = design_figures(doc, curves=curves, figure_format=figure_format)
     tables = {
         key: _isobaric_matrix(doc, key, scale)
         for key, scale in (

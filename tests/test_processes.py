@@ -20,6 +20,14 @@ def test_the_answer_comes_back():
         assert w.result() == 10
 
 
+def test_a_function_named_is_imported_in_the_worker():
+    with Beside("joining", "os.path:join", "a", "b") as w:
+        assert w.result() == os.path.join("a", "b")
+    with Beside("importing", "no_such_module_here:f") as w:
+        with pytest.raises(ModuleNotFoundError, match="no_such_module_here"):
+            w.result()
+
+
 def test_an_error_in_the_worker_is_raised_here_with_its_parameter():
     with Beside("refusing", _refuse, "load_N: expected a positive load", "load_N") as w:
         with pytest.raises(InputError, match="^load_N: expected") as e:

@@ -4,11 +4,14 @@ seed; ``fitting_both`` hands the model's fit over before the comparison is done.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from uq._data.stand_description import PAPER_STAND
-from uq._derived import comparison
+from uq._derived import comparison, comparison_worker
 from uq._inference.sampler import Settings
 from uq._io.files import dumps_json
 
@@ -28,10 +31,10 @@ def test_cubics_fitted_in_a_worker_are_those_fitted_here(small_campaign, monkeyp
         )
 
     here = both(1)
-    monkeypatch.setattr(comparison, "WORKER_MIN_READINGS", 0)  # the small campaign: a worker
-    started, beside = [], comparison.Beside
+    monkeypatch.setattr(comparison_worker, "WORKER_MIN_READINGS", 0)  # the small campaign
+    started, beside = [], comparison_worker.Beside
     monkeypatch.setattr(
-        comparison, "Beside", lambda *a, **k: started.append(a[0]) or beside(*a, **k)
+        comparison_worker, "Beside", lambda *a, **k: started.append(a[0]) or beside(*a, **k)
     )
     there = both(2)
     assert started, "the cubics were not fitted in a worker"
@@ -48,7 +51,7 @@ def test_fitting_both_gives_the_fit_first_and_the_same_comparison(small_campaign
     """The caller works with the model's fit while the worker compares; what it then gets is
     fit_both's, and a worker that fails says so here."""
     kw = {"seed": 4, "settings": SHORT, "stand": PAPER_STAND, "model": "surface"}
-    monkeypatch.setattr(comparison, "WORKER_MIN_READINGS", 0)
+    monkeypatch.setattr(comparison_worker, "WORKER_MIN_READINGS", 0)
     here = comparison.fit_both(small_campaign, jobs=1, **kw)
     with comparison.fitting_both(small_campaign, jobs=2, **kw) as (fit, compared):
         assert fit.name == "surface" and fit.posterior is not None  # before any comparison
@@ -60,10 +63,34 @@ def test_fitting_both_gives_the_fit_first_and_the_same_comparison(small_campaign
 
 
 def test_a_comparison_that_fails_in_the_worker_is_raised_here(small_campaign, monkeypatch):
-    monkeypatch.setattr(comparison, "WORKER_MIN_READINGS", 0)
-    send = comparison._send  # the worker is sent what it cannot compare
-    monkeypatch.setattr(comparison, "_send", lambda conn, fit: send(conn, "not a fit"))
+    monkeypatch.setattr(comparison_worker, "WORKER_MIN_READINGS", 0)
+    send = comparison_worker._send  # the worker is sent what it cannot compare
+    monkeypatch.setattr(comparison_worker, "_send", lambda conn, fit: send(conn, "not a fit"))
     kw = {"seed": 4, "settings": SHORT, "stand": PAPER_STAND, "model": "surface"}
     with comparison.fitting_both(small_campaign, jobs=2, **kw) as (fit, compared):
         with pytest.raises(AttributeError, match="'str' object has no attribute"):
             compared()
+
+
+def test_a_worker_started_first_gives_the_same_fits(small_campaign):
+    """A command starts the worker before it imports JAX (comparison_worker.start) and hands it
+    to fitting_both: the same comparison as a worker fitting_both starts itself."""
+    kw = {"seed": 4, "settings": SHORT, "stand": PAPER_STAND}
+    here = comparison.fit_both(small_campaign, jobs=1, model="surface", **kw)
+    worker = comparison_worker.ComparisonWorker(small_campaign, **kw)  # whatever its size
+    with worker:
+        there = comparison.fit_both(small_campaign, model="surface", worker=worker, **kw)
+    assert there[2] == here[2]
+    assert dumps_json(there[1].to_json()) == dumps_json(here[1].to_json())
+
+
+def test_the_worker_is_named_and_started_without_jax():
+    """The module that starts the worker imports neither JAX nor the models: a command starts it
+    first, and the worker's imports run beside its own."""
+    code = (
+        "import sys, uq._derived.comparison_worker as w; "
+        "print(sorted(m for m in ('jax', 'uq._derived.comparison', 'uq._models.cubic_fit') "
+        "if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -289,13 +289,8 @@ def _check_before_fit(args, rec) -> None:
 
 
 def command_design(args) -> int:
-    import numpy as np
-
     from uq._cli.common import load, settings_from, stand_from
-    from uq._derived import design as D
-    from uq._derived.comparison import fitting_both, sampler_words
-    from uq._derived.model_check import predictive_check
-    from uq._io.files import emit_json
+    from uq._derived import comparison_worker
 
     t0 = time.perf_counter()
     entry = registry.entry(args.model)
@@ -303,6 +298,24 @@ def command_design(args) -> int:
     settings = settings_from(args)
     settings.require_walkers(entry.n_sampled)  # before the recordings are read
     rec = load(args, needs=("piston", "order") if entry.needs_volume else ("order",))
+    compare = rec.has_piston and not args.no_compare and entry.over_all_tests
+    # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics, fitted
+    # beside the model and compared with it in a worker while the design is worked out; the
+    # worker starts before this process imports JAX (uq._derived.comparison_worker)
+    kw = {"seed": args.seed, "settings": settings, "stand": stand}
+    worker = comparison_worker.start(rec, jobs=None, **kw) if compare else None
+    with worker or nullcontext():
+        return _design(args, rec, compare, worker, t0, **kw)
+
+
+def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stand) -> int:
+    import numpy as np
+
+    from uq._derived import design as D
+    from uq._derived.comparison import fitting_both, sampler_words
+    from uq._derived.model_check import predictive_check
+    from uq._io.files import emit_json
+
     _check_before_fit(args, rec)
     x_c = args.height_mm * 1e-3
     if args.sheet_heights_mm:
@@ -319,17 +332,15 @@ def command_design(args) -> int:
     # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
-    if rec.has_piston and not args.no_compare and entry.over_all_tests:
-        # how the data rank the model that answers: PSIS-LOO against the per-pressure cubics,
-        # fitted beside the model and compared with it in a worker while the design is worked out
+    if compare:
         both = fitting_both(
-            rec, seed=args.seed, settings=settings, stand=stand, model=answering, jobs=None
+            rec, seed=seed, settings=settings, stand=stand, model=answering, worker=worker
         )
     else:  # no comparison (None): the cubics have no other model fitted to rank against
-        fit = registry.fit(answering, rec, seed=args.seed, settings=settings, stand=stand)
+        fit = registry.fit(answering, rec, seed=seed, settings=settings, stand=stand)
         both = nullcontext((fit, lambda: (None, None)))
     with both as (fit, compared):
-        check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
+        check = predictive_check(fit, seed=seed)  # at the tested points, before any answer
         model = fit.on_draws(args.draws)
         curves = None
         if rec.has_piston:

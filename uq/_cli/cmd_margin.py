@@ -4,6 +4,7 @@ the answering model, printing)."""
 from __future__ import annotations
 
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -406,28 +407,35 @@ def command_margin(args) -> int:
         )
     else:
         from uq._cli.common import settings_from
-        from uq._derived.comparison import fit_and_choose
+        from uq._derived import comparison_worker
 
         args.model = args.model or AUTO
         stand = stand_from(args)  # a bad --stand file is refused before the recordings are read
         fitted = (
             (registry.default("margin"), registry.CUBICS) if args.model == AUTO else (args.model,)
         )
-        settings_from(args).require_walkers(max(registry.entry(m).n_sampled for m in fitted))
+        settings = settings_from(args)
+        settings.require_walkers(max(registry.entry(m).n_sampled for m in fitted))
         rec = load(args)
-        _check_design_volume(args, rec)
-        tested = [t.pressure_bar for t in rec.tests]
-        for q in queries:
-            _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
-        ans, info, diagnostics = fit_and_choose(
-            rec,
-            model=args.model,
-            seed=args.seed,
-            settings=settings_from(args),
-            stand=stand,
-            jobs=None,  # the cubics fitted beside the model, and compared, in a worker
-            check_seed=args.seed,  # the answering model at the tested points
-        )
+        kw = {"seed": args.seed, "settings": settings, "stand": stand}
+        # the cubics fitted beside the model, and compared, in a worker that starts before this
+        # process imports JAX (uq._derived.comparison_worker)
+        worker = comparison_worker.start(rec, jobs=None, **kw) if args.model == AUTO else None
+        with worker or nullcontext():
+            from uq._derived.comparison import fit_and_choose
+
+            _check_design_volume(args, rec)
+            tested = [t.pressure_bar for t in rec.tests]
+            for q in queries:
+                _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
+            ans, info, diagnostics = fit_and_choose(
+                rec,
+                model=args.model,
+                jobs=None,
+                worker=worker,
+                check_seed=args.seed,  # the answering model at the tested points
+                **kw,
+            )
         source = rec.path
         check = diagnostics["model_check"]
     # every answer before anything is written; with a queries file each row gets its own answer

@@ -6,6 +6,7 @@ JSON, the model's page (``uq._report.pages``) and the saved model (``--out``).""
 from __future__ import annotations
 
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 from uq._cli.common import add_stand, record_convergence, stand_from
@@ -53,12 +54,7 @@ def configure_surface(p) -> None:
 
 def command_surface(args) -> int:
     from uq._cli.common import load, settings_from
-    from uq._derived.comparison import fit_both, sampler_words
-    from uq._derived.margin import describe
-    from uq._derived.model_check import predictive_check
-    from uq._inference.convergence import CLI_ADVICE
-    from uq._io.files import emit_json
-    from uq._report.pages import write_model_page
+    from uq._derived import comparison_worker
 
     t0 = time.perf_counter()
     entry = registry.entry(args.model)
@@ -69,20 +65,38 @@ def command_surface(args) -> int:
     if args.select and entry.select_orders is None:
         raise InputError(f"option --select: the {entry.name} model has no candidate orders to rank")
     rec = load(args)
+    # the cubics fitted beside the model, and compared, in a worker that starts before this
+    # process imports JAX (uq._derived.comparison_worker)
+    beside = not args.no_compare and not args.select
+    kw = {"seed": args.seed, "settings": settings, "stand": stand}
+    worker = comparison_worker.start(rec, jobs=None, **kw) if beside else None
+    with worker or nullcontext():
+        return _surface(args, entry, rec, worker, t0, **kw)
+
+
+def _surface(args, entry, rec, worker, t0: float, *, seed, settings, stand) -> int:
+    from uq._derived.comparison import fit_both, sampler_words
+    from uq._derived.margin import describe
+    from uq._derived.model_check import predictive_check
+    from uq._inference.convergence import CLI_ADVICE
+    from uq._io.files import emit_json
+    from uq._report.pages import write_model_page
+
     fit = comparison = None
     if args.select:
-        fit, _ = entry.order_selection()(rec, seed=args.seed, settings=settings, stand=stand)
+        fit, _ = entry.order_selection()(rec, seed=seed, settings=settings, stand=stand)
     elif args.no_compare:
-        fit = entry.fit_function()(rec, seed=args.seed, settings=settings, stand=stand)
-    if not args.no_compare:  # the cubics fitted beside the model, in a worker (fit_both)
+        fit = entry.fit_function()(rec, seed=seed, settings=settings, stand=stand)
+    if not args.no_compare:
         fit, _, comparison = fit_both(
             rec,
-            seed=args.seed,
+            seed=seed,
             settings=settings,
             stand=stand,
             surface_fit=fit,
             model=args.model,
             jobs=None,
+            worker=worker,
         )
     res = fit.to_json(comparison)
     PRINTERS.get(fit.name, _print_model)(rec, fit, res)
@@ -108,7 +122,7 @@ def command_surface(args) -> int:
             comparison=comparison,
             warnings=fit.convergence.messages(CLI_ADVICE),
             # the check at the tested points, for uq margin --fit to repeat (docs/design.md 8)
-            model_check=predictive_check(fit, seed=args.seed),
+            model_check=predictive_check(fit, seed=seed),
         )
         print(f"  saved fit: {path} (uq margin --fit answers from it)")
     # printed, not in the JSON: reruns give identical bytes

@@ -28,13 +28,12 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
-import multiprocessing
-import threading
 
 import numpy as np
 from scipy.special import logsumexp
 
 from uq._data.stand_description import PAPER_STAND
+from uq._derived import comparison_worker
 from uq._derived.margin import AUTO, choose
 from uq._derived.model_check import predictive_check
 from uq._inference.collapsed import fit_collapsed
@@ -50,7 +49,6 @@ from uq._inference.loo import (
     verdict,
 )
 from uq._inference.sampler import Settings
-from uq._io.processes import Beside, cores
 from uq._models import registry
 from uq._models.cubic_fit import collapsed_model, fit_campaign
 
@@ -62,10 +60,14 @@ def _concat(parts) -> np.ndarray:
     return np.concatenate([p[:C, :D] for p in parts], axis=-1)
 
 
-def _part(loo: Loo, n_coefficients: int, loglik) -> dict:
-    """One model's LOO in the JSON; p_loo = lppd (at the drawn coefficients) - elpd_loo."""
+def _lppd(loglik) -> float:
+    """The log pointwise predictive density at the drawn coefficients, summed over readings."""
     ll = np.asarray(loglik).reshape(-1, np.shape(loglik)[-1])
-    lppd = float(np.sum(logsumexp(ll, axis=0) - np.log(ll.shape[0])))
+    return float(np.sum(logsumexp(ll, axis=0) - np.log(ll.shape[0])))
+
+
+def _part(loo: Loo, n_coefficients: int, lppd: float) -> dict:
+    """One model's LOO in the JSON; p_loo = lppd (at the drawn coefficients) - elpd_loo."""
     return {
         "elpd_loo": loo.elpd,
         "se": loo.se,
@@ -171,11 +173,12 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
         kfold_both=_kfold_both(surface_fit, cubic_fit, seed=seed),
     )
     plain_s, plain_c = psis(sur_plain), psis(cub_plain)
+    lppd_s, lppd_c = _lppd(sur_plain), _lppd(cub_plain)
     names = (name, "per-pressure cubics")
     return {
         "model": name,
-        name: _part(loo_s, n_s, sur_plain),
-        registry.CUBICS: _part(loo_c, n_c, cub_plain)
+        name: _part(loo_s, n_s, lppd_s),
+        registry.CUBICS: _part(loo_c, n_c, lppd_c)
         | {"max_pareto_k_psis": k_psis, "n_exact_refits": loo_c.n_refits},
         **verdict(loo_s, loo_c, names),
         "method": (
@@ -184,8 +187,8 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
             f"of their test without the reading; more, both models by 10-fold cross-validation (here: {how})"
         ),
         "plain_psis_loo": {
-            name: _part(plain_s, n_s, sur_plain),
-            registry.CUBICS: _part(plain_c, n_c, cub_plain),
+            name: _part(plain_s, n_s, lppd_s),
+            registry.CUBICS: _part(plain_c, n_c, lppd_c),
             **verdict(plain_s, plain_c, names),
         },
         "unit": f"log density per {'force' if force_only else '(force, piston)'} reading, summed over readings",
@@ -199,15 +202,6 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
     }
 
 
-#: readings from which :func:`fit_both` fits the cubics in a worker process when asked (``jobs``).
-#: The cubics' fit and pointwise terms cost about 5 ms CPU a reading (measured: 0.9 s at 185
-#: readings, 2.2 s at data/n50's 407); the worker adds about 1.4 CPU s (its imports, sending the fit
-#: back), and the model's fit it runs beside can be shorter than its start (the surface: 1.7 s on
-#: a 185-reading campaign of five tests). Below about 250 readings the worker would add more CPU
-#: than it takes off the command's process, and may be waited for (docs/speed.md).
-WORKER_MIN_READINGS = 250
-
-
 def _cubics(rec, *, seed: int, settings: Settings, stand):
     """The per-pressure cubics of :func:`force_side` of ``rec`` with the pointwise terms
     :func:`compare` reads."""
@@ -217,7 +211,7 @@ def _cubics(rec, *, seed: int, settings: Settings, stand):
     return cub
 
 
-def _cubics_then_compare(rec, asked, *, seed: int, settings: Settings, stand):
+def cubics_then_compare(rec, asked, *, seed: int, settings: Settings, stand):
     """The worker of :func:`fitting_both`: the cubics, then, once the model's fit comes through
     the pipe ``asked``, the comparison of the two: (cubics, comparison)."""
     cub = _cubics(rec, seed=seed, settings=settings, stand=stand)
@@ -226,50 +220,43 @@ def _cubics_then_compare(rec, asked, *, seed: int, settings: Settings, stand):
     return cub, compare(fit, cub, seed=seed, settings=settings)
 
 
-def _send(conn, obj) -> None:
-    """``obj`` down the pipe ``conn`` (in a thread: the worker reads it only after its own fit); a
-    worker that died is reported by its :meth:`~uq._io.processes.Beside.result`."""
-    with contextlib.suppress(OSError):
-        conn.send(obj)
-    conn.close()
-
-
 @contextlib.contextmanager
-def fitting_both(rec, *, seed: int, settings: Settings, stand, model=None, jobs: int | None = 1):
+def fitting_both(
+    rec,
+    *,
+    seed: int,
+    settings: Settings,
+    stand,
+    model=None,
+    jobs: int | None = 1,
+    worker: comparison_worker.ComparisonWorker | None = None,
+):
     """:func:`fit_both` in two steps, for a caller with work of its own that needs the model's fit
     but not yet the comparison: yields (model fit, ``compared``), ``compared()`` -> (cubics,
     comparison), computed once.
 
-    With a worker (``jobs`` >= 2 and at least ``WORKER_MIN_READINGS`` readings), the worker fits
-    the cubics beside the model's fit here and then, sent the model's fit, compares the two while
-    the caller goes on; without, ``compared()`` fits the cubics and compares here. The same fits
-    and comparison, to the bit."""
+    With a worker (``jobs`` >= 2 and at least ``WORKER_MIN_READINGS`` readings; ``worker``: one
+    the caller started already with the same ``rec``, seed, settings and stand,
+    ``uq._derived.comparison_worker.start``), the worker fits the cubics beside the model's fit
+    here and then, sent the model's fit, compares the two while the caller goes on; without,
+    ``compared()`` fits the cubics and compares here. The same fits and comparison, to the bit."""
     name = registry.default("margin") if model is None else model
-    jobs = cores() if jobs is None else jobs
-    if jobs < 2 or rec.n_points < WORKER_MIN_READINGS:
-        fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
+    kw = {"seed": seed, "settings": settings, "stand": stand}
+    if worker is None:
+        worker = comparison_worker.start(rec, jobs=jobs, **kw)
+    if worker is None:
+        fit = registry.fit(name, rec, **kw)
 
         def here():
-            cub = _cubics(rec, seed=seed, settings=settings, stand=stand)
+            cub = _cubics(rec, **kw)
             return cub, compare(fit, cub, seed=seed, settings=settings)
 
         yield fit, functools.cache(here)
         return
-    asked, ask = multiprocessing.get_context("spawn").Pipe(duplex=False)
-    what = "fitting the per-pressure cubics and comparing them with the model"
-    kw = {"seed": seed, "settings": settings, "stand": stand}
-    with Beside(what, _cubics_then_compare, rec, asked, **kw) as worker:
-        asked.close()  # the worker's copy is left
+    with worker:
         fit = registry.fit(name, rec, **kw)
-        sender = threading.Thread(target=_send, args=(ask, fit), daemon=True)
-        sender.start()
-
-        @functools.cache
-        def compared():
-            sender.join()
-            return worker.result()
-
-        yield fit, compared
+        worker.compare(fit)
+        yield fit, functools.cache(worker.result)
 
 
 def fit_both(
@@ -282,6 +269,7 @@ def fit_both(
     cubic_fit=None,
     model=None,
     jobs: int | None = 1,
+    worker: comparison_worker.ComparisonWorker | None = None,
 ):
     """A model over all tests (``model``: a registry name, default the registry's default model)
     and the per-pressure cubics of ``rec`` with the same settings (either fit may be given already)
@@ -290,13 +278,14 @@ def fit_both(
     as L) is not the comparison's, and a given one is then replaced.
 
     ``jobs``: processes that fit (None: one per CPU); with two or more, no fit given and at least
-    ``WORKER_MIN_READINGS`` readings, the cubics are fitted in a spawned worker process beside the
-    model's fit here and compared with it there (:func:`fitting_both`; ``uq._io.processes.Beside``):
+    ``WORKER_MIN_READINGS`` readings (``uq._derived.comparison_worker``), the cubics are fitted in a spawned worker process beside the
+    model's fit here and compared with it there (:func:`fitting_both`, which ``worker`` is passed
+    to; ``uq._io.processes.Beside``):
     the same fits and comparison, to the bit. A script that asks for it needs an
     ``if __name__ == "__main__":`` guard."""
     if surface_fit is None and (cubic_fit is None or force_side(rec) is not rec):
         with fitting_both(
-            rec, seed=seed, settings=settings, stand=stand, model=model, jobs=jobs
+            rec, seed=seed, settings=settings, stand=stand, model=model, jobs=jobs, worker=worker
         ) as (fit, compared):
             return (fit, *compared())
     if surface_fit is None:
@@ -325,12 +314,13 @@ def fit_and_choose(
     stand=None,
     jobs: int | None = 1,
     check_seed: int | None = None,
+    worker: comparison_worker.ComparisonWorker | None = None,
 ):
     """Fit what ``model`` needs (``auto``: the registry's default model over all tests and the
     per-pressure cubics, compared by PSIS-LOO with the same settings, ``uq._derived.comparison``;
     a registry name: that model alone) and choose the answering model (:func:`choose`); returns
-    (answering model, model description, merged sampler diagnostics). ``jobs``: :func:`fit_both`'s.
-    ``check_seed``: the diagnostics also hold the answering model's ``model_check``
+    (answering model, model description, merged sampler diagnostics). ``jobs``, ``worker``:
+    :func:`fitting_both`'s. ``check_seed``: the diagnostics also hold the answering model's ``model_check``
     (``uq._derived.model_check.predictive_check`` with that seed); with ``auto`` and a worker, the
     model's is made while the worker compares."""
     settings = Settings() if settings is None else settings
@@ -345,6 +335,7 @@ def fit_and_choose(
             stand=stand,
             model=registry.default("margin"),
             jobs=jobs,
+            worker=worker,
         ) as (fit, compared):
             if check_seed is not None:
                 checks[id(fit)] = predictive_check(fit, seed=check_seed)

@@ -17,6 +17,7 @@ line, exit 130) and stops them.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import multiprocessing
 import os
 import pickle
@@ -82,11 +83,15 @@ class WorkerDied(RuntimeError):
 
 
 def _run(send, fn, args, kwargs) -> None:
-    """The worker: ``(True, fn(*args, **kwargs))`` or ``(False, the exception it raised)``,
+    """The worker: ``(True, fn(*args, **kwargs))`` or ``(False, the exception it raised)``
+    (``fn``: a function, or one named ``"module:attribute"``),
     pickled straight into the pipe (no copy of a large answer held in memory first)."""
     ignore_interrupts()
     set_enabled(False)  # the calling process draws its own bar on the same terminal
     try:
+        if isinstance(fn, str):  # "module:attribute", imported here (module docstring)
+            module, _, attr = fn.partition(":")
+            fn = getattr(importlib.import_module(module), attr)
         answer = (True, fn(*args, **kwargs))
     except BaseException as exc:  # noqa: BLE001 - every failure goes back to the caller
         try:
@@ -99,7 +104,9 @@ def _run(send, fn, args, kwargs) -> None:
 
 
 class Beside:
-    """``fn(*args, **kwargs)`` computed in a spawned worker process while this one goes on;
+    """``fn(*args, **kwargs)`` computed in a spawned worker process while this one goes on
+    (``fn`` named ``"module:attribute"``: imported in the worker alone, so that this process need
+    not have imported it, nor what it imports);
     ``what`` names the work in an error (``"fitting the per-pressure cubics"``). A context
     manager: :meth:`result` waits for the answer (an exception raised in the worker is raised
     here; a worker that stops without an answer raises :class:`WorkerDied`), and leaving the

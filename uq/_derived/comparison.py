@@ -278,11 +278,10 @@ def fit_both(
     as L) is not the comparison's, and a given one is then replaced.
 
     ``jobs``: processes that fit (None: one per CPU); with two or more, no fit given and at least
-    ``WORKER_MIN_READINGS`` readings (``uq._derived.comparison_worker``), the cubics are fitted in a spawned worker process beside the
-    model's fit here and compared with it there (:func:`fitting_both`, which ``worker`` is passed
-    to; ``uq._io.processes.Beside``):
-    the same fits and comparison, to the bit. A script that asks for it needs an
-    ``if __name__ == "__main__":`` guard."""
+    ``WORKER_MIN_READINGS`` readings (``uq._derived.comparison_worker``), the cubics are fitted in
+    a spawned worker process beside the model's fit here and compared with it there
+    (:func:`fitting_both`, which ``worker`` is passed to): the same fits and comparison, to the
+    bit. A script that asks for it needs an ``if __name__ == "__main__":`` guard."""
     if surface_fit is None and (cubic_fit is None or force_side(rec) is not rec):
         with fitting_both(
             rec, seed=seed, settings=settings, stand=stand, model=model, jobs=jobs, worker=worker
@@ -320,9 +319,9 @@ def fit_and_choose(
     per-pressure cubics, compared by PSIS-LOO with the same settings, ``uq._derived.comparison``;
     a registry name: that model alone) and choose the answering model (:func:`choose`); returns
     (answering model, model description, merged sampler diagnostics). ``jobs``, ``worker``:
-    :func:`fitting_both`'s. ``check_seed``: the diagnostics also hold the answering model's ``model_check``
-    (``uq._derived.model_check.predictive_check`` with that seed); with ``auto`` and a worker, the
-    model's is made while the worker compares."""
+    :func:`fitting_both`'s. ``check_seed``: the diagnostics also hold the answering model's
+    ``model_check`` (``uq._derived.model_check.predictive_check`` with that seed); with ``auto``,
+    the model's is made while the worker compares."""
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
     fit = cub = comparison = None

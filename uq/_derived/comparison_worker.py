@@ -62,8 +62,11 @@ class ComparisonWorker:
         return self
 
     def __exit__(self, *exc):
+        stopped = self._worker.__exit__(*exc)  # a send still under way then fails: no reader
+        if self._sender is not None:
+            self._sender.join()
         self._ask.close()
-        return self._worker.__exit__(*exc)
+        return stopped
 
 
 def start(rec, *, seed: int, settings, stand, jobs: int | None = 1) -> ComparisonWorker | None:

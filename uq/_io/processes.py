@@ -89,7 +89,7 @@ def _run(send, fn, args, kwargs) -> None:
     ignore_interrupts()
     set_enabled(False)  # the calling process draws its own bar on the same terminal
     try:
-        if isinstance(fn, str):  # "module:attribute", imported here (module docstring)
+        if isinstance(fn, str):  # "module:attribute": imported here, not by the caller (Beside)
             module, _, attr = fn.partition(":")
             fn = getattr(importlib.import_module(module), attr)
         answer = (True, fn(*args, **kwargs))

@@ -338,18 +338,6 @@ def answer_query(ans, info: dict, q: dict) -> dict:
         raise InputError(f"{_place(q, column)}:{rest}") from None
 
 
-def _answers(args, ans, info: dict, queries: list[dict]) -> list[dict]:
-    """Every query's answer (its design margins too, when asked) before anything is written; with
-    a queries file each row gets its own answer or its own refusal (a row the model cannot answer
-    does not abort the others)."""
-    results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]
-    if _design_asked(args):
-        for q, r in zip(queries, results, strict=True):
-            if "refused" not in r:
-                r["design"] = _design_answer(args, ans, q)
-    return results
-
-
 def _answer_or_refusal(ans, info: dict, q: dict, per_row: bool) -> dict:
     """:func:`answer_query`; for a row of a queries file a refusal is that row's answer
     (``{"row", "height_m", "load_N", "refused"}``) instead of the end of the command."""
@@ -396,7 +384,7 @@ def _check_usage(args) -> None:
 def command_margin(args) -> int:
     from uq._cli.cmd_design import print_check
     from uq._cli.common import load
-    from uq._derived.model_check import predictive_check, unavailable
+    from uq._derived.model_check import unavailable
     from uq._io.files import emit_json
 
     _check_usage(args)
@@ -417,7 +405,6 @@ def command_margin(args) -> int:
         check = meta.get("model_check") or unavailable(
             ans, "a saved fit keeps no readings' replicates: fit the recordings to check it"
         )
-        results = _answers(args, ans, info, queries)
     else:
         from uq._cli.common import settings_from
         from uq._derived import comparison_worker
@@ -446,19 +433,18 @@ def command_margin(args) -> int:
                 model=args.model,
                 jobs=None,
                 worker=worker,
-                # the answering model's check at the tested points and its answers (made while
-                # the worker compares, for the model that answers whichever the comparison names)
-                then=lambda m: (
-                    predictive_check(m, seed=args.seed),
-                    _answers(args, m, {}, queries),
-                ),
+                check_seed=args.seed,  # the answering model at the tested points
                 **kw,
             )
         source = rec.path
-        check, results = diagnostics["then"]
-        for r in results:  # made before the comparison described the model
-            if "model" in r:
-                r["model"] = info
+        check = diagnostics["model_check"]
+    # every answer before anything is written; with a queries file each row gets its own answer
+    # or its own refusal (a row the model cannot answer does not abort the others)
+    results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]
+    if _design_asked(args):
+        for q, r in zip(queries, results, strict=True):
+            if "refused" not in r:
+                r["design"] = _design_answer(args, ans, q)
     if args.fit is not None:
         print(
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "

@@ -35,6 +35,7 @@ from scipy.special import logsumexp
 from uq._data.stand_description import PAPER_STAND
 from uq._derived import comparison_worker
 from uq._derived.margin import AUTO, choose
+from uq._derived.model_check import predictive_check
 from uq._inference.collapsed import fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.loo import (
@@ -311,21 +312,20 @@ def fit_and_choose(
     settings=None,
     stand=None,
     jobs: int | None = 1,
+    check_seed: int | None = None,
     worker: comparison_worker.ComparisonWorker | None = None,
-    then=None,
 ):
     """Fit what ``model`` needs (``auto``: the registry's default model over all tests and the
     per-pressure cubics, compared by PSIS-LOO with the same settings, ``uq._derived.comparison``;
     a registry name: that model alone) and choose the answering model (:func:`choose`); returns
     (answering model, model description, merged sampler diagnostics). ``jobs``, ``worker``:
-    :func:`fitting_both`'s. ``then``: a function of the answering model (its check at the tested
-    points, its answers) whose value the diagnostics hold (``"then"``): with ``auto`` it is run on
-    the model's fit while the worker compares, and on the cubics after, if they answer; what it
-    raises is raised once its model is the one that answers."""
+    :func:`fitting_both`'s. ``check_seed``: the diagnostics also hold the answering model's
+    ``model_check`` (``uq._derived.model_check.predictive_check`` with that seed); with ``auto``,
+    the model's is made while the worker compares."""
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
     fit = cub = comparison = None
-    early = {}  # id(fit) -> then(fit), made before it is known to answer: (True, value) or (False, error)
+    checks = {}  # id(fit) -> its check, made before it is known to answer
     if model == AUTO:
         with fitting_both(
             rec,
@@ -336,8 +336,8 @@ def fit_and_choose(
             jobs=jobs,
             worker=worker,
         ) as (fit, compared):
-            if then is not None:
-                early[id(fit)] = _outcome(then, fit)
+            if check_seed is not None:
+                checks[id(fit)] = predictive_check(fit, seed=check_seed)
             cub, comparison = compared()
     elif registry.entry(model).over_all_tests:
         fit = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)
@@ -351,20 +351,9 @@ def fit_and_choose(
     if ans.omitted_reason:  # a campaign without piston readings
         info["omitted"] = ans.omitted_reason
     diagnostics = {"warnings": warnings, "converged": bool(converged), "notes": notes}
-    if then is not None:
-        ok, value = early.get(id(ans)) or _outcome(then, ans)
-        if not ok:
-            raise value
-        diagnostics["then"] = value
+    if check_seed is not None:
+        diagnostics["model_check"] = checks.get(id(ans)) or predictive_check(ans, seed=check_seed)
     return ans, info, diagnostics
-
-
-def _outcome(fn, fit) -> tuple[bool, object]:
-    """(True, fn(fit)) or (False, the exception it raised), to be raised where it matters."""
-    try:
-        return True, fn(fit)
-    except Exception as exc:  # noqa: BLE001 - raised by fit_and_choose if this model answers
-        return False, exc
 
 
 def sampler_words(fit) -> str | None:

@@ -384,7 +384,7 @@ def _check_usage(args) -> None:
 def command_margin(args) -> int:
     from uq._cli.cmd_design import print_check
     from uq._cli.common import load
-    from uq._derived.model_check import unavailable
+    from uq._derived.model_check import predictive_check, unavailable
     from uq._io.files import emit_json
 
     _check_usage(args)
@@ -433,11 +433,10 @@ def command_margin(args) -> int:
                 model=args.model,
                 jobs=None,
                 worker=worker,
-                check_seed=args.seed,  # the answering model at the tested points
                 **kw,
             )
         source = rec.path
-        check = diagnostics["model_check"]
+        check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points
     # every answer before anything is written; with a queries file each row gets its own answer
     # or its own refusal (a row the model cannot answer does not abort the others)
     results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]

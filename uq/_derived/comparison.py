@@ -35,7 +35,6 @@ from scipy.special import logsumexp
 from uq._data.stand_description import PAPER_STAND
 from uq._derived import comparison_worker
 from uq._derived.margin import AUTO, choose
-from uq._derived.model_check import predictive_check
 from uq._inference.collapsed import fit_collapsed
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.loo import (
@@ -312,22 +311,18 @@ def fit_and_choose(
     settings=None,
     stand=None,
     jobs: int | None = 1,
-    check_seed: int | None = None,
     worker: comparison_worker.ComparisonWorker | None = None,
 ):
     """Fit what ``model`` needs (``auto``: the registry's default model over all tests and the
     per-pressure cubics, compared by PSIS-LOO with the same settings, ``uq._derived.comparison``;
     a registry name: that model alone) and choose the answering model (:func:`choose`); returns
     (answering model, model description, merged sampler diagnostics). ``jobs``, ``worker``:
-    :func:`fitting_both`'s. ``check_seed``: the diagnostics also hold the answering model's
-    ``model_check`` (``uq._derived.model_check.predictive_check`` with that seed); with ``auto``,
-    the model's is made while the worker compares."""
+    :func:`fit_both`'s."""
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
     fit = cub = comparison = None
-    checks = {}  # id(fit) -> its check, made before it is known to answer
     if model == AUTO:
-        with fitting_both(
+        fit, cub, comparison = fit_both(
             rec,
             seed=seed,
             settings=settings,
@@ -335,10 +330,7 @@ def fit_and_choose(
             model=registry.default("margin"),
             jobs=jobs,
             worker=worker,
-        ) as (fit, compared):
-            if check_seed is not None:
-                checks[id(fit)] = predictive_check(fit, seed=check_seed)
-            cub, comparison = compared()
+        )
     elif registry.entry(model).over_all_tests:
         fit = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)
     else:
@@ -350,10 +342,7 @@ def fit_and_choose(
     ans, info = choose(fit, cub, comparison, forced=model)
     if ans.omitted_reason:  # a campaign without piston readings
         info["omitted"] = ans.omitted_reason
-    diagnostics = {"warnings": warnings, "converged": bool(converged), "notes": notes}
-    if check_seed is not None:
-        diagnostics["model_check"] = checks.get(id(ans)) or predictive_check(ans, seed=check_seed)
-    return ans, info, diagnostics
+    return ans, info, {"warnings": warnings, "converged": bool(converged), "notes": notes}
 
 
 def sampler_words(fit) -> str | None:

@@ -220,6 +220,26 @@ def test_leaving_the_known_pressures_is_marked_not_extrapolated():
     )
 
 
+def test_the_charge_point_is_on_the_path_where_the_bounds_do_not_bracket_it():
+    """A compliant casing (dV/dp_u < 0) and a small volume turn the gas law back below the upper
+    known pressure: the bounds then do not bracket its root at the charge height, which is still
+    the charge point itself, stable there (V_c + n p_abs dV/dp_u > 0): load and rate as at any
+    charge height, not NaN. Away from it the path is marked as before."""
+    c0, v_c, n, p_c, bounds = -5.7e-10, 0.8e-3, 1.35, 9.0e5, (1.0e4, 1.0e6)
+    el = potential_element(0.028, c0=c0)
+    gap = lambda p: np.log(p + P_ATM_PA) + n * np.log(v_c + c0 * (p - p_c))  # noqa: E731
+    assert gap(bounds[1]) < gap(p_c) and gap(bounds[0]) < gap(p_c)  # not bracketed at x_c
+    path = sealed_path(
+        el, np.array([0.100, X_C]), Charge(X_C, p_c, v_c, n), pressure_bounds_pa=bounds
+    )
+    assert path.in_range[0, 1] and path.overpressure_pa[0, 1] == p_c
+    assert path.force_N[0, 1] == pytest.approx(0.028 * p_c, rel=1e-12)
+    p_abs = p_c + P_ATM_PA
+    want = n * p_abs * 0.028**2 / (v_c + n * p_abs * c0)  # test_casing_term_at_the_charge_height
+    assert path.rate_N_per_m[0, 1] == pytest.approx(want, rel=1e-10)
+    assert np.isfinite(natural_frequency_Hz(path.rate_N_per_m[:, 1], path.force_N[:, 1])).all()
+
+
 def test_frequency_transmissibility_and_refusals():
     k, P = np.array([2.6e5, 1.0e5]), np.array([13e3, 10e3])
     f = natural_frequency_Hz(k, P)

@@ -141,6 +141,15 @@ def _log_gap(element, x, p, v_shift, log_k, n, v_r, p_atm):
     return phi, dphi
 
 
+def _unbracketed_charge_points(x, charge_height_m, p_c, lo, hi, in_range) -> np.ndarray:
+    """(S, H): the points at the charge height whose root the bounds do not bracket. The path's
+    pressure there is the charge pressure itself (V_c fixes the volume's constant there), also
+    where the gas law is not monotone over all the known pressures (a compliant casing and a
+    small volume can turn it back below the upper bound): the charge point, stable or not."""
+    at = np.isclose(x, float(charge_height_m), rtol=0.0, atol=1e-12)[None, :]
+    return at & (p_c >= lo) & (p_c <= hi) & ~in_range
+
+
 def sealed_path(
     element,
     height_m,
@@ -203,12 +212,15 @@ def sealed_path(
     f_lo, _ = _log_gap(element, x, lo, v_shift, log_k, n, v_r, p_atm)
     f_hi, _ = _log_gap(element, x, hi, v_shift, log_k, n, v_r, p_atm)
     in_range = (f_lo <= 0) & (f_hi >= 0)
+    at_charge = _unbracketed_charge_points(x, charge.height_m, p_c, lo, hi, in_range)
+    in_range |= at_charge
     if pressure_bounds_pa is None and not in_range.all():
         raise RuntimeError(
             f"sealed path: no pressure satisfies the gas law (S1) at {int((~in_range).sum())} of {in_range.size} (draw, height) points"
         )
     p = np.where(np.isfinite(guess) & (guess > lo) & (guess < hi), guess, 0.5 * (lo + hi))
-    done = ~in_range
+    p = np.where(at_charge, np.broadcast_to(p_c, shape), p)
+    done = ~in_range | at_charge
     # Newton's steps point by point; the draws (rows) whose every height is done drop out of the
     # arrays (an element that can give a subset of its draws, ``on_rows``): the same numbers
     rows, el, per_draw = np.arange(S), element, (v_shift, log_k, n)

@@ -17,7 +17,6 @@ line, exit 130) and stops them.
 from __future__ import annotations
 
 import contextlib
-import importlib
 import multiprocessing
 import os
 import pickle
@@ -26,6 +25,7 @@ import sys
 import threading
 
 from uq._io.progress import set_enabled
+from uq._io.values import resolve
 
 
 def cores() -> int:
@@ -89,10 +89,8 @@ def _run(send, fn, args, kwargs) -> None:
     ignore_interrupts()
     set_enabled(False)  # the calling process draws its own bar on the same terminal
     try:
-        if isinstance(fn, str):  # "module:attribute": imported here, not by the caller (Beside)
-            module, _, attr = fn.partition(":")
-            fn = getattr(importlib.import_module(module), attr)
-        answer = (True, fn(*args, **kwargs))
+        # a function named "module:attribute" is imported here, not by the caller (Beside)
+        answer = (True, resolve(fn)(*args, **kwargs))
     except BaseException as exc:  # noqa: BLE001 - every failure goes back to the caller
         try:
             pickle.dumps(exc)

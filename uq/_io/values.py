@@ -1,9 +1,20 @@
 """Checks of option values shared by the command line and the batch catalogue: each takes the text and
-returns the value, or raises ValueError with a message fit to follow "option --x:" or "row 3, column x:"."""
+returns the value, or raises ValueError with a message fit to follow "option --x:" or "row 3, column x:";
+and :func:`resolve`, an object named by its text ``"module:attribute"`` (a registry entry's fitter,
+a worker process's function)."""
 
 from __future__ import annotations
 
+import importlib
 import math
+
+
+def resolve(target):
+    """An object named ``"module:attribute"`` (imported now), or the object itself."""
+    if not isinstance(target, str):
+        return target
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
 
 
 def _number(text: str, kind=float):

@@ -36,9 +36,9 @@ import numpy as np
 from uq._inference.convergence import CLI_ADVICE
 from uq._inference.summary import band, estimate, thin_rows
 from uq._io.errors import InputError
+from uq._io.values import resolve
 from uq._models import saved
 from uq._models.fitted import Block, Verdict, refuse_extrapolation
-from uq._models.registry import resolve
 from uq._physics.quantities import BAR_PA
 
 LEVEL = 0.90

@@ -26,12 +26,12 @@ on that class (``uq._report.pages``): a model without a page of its own gets the
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
 
 from uq._io.errors import InputError
+from uq._io.values import resolve
 
 #: the entry-point group of models plugged in by other packages
 ENTRY_POINT_GROUP = "uq.models"
@@ -84,14 +84,6 @@ class ModelEntry:
 
     def order_selection(self) -> Callable | None:
         return None if self.select_orders is None else resolve(self.select_orders)
-
-
-def resolve(target):
-    """An object named ``"module:attribute"`` (imported now), or the object itself."""
-    if not isinstance(target, str):
-        return target
-    module, _, attr = target.partition(":")
-    return getattr(importlib.import_module(module), attr)
 
 
 _ENTRIES: dict[str, ModelEntry] = {}

@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -39,3 +41,38 @@ def test_n50_bands_tiny(tmp_path):
     assert doc["tested_33"]["discrepancy"]["of"] == 9  # 3 tests x 3 heights
     assert doc["between"]["surface"]["of"] == 6
     assert "Table 1's curves" in (tmp_path / "n50-bands.md").read_text()
+
+
+def _script(name: str):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_between_coverage_records_on_another_stand():
+    """--stand: the campaign is recorded on that stand (same seed, other readings, its comments
+    say so); the models are still fitted assuming the paper's budget (fit_models' PAPER_STAND)."""
+    from uq._data.stand_description import read_stand
+
+    bc = _script("between_coverage")
+    rough = read_stand(ROOT / "data/stands/slow-pressure-control.toml")
+    grid = bc.GRIDS["1-3-5"]
+    paper = bc.campaign("n50-kink", grid, bc.FIRST_SEED, False)
+    other = bc.campaign("n50-kink", grid, bc.FIRST_SEED, False, rough)
+    assert [t.pressure_bar for t in other.tests] == [t.pressure_bar for t in paper.tests]
+    assert other.n_points == paper.n_points
+    f_paper = [t.force_N for t in paper.tests]
+    f_other = [t.force_N for t in other.tests]
+    assert not all(np.array_equal(a, b) for a, b in zip(f_paper, f_other, strict=True))
+    assert any("error_df = 5" in c for c in other.comments)
+    assert not any("error_df" in c for c in paper.comments)
+
+
+def test_between_coverage_refuses_a_missing_stand_in_one_line(tmp_path):
+    proc = _run("scripts/between_coverage.py", "--tiny", "--stand", tmp_path / "no.toml")
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "option --stand" in lines[0] and "no.toml" in lines[0]

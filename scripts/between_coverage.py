@@ -59,6 +59,7 @@ from scipy import stats  # noqa: E402
 from uq._data.stand_description import PAPER_STAND, read_stand  # noqa: E402
 from uq._derived.comparison import force_side  # noqa: E402
 from uq._derived.margin import pressure_needed  # noqa: E402
+from uq._derived.model_check import predictive_check  # noqa: E402
 from uq._inference.sampler import Settings  # noqa: E402
 from uq._inference.summary import band  # noqa: E402
 from uq._io.errors import InputError  # noqa: E402
@@ -80,6 +81,8 @@ CATALOGUE_GRIDS = ("catalogue",)
 SPRING_NAMES = ("n50-kink", "n50-knee", "n50-ripple", "n50", "n50-smooth")
 HEIGHTS_MM = (70.0, 90.0, 112.0, 130.0, 150.0)
 MODELS = ("discrepancy", "surface", "cubics")
+#: the models whose posterior-predictive check (uq._derived.model_check) each campaign records
+CHECKED = ("discrepancy", "surface")
 LEVEL = 0.90
 FIRST_SEED = 29000
 #: the tests' settings: a short run (the plumbing is under test, not the posterior)
@@ -127,7 +130,16 @@ def one_campaign(
         "discrepancy": bool(answers["discrepancy"].convergence.converged),
         "surface": bool(answers["surface"].convergence.converged),
     }
-    out = {"seed": seed, "cpu_seconds": seconds, "converged": converged, "queries": []}
+    # what uq margin and uq design print with every answer, and exit 1 on: does the model follow
+    # the readings it was fitted to (the posterior-predictive check at the tested points)
+    misses = {m: bool(predictive_check(answers[m], seed=seed)["misses"]) for m in CHECKED}
+    out = {
+        "seed": seed,
+        "cpu_seconds": seconds,
+        "converged": converged,
+        "check_misses": misses,
+        "queries": [],
+    }
     for h_mm, p in qs:
         h = h_mm / 1e3
         true_force = float(truth.force_N(np.array(h), p))
@@ -220,7 +232,33 @@ def summarise(results: dict) -> dict:
         "width_ratio_discrepancy_over_surface": ratios,
         "mean_cpu_seconds_per_fit": cpu,
         "unconverged_fits": unconverged,
+        "model_check": _checked(results),
     }
+
+
+def _checked(results: dict) -> dict:
+    """Per (spring, grid) whose runs recorded it: campaigns the model check flagged, per model of
+    ``CHECKED``, and the pooled share of force queries covered in all campaigns and in those the
+    check passes (what a user who heeds the check's exit status 1 is left with)."""
+    out = {}
+    for key, runs in results.items():
+        runs = [r for r in runs if "check_misses" in r]
+        if not runs:
+            continue
+        out[key] = {"campaigns": len(runs)}
+        for m in CHECKED:
+            passed = [r for r in runs if not r["check_misses"][m]]
+
+            def share(rs, m=m):
+                hits = [q[m]["force"]["covered"] for r in rs for q in r["queries"]]
+                return sum(hits) / len(hits) if hits else None
+
+            out[key][m] = {
+                "flagged": len(runs) - len(passed),
+                "force_covered_all": share(runs),
+                "force_covered_when_passed": share(passed),
+            }
+    return out
 
 
 def markdown(summary: dict, command: str, seconds: float) -> str:
@@ -274,6 +312,7 @@ def markdown(summary: dict, command: str, seconds: float) -> str:
         + ", ".join(f"{m} {k}" for m, k in summary["unconverged_fits"].items())
         + ".",
         "",
+        *_check_lines(summary.get("model_check") or {}),
         "## By pressure and height",
         "",
         "| spring | grid | what | p bar | height mm | discrepancy | surface | cubics |",
@@ -300,6 +339,36 @@ def markdown(summary: dict, command: str, seconds: float) -> str:
             + " |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _check_lines(checked: dict) -> list[str]:
+    """The markdown section on the model check, where the runs recorded it."""
+    if not checked:
+        return []
+
+    def pct(v):
+        return "-" if v is None else f"{v:.2f}"
+
+    lines = [
+        "## The model check",
+        "",
+        "`uq margin` and `uq design` run a posterior-predictive check at the tested points with "
+        "every answer and exit 1 when the model misses the readings (docs/design.md). Campaigns "
+        "it flags, and the pooled share of force queries covered in all campaigns and in those it "
+        "passes:",
+        "",
+        "| spring | grid | model | flagged | covered, all | covered, check passed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for key, c in checked.items():
+        spring, gname = key.split("/")
+        for m in CHECKED:
+            r = c[m]
+            lines.append(
+                f"| {spring} | {gname} | {m} | {r['flagged']}/{c['campaigns']} | "
+                f"{pct(r['force_covered_all'])} | {pct(r['force_covered_when_passed'])} |"
+            )
+    return lines + [""]
 
 
 def main(argv=None) -> int:

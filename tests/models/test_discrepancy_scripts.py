@@ -31,7 +31,14 @@ def test_between_coverage_tiny(tmp_path):
         (p, h) for p in (2.0, 4.0) for h in (90.0, 150.0)
     }
     assert all(r["covered"] + r["refused"] <= 1 and 0 <= r["interval"][0] for r in doc["rows"])
-    assert "By pressure and height" in (tmp_path / "summary.md").read_text()
+    # the model check uq margin runs, per campaign: flagged or not, coverage with and without it
+    check = doc["model_check"]["n50-kink/1-3-5"]
+    assert check["campaigns"] == 1 and set(check) == {"campaigns", "discrepancy", "surface"}
+    assert check["discrepancy"]["flagged"] in (0, 1)
+    run = doc["runs"]["n50-kink/1-3-5"][0]
+    assert set(run["check_misses"]) == {"discrepancy", "surface"}
+    text = (tmp_path / "summary.md").read_text()
+    assert "By pressure and height" in text and "## The model check" in text
 
 
 def test_n50_bands_tiny(tmp_path):

@@ -141,10 +141,26 @@ def force_side(rec):
     )
 
 
-def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Settings()) -> dict:
+def cubic_terms(cubic_fit) -> tuple[Loo, Loo, float]:
+    """The cubics' side of :func:`compare`, which needs no model fit (a worker makes it while the
+    model is fitted): their PSIS-LOO, their plain PSIS-LOO at the drawn coefficients, their lppd."""
+    plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
+    loo = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
+    return loo, psis(plain), _lppd(plain)
+
+
+def compare(
+    surface_fit,
+    cubic_fit,
+    *,
+    seed: int = 0,
+    settings: Settings = Settings(),
+    cubic_side: tuple[Loo, Loo, float] | None = None,
+) -> dict:
     """PSIS-LOO of a model over all tests (its registry ``name`` keys the document) against the
     per-pressure cubics, per (force, piston) reading (module docstring); the ``comparison``
-    document of the JSON results."""
+    document of the JSON results. ``cubic_side``: :func:`cubic_terms` of ``cubic_fit``, when
+    already made."""
     name = surface_fit.name
     if getattr(surface_fit, "posterior", None) is None:  # a model plugged in without one
         return {
@@ -157,13 +173,12 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
         raise ValueError(
             "the force surface is compared with cubics fitted to the force alone (force_side)"
         )
-    cub_plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
+    loo_c, plain_c, lppd_c = cubic_side or cubic_terms(cubic_fit)
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.n_coefficients, 8 * len(cubic_fit.tests)
     if force_only:
         n_c = sum(t.posterior.beta.shape[-1] for t in cubic_fit.tests)
     loo_s = psis(surface_fit.loglik_loo)
-    loo_c = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
     k_psis = float(np.max(loo_c.pareto_k))
     loo_s, loo_c, how = remedy(
         loo_s,
@@ -171,8 +186,7 @@ def compare(surface_fit, cubic_fit, *, seed: int = 0, settings: Settings = Setti
         refit=(None, _cubic_refit(cubic_fit, settings, seed)),
         kfold_both=_kfold_both(surface_fit, cubic_fit, seed=seed),
     )
-    plain_s, plain_c = psis(sur_plain), psis(cub_plain)
-    lppd_s, lppd_c = _lppd(sur_plain), _lppd(cub_plain)
+    plain_s, lppd_s = psis(sur_plain), _lppd(sur_plain)
     names = (name, "per-pressure cubics")
     return {
         "model": name,
@@ -210,9 +224,10 @@ def cubics_then_compare(rec, asked, *, seed: int, settings: Settings, stand):
     """The worker of :func:`fitting_both`: the cubics, then, once the model's fit comes through
     the pipe ``asked``, the comparison of the two: (cubics, comparison)."""
     cub = _cubics(rec, seed=seed, settings=settings, stand=stand)
+    side = cubic_terms(cub)  # while the model is still being fitted
     fit = asked.recv()
     asked.close()
-    return cub, compare(fit, cub, seed=seed, settings=settings)
+    return cub, compare(fit, cub, seed=seed, settings=settings, cubic_side=side)
 
 
 @contextlib.contextmanager

@@ -1086,16 +1086,24 @@ def between_coverage_summary(rel: str) -> Callable[[], str]:
                     + " | ".join("-" if v is None else f"{v:.2f}" for v in vals)
                     + f" | {'-' if r is None else f'{r:.2f}'} |"
                 )
-        out = {m: 0 for m in models}
-        total = {m: 0 for m in models}
-        for r in d["rows"]:
-            total[r["model"]] += 1
-            out[r["model"]] += not r["level_inside"]
+        # the paper's stand, and stands other than the models assume (grids g@name), apart
+        stands = {"@" in r["grid"] for r in d["rows"]}
+        counts = []
+        for other in sorted(stands):
+            rows = [r for r in d["rows"] if ("@" in r["grid"]) == other]
+            outside = {
+                m: sum(not r["level_inside"] for r in rows if r["model"] == m) for m in models
+            }
+            total = {m: sum(r["model"] == m for r in rows) for m in models}
+            counts.append(
+                ("on another stand (g@name): " if other else "")
+                + ", ".join(f"{m} {outside[m]} of {total[m]}" for m in models)
+            )
         lines += [
             "",
             "Counts (by spring, grid, pressure, height and force or margin) whose exact 90 % interval "
             "excludes 0.90: "
-            + ", ".join(f"{m} {out[m]} of {total[m]}" for m in models)
+            + "; ".join(counts)
             + ". CPU seconds per fit (mean): "
             + ", ".join(f"{m} {v:.0f}" for m, v in d["mean_cpu_seconds_per_fit"].items())
             + ".",
@@ -1118,6 +1126,28 @@ def between_coverage_summary(rel: str) -> Callable[[], str]:
             )
             + ".",
         ]
+        checked = d.get("model_check") or {}
+        if checked:
+            lines += [
+                "",
+                "The model check `uq margin` and `uq design` run with every answer (exit 1 when the "
+                "model misses the readings it was fitted to): campaigns it flagged, and the pooled "
+                "share of force queries covered in all campaigns and in those it passed:",
+                "",
+                "| spring | grid | model | flagged | covered, all | covered, check passed |",
+                "| --- | --- | --- | --- | --- | --- |",
+            ]
+            for key in sorted(checked, key=lambda k: (k.split("/")[1], k)):
+                spring, grid = key.split("/")
+                for m in ("discrepancy", "surface"):
+                    c = checked[key][m]
+                    passed = c["force_covered_when_passed"]
+                    lines.append(
+                        f"| {spring} | {grid} | {m} | {c['flagged']} of {checked[key]['campaigns']} "
+                        f"| {c['force_covered_all']:.2f} | "
+                        + ("-" if passed is None else f"{passed:.2f}")
+                        + " |"
+                    )
         return "\n".join(lines) + "\n"
 
     return make
@@ -1142,7 +1172,7 @@ def discrepancy_cost(rel: str) -> Callable[[], str]:
             cpu = {m: sum(r["cpu_seconds"][m] for r in runs) / len(runs) for m in models}
             lines.append(
                 f"| {key} | {len(runs)} | "
-                + " | ".join(f"{cpu[m]:.0f} s" for m in models)
+                + " | ".join(f"{cpu[m]:.1f} s" for m in models)
                 + f" | {cpu['discrepancy'] / cpu['surface']:.1f} |"
             )
         return "\n".join(lines) + "\n"

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import os
 import signal
-import sys
 
 import pytest
 
 from uq._io.errors import InputError
-from uq._io.processes import Beside, WorkerDied, import_beside
+from uq._io.processes import Beside, WorkerDied
 
 
 def _refuse(message, param):
@@ -52,18 +51,3 @@ def test_leaving_the_block_stops_a_running_worker():
     with Beside("sleeping", time.sleep, 600) as w:
         process = w._process
     assert not process.is_alive() and process.exitcode == -signal.SIGTERM
-
-
-def test_import_beside_imports_and_calls_in_a_daemon_thread(tmp_path, monkeypatch):
-    """"module:function" is imported and called, "module" imported; a name that fails raises
-    nothing there (the command meets it where it imports the module itself) and stops nothing."""
-    (tmp_path / "uq_beside_probe.py").write_text("CALLS = []\n\ndef f():\n    CALLS.append(1)\n")
-    (tmp_path / "uq_beside_plain.py").write_text("X = 1\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    thread = import_beside("uq_beside_no_such_module", "uq_beside_probe:f", "uq_beside_plain")
-    thread.join(30)
-    assert thread.daemon and not thread.is_alive()
-    assert sys.modules["uq_beside_probe"].CALLS == [1]
-    assert "uq_beside_plain" in sys.modules and "uq_beside_no_such_module" not in sys.modules
-    for name in ("uq_beside_probe", "uq_beside_plain"):
-        monkeypatch.delitem(sys.modules, name)

@@ -315,7 +315,6 @@ def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stan
     from uq._derived.comparison import fitting_both, sampler_words
     from uq._derived.model_check import predictive_check
     from uq._io.files import emit_json
-    from uq._io.processes import import_beside
 
     _check_before_fit(args, rec)
     x_c = args.height_mm * 1e-3
@@ -333,8 +332,6 @@ def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stan
     # a force-only campaign: the per-pressure cubics (uq fit's force-only cubic per test) give
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
-    if args.out:  # the sheet's modules and matplotlib (about 0.5 s): imported during the fit
-        import_beside("uq._report.design", "uq._report.html:pyplot")
     if compare:
         both = fitting_both(
             rec, seed=seed, settings=settings, stand=stand, model=answering, worker=worker

@@ -17,7 +17,6 @@ line, exit 130) and stops them.
 from __future__ import annotations
 
 import contextlib
-import importlib
 import multiprocessing
 import os
 import pickle
@@ -77,27 +76,6 @@ def interrupts_ignored():
         yield
     finally:
         signal.signal(signal.SIGINT, handler)
-
-
-def import_beside(*names: str) -> threading.Thread:
-    """Start importing ``names`` in a daemon thread and return at once: ``"module"``, or
-    ``"module:function"`` to call once imported (an import made by a function, such as
-    ``uq._report.html.pyplot``'s). For what a command needs only after its fit (matplotlib for a
-    data sheet's figures): the fit's compiled programs release the GIL, so the imports run on a
-    CPU that would otherwise wait. Nothing is raised here: a name that fails is met again where
-    the command imports it itself (which waits for an import still under way)."""
-
-    def run():
-        for name in names:
-            with contextlib.suppress(Exception):
-                if ":" in name:
-                    resolve(name)()
-                else:
-                    importlib.import_module(name)
-
-    thread = threading.Thread(target=run, name="uq-import-beside", daemon=True)
-    thread.start()
-    return thread
 
 
 class WorkerDied(RuntimeError):

@@ -205,6 +205,9 @@ def summarise(results: dict) -> dict:
                             "interval": [lo, hi],
                             "mean_width": float(np.mean(ws)) if ws else None,
                             "level_inside": bool(lo <= LEVEL <= hi),
+                            # which way a count outside misses: "below" (the model's intervals
+                            # too narrow there: a user is misled) or "above" (too wide: cautious)
+                            "side": "below" if hi < LEVEL else "above" if lo > LEVEL else "inside",
                         }
                     )
                     cov_all, n_all, w_all = cov_all + covered, n_all + n, w_all + ws
@@ -280,9 +283,9 @@ def markdown(summary: dict, command: str, seconds: float) -> str:
         "force; `margin`: the 90 % interval of `pressure_bar_needed` for the true force holds the "
         "query's pressure. Each count has its exact 90 % Clopper-Pearson interval (with "
         f"{n} replications a count of {int(round(LEVEL * n))} has [{lo:.2f}, {hi:.2f}]); **bold**: "
-        "0.90 outside it."
+        "0.90 above it (the intervals too narrow there), _italic_: 0.90 below it (too wide)."
         + (
-            " A grid `g@name`: the campaigns recorded on the stand data/stands/name.toml (the same "
+            " A grid `g@name`: the campaigns recorded on the stand of data/stands/ named so (the same "
             "seeds as on the paper's stand), the models fitted assuming the paper's error budget."
             if any("@" in k for k in reps)
             else ""
@@ -330,7 +333,7 @@ def markdown(summary: dict, command: str, seconds: float) -> str:
         txt = f"{r['covered']}/{r['n']} [{r['interval'][0]:.2f}, {r['interval'][1]:.2f}]"
         if r["refused"]:
             txt += f" ({r['refused']} refused)"
-        return txt if r["level_inside"] else f"**{txt}**"
+        return {"below": f"**{txt}**", "above": f"_{txt}_"}.get(r.get("side"), txt)
 
     for (spring, gname, what, p, h), models in by.items():
         lines.append(

@@ -83,3 +83,27 @@ def test_between_coverage_refuses_a_missing_stand_in_one_line(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "option --stand" in lines[0] and "no.toml" in lines[0]
+
+
+def test_between_coverage_says_which_way_a_count_misses():
+    """Over 40 replications: 40 covered excludes 0.90 from above (too wide), 30 from below (too
+    narrow: the summary's bold), 36 neither."""
+    bc = _script("between_coverage")
+
+    def runs(covered: int):
+        def q(hit):
+            entry = {"force": {"covered": hit, "width_N": 1.0}, "margin": {"covered": hit}}
+            return {"height_mm": 90.0, "pressure_bar": 2.0} | {m: entry for m in bc.MODELS}
+
+        return [
+            {
+                "cpu_seconds": dict.fromkeys(bc.MODELS, 1.0),
+                "converged": dict.fromkeys(bc.CHECKED, True),
+                "queries": [q(i < covered)],
+            }
+            for i in range(40)
+        ]
+
+    rows = bc.summarise({"a/7": runs(40), "b/7": runs(30), "c/7": runs(36)})["rows"]
+    side = {r["spring"]: r["side"] for r in rows if r["model"] == "discrepancy"}
+    assert side == {"a": "above", "b": "below", "c": "inside"}

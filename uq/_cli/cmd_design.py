@@ -303,8 +303,7 @@ def command_design(args) -> int:
     # beside the model and compared with it in a worker while the design is worked out; the
     # worker starts before this process imports JAX (uq._derived.comparison_worker)
     kw = {"seed": args.seed, "settings": settings, "stand": stand}
-    worker = comparison_worker.start(rec, jobs=None, **kw) if compare else None
-    with worker or nullcontext():
+    with comparison_worker.running(rec, compare, **kw) as worker:
         return _design(args, rec, compare, worker, t0, **kw)
 
 

@@ -4,7 +4,6 @@ the answering model, printing)."""
 from __future__ import annotations
 
 import sys
-from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -420,8 +419,7 @@ def command_margin(args) -> int:
         kw = {"seed": args.seed, "settings": settings, "stand": stand}
         # the cubics fitted beside the model, and compared, in a worker that starts before this
         # process imports JAX (uq._derived.comparison_worker)
-        worker = comparison_worker.start(rec, jobs=None, **kw) if args.model == AUTO else None
-        with worker or nullcontext():
+        with comparison_worker.running(rec, args.model == AUTO, **kw) as worker:
             from uq._derived.comparison import fit_and_choose
 
             _check_design_volume(args, rec)

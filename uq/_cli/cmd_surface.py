@@ -6,7 +6,6 @@ JSON, the model's page (``uq._report.pages``) and the saved model (``--out``).""
 from __future__ import annotations
 
 import time
-from contextlib import nullcontext
 from pathlib import Path
 
 from uq._cli.common import add_stand, record_convergence, stand_from
@@ -69,8 +68,7 @@ def command_surface(args) -> int:
     # process imports JAX (uq._derived.comparison_worker)
     beside = not args.no_compare and not args.select
     kw = {"seed": args.seed, "settings": settings, "stand": stand}
-    worker = comparison_worker.start(rec, jobs=None, **kw) if beside else None
-    with worker or nullcontext():
+    with comparison_worker.running(rec, beside, **kw) as worker:
         return _surface(args, entry, rec, worker, t0, **kw)
 
 

@@ -77,3 +77,12 @@ def start(rec, *, seed: int, settings, stand, jobs: int | None = 1) -> Compariso
     if jobs < 2 or rec.n_points < WORKER_MIN_READINGS:
         return None
     return ComparisonWorker(rec, seed=seed, settings=settings, stand=stand)
+
+
+@contextlib.contextmanager
+def running(rec, wanted: bool, *, seed: int, settings, stand):
+    """A command's worker for ``rec`` (:func:`start`, one process per CPU) when ``wanted``, else
+    None; stopped, if still running, when the block ends."""
+    worker = start(rec, jobs=None, seed=seed, settings=settings, stand=stand) if wanted else None
+    with worker or contextlib.nullcontext():
+        yield worker

@@ -252,7 +252,8 @@ def fitting_both(
     ``compared()`` fits the cubics and compares here. The same fits and comparison, to the bit."""
     name = registry.default("margin") if model is None else model
     kw = {"seed": seed, "settings": settings, "stand": stand}
-    if worker is None:
+    given = worker is not None  # a worker the caller started is the caller's to stop
+    if not given:
         worker = comparison_worker.start(rec, jobs=jobs, **kw)
     if worker is None:
         fit = registry.fit(name, rec, **kw)
@@ -263,7 +264,7 @@ def fitting_both(
 
         yield fit, functools.cache(here)
         return
-    with worker:
+    with contextlib.nullcontext() if given else worker:
         fit = registry.fit(name, rec, **kw)
         worker.compare(fit)
         yield fit, functools.cache(worker.result)

@@ -34,11 +34,11 @@ import itertools
 from dataclasses import MISSING, dataclass, fields, replace
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from uq._derived.margin import pressure_needed
 from uq._inference.summary import band, estimate
 from uq._io.errors import InputError
+from uq._physics import knots
 from uq._physics.quantities import BAR_PA
 from uq._physics.sealed import (
     POLYTROPIC_RANGE,
@@ -219,7 +219,7 @@ class DesignGrid:
         X, P = np.meshgrid(self.heights, self.pressures_bar, indexing="ij")
         self.force = np.asarray(model.force_draws(X, P), float)
         self.area = np.asarray(model.volume_area_draws(X, P), float)
-        self.dforce_dx = CubicSpline(self.heights, self.force, axis=1).derivative()(self.heights)
+        self.dforce_dx = knots.derivative_at_knots(self.heights, self.force, axis=1)
         self.n_draws = self.force.shape[0]
         self._volumes = {}
         self._prior_sd = {}
@@ -331,9 +331,9 @@ def dvdp_prior_sd(model, height_m: float, charge_bar: float) -> float:
     a_lo = np.asarray(model.volume_area_draws(xs, np.full(xs.shape, p_lo)), float).mean(axis=0)
     a_hi = np.asarray(model.volume_area_draws(xs, np.full(xs.shape, p_hi)), float).mean(axis=0)
     slope = (a_hi - a_lo) / ((p_hi - p_lo) * BAR_PA)  # d(dV/dx)/dp_u, m^2/Pa
-    anti = CubicSpline(xs, slope).antiderivative()
     uniform = np.linspace(hlo, hhi, PRIOR_HEIGHTS)  # x* uniform over the tested heights
-    change = anti(uniform) - anti(height_m)  # dV/dp_u(x*) - dV/dp_u(x_c), m^3/Pa
+    # dV/dp_u(x*) - dV/dp_u(x_c), m^3/Pa
+    change = knots.integral_from(xs, slope, axis=0, start=height_m, to=uniform)
     return float(np.sqrt(np.mean(change**2)) * L_PER_M3 * BAR_PA)
 
 
@@ -611,8 +611,7 @@ def isobaric_table(model, pressures_bar, heights_m, reference_height_m: float) -
         P = np.asarray(model.force_draws(xs, np.full(xs.shape, p)), float)
         if has_volume:
             A = np.asarray(model.volume_area_draws(fine, np.full(fine.shape, p)), float)
-            anti = CubicSpline(fine, A, axis=1).antiderivative()
-            dV = anti(xs) - anti(np.array([reference_height_m]))
+            dV = knots.integral_from(fine, A, axis=1, start=reference_height_m, to=xs)
             A_at = A[:, np.searchsorted(fine, np.round(xs, 9))]
         columns = {"load_N": P, "feff_m2": P / (p * BAR_PA)}
         if has_volume:

@@ -36,9 +36,9 @@ from functools import partialmethod
 from typing import NamedTuple
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from uq._io.errors import InputError
+from uq._physics import knots
 
 G_STANDARD = 9.80665  # m/s^2, standard gravity (the load's mass is P / g)
 P_ATM_PA = 101325.0
@@ -330,7 +330,7 @@ class GridElement:
                 raise ValueError(
                     f"GridElement: {name} has shape {a.shape}, expected (S, {shape[0]}, {shape[1]})"
                 )
-            self._c[name] = CubicSpline(self.pressure_grid, a, axis=2).c  # (4, Pn-1, S, H)
+            self._c[name] = knots.coefficients(self.pressure_grid, a, axis=2)  # (4, Pn-1, S, H)
         self.n_draws = int(np.asarray(force).shape[0])
         self._rows = np.arange(self.n_draws)  # the draw each row of p_pa is evaluated for
         self._at_heights = {}  # the grid indices of the heights asked (the same ones every step)

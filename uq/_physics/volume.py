@@ -27,9 +27,9 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from uq._io.errors import InputError
+from uq._physics import knots
 from uq._physics.quantities import BAR_PA
 
 L_PER_M3 = 1.0e3
@@ -134,17 +134,14 @@ def relative_volume_grid(
         raise ValueError(f"volume_area_m2 has shape {A.shape}, expected (S, {x.size}, {p.size})")
     if not x[0] - 1e-12 <= design_height_m <= x[-1] + 1e-12:
         raise ValueError("the design height must lie on the height grid's range")
-    anti = CubicSpline(x, A, axis=1).antiderivative()
-    along_x = anti(x) - anti(np.array([design_height_m]))  # (S, H, Pn) - (S, 1, Pn)
+    along_x = knots.integral_from(x, A, axis=1, start=design_height_m)  # (S, H, Pn)
     d = np.asarray(dvdp_m3_per_pa, float)
     if d.ndim == 0:
         at_c = d * (p - charge_pa)  # (Pn,)
     else:
         if d.shape != (A.shape[0], p.size):
             raise ValueError(f"dV/dp draws have shape {d.shape}, expected ({A.shape[0]}, {p.size})")
-        anti_p = CubicSpline(p, d, axis=1).antiderivative()
-        at_c = anti_p(p) - anti_p(np.array([charge_pa]))  # (S, Pn)
-        at_c = at_c[:, None, :]
+        at_c = knots.integral_from(p, d, axis=1, start=charge_pa)[:, None, :]  # (S, 1, Pn)
     return along_x + at_c
 
 

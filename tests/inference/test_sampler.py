@@ -548,3 +548,35 @@ def test_yeo_johnson_is_scipys_with_its_inverse_slope_and_exponents():
     want = [stats.yeojohnson_normmax(s[:, j]) for j in range(s.shape[1])]
     assert all(0.1 < w < 1.9 for w in want), want
     np.testing.assert_allclose(yeo_johnson_exponents(s), want, atol=0.011)
+
+
+def test_yeo_johnson_exponents_coarse_to_fine_is_the_whole_grids():
+    """The coarse-to-fine search picks the exponent the whole grid's search picks, on skewed,
+    heavy-tailed, bounded and outlying samples of several sizes."""
+    from uq._inference.sampler import YJ_RANGE, yeo_johnson, yeo_johnson_exponents
+
+    grid = np.arange(YJ_RANGE[0], YJ_RANGE[1] + 0.01, 0.02)
+
+    def whole_grid(z):
+        y = yeo_johnson(z[None], grid[:, None, None])
+        slope = np.sum(np.sign(z) * np.log1p(np.abs(z)), axis=0)
+        return grid[
+            np.argmax((grid[:, None] - 1.0) * slope - 0.5 * len(z) * np.log(np.var(y, 1)), 0)
+        ]
+
+    rng = np.random.default_rng(11)
+    for n in (40, 300, 2000):
+        z = np.column_stack(
+            [
+                rng.gamma(0.5, size=n),
+                -rng.gamma(4.0, size=n),
+                rng.standard_t(1.5, size=n),
+                rng.standard_normal(n) ** 3,
+                rng.uniform(size=n),
+                np.concatenate([rng.standard_normal(n - 3), [40.0, 50.0, -60.0]]),
+                -rng.lognormal(size=n),
+            ]
+        )
+        z = (z - z.mean(0)) / z.std(0)
+        got = yeo_johnson_exponents(z)
+        np.testing.assert_array_equal(got, whole_grid(z))

@@ -224,8 +224,9 @@ def test_default_dvdp_is_drawn_with_its_sd_and_covers_a_compliance_of_that_size(
     assert prior["dvdp_sd_l_per_bar"] == pytest.approx(dvdp_prior_sd(m, 0.112, 6.0))
     assert "+-" in prior["assumptions"][0] and "drawn per posterior draw" in prior["assumptions"][0]
     k, ke, kp = tr.rate_N_per_m[0], exact["rate_N_per_m"], prior["rate_N_per_m"]
-    # the exact 0: no spread (to rounding: the grid's splines are matrix products, uq._physics.knots)
-    assert ke["sd"] < 1e-12 * abs(ke["mean"]) and not ke["q05"] <= k <= ke["q95"]  # misses the truth
+    # the exact 0: no spread (to rounding: the grid's splines are matrix products,
+    # uq._physics.knots), and it misses the truth
+    assert ke["sd"] < 1e-12 * abs(ke["mean"]) and not ke["q05"] <= k <= ke["q95"]
     assert kp["q05"] <= k <= kp["q95"]  # the prior's width covers it
     f = prior["natural_frequency_Hz"]
     assert f["q95"] - f["q05"] > 0.01 * f["mean"]  # an honest width: more than 1 %

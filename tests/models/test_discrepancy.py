@@ -367,12 +367,32 @@ def test_draws_are_fixed_and_coherent_in_pressure(small_fit):
     above = fit.deviation_draws(np.full(nodes.size, 0.15), nodes + eps, every)
     scale = np.abs(fit.tested_deviations).max()
     assert np.abs(above - below).max() < 1e-6 * scale
-    every_block = fit.block_draws(np.full(ps.size, 0.15), ps)  # every block computed
+    one = {b: fit.deviation_draws(np.full(ps.size, 0.15), ps, (b,)) for b in every}
     for some in (("delta",), ("eps",), ("delta", "eps"), ("delta", "phi"), ("eps", "phi")):
-        np.testing.assert_array_equal(  # only the blocks asked for computed: the same numbers
+        np.testing.assert_allclose(  # only the blocks asked for, summed
             fit.deviation_draws(np.full(ps.size, 0.15), ps, some),
-            sum(every_block[b] for b in some),
+            sum(one[b] for b in some),
+            rtol=1e-12,
+            atol=1e-12 * scale,
         )
+    # on a grid of heights x pressures (one matrix product) as point by point (scattered points)
+    X, P = np.meshgrid(np.linspace(0.07, 0.15, 9), np.linspace(2.0, 8.0, 13), indexing="ij")
+    grid = fit.deviation_draws(X, P, every)
+    assert grid.shape == (fit.n_draws, 9, 13)
+    for j in range(9):
+        np.testing.assert_allclose(
+            grid[:, j],
+            fit.deviation_draws(X[j] + 1e-13 * np.arange(13), P[j], every),  # scattered
+            rtol=1e-9,
+            atol=1e-9 * scale,
+        )
+    ratio = {"delta": lambda p: p * 1e5, "phi": lambda p: np.full(p.shape, fit.p_ref_pa)}
+    np.testing.assert_allclose(
+        fit.deviation_draws(X, P, tuple(ratio), factors=ratio),
+        P * 1e5 * fit.deviation_draws(X, P) + fit.p_ref_pa * fit.deviation_draws(X, P, ("phi",)),
+        rtol=1e-9,
+        atol=1e-9 * scale * fit.p_ref_pa,
+    )
     base = SurfaceFit.force_draws(fit, 0.15, 4.0)
     t = fit.geometry.t(0.15)
     tk = t ** np.arange(fit.n_k)

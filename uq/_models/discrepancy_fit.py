@@ -229,52 +229,51 @@ class DiscrepancyFit(SurfaceFit):
         values = np.concatenate([self.tested_deviations, vg], axis=1)[:, order]
         return allp[order], np.ascontiguousarray(values.transpose(2, 0, 1))
 
-    def block_draws(
-        self, height_m, p_bar, blocks=None, *, check: bool = True
-    ) -> dict[str, np.ndarray]:
-        """The deviation ``blocks`` (default: every one, ``symbols``) at the points, m^2:
-        {symbol: (S, *shape)}; phi's is the force's deviation not proportional to p_u as an area at
-        p_ref. Only the blocks asked for are computed."""
+    def deviation_draws(
+        self, height_m, p_bar, blocks=("delta",), *, factors=None, check: bool = True
+    ) -> np.ndarray:
+        """The sum of the deviation ``blocks`` at the points, m^2, (S, *shape), each times its
+        factor in ``factors`` (symbol -> a function of pressures in bar, (n,) -> (n,); default
+        1): ("delta",) the pressure area's, ("delta", "eps") the volume-derived area's, delta
+        times p_u and phi times p_ref the force's. Only the blocks asked for are computed. A
+        deviation is a polynomial in t whose coefficients (the two-node mean of the nodes' draws)
+        depend on the pressure alone: they are made once per distinct pressure and, where the
+        points are a grid of their distinct heights and pressures, the polynomials evaluated on
+        that grid by one matrix product."""
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
-        shape, t = h.shape, self.geometry.t(h.ravel())
-        # the weights and the two-node means depend on the pressure alone: once per distinct one
-        p, back = np.unique(p.ravel(), return_inverse=True)
-        back = slice(None) if np.array_equal(back, np.arange(h.size)) else back.reshape(-1)
+        shape, n_k = h.shape, self.n_k
+        pu, at_p = np.unique(p.ravel(), return_inverse=True)
+        hu, at_h = np.unique(h.ravel(), return_inverse=True)
         nodes, values = self.nodes
         if nodes.size == 1:
-            i, w = np.zeros(p.size, int), np.ones((self.rows.size, p.size, 2)) * [1.0, 0.0]
+            i, w = np.zeros(pu.size, int), np.ones((self.rows.size, pu.size, 2)) * [1.0, 0.0]
             values = np.concatenate([values, values], axis=2)
         else:
-            i, w = gp.two_point_weights(p, nodes, self.hyper["length"])
-        w0, w1 = np.ascontiguousarray(w[..., 0]), np.ascontiguousarray(w[..., 1])
-        out = {}
-        for sym in self.symbols if blocks is None else blocks:
-            b = self.symbols.index(sym)
-            acc = np.zeros((self.rows.size, h.size))
-            for k in range(self.n_k):
-                series = values[b * self.n_k + k]
-                acc += (w0 * series[:, i] + w1 * series[:, i + 1])[:, back] * t**k
-            out[sym] = acc.reshape(-1, *shape)
-        return out
-
-    def deviation_draws(self, height_m, p_bar, blocks=("delta",), *, check: bool = True):
-        """The sum of the deviation ``blocks`` at the points, m^2, (S, *shape): ("delta",) the
-        pressure area's, ("delta", "eps") the volume-derived area's (``block_draws``)."""
-        return sum(self.block_draws(height_m, p_bar, blocks, check=check).values())
-
-    def _p_pa(self, height_m, p_bar):
-        shape = np.broadcast(np.asarray(height_m), np.asarray(p_bar)).shape
-        return np.broadcast_to(np.asarray(p_bar, float), shape) * BAR_PA
+            i, w = gp.two_point_weights(pu, nodes, self.hyper["length"])
+        coef = np.zeros((n_k, self.rows.size, pu.size))  # (k, S, distinct pressures)
+        for sym in blocks:
+            series = values[self.symbols.index(sym) * n_k :][:n_k]  # (k, S, nodes)
+            c = w[..., 0] * series[:, :, i] + w[..., 1] * series[:, :, i + 1]
+            coef += c if factors is None or sym not in factors else c * factors[sym](pu)
+        coef = coef.transpose(1, 2, 0)  # (S, distinct pressures, k)
+        at_p, at_h = at_p.reshape(-1), at_h.reshape(-1)
+        if pu.size * hu.size <= 2 * h.size:  # a grid (or nearly): evaluated on it, then looked up
+            table = coef @ (self.geometry.t(hu) ** np.arange(n_k)[:, None])  # (S, P, H)
+            out = table.reshape(table.shape[0], -1)[:, at_p * hu.size + at_h]
+        else:  # scattered points: each its own polynomial
+            tk = self.geometry.t(h.ravel())[:, None] ** np.arange(n_k)  # (n, k)
+            out = np.einsum("snk,nk->sn", coef[:, at_p], tk)
+        return out.reshape(-1, *shape)
 
     # ---- the quantities: the surface's plus the deviations
     def force_draws(self, height_m, p_bar, *, check: bool = True) -> np.ndarray:
         """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta plus
         p_ref phi."""
         base = super().force_draws(height_m, p_bar, check=check)
-        d = self.block_draws(height_m, p_bar, ("delta", "phi"), check=False)
-        return base + self._p_pa(height_m, p_bar) * d["delta"] + self.p_ref_pa * d["phi"]
+        at = {"delta": lambda p: p * BAR_PA, "phi": lambda p: np.full(p.shape, self.p_ref_pa)}
+        return base + self.deviation_draws(height_m, p_bar, tuple(at), factors=at, check=False)
 
     def pressure_area_draws(self, height_m, p_bar, *, check=True):
         """F_p + delta, m^2: the pressure area with its deviation."""
@@ -294,8 +293,8 @@ class DiscrepancyFit(SurfaceFit):
     def spread_draws(self, height_m, p_bar, *, check=True):
         """p_u (-dV/dx) - P = p_u (D + eps) - E - p_ref phi, N."""
         base = super().spread_draws(height_m, p_bar, check=check)
-        d = self.block_draws(height_m, p_bar, ("eps", "phi"), check=False)
-        return base + self._p_pa(height_m, p_bar) * d["eps"] - self.p_ref_pa * d["phi"]
+        at = {"eps": lambda p: p * BAR_PA, "phi": lambda p: np.full(p.shape, -self.p_ref_pa)}
+        return base + self.deviation_draws(height_m, p_bar, tuple(at), factors=at, check=False)
 
     # ---- the JSON document
     def fitted_document(self, comparison: dict | None, advice: str) -> dict:

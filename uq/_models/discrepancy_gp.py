@@ -136,10 +136,10 @@ def draw_on_grid(values_T, scales, length, tested_bar, grid_bar, xi):
     R = per_distance(allp[:, None] - allp[None, :], length) + JITTER * np.eye(T + G)
     Rtt, Rgt, Rgg = R[:, :T, :T], R[:, T:, :T], R[:, T:, T:]
     W = np.linalg.solve(Rtt, np.swapaxes(Rgt, 1, 2))  # (S, T, G) = R_TT^-1 R_TG
-    mean = np.einsum("stg,stc->sgc", W, values_T)
-    cov = Rgg - np.einsum("sgt,sth->sgh", Rgt, W)
+    mean = np.swapaxes(W, 1, 2) @ values_T  # (S, G, c); matrix products, not einsum: BLAS
+    cov = Rgg - Rgt @ W
     cov = 0.5 * (cov + np.swapaxes(cov, 1, 2)) + JITTER * np.eye(G)
-    return mean + np.einsum("sgh,shc->sgc", np.linalg.cholesky(cov), xi) * scales[:, None, :]
+    return mean + (np.linalg.cholesky(cov) @ xi) * scales[:, None, :]
 
 
 def two_point_weights(p_bar, nodes_bar, length):

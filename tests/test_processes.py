@@ -51,3 +51,16 @@ def test_leaving_the_block_stops_a_running_worker():
     with Beside("sleeping", time.sleep, 600) as w:
         process = w._process
     assert not process.is_alive() and process.exitcode == -signal.SIGTERM
+
+
+def test_a_worker_collects_garbage_as_a_short_lived_process():
+    """A worker's cyclic collector is set for a process that lives as long as one command; the
+    calling process (the library's) keeps its own."""
+    import gc
+
+    from uq._io.processes import SHORT_LIVED_GC
+
+    mine = gc.get_threshold()
+    with Beside("asking", "gc:get_threshold") as w:
+        assert tuple(w.result()) == SHORT_LIVED_GC
+    assert gc.get_threshold() == mine != SHORT_LIVED_GC

@@ -388,6 +388,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _command(argv: list[str], as_program: bool) -> int:
     _interrupts_are_not_lost()
+    if as_program:  # the process is the command's: its collector set for that (not the library's)
+        from uq._io.processes import short_lived  # reason: multiprocessing; exit_now needs it too
+
+        short_lived()
     _compile_cache()  # before the command's module is imported: JAX reads the settings on its import
     parser = build_parser(argv)
     args = _parse(parser, argv)

@@ -17,6 +17,7 @@ line, exit 130) and stops them.
 from __future__ import annotations
 
 import contextlib
+import gc
 import multiprocessing
 import os
 import pickle
@@ -78,6 +79,20 @@ def interrupts_ignored():
         signal.signal(signal.SIGINT, handler)
 
 
+#: the cyclic garbage collector's thresholds in a process of the command line or one of its
+#: workers (``short_lived``); Python's default is (700, 10, 10)
+SHORT_LIVED_GC = (50_000, 20, 100)
+
+
+def short_lived() -> None:
+    """The cyclic garbage collector set for a process that lives as long as one command: most of
+    its objects (the imports', JAX's traced programs) live to its end, and a collection walks them
+    all again (and runs JAX's collection callback). Collected every 50000 net allocations instead
+    of 700: on ``uq design`` about 6 collections instead of 500, 0.1-0.4 s less (docs/speed.md),
+    the peak memory the same. The library leaves the collector as the user set it."""
+    gc.set_threshold(*SHORT_LIVED_GC)
+
+
 class WorkerDied(RuntimeError):
     """A worker process stopped without an answer (killed, out of memory, a crash in C)."""
 
@@ -87,6 +102,7 @@ def _run(send, fn, args, kwargs) -> None:
     (``fn``: a function, or one named ``"module:attribute"``),
     pickled straight into the pipe (no copy of a large answer held in memory first)."""
     ignore_interrupts()
+    short_lived()
     set_enabled(False)  # the calling process draws its own bar on the same terminal
     try:
         # a function named "module:attribute" is imported here, not by the caller (Beside)

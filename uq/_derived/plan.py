@@ -33,7 +33,7 @@ from uq._io.errors import InputError
 # ----------------------------------------------------------------------------- layouts
 
 
-def recording_order(readings, new_bar, heights_only: bool = False):
+def recording_order(readings, new_bar):
     """The planned tests in recording order (ascending pressure; in each, compression from the
     highest height down, then rebound up: a height read twice is read once on each branch):
     [{"test": j, "pressure_bar", "heights_m", "branches"}]."""

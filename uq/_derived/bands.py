@@ -157,10 +157,6 @@ class PressureBands:
         """The test has its own volume curve (piston_* or volume_* column)."""
         return self.dV is not None
 
-    @property
-    def pressure_Pa(self) -> float:
-        return self.pressure_bar * BAR_PA
-
     def __repr__(self) -> str:
         return f"PressureBands({self.pressure_bar:g} bar, {self.force.mean.size} heights)"
 
@@ -368,7 +364,7 @@ def bands_from_coefficients(
     )
     u, u_top = x - x0_m, x_max - x0_m
     normals = (
-        None if noise is None else _Normals(np.random.default_rng(seed), force.shape[:2], x.size)
+        None if noise is None else _normals(np.random.default_rng(seed), force.shape[:2], x.size)
     )
     feff_ref = None if ref is None else -S * _slope(piston[ref], u)
     sel = np.flatnonzero(p_bar >= SCATTER_MIN_BAR - 1e-9)
@@ -385,7 +381,7 @@ def bands_from_coefficients(
             feff_ref,
             None if noise is None else np.asarray(noise, float)[t],
             None if noise_ref_force is None else np.asarray(noise_ref_force, float)[t],
-            None if normals is None else normals.next_test(),
+            None if normals is None else next(normals),
         )
         B, sim = {}, {}
         for n, curves in q:  # each quantity's (D, G) curves reduced to bands, then dropped
@@ -432,26 +428,20 @@ def bands_from_coefficients(
     )
 
 
-class _Normals:
-    """The predictive draws' normals, one test's (2, D, G) block at a time, from the stream the
-    bands have always used: ``rng.standard_normal((2, T, D, G))``, every test's force normals
-    first, then every test's piston normals. Two generators read that stream, one from its start
-    (force) and a copy moved past the T force blocks (piston), so that a campaign holds one test's
-    normals instead of all of them (64 MB on data/n50 at 2000 draws); numpy's generator draws a
-    block of normals as the same values whether in one call or in consecutive ones (tested)."""
-
-    def __init__(self, rng: np.random.Generator, shape: tuple[int, int], n_grid: int):
-        self._size = (int(shape[1]), int(n_grid))
-        self._force = rng
-        self._piston = copy.deepcopy(rng)
-        for _ in range(int(shape[0])):  # past the force normals, one block at a time
-            self._piston.standard_normal(self._size)
-
-    def next_test(self) -> np.ndarray:
-        """The next test's (2, D, G) normals: force's, piston's."""
-        return np.stack(
-            [self._force.standard_normal(self._size), self._piston.standard_normal(self._size)]
-        )
+def _normals(rng: np.random.Generator, shape: tuple[int, int], n_grid: int):
+    """The predictive draws' normals, one test's (2, D, G) block (force's, piston's) a ``next``,
+    from the stream the bands have always used: ``rng.standard_normal((2, T, D, G))``, every
+    test's force normals first, then every test's piston normals. Two generators read that stream,
+    one from its start (force) and a copy moved past the T force blocks (piston), so that a
+    campaign holds one test's normals instead of all of them (64 MB on data/n50 at 2000 draws);
+    numpy's generator draws a block of normals as the same values whether in one call or in
+    consecutive ones (tested)."""
+    size = (int(shape[1]), int(n_grid))
+    piston = copy.deepcopy(rng)
+    for _ in range(int(shape[0])):  # past the force normals, one block at a time
+        piston.standard_normal(size)
+    while True:
+        yield np.stack([rng.standard_normal(size), piston.standard_normal(size)])
 
 
 class _Across:

@@ -143,9 +143,8 @@ def _check_design_volume(args, rec) -> None:
     if not _design_asked(args) or rec.has_piston:
         return
     asked = next(o for o in DESIGN_OPTIONS if getattr(args, o, None) is not None)
-    option = "--" + asked.replace("_", "-")
     raise InputError(
-        f"option {option}: {rec.path} has no piston readings (force-only campaign or catalogue "
+        f"option {_option(asked)}: {rec.path} has no piston readings (force-only campaign or catalogue "
         "table), so the sealed rate, frequency and stroke cannot be given: they need dV/dx over the "
         "pressures the sealed spring moves through (omit the design options: the pressure needed and "
         "the force band are answered)"

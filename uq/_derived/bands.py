@@ -157,10 +157,6 @@ class PressureBands:
         """The test has its own volume curve (piston_* or volume_* column)."""
         return self.dV is not None
 
-    @property
-    def pressure_Pa(self) -> float:
-        return self.pressure_bar * BAR_PA
-
     def __repr__(self) -> str:
         return f"PressureBands({self.pressure_bar:g} bar, {self.force.mean.size} heights)"
 
@@ -338,10 +334,7 @@ def bands_from_coefficients(
     noise=None,
     noise_ref_force=None,
     reference_bar: float = REFERENCE_BAR,
-    scatter_min_bar: float = SCATTER_MIN_BAR,
-    extra_heights: dict | None = None,
     seed: int = 0,
-    level: float = LEVEL,
     on_test=None,
 ) -> CampaignBands:
     """Bands from coefficient draws.
@@ -352,9 +345,8 @@ def bands_from_coefficients(
     ``piston`` None means no test has any; noise
     (T, D, 3) = sigma0_N, rel_force, sigma_L_m or None (predictive bands then equal the mean
     bands); noise_ref_force (T, G): the force level F_ref of the relative noise term on the grid,
-    as the fit used it (its least-squares curve; default: each draw's own |force|); x_max_m (T,) each test's largest height (default: the grid's end); extra_heights:
-    label -> height (m) where the scatter is also reported (defaults: x0, x_max, x_min of the
-    grid and 75 mm); on_test(t, bands, grid): called with each test's index and
+    as the fit used it (its least-squares curve; default: each draw's own |force|); x_max_m (T,) each test's largest height (default: the grid's end); the scatter
+    is also reported at x0, x_max and x_min of the grid and at 75 mm; on_test(t, bands, grid): called with each test's index and
     :class:`PressureBands` as soon as they are made (grid: x_m, x0_m, reference_bar), so that
     its figure can be drawn while the next test's bands are made (``uq report`` does).
     """
@@ -372,10 +364,10 @@ def bands_from_coefficients(
     )
     u, u_top = x - x0_m, x_max - x0_m
     normals = (
-        None if noise is None else _Normals(np.random.default_rng(seed), force.shape[:2], x.size)
+        None if noise is None else _normals(np.random.default_rng(seed), force.shape[:2], x.size)
     )
     feff_ref = None if ref is None else -S * _slope(piston[ref], u)
-    sel = np.flatnonzero(p_bar >= scatter_min_bar - 1e-9)
+    sel = np.flatnonzero(p_bar >= SCATTER_MIN_BAR - 1e-9)
     across = _Across()  # F_eff's largest, smallest and summed value over the tests in sel
     tests = []
     for t in range(T):
@@ -389,7 +381,7 @@ def bands_from_coefficients(
             feff_ref,
             None if noise is None else np.asarray(noise, float)[t],
             None if noise_ref_force is None else np.asarray(noise_ref_force, float)[t],
-            None if normals is None else normals.next_test(),
+            None if normals is None else next(normals),
         )
         B, sim = {}, {}
         for n, curves in q:  # each quantity's (D, G) curves reduced to bands, then dropped
@@ -397,9 +389,9 @@ def bands_from_coefficients(
                 across.add(curves)
             if (n in OWN_VOLUME and not has_vol[t]) or (n in REF_VOLUME and ref is None):
                 continue
-            B[n] = Band.of(curves, level)
+            B[n] = Band.of(curves)
             if n in SIMULTANEOUS:
-                sim[n] = SimultaneousBand.of(curves, level)
+                sim[n] = SimultaneousBand.of(curves)
             del curves
         sim = {n: sim[n] for n in SIMULTANEOUS if n in sim}
         at0 = _at_x0(
@@ -420,9 +412,7 @@ def bands_from_coefficients(
         "x_min": float(x.min()),
         "75 mm": EXTRA_HEIGHT_M,
     }
-    if extra_heights is not None:
-        heights = dict(extra_heights)
-    scatter, scatter_at = _scatter(p_bar[sel], force[sel], across, heights, x0_m, level)
+    scatter, scatter_at = _scatter(p_bar[sel], force[sel], across, heights, x0_m)
     return CampaignBands(
         x,
         float(x0_m),
@@ -438,26 +428,20 @@ def bands_from_coefficients(
     )
 
 
-class _Normals:
-    """The predictive draws' normals, one test's (2, D, G) block at a time, from the stream the
-    bands have always used: ``rng.standard_normal((2, T, D, G))``, every test's force normals
-    first, then every test's piston normals. Two generators read that stream, one from its start
-    (force) and a copy moved past the T force blocks (piston), so that a campaign holds one test's
-    normals instead of all of them (64 MB on data/n50 at 2000 draws); numpy's generator draws a
-    block of normals as the same values whether in one call or in consecutive ones (tested)."""
-
-    def __init__(self, rng: np.random.Generator, shape: tuple[int, int], n_grid: int):
-        self._size = (int(shape[1]), int(n_grid))
-        self._force = rng
-        self._piston = copy.deepcopy(rng)
-        for _ in range(int(shape[0])):  # past the force normals, one block at a time
-            self._piston.standard_normal(self._size)
-
-    def next_test(self) -> np.ndarray:
-        """The next test's (2, D, G) normals: force's, piston's."""
-        return np.stack(
-            [self._force.standard_normal(self._size), self._piston.standard_normal(self._size)]
-        )
+def _normals(rng: np.random.Generator, shape: tuple[int, int], n_grid: int):
+    """The predictive draws' normals, one test's (2, D, G) block (force's, piston's) a ``next``,
+    from the stream the bands have always used: ``rng.standard_normal((2, T, D, G))``, every
+    test's force normals first, then every test's piston normals. Two generators read that stream,
+    one from its start (force) and a copy moved past the T force blocks (piston), so that a
+    campaign holds one test's normals instead of all of them (64 MB on data/n50 at 2000 draws);
+    numpy's generator draws a block of normals as the same values whether in one call or in
+    consecutive ones (tested)."""
+    size = (int(shape[1]), int(n_grid))
+    piston = copy.deepcopy(rng)
+    for _ in range(int(shape[0])):  # past the force normals, one block at a time
+        piston.standard_normal(size)
+    while True:
+        yield np.stack([rng.standard_normal(size), piston.standard_normal(size)])
 
 
 class _Across:
@@ -543,12 +527,12 @@ def _at_x0(p_bar: float, force, b_L, b_L_ref, S: float) -> dict:
     return out
 
 
-def _scatter(p_bar, force, across: _Across, heights: dict, x0_m: float, level: float):
-    """Scatter of F_eff over the tests at >= scatter_min_bar (None with fewer than two), on the
+def _scatter(p_bar, force, across: _Across, heights: dict, x0_m: float):
+    """Scatter of F_eff over the tests at >= SCATTER_MIN_BAR (None with fewer than two), on the
     grid (``across``: their F_eff curves) and at heights."""
     if p_bar.size < 2:
         return None, {}
-    scatter = Band.of(across.scatter(), level)
+    scatter = Band.of(across.scatter())
     hx = np.array(list(heights.values()), float)
     fh = _poly(force, hx - x0_m) / (p_bar * BAR_PA)[:, None, None]  # (T', D, H)
     sh = feff_scatter(fh)  # (D, H)

@@ -33,7 +33,7 @@ from uq._io.errors import InputError
 # ----------------------------------------------------------------------------- layouts
 
 
-def recording_order(readings, new_bar, heights_only: bool = False):
+def recording_order(readings, new_bar):
     """The planned tests in recording order (ascending pressure; in each, compression from the
     highest height down, then rebound up: a height read twice is read once on each branch):
     [{"test": j, "pressure_bar", "heights_m", "branches"}]."""
@@ -284,7 +284,7 @@ def _frame_of(builder, tests) -> Frame:
     return builder.frame(np.array([p for p, _ in tests], float), new_heights=[h for _, h in tests])
 
 
-def paper_tests(tested_bar, heights_m=None):
+def paper_tests(tested_bar):
     """The paper's protocol (section 3.4) at its pressures not yet tested: 155 -> 65 -> 155 mm in
     5 mm steps (37 readings a test)."""
     down = np.round(np.arange(PAPER_X_MAX_M, PAPER_X_MIN_M - 1e-9, -0.005), 6)

@@ -72,17 +72,14 @@ def chi2_logsf(x: float, dof: int) -> float:
     return float(np.log1p(-chdtr(dof, x)))
 
 
-def least_squares_draws(u_m, y, n_draws: int, rng, coef=None, cov=None) -> np.ndarray:
+def least_squares_draws(u_m, y, n_draws: int, rng) -> np.ndarray:
     """Draws (n_draws, 4) of a cubic's paper-basis coefficients from its ordinary least-squares
-    estimate and covariance s^2 (X^T X)^-1 (s^2 the residual variance, n - 4 degrees of freedom),
-    or from the given ``coef`` and ``cov``."""
-    if coef is None:
-        X = np.vander(np.asarray(u_m, float), 4, increasing=True)
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        res = y - X @ coef
-        s2 = float(res @ res) / max(y.size - 4, 1)
-        cov = s2 * np.linalg.inv(X.T @ X)
-    return rng.multivariate_normal(np.asarray(coef, float), np.asarray(cov, float), n_draws)
+    estimate and covariance s^2 (X^T X)^-1 (s^2 the residual variance, n - 4 degrees of freedom)."""
+    X = np.vander(np.asarray(u_m, float), 4, increasing=True)
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    res = y - X @ coef
+    s2 = float(res @ res) / max(y.size - 4, 1)
+    return rng.multivariate_normal(coef, s2 * np.linalg.inv(X.T @ X), n_draws)
 
 
 def _neighbours(p: np.ndarray, i: int) -> np.ndarray:

@@ -289,6 +289,18 @@ def arrays(rec):
     return (*force_arrays(rec), L, idx)
 
 
+def campaign_data(rec, stand: StandDescription, area_m2, designs, lever) -> PairData:
+    """A campaign's arrays for a model of force and piston over all its tests: the designs
+    (``designs(x, p, idx, n_tests)`` -> Xf, Xl), the readings, and the noise references from a
+    weighted least-squares fit of the same model (:func:`reference_fit`): its force, and
+    ``lever(x, p, beta)`` (the force's lever of a pressure-holding error)."""
+    x, p, F, L, idx = arrays(rec)
+    Xf, Xl = designs(x, p, idx, len(rec.tests))
+    beta = reference_fit(Xf, F, Xl, L)
+    phat, lever = np.abs(Xf @ beta), np.abs(lever(x, p, beta))
+    return pair_data(Xf, Xl, F, L, phat, lever, p, area_m2, stand, measured_deviation(rec, stand))
+
+
 def reference_fit(Xf, F, Xl=None, L=None) -> np.ndarray:
     """The coefficients of a weighted least-squares fit of the force (and the piston), whose
     curves are the plug-in references of the noise terms: force sd 0.5 % + 20 N, piston sd 1 mm."""

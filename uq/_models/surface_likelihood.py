@@ -15,7 +15,7 @@ from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.sampler import INDEPENDENCE_MIX, Settings
 from uq._io.errors import InputError
 from uq._models import pair, surface_force
-from uq._models.pair import NOISE_NAMES, PairData, noise_prior_mean, pair_data
+from uq._models.pair import NOISE_NAMES, PairData, noise_prior_mean
 from uq._models.surface import (
     CANDIDATES,
     MAX_DRAWS,
@@ -94,22 +94,13 @@ def surface_force_data(rec: Recordings, orders: Orders, stand: StandDescription)
 def surface_data(rec: Recordings, orders: Orders, stand: StandDescription) -> PairData:
     """The model's arrays for a campaign: designs, readings, the noise references, the Gram plan."""
     g = geometry_of(rec)
-    x, p, F, L, idx = pair.arrays(rec)
-    Xf, Xl = designs(orders, g, x, p, idx, len(rec.tests))
-    beta = pair.reference_fit(Xf, F, Xl, L)
     nc = (orders.K + 1) * (orders.Lp + 1)
-    feff = tq_columns(g.t(x), g.q(p), orders.K, orders.Lp) @ (beta[:nc] * SCALE_C)
-    return pair_data(
-        Xf,
-        Xl,
-        F,
-        L,
-        np.abs(Xf @ beta),
-        np.abs(feff),
-        p,
-        g.area_m2,
+    return pair.campaign_data(
+        rec,
         stand,
-        pair.measured_deviation(rec, stand),
+        g.area_m2,
+        lambda x, p, idx, n_tests: designs(orders, g, x, p, idx, n_tests),
+        lambda x, p, beta: tq_columns(g.t(x), g.q(p), orders.K, orders.Lp) @ (beta[:nc] * SCALE_C),
     )
 
 

@@ -16,7 +16,7 @@ from uq._inference.float64 import jnp
 from uq._inference.sampler import Settings
 from uq._io.errors import InputError
 from uq._models import pair
-from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, PairData, pair_data
+from uq._models.pair import NATURAL_NAMES, NOISE_NAMES, PairData
 from uq._models.thermo import (
     CANDIDATES,
     MAX_DRAWS,
@@ -99,13 +99,12 @@ def thermo_data(rec: Recordings, orders: ThermoOrders, stand: StandDescription) 
     least-squares fit of the same potential (force, and the force's pressure derivative as the
     lever of a pressure-holding error)."""
     g = geometry_of(rec)
-    x, p, F, L, idx = pair.arrays(rec)
-    Xf, Xl = designs(orders, g, x, p, idx, len(rec.tests))
-    beta = pair.reference_fit(Xf, F, Xl, L)
-    phat = np.abs(Xf @ beta)
-    lever = np.abs(force_pressure_slope(orders, g, x, p, beta[: orders.n_potential]))
-    return pair_data(
-        Xf, Xl, F, L, phat, lever, p, g.area_m2, stand, pair.measured_deviation(rec, stand)
+    return pair.campaign_data(
+        rec,
+        stand,
+        g.area_m2,
+        lambda x, p, idx, n_tests: designs(orders, g, x, p, idx, n_tests),
+        lambda x, p, beta: force_pressure_slope(orders, g, x, p, beta[: orders.n_potential]),
     )
 
 

@@ -120,15 +120,14 @@ def _bands(ax, x, pointwise, simultaneous, scale, color, ls="-"):
     _fill(ax, x, pointwise, scale, color, alpha=0.4, ls=ls)
 
 
-def _band_key(ax, *, simultaneous: bool, points: str | None = None) -> None:
+def _band_key(ax, points: str | None = None) -> None:
     """A legend of what the shades and marks mean (colours are the pressures: the colour bar)."""
     from matplotlib.lines import Line2D  # reason: optional and heavy, loaded only where used
     from matplotlib.patches import Patch  # reason: optional and heavy, loaded only where used
 
     handles = [Line2D([], [], color="0.3", lw=LINE_PT, label="posterior mean")]
     handles.append(Patch(color="0.3", alpha=0.4, lw=0, label="pointwise 90 % band"))
-    if simultaneous:
-        handles.append(Patch(color="0.3", alpha=0.15, lw=0, label="simultaneous 90 % band"))
+    handles.append(Patch(color="0.3", alpha=0.15, lw=0, label="simultaneous 90 % band"))
     if points:
         handles.append(Line2D([], [], color="0.3", ls="", marker=".", label=points))
     ax.legend(handles=handles, fontsize=7, loc="best")
@@ -344,7 +343,7 @@ def figure_feff(cf, cb: CampaignBands):
         "Fig. 4: effective area from the force (eq. 1), tests with p_u ≥ 1 bar", fontsize=10
     )
     ax.grid(alpha=0.3)
-    _band_key(ax, simultaneous=True, points="readings P / p_u")
+    _band_key(ax, points="readings P / p_u")
     _colour_bar(fig, ax, sm, [tb.pressure_bar for _, tb in shown])
     return fig
 
@@ -376,7 +375,7 @@ def figure_traditional(cf, cb: CampaignBands):
     ax2.axhline(0, color="k", lw=0.6)
     ax2.set(xlabel="height x (mm)", ylabel="(traditional − measured) / measured (%)")
     ax2.set_title("spread of the traditional force", fontsize=9)
-    _band_key(ax2, simultaneous=True)
+    _band_key(ax2)
     for a in (ax, ax2):
         _mark_x0(a, cb.x0_m * MM)
         a.grid(alpha=0.3)

@@ -23,10 +23,9 @@ from uq._models.registry import CUBICS
 from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
 
-def figure_residual_overlay(fit, model: str | None = None):
+def figure_residual_overlay(fit):
     """Readings minus the model's mean force, with its 90 % band, one panel per test (``fit``: any
-    fitted model of the recordings; ``model`` names it in the legend, default its name)."""
-    model = fit.name if model is None else model
+    fitted model of the recordings, named in the legend by its name)."""
     plt = pyplot()
     tests = fit.recordings.tests
     n = len(tests)
@@ -48,7 +47,7 @@ def figure_residual_overlay(fit, model: str | None = None):
             alpha=0.35,
             color="tab:blue",
             lw=0,
-            label=f"{model} 90 % band",
+            label=f"{fit.name} 90 % band",
         )
         ax.axhline(0, color="k", lw=0.6)
         comp = t.compression
@@ -74,7 +73,7 @@ def figure_residual_overlay(fit, model: str | None = None):
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside upper center", ncol=3, fontsize=7, frameon=False)
     fig.supxlabel("height x, mm", fontsize=9)
-    fig.supylabel(f"reading - {model} mean force, N", fontsize=9)
+    fig.supylabel(f"reading - {fit.name} mean force, N", fontsize=9)
     return fig
 
 

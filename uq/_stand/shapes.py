@@ -124,8 +124,6 @@ def catalogue_recordings(
     layout=None,
     volume_at_bar: float | None = None,
     stand=None,
-    piston_area_m2: float | None = None,
-    name: str | None = None,
 ):
     """A catalogue table made by the stand, as :class:`uq.Recordings` in memory: what
     ``uq simulate --catalogue [--volume-at-bar P]`` writes (the same tests, cut and rounded the
@@ -133,11 +131,10 @@ def catalogue_recordings(
     ``layout`` default: the paper's pressures, 10 mm steps."""
 
     stand = PAPER_STAND if stand is None else stand
-    area = PAPER_PISTON_AREA_M2 if piston_area_m2 is None else piston_area_m2
     layout = Layout(step_m=0.010) if layout is None else layout
     p = tuple(layout.pressures_bar)
     volume_at_bar = p[len(p) // 2] if volume_at_bar is None else volume_at_bar
-    tests = simulate(spring, seed=seed, layout=layout, piston_area_m2=area, stand=stand)
+    tests = simulate(spring, seed=seed, layout=layout, stand=stand)
     tests = catalogue(
         tests,
         spring,
@@ -145,7 +142,7 @@ def catalogue_recordings(
         volume_at_bar=volume_at_bar,
         x_max_m=layout.x_max_m,
         element_volume_at_xmax_m3=stand.element_volume_at_xmax_m3,
-        piston_area_m2=area,
+        piston_area_m2=PAPER_PISTON_AREA_M2,
     )
     text = write_recordings_csv(
         tests,
@@ -155,4 +152,6 @@ def catalogue_recordings(
         volume=True,
         rounding=catalogue_rounding({"height": "mm", "force": "N", "volume": "l"}),
     )
-    return recordings_from_text(text, name or f"catalogue seed {seed}", piston_area_cm2=area * 1e4)
+    return recordings_from_text(
+        text, f"catalogue seed {seed}", piston_area_cm2=PAPER_PISTON_AREA_M2 * 1e4
+    )

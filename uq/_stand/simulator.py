@@ -359,19 +359,17 @@ def simulate_planned(
     planned: list[dict],
     *,
     seed: int = 0,
-    effects: dict[str, float] | None = None,
-    piston_area_m2: float = PAPER_PISTON_AREA_M2,
-    stand: StandDescription = PAPER_STAND,
 ) -> list[dict]:
-    """The virtual stand reading planned tests (the ``tests`` of ``uq plan --json``: dicts with
-    pressure_bar, heights_mm in recording order and optional branches, compression when absent), with
-    the same errors as :func:`simulate`; returns one dict of arrays per test, as :func:`simulate`."""
-    spring = make_spring(spring_name, piston_area_m2)
+    """The paper's virtual stand, without effects, reading planned tests (the ``tests`` of ``uq plan
+    --json``: dicts with pressure_bar, heights_mm in recording order and optional branches,
+    compression when absent), with the same errors as :func:`simulate`; returns one dict of arrays
+    per test, as :func:`simulate`."""
+    spring = make_spring(spring_name)
     rng = np.random.default_rng(seed)
     return [
         _test(
             spring,
-            dict(effects or {}),
+            {},
             float(t["pressure_bar"]),
             np.round(np.asarray(t["heights_mm"], float) * 1e-3, 9),
             np.array(
@@ -381,8 +379,8 @@ def simulate_planned(
                 ]
             ),
             rng,
-            stand,
-            piston_area_m2,
+            PAPER_STAND,
+            PAPER_PISTON_AREA_M2,
         )
         for t in planned
     ]

@@ -40,6 +40,7 @@ RUN_BY = {
     "scripts/plan_proof.py": "test_plan_proof_tiny",
     "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
+    "scripts/between_decomposition.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/importance_coverage.py": "test_importance_coverage_tiny",
     "scripts/maxwell_table1.py": "test_maxwell_table1_reproduces_the_committed_report",
     "scripts/noise_check_study.py": "test_noise_check_study_tiny",

@@ -1,5 +1,5 @@
 """The discrepancy surface's study scripts run with tiny settings (tests/test_scripts.py's rule):
-scripts/between_coverage.py and scripts/n50_bands.py."""
+scripts/between_coverage.py, scripts/between_decomposition.py and scripts/n50_bands.py."""
 
 from __future__ import annotations
 
@@ -39,6 +39,31 @@ def test_between_coverage_tiny(tmp_path):
     assert set(run["check_misses"]) == {"discrepancy", "surface"}
     text = (tmp_path / "summary.md").read_text()
     assert "By pressure and height" in text and "## The model check" in text
+
+
+def test_between_decomposition_tiny(tmp_path):
+    """One campaign taken apart at the query and its two tested neighbours: the smooth surface's
+    part and the deviation's add up to the band's force, and a pressure that is tested is refused
+    with one line and status 2."""
+    out = tmp_path / "decomposition.json"
+    proc = _run("scripts/between_decomposition.py", "--tiny", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("RECONSTRUCTED")
+    doc = json.loads(out.read_text())
+    rows = doc["seeds"][0]["rows"]
+    assert [(r["pressure_bar"], r["tested"]) for r in rows] == [
+        (3.0, True),
+        (4.5, False),
+        (5.0, True),
+    ]
+    for r in rows:
+        lo, hi = r["band_N"]
+        centre = r["true_force_N"] + r["surface_minus_truth_N"] + r["deviation_N"]
+        assert lo < centre < hi
+        assert r["covered"] == (lo <= r["true_force_N"] <= hi)
+    bad = _run("scripts/between_decomposition.py", "--tiny", "--pressure-bar", 3)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert "--pressure-bar" in bad.stderr
 
 
 def test_n50_bands_tiny(tmp_path):

@@ -239,7 +239,7 @@ class DiscrepancyFit(SurfaceFit):
         deviation is a polynomial in t whose coefficients (the two-node mean of the nodes' draws)
         depend on the pressure alone: they are made once per distinct pressure and, where the
         points are a grid of their distinct heights and pressures, the polynomials evaluated on
-        that grid by one matrix product."""
+        that grid."""
         h, p = np.broadcast_arrays(np.asarray(height_m, float), np.asarray(p_bar, float))
         if check:
             self.check_range(h, p)
@@ -252,19 +252,23 @@ class DiscrepancyFit(SurfaceFit):
             values = np.concatenate([values, values], axis=2)
         else:
             i, w = gp.two_point_weights(pu, nodes, self.hyper["length"])
-        coef = np.zeros((n_k, self.rows.size, pu.size))  # (k, S, distinct pressures)
-        for sym in blocks:
-            series = values[self.symbols.index(sym) * n_k :][:n_k]  # (k, S, nodes)
-            c = w[..., 0] * series[:, :, i] + w[..., 1] * series[:, :, i + 1]
-            coef += c if factors is None or sym not in factors else c * factors[sym](pu)
-        coef = coef.transpose(1, 2, 0)  # (S, distinct pressures, k)
+        # on the grid of the distinct heights and pressures where the points are one (or nearly),
+        # then looked up; else point by point. One coefficient at a time: temporaries of (draws x
+        # distinct pressures), the output's size at most
+        on_grid = pu.size * hu.size <= 2 * h.size
+        t = self.geometry.t(hu if on_grid else h.ravel())
         at_p, at_h = at_p.reshape(-1), at_h.reshape(-1)
-        if pu.size * hu.size <= 2 * h.size:  # a grid (or nearly): evaluated on it, then looked up
-            table = coef @ (self.geometry.t(hu) ** np.arange(n_k)[:, None])  # (S, P, H)
-            out = table.reshape(table.shape[0], -1)[:, at_p * hu.size + at_h]
-        else:  # scattered points: each its own polynomial
-            tk = self.geometry.t(h.ravel())[:, None] ** np.arange(n_k)  # (n, k)
-            out = np.einsum("snk,nk->sn", coef[:, at_p], tk)
+        out = np.zeros((self.rows.size, pu.size, hu.size) if on_grid else (self.rows.size, h.size))
+        w0, w1 = np.ascontiguousarray(w[..., 0]), np.ascontiguousarray(w[..., 1])
+        for sym in blocks:
+            scale = None if factors is None or sym not in factors else factors[sym](pu)
+            for k, series in enumerate(values[self.symbols.index(sym) * n_k :][:n_k]):
+                c = w0 * series[:, i] + w1 * series[:, i + 1]  # (S, distinct pressures)
+                if scale is not None:
+                    c *= scale
+                out += c[:, :, None] * t**k if on_grid else c[:, at_p] * t**k
+        if on_grid:
+            out = out.reshape(out.shape[0], -1)[:, at_p * hu.size + at_h]
         return out.reshape(-1, *shape)
 
     # ---- the quantities: the surface's plus the deviations

@@ -510,10 +510,24 @@ def test_progress_only_on_a_terminal_and_not_quiet(monkeypatch, restore_progress
     assert list(_progress.progress(range(3), desc="fits")) == [0, 1, 2]
     assert "fits" in tty.getvalue()
     _progress.set_enabled(False)  # --quiet
-    assert _progress.progress(range(3), desc="fits").disable
+    assert isinstance(_progress.progress(range(3)), _progress.Silent)
     _progress.set_enabled(True)
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # a pipe or a log file
-    assert _progress.progress(range(3), desc="fits").disable
+    assert isinstance(_progress.progress(range(3)), _progress.Silent)
+
+
+def test_no_bar_takes_no_multiprocessing_lock():
+    """Where no bar is shown nothing takes tqdm's lock, a multiprocessing semaphore that the
+    command's fast exit would leave to the resource tracker's warning (uq._io.progress)."""
+    code = (
+        "from uq._io.progress import progress\n"
+        "list(progress(range(3), desc='fits'))\n"
+        "with progress(total=3, desc='steps') as bar: bar.update(3)\n"
+        "import multiprocessing.resource_tracker as rt, tqdm\n"
+        "print(hasattr(tqdm.tqdm, '_lock'), rt._resource_tracker._pid is not None)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]
 
 
 @pytest.mark.parametrize("quiet, shown", [([], True), (["--quiet"], False)])

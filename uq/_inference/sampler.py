@@ -670,11 +670,11 @@ def run_many(
     those of the first steps), and discards at least the first ``settings.min_steps`` steps as
     burn-in (why: ``_HeldIndependence``).
     """
-    from uq._io.progress import progress
+    from uq._io.progress import Silent, progress
 
     # No total: the run stops when the rules pass, usually far below max_steps, so a bar to
     # max_steps would show an ETA many times too long. It counts steps and their rate instead.
-    with progress(desc=desc, unit="step") as bar:
+    with progress(desc=desc, unit="step") if desc else Silent(None) as bar:
         return _run_many(log_prob, centers, covs, names, seed, settings, bar, mix, proposal)
 
 

@@ -331,7 +331,8 @@ def test_discrepancy_bench_tiny_run(tmp_path):
 def test_commands_bench_runs_the_baselines_code(tmp_path, monkeypatch):
     """The benchmark's child runs the package its PYTHONPATH names, even when the benchmark is
     started from a checkout's root (``python -c`` puts the working directory first on sys.path):
-    a stand-in ``uq`` whose command line writes a mark is the one run."""
+    a stand-in ``uq`` whose command line writes a mark, and ends the process as the program does,
+    is the one run, and its usage is reported."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
@@ -340,16 +341,22 @@ def test_commands_bench_runs_the_baselines_code(tmp_path, monkeypatch):
     commands = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(commands)
     fake = tmp_path / "baseline"
-    (fake / "uq" / "_cli").mkdir(parents=True)
+    for sub in ("_cli", "_io"):
+        (fake / "uq" / sub).mkdir(parents=True)
+        (fake / "uq" / sub / "__init__.py").write_text("")
     (fake / "uq" / "__init__.py").write_text("")
-    (fake / "uq" / "_cli" / "__init__.py").write_text("")
     mark = tmp_path / "mark"
-    (fake / "uq" / "_cli" / "main.py").write_text(
-        f"def main(argv):\n    open({str(mark)!r}, 'w').write(' '.join(argv))\n    return 0\n"
+    (fake / "uq" / "_io" / "processes.py").write_text(
+        "import os\ndef exit_now(status=0, **kw):\n    os._exit(status)\n"
+    )
+    (fake / "uq" / "_cli" / "main.py").write_text(  # the program: it ends the process itself
+        "import sys\nfrom uq._io import processes\n"
+        f"def main():\n    open({str(mark)!r}, 'w').write(' '.join(sys.argv[1:]))\n"
+        "    processes.exit_now(0)\n"
     )
     monkeypatch.chdir(ROOT)
     r = commands.run_child(["uq", "fit", "x.csv"], commands._with_path(dict(os.environ), fake))
-    assert r["exit"] == 0 and mark.read_text() == "fit x.csv"
+    assert r["exit"] == 0 and mark.read_text() == "fit x.csv" and r["cpu_s"] > 0
 
 
 @pytest.mark.parametrize(

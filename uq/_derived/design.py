@@ -390,19 +390,28 @@ def sealed_paths(
             vol.volume_m3[sl][:, sub],
             grid.area[sl][:, sub],
         )
-        for p_c, out in zip(charges, parts, strict=True):
-            p_here = np.broadcast_to(p_c if p_c.ndim == 0 else p_c[sl], (el.n_draws,)) * BAR_PA
+        S, p_all, v_all = el.n_draws, [], []
+        for p_c in charges:
+            p_here = np.broadcast_to(p_c if p_c.ndim == 0 else p_c[sl], (S,)) * BAR_PA
             # one charge per draw (a design margin): V_c was measured in the loaded state, at that charge
-            v_charge = v_c[sl] if p_c.ndim == 1 else el.volume_m3(x_c, p_here[:, None])[:, 0]
-            charge = Charge(
-                grid.height_m,
-                p_here,
-                v_charge,
-                n[sl],
-                design.reservoir_l / L_PER_M3,
-                design.p_atm_bar * BAR_PA,
-            )
-            out.append(sealed_path(el, heights, charge, pressure_bounds_pa=el.pressure_bounds_pa))
+            v_all.append(v_c[sl] if p_c.ndim == 1 else el.volume_m3(x_c, p_here[:, None])[:, 0])
+            p_all.append(p_here)
+        # every charge in one solve: the block's draws repeated, charge after charge (the same
+        # numbers: the gas law is solved point by point)
+        charge = Charge(
+            grid.height_m,
+            np.concatenate(p_all),
+            np.concatenate(v_all),
+            np.tile(n[sl], len(charges)),
+            design.reservoir_l / L_PER_M3,
+            design.p_atm_bar * BAR_PA,
+        )
+        rows = np.tile(np.arange(S), len(charges))
+        path = sealed_path(
+            el.on_rows(rows), heights, charge, pressure_bounds_pa=el.pressure_bounds_pa
+        )
+        for j, out in enumerate(parts):
+            out.append(SealedPath(path.height_m, *(a[j * S : (j + 1) * S] for a in path[1:])))
     paths = [
         SealedPath(
             heights, *(np.concatenate([getattr(p, f) for p in ps]) for f in SealedPath._fields[1:])

@@ -31,26 +31,24 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
+
+# the study's grids, level, campaigns and tiny settings (the campaigns it reports on)
+import between_coverage as bc  # noqa: E402
 
 from uq._data.stand_description import PAPER_STAND  # noqa: E402
-from uq._inference.sampler import Settings  # noqa: E402
 from uq._inference.summary import band  # noqa: E402
 from uq._io.files import dumps_json, write_text_atomic  # noqa: E402
 from uq._models.discrepancy import fit_discrepancy  # noqa: E402
 from uq._models.surface import SurfaceFit  # noqa: E402
-from uq._stand.simulator import SPRINGS, Layout, simulate_recordings  # noqa: E402
+from uq._stand.simulator import SPRINGS  # noqa: E402
 
-PAPER = (0.1, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0)
-TINY_GRID = (1.0, 3.0, 5.0)
-LEVEL = 0.90
-TINY = Settings(n_ensembles=2, max_steps=100)
+PAPER, TINY_GRID, LEVEL = bc.GRIDS["paper"], bc.GRIDS["1-3-5"], bc.LEVEL
 
 
 def decompose(spring: str, seed: int, grid, query_bar: float, heights_mm, settings=None) -> dict:
     """One campaign's fit taken apart at ``query_bar`` and its two neighbouring tested pressures."""
-    rec = simulate_recordings(
-        spring, seed=seed, layout=Layout(pressures_bar=grid), stand=PAPER_STAND
-    )
+    rec = bc.campaign(spring, grid, seed, catalogue=False)
     fit = fit_discrepancy(rec, seed=seed, settings=settings, stand=PAPER_STAND)
     truth = SPRINGS[spring]()
     tested = np.sort(np.asarray(fit.tested_pressures_bar, float))
@@ -119,7 +117,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     grid, settings, seeds, heights = PAPER, None, args.seeds, args.heights_mm
     if args.tiny:
-        grid, settings, seeds, heights = TINY_GRID, TINY, seeds[:1], heights[:1]
+        grid, settings, seeds, heights = TINY_GRID, bc.TINY, seeds[:1], heights[:1]
     if not min(grid) < args.pressure_bar < max(grid) or args.pressure_bar in grid:
         print(
             f"between_decomposition.py: option --pressure-bar: {args.pressure_bar:g} bar is not "

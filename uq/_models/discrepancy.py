@@ -386,26 +386,27 @@ def coefficient_map(theta, d):
     return jnp.concatenate([d.A, Cz], axis=-1)
 
 
-def _deviation_map(theta, d):
-    """chol(R(l)) (T, T) and the channels' scales a s_k (n_c,): the deviations' part of C."""
+def deviation_map(theta, d):
+    """chol(R(l)) (T, T) and the channels' scales a s_k (n_c,): the deviations' part of C, the
+    first argument of ``map_coefficients`` and ``map_transpose`` (made once a draw)."""
     _, amps, length = _split(theta, d)
     return jnp.linalg.cholesky(gp.correlation(d.p_bar, length, jnp)), channel_scales(amps, d)
 
 
-def map_coefficients(theta, beta, d):
+def map_coefficients(dev_map, beta, d):
     """C beta (T, m) without forming C (``coefficient_map``: T m K numbers a draw, more memory
     traffic than the rest of a draw): A beta_s plus, per test i, D_i (g * (chol(R) Z^T)_i), Z the
-    deviations' standard normals (n_c, T)."""
-    Lr, g = _deviation_map(theta, d)
+    deviations' standard normals (n_c, T); ``dev_map``: ``deviation_map`` of the draw's theta."""
+    Lr, g = dev_map
     T, _, n_c = d.D.shape
     ks = d.A.shape[2]
     Y = Lr @ beta[ks:].reshape(n_c, T).T  # (T, n_c)
     return jnp.einsum("iak,k->ia", d.A, beta[:ks]) + jnp.einsum("iac,ic->ia", d.D, Y * g)
 
 
-def map_transpose(theta, v, d):
+def map_transpose(dev_map, v, d):
     """C^T v (K,) for v (T, m), without forming C (``map_coefficients``' transpose)."""
-    Lr, g = _deviation_map(theta, d)
+    Lr, g = dev_map
     W = jnp.einsum("iac,ia->ic", d.D, v)  # (T, n_c)
     z = g[:, None] * (W.T @ Lr)  # (n_c, T), channel-major as beta's z
     return jnp.concatenate([jnp.einsum("iak,ia->k", d.A, v), z.reshape(-1)])
@@ -576,9 +577,10 @@ def draw_from_normals(theta, e, d):
     T, m = post.u.shape
     K = n_coefficients(d)
     beta0, xi = e[:K], e[K:].reshape(T, m)
-    Bb = jnp.einsum("iba,ib->ia", post.Rt, map_coefficients(theta, beta0, d))  # R C beta0
+    dev_map = deviation_map(theta, d)
+    Bb = jnp.einsum("iba,ib->ia", post.Rt, map_coefficients(dev_map, beta0, d))  # R C beta0
     w = jax.scipy.linalg.cho_solve((post.Lm, True), (post.u - Bb - xi).reshape(-1))
-    return beta0 + map_transpose(theta, _apply_Rt(post.Rt, w.reshape(T, m)), d)
+    return beta0 + map_transpose(dev_map, _apply_Rt(post.Rt, w.reshape(T, m)), d)
 
 
 def draw_linear(theta, key, d):
@@ -628,7 +630,7 @@ def log_prob(theta, d):
 
 def z_means(theta, beta, d):
     """Every test's Z-coefficients at one draw, (T, m)."""
-    return map_coefficients(theta, beta, d)
+    return map_coefficients(deviation_map(theta, d), beta, d)
 
 
 def _rows(d):

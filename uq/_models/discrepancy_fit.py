@@ -233,8 +233,8 @@ class DiscrepancyFit(SurfaceFit):
         self, height_m, p_bar, blocks=("delta",), *, factors=None, check: bool = True
     ) -> np.ndarray:
         """The sum of the deviation ``blocks`` at the points, m^2, (S, *shape), each times its
-        factor in ``factors`` (symbol -> a function of pressures in bar, (n,) -> (n,); default
-        1): ("delta",) the pressure area's, ("delta", "eps") the volume-derived area's, delta
+        factor in ``factors`` (symbol -> a number, or a function of pressures in bar, (n,) ->
+        (n,); default 1): ("delta",) the pressure area's, ("delta", "eps") the volume-derived area's, delta
         times p_u and phi times p_ref the force's. Only the blocks asked for are computed. A
         deviation is a polynomial in t whose coefficients (the two-node mean of the nodes' draws)
         depend on the pressure alone: they are made once per distinct pressure and, where the
@@ -261,7 +261,8 @@ class DiscrepancyFit(SurfaceFit):
         out = np.zeros((self.rows.size, pu.size, hu.size) if on_grid else (self.rows.size, h.size))
         w0, w1 = np.ascontiguousarray(w[..., 0]), np.ascontiguousarray(w[..., 1])
         for sym in blocks:
-            scale = None if factors is None or sym not in factors else factors[sym](pu)
+            scale = (factors or {}).get(sym)
+            scale = scale(pu) if callable(scale) else scale
             for k, series in enumerate(values[self.symbols.index(sym) * n_k :][:n_k]):
                 c = w0 * series[:, i] + w1 * series[:, i + 1]  # (S, distinct pressures)
                 if scale is not None:
@@ -276,7 +277,7 @@ class DiscrepancyFit(SurfaceFit):
         """The mean force P(x, p_u) (reading noise excluded), N: the surface's plus p_u delta plus
         p_ref phi."""
         base = super().force_draws(height_m, p_bar, check=check)
-        at = {"delta": lambda p: p * BAR_PA, "phi": lambda p: np.full(p.shape, self.p_ref_pa)}
+        at = {"delta": lambda p: p * BAR_PA, "phi": self.p_ref_pa}
         return base + self.deviation_draws(height_m, p_bar, tuple(at), factors=at, check=False)
 
     def pressure_area_draws(self, height_m, p_bar, *, check=True):
@@ -297,7 +298,7 @@ class DiscrepancyFit(SurfaceFit):
     def spread_draws(self, height_m, p_bar, *, check=True):
         """p_u (-dV/dx) - P = p_u (D + eps) - E - p_ref phi, N."""
         base = super().spread_draws(height_m, p_bar, check=check)
-        at = {"eps": lambda p: p * BAR_PA, "phi": lambda p: np.full(p.shape, -self.p_ref_pa)}
+        at = {"eps": lambda p: p * BAR_PA, "phi": -self.p_ref_pa}
         return base + self.deviation_draws(height_m, p_bar, tuple(at), factors=at, check=False)
 
     # ---- the JSON document

@@ -241,31 +241,17 @@ def _design_from(args):
 def _check_before_fit(args, rec) -> None:
     """Every option checked against the campaign before the (minutes-long) fit; one line each."""
     from uq._derived.design import check_design
-    from uq._io.errors import InputError
+    from uq._io.errors import InputError, refuse_outside
 
     ranges = _planned(rec, args.model)
-    lo, hi = ranges.height_range_m
-    if not lo - 1e-9 <= args.height_mm * 1e-3 <= hi + 1e-9:
-        raise InputError(
-            f"option --height-mm: {args.height_mm:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm; "
-            "the model does not extrapolate"
-        )
-    plo, phi = ranges.pressure_range_bar
-    if not plo - 1e-9 <= args.charge_bar <= phi + 1e-9:
-        raise InputError(
-            f"option --charge-bar: {args.charge_bar:g} bar is outside the tested pressures {plo:g}..{phi:g} bar; "
-            "the model does not extrapolate"
-        )
+    (lo, hi), (plo, phi) = ranges.height_range_m, ranges.pressure_range_bar
+    never = "; the model does not extrapolate"
+    refuse_outside("option --height-mm", args.height_mm * 1e-3, lo, hi, "heights", never)
+    refuse_outside("option --charge-bar", args.charge_bar, plo, phi, "pressures", never)
     for h in args.sheet_heights_mm or ():
-        if not lo - 1e-9 <= h * 1e-3 <= hi + 1e-9:
-            raise InputError(
-                f"option --sheet-heights-mm: {h:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
-            )
+        refuse_outside("option --sheet-heights-mm", h * 1e-3, lo, hi, "heights")
     for c in args.charges_bar or ():
-        if not plo - 1e-9 <= c <= phi + 1e-9:
-            raise InputError(
-                f"option --charges-bar: {c:g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
-            )
+        refuse_outside("option --charges-bar", c, plo, phi, "pressures")
     if not rec.has_piston:
         return  # force-only: isobaric loads only (the sealed options are not used)
     if args.volume_l is None:

@@ -10,7 +10,7 @@ import numpy as np
 
 from uq._cli.common import add_misfit, add_stand, record_convergence, record_misfit, stand_from
 from uq._derived.margin import AUTO, load_answer, margin, model_choices
-from uq._io.errors import InputError
+from uq._io.errors import InputError, refuse_outside
 from uq._io.files import sha256_of
 from uq._models import registry
 
@@ -302,12 +302,7 @@ def _queries_from(args) -> list[dict]:
 
 def _check_ranges(q: dict, height_range_m, pressure_range_bar) -> None:
     """Heights and pressures outside the tested ranges, refused before any fitting or answering (no extrapolation)."""
-    lo, hi = height_range_m
-    h = q["height_mm"] * 1e-3
-    if not lo - 1e-9 <= h <= hi + 1e-9:
-        raise InputError(
-            f"{_place(q, 'height_mm')}: {q['height_mm']:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
-        )
+    refuse_outside(_place(q, "height_mm"), q["height_mm"] * 1e-3, *height_range_m, "heights")
     plo, phi = pressure_range_bar
     if q["pressure_bar"] is not None and not plo - 1e-9 <= q["pressure_bar"] <= phi + 1e-9:
         raise InputError(

@@ -131,7 +131,7 @@ class Fit:
         )[:, M.scored_rows(d)]
         ok = np.all(np.isfinite(ll), axis=1)
         self.ll, self.beta, self.theta = ll[ok], beta[ok], theta[ok]
-        self._means_of = (theta, beta, data, ok)  # for ``_means``, on first use
+        self._means_of = (theta, beta, data, ok)  # for ``means``, on first use
         self.n_params = sum(M.N_PARAMS[m] for m in self.names)
         if bar is not None:
             bar.update(1)
@@ -140,25 +140,13 @@ class Fit:
             self.elpd = self.loo.elpd
 
     @functools.cached_property
-    def _means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The mean force, mean piston and noise sd of every row at every kept draw (muF, muL,
         sigma), made on first use: only the base and the final model's residuals need them, not
         the screening's candidates (the same numbers as made with the fit)."""
         theta, beta, data, ok = self._means_of
         muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
         return muF[ok], muL[ok], sigma[ok]
-
-    @property
-    def muF(self) -> np.ndarray:
-        return self._means[0]
-
-    @property
-    def muL(self) -> np.ndarray:
-        return self._means[1]
-
-    @property
-    def sigma(self) -> np.ndarray:
-        return self._means[2]
 
     def magnitude(self, name: str, n_tests: int, ctx) -> np.ndarray:
         """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table
@@ -256,17 +244,18 @@ def residuals_of(fit: Fit, meta: dict, d) -> dict:
     """Posterior-mean residuals and standardised residuals of force (N) and volume (m^3)."""
     S = meta["area"]
     n = meta["force_N"].size
-    sz, sL = fit.sigma[:, :n], fit.sigma[:, n:]
+    muF, muL, sigma = fit.means
+    sz, sL = sigma[:, :n], sigma[:, n:]
     c = np.asarray(d.c)
     var_noise_F = np.mean(sz**2 + (c * sL) ** 2, axis=0)
     var_noise_L = np.mean(sL**2, axis=0)
-    rF = meta["force_N"] - fit.muF.mean(0)
-    sdF = np.sqrt(fit.muF.var(0) + var_noise_F)
+    rF = meta["force_N"] - muF.mean(0)
+    sdF = np.sqrt(muF.var(0) + var_noise_F)
     if not meta["has_volume"]:  # force-only: no volume residuals
         return {"force": (rF, rF / sdF)}
     # NaN where a test has no volume readings (a catalogue's volume at one pressure)
-    rL = np.where(meta["volume_observed"], meta["piston_m"] - fit.muL.mean(0), np.nan)
-    sdL = np.sqrt(fit.muL.var(0) + var_noise_L)
+    rL = np.where(meta["volume_observed"], meta["piston_m"] - muL.mean(0), np.nan)
+    sdL = np.sqrt(muL.var(0) + var_noise_L)
     return {"force": (rF, rF / sdF), "volume": (S * rL, rL / sdL)}
 
 
@@ -734,7 +723,8 @@ def diagnose(
         mechanisms.append(entry)
     mechanisms.sort(key=lambda e: -e["delta_elpd"])
     rms = {
-        f: float(np.sqrt(np.mean((meta["force_N"] - f.muF.mean(0)) ** 2))) for f in {base, final}
+        f: float(np.sqrt(np.mean((meta["force_N"] - f.means[0].mean(0)) ** 2)))
+        for f in {base, final}
     }
     result = {
         "mismatch_detected": bool(chosen or flags_base),

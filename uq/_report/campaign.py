@@ -449,6 +449,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     comp = t.compression
     p_pa = tb.pressure_bar * BAR_PA
     piston_m = t.piston_m if piston_m is None else piston_m
+    ref = f"{cb.reference_bar:g}-bar"  # the reference test's volume curve
 
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)
@@ -496,15 +497,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     if tb.has_volume:
         _fill(ax, x, tb.trad_own, 1e-3, "tab:red", label="p_u (−S dL/dx), own volume", ls="--")
     if tb.trad_ref is not None:
-        _fill(
-            ax,
-            x,
-            tb.trad_ref,
-            1e-3,
-            "tab:purple",
-            label=f"p_u (−S dL/dx), {cb.reference_bar:g}-bar volume",
-            ls=":",
-        )
+        _fill(ax, x, tb.trad_ref, 1e-3, "tab:purple", label=f"p_u (−S dL/dx), {ref} volume", ls=":")
     else:
         _absent(ax, "no traditional force:\nno test has a volume curve", x, y=0.15)
     ax.set(xlabel="height x (mm)", ylabel="force (kN)", title="traditional vs measured force")
@@ -514,15 +507,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     if tb.has_volume:
         _fill(ax, x, tb.spread_own, 1.0, "tab:red", label="own volume curve", ls="--")
     if tb.spread_ref is not None:
-        _fill(
-            ax,
-            x,
-            tb.spread_ref,
-            1.0,
-            "tab:purple",
-            label=f"{cb.reference_bar:g}-bar volume curve",
-            ls=":",
-        )
+        _fill(ax, x, tb.spread_ref, 1.0, "tab:purple", label=f"{ref} volume curve", ls=":")
         ax.legend(fontsize=7, loc="best")
     else:
         _absent(ax, "no spread: no test has a volume curve", x)
@@ -1110,32 +1095,22 @@ def _draw_figures(
 ) -> dict[str, Figure]:
     """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
     the extension (``"fig2_force"``); ``units``: second axes in the recordings' units."""
-    drawn = [("fig2_force", lambda _: figure_force(cf, cb), "Figure 2: force vs height")]
-    if any(tb.has_volume for tb in cb.tests):
-        drawn.append(
-            ("fig3_volume", lambda _: figure_volume(cf, cb), "Figure 3: volume increment vs height")
-        )
-    drawn.append(("fig4_feff", lambda _: figure_feff(cf, cb), "Figure 4: effective area vs height"))
-    if cb.has_volume:
-        drawn.append(
-            (
-                "fig5_traditional",
-                lambda _: figure_traditional(cf, cb),
-                "Figure 5: traditional vs measured force",
-            )
-        )
-    if cb.scatter is not None:
-        drawn.append(
-            (
-                "fig_feff_scatter",
-                lambda _: figure_scatter(cb, ref is not None and ref.is_paper),
-                "F_eff scatter vs height",
-            )
-        )
+    paper = ref is not None and ref.is_paper
+    drawn = [  # (stem, whether drawn, figure, alternative text)
+        ("fig2_force", True, lambda _: figure_force(cf, cb), "Figure 2: force vs height"),
+        ("fig3_volume", any(tb.has_volume for tb in cb.tests), lambda _: figure_volume(cf, cb),
+         "Figure 3: volume increment vs height"),
+        ("fig4_feff", True, lambda _: figure_feff(cf, cb), "Figure 4: effective area vs height"),
+        ("fig5_traditional", cb.has_volume, lambda _: figure_traditional(cf, cb),
+         "Figure 5: traditional vs measured force"),
+        ("fig_feff_scatter", cb.scatter is not None, lambda _: figure_scatter(cb, paper),
+         "F_eff scatter vs height"),
+    ]  # fmt: skip
     what, _ = not_converged(cf)  # the campaign's figures show every test
     figs = {
         stem: Figure(f"{stem}.{figure_format}", _encoded(make, figure_format, units, what), alt)
-        for stem, make, alt in drawn
+        for stem, shown, make, alt in drawn
+        if shown
     }
     for tf, data in zip(cf.tests, test_figures.results(), strict=True):
         stem = f"test_{tf.pressure_bar:g}bar"

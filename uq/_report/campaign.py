@@ -192,17 +192,9 @@ def _with_residuals(n: int):
     fig = plt.figure(figsize=(W, H))
     grid_top = k.bottom + rows * k.panel + (rows - 1) * k.row_gap  # inches from the bottom
     main_bottom = grid_top + k.below_main
-    main = fig.add_axes(
-        (k.left / W, main_bottom / H, 1 - (k.left + k.right) / W, 1 - (main_bottom + k.top) / H)
-    )
-    bar = fig.add_axes(
-        (
-            (W - k.right + k.bar_pad) / W,
-            main_bottom / H,
-            k.bar_width / W,
-            1 - (main_bottom + k.top) / H,
-        )
-    )
+    bottom, height = main_bottom / H, 1 - (main_bottom + k.top) / H  # of the main and bar axes
+    main = fig.add_axes((k.left / W, bottom, 1 - (k.left + k.right) / W, height))
+    bar = fig.add_axes(((W - k.right + k.bar_pad) / W, bottom, k.bar_width / W, height))
     width = (W - k.left - k.right - (cols - 1) * k.col_gap) / cols
     gs = fig.add_gridspec(
         rows, cols, left=k.left / W, right=1 - k.right / W, bottom=k.bottom / H, top=grid_top / H,
@@ -575,17 +567,9 @@ def _readings(ax, h, y, comp) -> None:
         ax.plot(h, y, "o", ms=3.5, color="k", mfc="none", label="readings (order unknown)")
         return
     for is_comp, name in ((True, "compression"), (False, "rebound")):
-        m = comp == is_comp
-        if m.any():
-            ax.plot(
-                h[m],
-                y[m],
-                "o",
-                ms=3.5,
-                mfc="none" if not is_comp else BRANCH_COLORS[is_comp],
-                color=BRANCH_COLORS[is_comp],
-                label=name,
-            )
+        m, c = comp == is_comp, BRANCH_COLORS[is_comp]
+        if m.any():  # compression filled, rebound open
+            ax.plot(h[m], y[m], "o", ms=3.5, mfc=c if is_comp else "none", color=c, label=name)
 
 
 def _absent(ax, words: str, x, y: float = 0.5) -> None:
@@ -847,15 +831,11 @@ def _table1(cf, ref: Reference | None) -> tuple[list[dict], int, int]:
         volume = getattr(tf, "has_piston", True)
         nan = np.full_like(tf.flat("force"), np.nan)
         draws = np.concatenate([tf.flat("force"), tf.flat("piston") if volume else nan], axis=1)
-        paper = None
-        if ref is not None and ref.at(ref.force, tf.pressure_bar) is not None:
+        force = None if ref is None else ref.at(ref.force, tf.pressure_bar)
+        paper = None  # the reference's coefficients, NaN where it has none
+        if force is not None:
             piston = ref.at(ref.piston, tf.pressure_bar)
-            paper = np.concatenate(
-                [
-                    ref.at(ref.force, tf.pressure_bar),
-                    piston if piston is not None else np.full(4, np.nan),
-                ]
-            )
+            paper = np.concatenate([force, np.full(4, np.nan) if piston is None else piston])
         for k, (_, _, f) in enumerate(TABLE1_COLUMNS[:columns]):
             if k >= 4 and not volume:  # a force-only test has no piston coefficients
                 cells.append(None)

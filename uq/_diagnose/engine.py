@@ -121,14 +121,10 @@ class Fit:
             )
         self.posterior = posterior
         theta = posterior.theta.reshape(-1, M.N_THETA)
-        beta = posterior.beta.reshape(theta.shape[0], -1)
-        ll = np.concatenate(
-            [
-                posterior.loglik["z"].reshape(theta.shape[0], -1),
-                posterior.loglik["L"].reshape(theta.shape[0], -1),
-            ],
-            axis=1,
-        )[:, M.scored_rows(d)]
+        S = theta.shape[0]
+        beta = posterior.beta.reshape(S, -1)
+        ll = np.concatenate([posterior.loglik[k].reshape(S, -1) for k in ("z", "L")], axis=1)
+        ll = ll[:, M.scored_rows(d)]
         ok = np.all(np.isfinite(ll), axis=1)
         self.ll, self.beta, self.theta = ll[ok], beta[ok], theta[ok]
         self._means_of = (theta, beta, data, ok)  # for ``means``, on first use
@@ -430,14 +426,12 @@ NEEDS_WORDS = {
 
 def capabilities(rec) -> set[str]:
     """What the campaign ``rec`` can identify (the words of ``Mechanism.needs``)."""
-    have = set()
-    if rec.has_volume:  # piston coordinates, or a volume column on some test
-        have.add("volume")
-    if len(rec.tests) >= 2:
-        have.add("pressures")
-    if rec.has_both_branches:
-        have.add("both_branches")
-    return have
+    have = {
+        "volume": rec.has_volume,  # piston coordinates, or a volume column on some test
+        "pressures": len(rec.tests) >= 2,
+        "both_branches": rec.has_both_branches,
+    }
+    return {k for k, yes in have.items() if yes}
 
 
 def offered(rec) -> tuple[tuple[str, ...], dict[str, str]]:
@@ -645,14 +639,9 @@ class Diagnosis:
         status (a pandas DataFrame; empty when nothing was found)."""
         import pandas as pd  # reason: optional and heavy, loaded only where used
 
+        columns = ("unit", "delta_elpd", "delta_elpd_se", "status")
         rows = {
-            m["name"]: {
-                **m["magnitude"],
-                "unit": m["unit"],
-                "delta_elpd": m["delta_elpd"],
-                "delta_elpd_se": m["delta_elpd_se"],
-                "status": m["status"],
-            }
+            m["name"]: m["magnitude"] | {k: m[k] for k in columns}
             for m in self.document["mechanisms"]
         }
         return pd.DataFrame.from_dict(rows, orient="index")

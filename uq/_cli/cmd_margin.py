@@ -432,10 +432,11 @@ def command_margin(args) -> int:
     # every answer before anything is written; with a queries file each row gets its own answer
     # or its own refusal (a row the model cannot answer does not abort the others)
     results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]
-    if _design_asked(args):
-        for q, r in zip(queries, results, strict=True):
-            if "refused" not in r:
+    for q, r in zip(queries, results, strict=True):
+        if "refused" not in r:  # a refused row keeps its four keys (docs/formats.md)
+            if _design_asked(args):
                 r["design"] = _design_answer(args, ans, q)
+            r["model_check"] = check
     if args.fit is not None:
         print(
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
@@ -459,9 +460,6 @@ def command_margin(args) -> int:
         print(
             f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"
         )
-    for r in results:
-        if "refused" not in r:  # a refused row keeps its four keys (docs/formats.md)
-            r["model_check"] = check
     if args.queries:
         _print_table(source, ans, info, queries, results)
     elif queries:

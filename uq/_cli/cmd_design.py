@@ -293,7 +293,8 @@ def command_design(args) -> int:
         return _design(args, rec, compare, worker, t0, **kw)
 
 
-def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stand) -> int:
+def _design(args, rec, compare: bool, worker, t0: float, **kw) -> int:
+    """The fit (``kw``: its seed, settings and stand), the design, what is printed and written."""
     import numpy as np
 
     from uq._derived import design as D
@@ -318,14 +319,12 @@ def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stan
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
     if compare:
-        both = fitting_both(
-            rec, seed=seed, settings=settings, stand=stand, model=answering, worker=worker
-        )
+        both = fitting_both(rec, model=answering, worker=worker, **kw)
     else:  # no comparison (None): the cubics have no other model fitted to rank against
-        fit = registry.fit(answering, rec, seed=seed, settings=settings, stand=stand)
+        fit = registry.fit(answering, rec, **kw)
         both = nullcontext((fit, lambda: (None, None)))
     with both as (fit, compared):
-        check = predictive_check(fit, seed=seed)  # at the tested points, before any answer
+        check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
         model = fit.on_draws(args.draws)
         curves = None
         if rec.has_piston:

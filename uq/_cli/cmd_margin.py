@@ -421,11 +421,7 @@ def command_margin(args) -> int:
             for q in queries:
                 _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
             ans, info, diagnostics = fit_and_choose(
-                rec,
-                model=args.model,
-                jobs=None,
-                worker=worker,
-                **kw,
+                rec, model=args.model, jobs=None, worker=worker, **kw
             )
         source = rec.path
         check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points

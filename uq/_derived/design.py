@@ -218,11 +218,9 @@ class DesignGrid:
         self._prior_sd = {}
         self.dvdp_at_c = None
         if model.has_dvdp:
+            at_c = np.full(n_pressures, self.height_m)
             self.dvdp_at_c = np.asarray(
-                model.volume_pressure_draws(
-                    np.full(n_pressures, self.height_m), self.pressures_bar
-                ),
-                float,
+                model.volume_pressure_draws(at_c, self.pressures_bar), float
             )
 
     def draw_inputs(self, design: SealedDesign) -> tuple[np.ndarray, np.ndarray]:

@@ -574,12 +574,8 @@ def _plain(v):
 def _where_text(label: str, v) -> str:
     if label == "pressure_bar":
         return f"{float(v):g} bar"
-    if label == "height_mm":
-        return (
-            f"{float(v[0]):g}-{float(v[1]):g} mm"
-            if isinstance(v, list | tuple)
-            else f"{float(v):g} mm"
-        )
+    if label == "height_mm":  # a height group's [from, to] (``where``)
+        return f"{float(v[0]):g}-{float(v[1]):g} mm"
     return str(v)
 
 

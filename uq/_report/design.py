@@ -298,7 +298,6 @@ def sheet_csv(doc: dict) -> str:
             f = f"{t['forcing_Hz']:g}Hz"
             rows.append(_est_row(pre, f"transmissibility_at_{f}", "1", t["transmissibility"]))
             rows.append(_est_row(pre, f"isolation_at_{f}", "%", t["isolation_pct"]))
-    if doc.get("rate_N_per_m") is not None:
         for r in doc["frequency_chart"]["rows"]:
             pre = {
                 "table": "sealed_at_design_height",

@@ -37,35 +37,23 @@ def figure_residual_overlay(fit):
     some = fit.on_draws(1000)
     lo, hi = fit.height_range_m
     xs = np.linspace(lo, hi, 80)
+    named = f"{fit.name} 90 % band"
     for ax, t in zip(axes.flat, tests, strict=False):
         m, lo_b, hi_b = band(some.force_draws(xs, t.pressure_bar), axis=0)
-        at_pts = some.force_draws(t.height_m, t.pressure_bar).mean(axis=0)
+        r = t.force_N - some.force_draws(t.height_m, t.pressure_bar).mean(axis=0)
         ax.fill_between(
-            xs * 1e3,
-            lo_b - m,
-            hi_b - m,
-            alpha=0.35,
-            color="tab:blue",
-            lw=0,
-            label=f"{fit.name} 90 % band",
+            xs * 1e3, lo_b - m, hi_b - m, alpha=0.35, color="tab:blue", lw=0, label=named
         )
         ax.axhline(0, color="k", lw=0.6)
         comp = t.compression
         if comp is None:  # one pass in unknown order (a catalogue table)
-            ax.plot(t.height_m * 1e3, t.force_N - at_pts, ".", ms=3, color="k", label="readings")
+            ax.plot(t.height_m * 1e3, r, ".", ms=3, color="k", label="readings")
         else:
             for sel, mark, color, label in (
                 (comp, ".", "tab:red", "compression"),
                 (~comp, "x", "tab:green", "rebound"),
             ):
-                ax.plot(
-                    t.height_m[sel] * 1e3,
-                    (t.force_N - at_pts)[sel],
-                    mark,
-                    ms=3,
-                    color=color,
-                    label=label,
-                )
+                ax.plot(t.height_m[sel] * 1e3, r[sel], mark, ms=3, color=color, label=label)
         ax.set_title(f"{t.pressure_bar:g} bar", fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[n:]:

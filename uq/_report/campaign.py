@@ -441,7 +441,8 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     comp = t.compression
     p_pa = tb.pressure_bar * BAR_PA
     piston_m = t.piston_m if piston_m is None else piston_m
-    ref = f"{cb.reference_bar:g}-bar"  # the reference test's volume curve
+    # the reference test's volume curve (None: no test has one)
+    ref = None if cb.reference_bar is None else f"{cb.reference_bar:g}-bar"
 
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)

@@ -60,16 +60,13 @@ def configure_calibrate(p) -> None:
 
 def command_calibrate(args) -> int:
     stand = stand_from(args, model=False)
-    truths = [t.strip() for t in args.truth.split(",") if t.strip()]
+    # the lists are checked and cleaned as they are read (uq._cli.common.choice_list)
+    truths, pressures, ar1s = (v.split(",") for v in (args.truth, args.pressure, args.pressure_ar1))
     if args.stand and "prior" in truths:
         raise InputError(
             "option --stand: only the n50 truth runs on a stand; use it with --truth n50"
         )
-
-    def items(text):
-        return [x.strip() for x in text.split(",") if x.strip()]
-
-    pressure_settings = [(pr, ar) for pr in items(args.pressure) for ar in items(args.pressure_ar1)]
+    pressure_settings = [(pr, ar) for pr in pressures for ar in ar1s]
     if "prior" in truths and pressure_settings != [("set", "off")]:
         raise InputError(
             "options --pressure/--pressure-ar1: only the n50 truth records pressure or fits AR(1) "
@@ -77,7 +74,7 @@ def command_calibrate(args) -> int:
         )
     results = []
     for truth, noise, (pressure, ar1) in (
-        (t, n, s) for t in truths for n in items(args.noise) for s in pressure_settings
+        (t, n, s) for t in truths for n in args.noise.split(",") for s in pressure_settings
     ):
         res = C.calibrate(
             args.reps,

@@ -241,31 +241,17 @@ def _design_from(args):
 def _check_before_fit(args, rec) -> None:
     """Every option checked against the campaign before the (minutes-long) fit; one line each."""
     from uq._derived.design import check_design
-    from uq._io.errors import InputError
+    from uq._io.errors import InputError, refuse_outside
 
     ranges = _planned(rec, args.model)
-    lo, hi = ranges.height_range_m
-    if not lo - 1e-9 <= args.height_mm * 1e-3 <= hi + 1e-9:
-        raise InputError(
-            f"option --height-mm: {args.height_mm:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm; "
-            "the model does not extrapolate"
-        )
-    plo, phi = ranges.pressure_range_bar
-    if not plo - 1e-9 <= args.charge_bar <= phi + 1e-9:
-        raise InputError(
-            f"option --charge-bar: {args.charge_bar:g} bar is outside the tested pressures {plo:g}..{phi:g} bar; "
-            "the model does not extrapolate"
-        )
+    (lo, hi), (plo, phi) = ranges.height_range_m, ranges.pressure_range_bar
+    never = "; the model does not extrapolate"
+    refuse_outside("option --height-mm", args.height_mm * 1e-3, lo, hi, "heights", never)
+    refuse_outside("option --charge-bar", args.charge_bar, plo, phi, "pressures", never)
     for h in args.sheet_heights_mm or ():
-        if not lo - 1e-9 <= h * 1e-3 <= hi + 1e-9:
-            raise InputError(
-                f"option --sheet-heights-mm: {h:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
-            )
+        refuse_outside("option --sheet-heights-mm", h * 1e-3, lo, hi, "heights")
     for c in args.charges_bar or ():
-        if not plo - 1e-9 <= c <= phi + 1e-9:
-            raise InputError(
-                f"option --charges-bar: {c:g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
-            )
+        refuse_outside("option --charges-bar", c, plo, phi, "pressures")
     if not rec.has_piston:
         return  # force-only: isobaric loads only (the sealed options are not used)
     if args.volume_l is None:
@@ -307,7 +293,8 @@ def command_design(args) -> int:
         return _design(args, rec, compare, worker, t0, **kw)
 
 
-def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stand) -> int:
+def _design(args, rec, compare: bool, worker, t0: float, **kw) -> int:
+    """The fit (``kw``: its seed, settings and stand), the design, what is printed and written."""
     import numpy as np
 
     from uq._derived import design as D
@@ -332,14 +319,12 @@ def _design(args, rec, compare: bool, worker, t0: float, *, seed, settings, stan
     # the isobaric loads only
     answering = args.model if rec.has_piston else registry.CUBICS
     if compare:
-        both = fitting_both(
-            rec, seed=seed, settings=settings, stand=stand, model=answering, worker=worker
-        )
+        both = fitting_both(rec, model=answering, worker=worker, **kw)
     else:  # no comparison (None): the cubics have no other model fitted to rank against
-        fit = registry.fit(answering, rec, seed=seed, settings=settings, stand=stand)
+        fit = registry.fit(answering, rec, **kw)
         both = nullcontext((fit, lambda: (None, None)))
     with both as (fit, compared):
-        check = predictive_check(fit, seed=seed)  # at the tested points, before any answer
+        check = predictive_check(fit, seed=args.seed)  # at the tested points, before any answer
         model = fit.on_draws(args.draws)
         curves = None
         if rec.has_piston:

@@ -10,7 +10,7 @@ import numpy as np
 
 from uq._cli.common import add_misfit, add_stand, record_convergence, record_misfit, stand_from
 from uq._derived.margin import AUTO, load_answer, margin, model_choices
-from uq._io.errors import InputError
+from uq._io.errors import InputError, refuse_outside
 from uq._io.files import sha256_of
 from uq._models import registry
 
@@ -302,12 +302,7 @@ def _queries_from(args) -> list[dict]:
 
 def _check_ranges(q: dict, height_range_m, pressure_range_bar) -> None:
     """Heights and pressures outside the tested ranges, refused before any fitting or answering (no extrapolation)."""
-    lo, hi = height_range_m
-    h = q["height_mm"] * 1e-3
-    if not lo - 1e-9 <= h <= hi + 1e-9:
-        raise InputError(
-            f"{_place(q, 'height_mm')}: {q['height_mm']:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
-        )
+    refuse_outside(_place(q, "height_mm"), q["height_mm"] * 1e-3, *height_range_m, "heights")
     plo, phi = pressure_range_bar
     if q["pressure_bar"] is not None and not plo - 1e-9 <= q["pressure_bar"] <= phi + 1e-9:
         raise InputError(
@@ -426,21 +421,18 @@ def command_margin(args) -> int:
             for q in queries:
                 _check_ranges(q, rec.height_range_m, (min(tested), max(tested)))
             ans, info, diagnostics = fit_and_choose(
-                rec,
-                model=args.model,
-                jobs=None,
-                worker=worker,
-                **kw,
+                rec, model=args.model, jobs=None, worker=worker, **kw
             )
         source = rec.path
         check = predictive_check(ans, seed=args.seed)  # the answering model at the tested points
     # every answer before anything is written; with a queries file each row gets its own answer
     # or its own refusal (a row the model cannot answer does not abort the others)
     results = [_answer_or_refusal(ans, info, q, bool(args.queries)) for q in queries]
-    if _design_asked(args):
-        for q, r in zip(queries, results, strict=True):
-            if "refused" not in r:
+    for q, r in zip(queries, results, strict=True):
+        if "refused" not in r:  # a refused row keeps its four keys (docs/formats.md)
+            if _design_asked(args):
                 r["design"] = _design_answer(args, ans, q)
+            r["model_check"] = check
     if args.fit is not None:
         print(
             f"{source}: saved fit of {meta['recordings_path']} (sha256 {meta['recordings_sha256'][:12]}..., "
@@ -464,9 +456,6 @@ def command_margin(args) -> int:
         print(
             f"{source}: saved the {ans.label} to {args.save_fit} (answer later with uq margin --fit {args.save_fit})"
         )
-    for r in results:
-        if "refused" not in r:  # a refused row keeps its four keys (docs/formats.md)
-            r["model_check"] = check
     if args.queries:
         _print_table(source, ans, info, queries, results)
     elif queries:

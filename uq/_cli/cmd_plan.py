@@ -311,20 +311,16 @@ def _choose(args, rec, targets, stand, settings):
     fit, cub, comparison = fit_both(rec, seed=args.seed, settings=settings, stand=stand, jobs=None)
     ans, info = choose(fit, cub, comparison)
     info = {k: v for k, v in info.items() if k in ("why", "comparison")}
-    if ans is cub:
-        reason = None
-        if any(t.needs_volume for t in targets):
-            reason = "the targets need the volume-derived area between tested pressures, which the cubics do not interpolate"
-        elif rec.pressure_measured:
-            reason = "uq plan plans with the plain cubics, and these take the measured pressures as a covariate"
-        if reason:
-            info["name"] = fit.name
-            info["why"] += f"; but {reason}: planned with the {fit.name} model"
-            return fit, info
-        info["name"] = cub.name
-        return cub, info
-    info["name"] = fit.name
-    return fit, info
+    reason = None  # why the cubics that answer uq margin cannot be planned with
+    if ans is cub and any(t.needs_volume for t in targets):
+        reason = "the targets need the volume-derived area between tested pressures, which the cubics do not interpolate"
+    elif ans is cub and rec.pressure_measured:
+        reason = "uq plan plans with the plain cubics, and these take the measured pressures as a covariate"
+    if reason:
+        info["why"] += f"; but {reason}: planned with the {fit.name} model"
+        ans = fit
+    info["name"] = ans.name
+    return ans, info
 
 
 # ----------------------------------------------------------------------------- outputs

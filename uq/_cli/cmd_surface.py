@@ -72,7 +72,8 @@ def command_surface(args) -> int:
         return _surface(args, entry, rec, worker, t0, **kw)
 
 
-def _surface(args, entry, rec, worker, t0: float, *, seed, settings, stand) -> int:
+def _surface(args, entry, rec, worker, t0: float, **kw) -> int:
+    """The fit (``kw``: its seed, settings and stand), its comparison, what is printed and written."""
     from uq._derived.comparison import fit_both, sampler_words
     from uq._derived.margin import describe
     from uq._derived.model_check import predictive_check
@@ -82,19 +83,12 @@ def _surface(args, entry, rec, worker, t0: float, *, seed, settings, stand) -> i
 
     fit = comparison = None
     if args.select:
-        fit, _ = entry.order_selection()(rec, seed=seed, settings=settings, stand=stand)
+        fit, _ = entry.order_selection()(rec, **kw)
     elif args.no_compare:
-        fit = entry.fit_function()(rec, seed=seed, settings=settings, stand=stand)
+        fit = entry.fit_function()(rec, **kw)
     if not args.no_compare:
         fit, _, comparison = fit_both(
-            rec,
-            seed=seed,
-            settings=settings,
-            stand=stand,
-            surface_fit=fit,
-            model=args.model,
-            jobs=None,
-            worker=worker,
+            rec, surface_fit=fit, model=args.model, jobs=None, worker=worker, **kw
         )
     res = fit.to_json(comparison)
     PRINTERS.get(fit.name, _print_model)(rec, fit, res)
@@ -120,7 +114,7 @@ def _surface(args, entry, rec, worker, t0: float, *, seed, settings, stand) -> i
             comparison=comparison,
             warnings=fit.convergence.messages(CLI_ADVICE),
             # the check at the tested points, for uq margin --fit to repeat (docs/design.md 8)
-            model_check=predictive_check(fit, seed=seed),
+            model_check=predictive_check(fit, seed=args.seed),
         )
         print(f"  saved fit: {path} (uq margin --fit answers from it)")
     # printed, not in the JSON: reruns give identical bytes

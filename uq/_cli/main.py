@@ -414,9 +414,8 @@ def _command(argv: list[str], as_program: bool) -> int:
         return _fail(name, f"error: {exc}", EXIT_INPUT)
     except KeyboardInterrupt:
         return _interrupted(name, as_program)
-    except (
-        BrokenPipeError
-    ):  # the reader of stdout went away (`| head`): the shell's status for SIGPIPE
+    # the reader of stdout went away (`| head`): the shell's status for SIGPIPE
+    except BrokenPipeError:
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE

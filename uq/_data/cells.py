@@ -47,9 +47,8 @@ def number(
         )
         raise InputError(f"{where(path, row, column)}: '{shown}' is not a number ({hint})")
     if decimal_comma:
-        if (
-            "." in text
-        ):  # in a file of decimal commas a point can only be a thousands separator or a slip
+        # in a file of decimal commas a point can only be a thousands separator or a slip
+        if "." in text:
             raise InputError(
                 f"{where(path, row, column)}: '{shown}' has a '.' in a file that writes decimal commas (a thousands separator?); write plain numbers"
             )

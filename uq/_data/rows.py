@@ -127,8 +127,7 @@ def read_table(
 
 def _read_bytes(path: str) -> bytes:
     try:
-        with open(path, "rb") as fh:
-            return fh.read()
+        return Path(path).read_bytes()
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:

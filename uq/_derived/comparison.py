@@ -293,16 +293,15 @@ def fit_both(
     a spawned worker process beside the model's fit here and compared with it there
     (:func:`fitting_both`, which ``worker`` is passed to): the same fits and comparison, to the
     bit. A script that asks for it needs an ``if __name__ == "__main__":`` guard."""
+    kw = {"seed": seed, "settings": settings, "stand": stand}
     if surface_fit is None and (cubic_fit is None or force_side(rec) is not rec):
-        with fitting_both(
-            rec, seed=seed, settings=settings, stand=stand, model=model, jobs=jobs, worker=worker
-        ) as (fit, compared):
+        with fitting_both(rec, model=model, jobs=jobs, worker=worker, **kw) as (fit, compared):
             return (fit, *compared())
     if surface_fit is None:
         name = registry.default("margin") if model is None else model
-        surface_fit = registry.fit(name, rec, seed=seed, settings=settings, stand=stand)
+        surface_fit = registry.fit(name, rec, **kw)
     if cubic_fit is None or force_side(rec) is not rec:
-        cubic_fit = _cubics(rec, seed=seed, settings=settings, stand=stand)
+        cubic_fit = _cubics(rec, **kw)
     return surface_fit, cubic_fit, compare(surface_fit, cubic_fit, seed=seed, settings=settings)
 
 
@@ -332,21 +331,16 @@ def fit_and_choose(
     :func:`fit_both`'s."""
     settings = Settings() if settings is None else settings
     stand = PAPER_STAND if stand is None else stand
+    kw = {"seed": seed, "settings": settings, "stand": stand}
     fit = cub = comparison = None
     if model == AUTO:
         fit, cub, comparison = fit_both(
-            rec,
-            seed=seed,
-            settings=settings,
-            stand=stand,
-            model=registry.default("margin"),
-            jobs=jobs,
-            worker=worker,
+            rec, model=registry.default("margin"), jobs=jobs, worker=worker, **kw
         )
     elif registry.entry(model).over_all_tests:
-        fit = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)
+        fit = registry.fit(model, rec, **kw)
     else:
-        cub = registry.fit(model, rec, seed=seed, settings=settings, stand=stand)
+        cub = registry.fit(model, rec, **kw)
     fitted = [f for f in (fit, cub) if f is not None]
     warnings = [w for f in fitted for w in f.convergence.messages(CLI_ADVICE)]
     converged = all(f.convergence.converged for f in fitted)

@@ -37,7 +37,7 @@ import numpy as np
 
 from uq._derived.margin import pressure_needed
 from uq._inference.summary import band, estimate
-from uq._io.errors import InputError
+from uq._io.errors import InputError, refuse_outside
 from uq._physics import knots
 from uq._physics.quantities import BAR_PA
 from uq._physics.sealed import (
@@ -115,19 +115,12 @@ def check_design(model, design: SealedDesign) -> None:
             "the sealed rate and natural frequency need the volume-derived area dV/dx: this campaign is "
             "force-only (no piston_mm column); only isobaric loads can be given"
         )
-    (hlo, hhi), (plo, phi) = model.height_range_m, model.pressure_range_bar
-    if not hlo - 1e-9 <= design.height_m <= hhi + 1e-9:
-        raise InputError(
-            f"height_m: {design.height_m * 1e3:g} mm is outside the tested heights "
-            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model does not extrapolate",
-            param="height_m",
-        )
-    if not plo - 1e-9 <= design.charge_bar <= phi + 1e-9:
-        raise InputError(
-            f"charge_bar: {design.charge_bar:g} bar is outside the tested pressures "
-            f"{plo:g}..{phi:g} bar; the model does not extrapolate",
-            param="charge_bar",
-        )
+    never = "; the model does not extrapolate"
+    for param, kind, (lo, hi) in (
+        ("height_m", "heights", model.height_range_m),
+        ("charge_bar", "pressures", model.pressure_range_bar),
+    ):
+        refuse_outside(param, getattr(design, param), lo, hi, kind, never, param=param)
     if design.volume_l is None or not (np.isfinite(design.volume_l) and design.volume_l > 0):
         raise InputError(
             "volume_l: the sealed spring needs the internal volume at the design height and "
@@ -225,11 +218,9 @@ class DesignGrid:
         self._prior_sd = {}
         self.dvdp_at_c = None
         if model.has_dvdp:
+            at_c = np.full(n_pressures, self.height_m)
             self.dvdp_at_c = np.asarray(
-                model.volume_pressure_draws(
-                    np.full(n_pressures, self.height_m), self.pressures_bar
-                ),
-                float,
+                model.volume_pressure_draws(at_c, self.pressures_bar), float
             )
 
     def draw_inputs(self, design: SealedDesign) -> tuple[np.ndarray, np.ndarray]:

@@ -216,33 +216,26 @@ def _check_grid(
     """Refuse, in one line, heights and pressures beyond what the recordings support; with
     ``extrapolate``, the notes saying which are beyond."""
     notes = []
-    hlo, hhi = model.height_range_m
-    plo, phi = model.pressure_range_bar
-    tol = 1e-9
-    out_h = heights_m[(heights_m < hlo - tol) | (heights_m > hhi + tol)]
-    out_p = pressures_bar[(pressures_bar < plo - tol) | (pressures_bar > phi + tol)]
-    if out_h.size:
-        if not extrapolate:
+    for param, values, (lo, hi), scale, unit, tail in (
+        ("heights_m", heights_m, model.height_range_m, 1e3, "mm",
+         "the model is continued there, no reading supports it"),
+        ("pressures_bar", pressures_bar, model.pressure_range_bar, 1.0, "bar",
+         "no test supports them"),
+    ):  # fmt: skip
+        what = param.split("_")[0]
+        beyond = values[(values < lo - 1e-9) | (values > hi + 1e-9)] * scale
+        span = f"{lo * scale:g}..{hi * scale:g} {unit}"
+        if beyond.size and not extrapolate:
             raise InputError(
-                f"heights_m: {out_h[0] * 1e3:g} mm is outside the tested heights {hlo * 1e3:g}..{hhi * 1e3:g} mm "
-                "the recordings support; give heights within them, or `extrapolate`",
-                param="heights_m",
+                f"{param}: {beyond[0]:g} {unit} is outside the tested {what} {span} the recordings "
+                f"support; give {what} within them, or `extrapolate`",
+                param=param,
             )
-        notes.append(
-            f"extrapolated: heights {', '.join(f'{h * 1e3:g}' for h in out_h)} mm lie outside the tested "
-            f"{hlo * 1e3:g}..{hhi * 1e3:g} mm; the model is continued there, no reading supports it"
-        )
-    if out_p.size:
-        if not extrapolate:
-            raise InputError(
-                f"pressures_bar: {out_p[0]:g} bar is outside the tested pressures {plo:g}..{phi:g} bar the "
-                "recordings support; give pressures within them, or `extrapolate`",
-                param="pressures_bar",
+        if beyond.size:
+            shown = ", ".join(f"{v:g}" for v in beyond)
+            notes.append(
+                f"extrapolated: {what} {shown} {unit} lie outside the tested {span}; {tail}"
             )
-        notes.append(
-            f"extrapolated: pressures {', '.join(f'{p:g}' for p in out_p)} bar lie outside the tested "
-            f"{plo:g}..{phi:g} bar; no test supports them"
-        )
     return notes
 
 

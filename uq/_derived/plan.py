@@ -181,10 +181,7 @@ def required_tests(targets, tested_bar, candidates_bar) -> np.ndarray:
                 continue
             above = p > tested.max()
             ok = cand >= p - 1e-9 if above else cand <= p + 1e-9
-            if not ok.any() and not need.any():
-                pass
-            covered = need & ok
-            if covered.any():
+            if (need & ok).any():  # a test already needed covers it
                 continue
             if not ok.any():
                 side = "at or above" if above else "at or below"

@@ -449,11 +449,7 @@ class DiscrepancyFrames(PairFrames):
         t = (np.asarray(x, float) - self.rec.x0_m) / BASIS_SCALE_M
         area = None if self.force_only else self.rec.piston_area_m2
         return dev.deviation_rows(
-            t,
-            np.asarray(p, float)[:, None] * BAR_PA,
-            self.scales.size,
-            area,
-            p_ref_pa(self.tested),
+            t, np.asarray(p, float)[:, None] * BAR_PA, self.scales.size, area, p_ref_pa(self.tested)
         )
 
     def _channel_scales(self, rows) -> np.ndarray:

@@ -317,9 +317,8 @@ class _Search:
             counts[lane, h] += 1
             # rank-r update of each lane with its own reading
             cols = h[:, None] * r + np.arange(r)[None, :]  # (Ju, r)
-            Y = CC.transpose(1, 3, 0, 2)[lane[:, None], cols].transpose(
-                2, 0, 3, 1
-            )  # (S, Ju, Hr, r)
+            # (S, Ju, Hr, r)
+            Y = CC.transpose(1, 3, 0, 2)[lane[:, None], cols].transpose(2, 0, 3, 1)
             Minv = np.linalg.inv(M[:, lane, h])  # (S, Ju, r, r)
             bh = b[:, lane, h]  # (S, Ju, r, T)
             CG -= Y @ (Minv @ bh)

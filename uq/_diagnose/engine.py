@@ -121,17 +121,13 @@ class Fit:
             )
         self.posterior = posterior
         theta = posterior.theta.reshape(-1, M.N_THETA)
-        beta = posterior.beta.reshape(theta.shape[0], -1)
-        ll = np.concatenate(
-            [
-                posterior.loglik["z"].reshape(theta.shape[0], -1),
-                posterior.loglik["L"].reshape(theta.shape[0], -1),
-            ],
-            axis=1,
-        )[:, M.scored_rows(d)]
+        S = theta.shape[0]
+        beta = posterior.beta.reshape(S, -1)
+        ll = np.concatenate([posterior.loglik[k].reshape(S, -1) for k in ("z", "L")], axis=1)
+        ll = ll[:, M.scored_rows(d)]
         ok = np.all(np.isfinite(ll), axis=1)
         self.ll, self.beta, self.theta = ll[ok], beta[ok], theta[ok]
-        self._means_of = (theta, beta, data, ok)  # for ``_means``, on first use
+        self._means_of = (theta, beta, data, ok)  # for ``means``, on first use
         self.n_params = sum(M.N_PARAMS[m] for m in self.names)
         if bar is not None:
             bar.update(1)
@@ -140,25 +136,13 @@ class Fit:
             self.elpd = self.loo.elpd
 
     @functools.cached_property
-    def _means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The mean force, mean piston and noise sd of every row at every kept draw (muF, muL,
         sigma), made on first use: only the base and the final model's residuals need them, not
         the screening's candidates (the same numbers as made with the fit)."""
         theta, beta, data, ok = self._means_of
         muF, muL, sigma = map_rows(M.means, (theta, beta), (data,))
         return muF[ok], muL[ok], sigma[ok]
-
-    @property
-    def muF(self) -> np.ndarray:
-        return self._means[0]
-
-    @property
-    def muL(self) -> np.ndarray:
-        return self._means[1]
-
-    @property
-    def sigma(self) -> np.ndarray:
-        return self._means[2]
 
     def magnitude(self, name: str, n_tests: int, ctx) -> np.ndarray:
         """Posterior draws of the mechanism's magnitude in the units of the mechanisms' table
@@ -256,17 +240,18 @@ def residuals_of(fit: Fit, meta: dict, d) -> dict:
     """Posterior-mean residuals and standardised residuals of force (N) and volume (m^3)."""
     S = meta["area"]
     n = meta["force_N"].size
-    sz, sL = fit.sigma[:, :n], fit.sigma[:, n:]
+    muF, muL, sigma = fit.means
+    sz, sL = sigma[:, :n], sigma[:, n:]
     c = np.asarray(d.c)
     var_noise_F = np.mean(sz**2 + (c * sL) ** 2, axis=0)
     var_noise_L = np.mean(sL**2, axis=0)
-    rF = meta["force_N"] - fit.muF.mean(0)
-    sdF = np.sqrt(fit.muF.var(0) + var_noise_F)
+    rF = meta["force_N"] - muF.mean(0)
+    sdF = np.sqrt(muF.var(0) + var_noise_F)
     if not meta["has_volume"]:  # force-only: no volume residuals
         return {"force": (rF, rF / sdF)}
     # NaN where a test has no volume readings (a catalogue's volume at one pressure)
-    rL = np.where(meta["volume_observed"], meta["piston_m"] - fit.muL.mean(0), np.nan)
-    sdL = np.sqrt(fit.muL.var(0) + var_noise_L)
+    rL = np.where(meta["volume_observed"], meta["piston_m"] - muL.mean(0), np.nan)
+    sdL = np.sqrt(muL.var(0) + var_noise_L)
     return {"force": (rF, rF / sdF), "volume": (S * rL, rL / sdL)}
 
 
@@ -441,14 +426,12 @@ NEEDS_WORDS = {
 
 def capabilities(rec) -> set[str]:
     """What the campaign ``rec`` can identify (the words of ``Mechanism.needs``)."""
-    have = set()
-    if rec.has_volume:  # piston coordinates, or a volume column on some test
-        have.add("volume")
-    if len(rec.tests) >= 2:
-        have.add("pressures")
-    if rec.has_both_branches:
-        have.add("both_branches")
-    return have
+    have = {
+        "volume": rec.has_volume,  # piston coordinates, or a volume column on some test
+        "pressures": len(rec.tests) >= 2,
+        "both_branches": rec.has_both_branches,
+    }
+    return {k for k, yes in have.items() if yes}
 
 
 def offered(rec) -> tuple[tuple[str, ...], dict[str, str]]:
@@ -591,12 +574,8 @@ def _plain(v):
 def _where_text(label: str, v) -> str:
     if label == "pressure_bar":
         return f"{float(v):g} bar"
-    if label == "height_mm":
-        return (
-            f"{float(v[0]):g}-{float(v[1]):g} mm"
-            if isinstance(v, list | tuple)
-            else f"{float(v):g} mm"
-        )
+    if label == "height_mm":  # a height group's [from, to] (``where``)
+        return f"{float(v[0]):g}-{float(v[1]):g} mm"
     return str(v)
 
 
@@ -656,14 +635,9 @@ class Diagnosis:
         status (a pandas DataFrame; empty when nothing was found)."""
         import pandas as pd  # reason: optional and heavy, loaded only where used
 
+        columns = ("unit", "delta_elpd", "delta_elpd_se", "status")
         rows = {
-            m["name"]: {
-                **m["magnitude"],
-                "unit": m["unit"],
-                "delta_elpd": m["delta_elpd"],
-                "delta_elpd_se": m["delta_elpd_se"],
-                "status": m["status"],
-            }
+            m["name"]: m["magnitude"] | {k: m[k] for k in columns}
             for m in self.document["mechanisms"]
         }
         return pd.DataFrame.from_dict(rows, orient="index")
@@ -734,7 +708,8 @@ def diagnose(
         mechanisms.append(entry)
     mechanisms.sort(key=lambda e: -e["delta_elpd"])
     rms = {
-        f: float(np.sqrt(np.mean((meta["force_N"] - f.muF.mean(0)) ** 2))) for f in {base, final}
+        f: float(np.sqrt(np.mean((meta["force_N"] - f.means[0].mean(0)) ** 2)))
+        for f in {base, final}
     }
     result = {
         "mismatch_detected": bool(chosen or flags_base),

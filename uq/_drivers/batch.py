@@ -385,11 +385,14 @@ def _seed(job: dict) -> int:
     return int(job["options"].get("seed", DEFAULT_SEED))
 
 
+def _fit_options(job: dict) -> dict:
+    """The seed, sampler settings and stand of a job's fits."""
+    return {"seed": _seed(job), "settings": _settings(job), "stand": _stand(job)}
+
+
 def _fit(job: dict):
     """The campaign's per-pressure cubics, as ``uq fit`` makes them."""
-    return fit_campaign(
-        _recordings(job), seed=_seed(job), settings=_settings(job), stand=_stand(job)
-    )
+    return fit_campaign(_recordings(job), **_fit_options(job))
 
 
 def _task_fit(job: dict, out: Path, cf=None) -> dict:
@@ -420,13 +423,7 @@ def _task_report(job: dict, out: Path, cf=None) -> dict:
 
 
 def _task_surface(job: dict, out: Path) -> dict:
-    fit = registry.fit(
-        registry.default("surface"),
-        _recordings(job),
-        seed=_seed(job),
-        settings=_settings(job),
-        stand=_stand(job),
-    )
+    fit = registry.fit(registry.default("surface"), _recordings(job), **_fit_options(job))
     res = fit.to_json()
     page = write_model_page(fit, res, out)
     emit_json(res, str(out / "surface.json"))
@@ -536,9 +533,8 @@ def run_dask(
         for fut in as_completed(futures):
             try:
                 got = fut.result()
-            except (
-                Exception
-            ) as exc:  # the worker itself died (KilledWorker, out of memory): its rows fail
+            # the worker itself died (KilledWorker, out of memory): its rows fail
+            except Exception as exc:
                 got = [_failed_row(j, None, _one_line(exc)) for j in futures[fut]]
             for row in got:
                 rows.append(row)

@@ -46,11 +46,7 @@ import numpy as np
 
 from uq._inference.convergence import ESS_MIN
 from uq._inference.loo import PARETO_K_MAX, psislw
-from uq._inference.sampler import (
-    yeo_johnson,
-    yeo_johnson_exponents,
-    yeo_johnson_log_slope,
-)
+from uq._inference.sampler import yeo_johnson, yeo_johnson_exponents, yeo_johnson_log_slope
 
 #: Pareto k-hat above which importance sampling is refused (Vehtari et al. 2024): the PSIS-LOO rule's
 K_MAX = PARETO_K_MAX

@@ -265,9 +265,8 @@ class _GroupedSnooker(_Grouped, emcee.moves.DESnookerMove):
         G, ns, ndim = sg.shape
         rows = np.arange(G)[:, None]
         # one walker from each of the three complement sets, in random order
-        w = np.stack(
-            [cj[rows, random.randint(cj.shape[1], size=(G, ns))] for cj in cg], axis=2
-        )  # (G, ns, 3, D)
+        # (G, ns, 3, D)
+        w = np.stack([cj[rows, random.randint(cj.shape[1], size=(G, ns))] for cj in cg], axis=2)
         order = np.argsort(random.rand(G, ns, 3), axis=2)
         w = np.take_along_axis(w, order[..., None], axis=2)
         z, z1, z2 = w[:, :, 0], w[:, :, 1], w[:, :, 2]
@@ -691,9 +690,8 @@ def _run_many(
     E, W = settings.n_ensembles, settings.n_walkers
     rng = np.random.default_rng(seed)
     # Walker order: problem, ensemble, walker; each ensemble's start is drawn afresh.
-    start = np.stack(
-        [_starts(log_prob, centers, chols, W, rng) for _ in range(E)], axis=1
-    )  # (K, E, W, D)
+    # (K, E, W, D)
+    start = np.stack([_starts(log_prob, centers, chols, W, rng) for _ in range(E)], axis=1)
 
     def flat_log_prob(q):  # emcee's (rows, D), rows in walker order -> (rows,)
         return np.asarray(log_prob(q.reshape(K, -1, ndim)), float).reshape(-1)

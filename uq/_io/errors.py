@@ -49,3 +49,18 @@ def where(path: str, row: int | None = None, column: str | None = None) -> str:
     if column is not None:
         parts.append(f"column '{column}'")
     return ", ".join(parts)
+
+
+def refuse_outside(
+    place: str, value: float, lo: float, hi: float, kind: str, tail: str = "", param=None
+) -> None:
+    """InputError ``PLACE: VALUE is outside the tested KIND LO..HI`` + ``tail`` when ``value`` lies
+    outside ``lo..hi`` (1e-9 of slack: the tested ends are in); ``kind`` "heights" (metres, said in
+    mm) or "pressures" (bar)."""
+    if lo - 1e-9 <= value <= hi + 1e-9:
+        return
+    if kind == "heights":
+        text = f"{value * 1e3:g} mm is outside the tested heights {lo * 1e3:g}..{hi * 1e3:g} mm"
+    else:
+        text = f"{value:g} bar is outside the tested pressures {lo:g}..{hi:g} bar"
+    raise InputError(f"{place}: {text}{tail}", param=param)

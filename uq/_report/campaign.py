@@ -192,17 +192,9 @@ def _with_residuals(n: int):
     fig = plt.figure(figsize=(W, H))
     grid_top = k.bottom + rows * k.panel + (rows - 1) * k.row_gap  # inches from the bottom
     main_bottom = grid_top + k.below_main
-    main = fig.add_axes(
-        (k.left / W, main_bottom / H, 1 - (k.left + k.right) / W, 1 - (main_bottom + k.top) / H)
-    )
-    bar = fig.add_axes(
-        (
-            (W - k.right + k.bar_pad) / W,
-            main_bottom / H,
-            k.bar_width / W,
-            1 - (main_bottom + k.top) / H,
-        )
-    )
+    bottom, height = main_bottom / H, 1 - (main_bottom + k.top) / H  # of the main and bar axes
+    main = fig.add_axes((k.left / W, bottom, 1 - (k.left + k.right) / W, height))
+    bar = fig.add_axes(((W - k.right + k.bar_pad) / W, bottom, k.bar_width / W, height))
     width = (W - k.left - k.right - (cols - 1) * k.col_gap) / cols
     gs = fig.add_gridspec(
         rows, cols, left=k.left / W, right=1 - k.right / W, bottom=k.bottom / H, top=grid_top / H,
@@ -449,6 +441,8 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     comp = t.compression
     p_pa = tb.pressure_bar * BAR_PA
     piston_m = t.piston_m if piston_m is None else piston_m
+    # the reference test's volume curve (None: no test has one)
+    ref = None if cb.reference_bar is None else f"{cb.reference_bar:g}-bar"
 
     ax = axs[0, 0]
     _fill(ax, x, tb.force_pred, 1e-3, "0.5", alpha=0.2, line=False)
@@ -496,15 +490,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     if tb.has_volume:
         _fill(ax, x, tb.trad_own, 1e-3, "tab:red", label="p_u (−S dL/dx), own volume", ls="--")
     if tb.trad_ref is not None:
-        _fill(
-            ax,
-            x,
-            tb.trad_ref,
-            1e-3,
-            "tab:purple",
-            label=f"p_u (−S dL/dx), {cb.reference_bar:g}-bar volume",
-            ls=":",
-        )
+        _fill(ax, x, tb.trad_ref, 1e-3, "tab:purple", label=f"p_u (−S dL/dx), {ref} volume", ls=":")
     else:
         _absent(ax, "no traditional force:\nno test has a volume curve", x, y=0.15)
     ax.set(xlabel="height x (mm)", ylabel="force (kN)", title="traditional vs measured force")
@@ -514,15 +500,7 @@ def figure_test(t, force_mean, x0_m: float, tb, cb: CampaignBands, piston_m=None
     if tb.has_volume:
         _fill(ax, x, tb.spread_own, 1.0, "tab:red", label="own volume curve", ls="--")
     if tb.spread_ref is not None:
-        _fill(
-            ax,
-            x,
-            tb.spread_ref,
-            1.0,
-            "tab:purple",
-            label=f"{cb.reference_bar:g}-bar volume curve",
-            ls=":",
-        )
+        _fill(ax, x, tb.spread_ref, 1.0, "tab:purple", label=f"{ref} volume curve", ls=":")
         ax.legend(fontsize=7, loc="best")
     else:
         _absent(ax, "no spread: no test has a volume curve", x)
@@ -590,17 +568,9 @@ def _readings(ax, h, y, comp) -> None:
         ax.plot(h, y, "o", ms=3.5, color="k", mfc="none", label="readings (order unknown)")
         return
     for is_comp, name in ((True, "compression"), (False, "rebound")):
-        m = comp == is_comp
-        if m.any():
-            ax.plot(
-                h[m],
-                y[m],
-                "o",
-                ms=3.5,
-                mfc="none" if not is_comp else BRANCH_COLORS[is_comp],
-                color=BRANCH_COLORS[is_comp],
-                label=name,
-            )
+        m, c = comp == is_comp, BRANCH_COLORS[is_comp]
+        if m.any():  # compression filled, rebound open
+            ax.plot(h[m], y[m], "o", ms=3.5, mfc=c if is_comp else "none", color=c, label=name)
 
 
 def _absent(ax, words: str, x, y: float = 0.5) -> None:
@@ -862,15 +832,11 @@ def _table1(cf, ref: Reference | None) -> tuple[list[dict], int, int]:
         volume = getattr(tf, "has_piston", True)
         nan = np.full_like(tf.flat("force"), np.nan)
         draws = np.concatenate([tf.flat("force"), tf.flat("piston") if volume else nan], axis=1)
-        paper = None
-        if ref is not None and ref.at(ref.force, tf.pressure_bar) is not None:
+        force = None if ref is None else ref.at(ref.force, tf.pressure_bar)
+        paper = None  # the reference's coefficients, NaN where it has none
+        if force is not None:
             piston = ref.at(ref.piston, tf.pressure_bar)
-            paper = np.concatenate(
-                [
-                    ref.at(ref.force, tf.pressure_bar),
-                    piston if piston is not None else np.full(4, np.nan),
-                ]
-            )
+            paper = np.concatenate([force, np.full(4, np.nan) if piston is None else piston])
         for k, (_, _, f) in enumerate(TABLE1_COLUMNS[:columns]):
             if k >= 4 and not volume:  # a force-only test has no piston coefficients
                 cells.append(None)
@@ -1110,32 +1076,22 @@ def _draw_figures(
 ) -> dict[str, Figure]:
     """The page's figures, each also written to ``out`` as a PNG or SVG file, by name without
     the extension (``"fig2_force"``); ``units``: second axes in the recordings' units."""
-    drawn = [("fig2_force", lambda _: figure_force(cf, cb), "Figure 2: force vs height")]
-    if any(tb.has_volume for tb in cb.tests):
-        drawn.append(
-            ("fig3_volume", lambda _: figure_volume(cf, cb), "Figure 3: volume increment vs height")
-        )
-    drawn.append(("fig4_feff", lambda _: figure_feff(cf, cb), "Figure 4: effective area vs height"))
-    if cb.has_volume:
-        drawn.append(
-            (
-                "fig5_traditional",
-                lambda _: figure_traditional(cf, cb),
-                "Figure 5: traditional vs measured force",
-            )
-        )
-    if cb.scatter is not None:
-        drawn.append(
-            (
-                "fig_feff_scatter",
-                lambda _: figure_scatter(cb, ref is not None and ref.is_paper),
-                "F_eff scatter vs height",
-            )
-        )
+    paper = ref is not None and ref.is_paper
+    drawn = [  # (stem, whether drawn, figure, alternative text)
+        ("fig2_force", True, lambda _: figure_force(cf, cb), "Figure 2: force vs height"),
+        ("fig3_volume", any(tb.has_volume for tb in cb.tests), lambda _: figure_volume(cf, cb),
+         "Figure 3: volume increment vs height"),
+        ("fig4_feff", True, lambda _: figure_feff(cf, cb), "Figure 4: effective area vs height"),
+        ("fig5_traditional", cb.has_volume, lambda _: figure_traditional(cf, cb),
+         "Figure 5: traditional vs measured force"),
+        ("fig_feff_scatter", cb.scatter is not None, lambda _: figure_scatter(cb, paper),
+         "F_eff scatter vs height"),
+    ]  # fmt: skip
     what, _ = not_converged(cf)  # the campaign's figures show every test
     figs = {
         stem: Figure(f"{stem}.{figure_format}", _encoded(make, figure_format, units, what), alt)
-        for stem, make, alt in drawn
+        for stem, shown, make, alt in drawn
+        if shown
     }
     for tf, data in zip(cf.tests, test_figures.results(), strict=True):
         stem = f"test_{tf.pressure_bar:g}bar"

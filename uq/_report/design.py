@@ -87,16 +87,9 @@ def figure_sealed_curves(doc: dict, curves: dict):
         if x.size == 0:
             continue
         for a, key, scale in ((ax, "load_N", 1e-3), (ax2, "rate_N_per_m", 1e-3)):
-            b = cv[key]
-            a.fill_between(
-                x,
-                np.asarray(b["q05"]) * scale,
-                np.asarray(b["q95"]) * scale,
-                color=c,
-                alpha=0.3 if c != "k" else 0.15,
-                lw=0,
-            )
-            a.plot(x, np.asarray(b["mean"]) * scale, color=c, lw=lw, ls=ls, label=label)
+            b = {k: np.asarray(cv[key][k]) * scale for k in ("mean", "q05", "q95")}
+            a.fill_between(x, b["q05"], b["q95"], color=c, alpha=0.3 if c != "k" else 0.15, lw=0)
+            a.plot(x, b["mean"], color=c, lw=lw, ls=ls, label=label)
     for a in (ax, ax2):
         a.axvline(doc["height_m"] * 1e3, color="k", ls=":", lw=1)
         a.set_xlabel("height x, mm")
@@ -298,7 +291,6 @@ def sheet_csv(doc: dict) -> str:
             f = f"{t['forcing_Hz']:g}Hz"
             rows.append(_est_row(pre, f"transmissibility_at_{f}", "1", t["transmissibility"]))
             rows.append(_est_row(pre, f"isolation_at_{f}", "%", t["isolation_pct"]))
-    if doc.get("rate_N_per_m") is not None:
         for r in doc["frequency_chart"]["rows"]:
             pre = {
                 "table": "sealed_at_design_height",

@@ -23,55 +23,52 @@ from uq._models.registry import CUBICS
 from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
 
 
+def panels_by_test(n: int, panel_in: float, extra_in: float):
+    """A figure of ``n`` panels, one per test, four to a row (constrained layout; the row's height
+    ``panel_in``, plus ``extra_in`` inches), the panels after the n-th off: (figure, axes)."""
+    cols = min(4, n)
+    rows = -(-n // cols)
+    fig, axes = pyplot().subplots(
+        rows,
+        cols,
+        figsize=(3.2 * cols, panel_in * rows + extra_in),
+        squeeze=False,
+        layout="constrained",
+    )
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    return fig, axes
+
+
 def figure_residual_overlay(fit):
     """Readings minus the model's mean force, with its 90 % band, one panel per test (``fit``: any
     fitted model of the recordings, named in the legend by its name)."""
-    plt = pyplot()
     tests = fit.recordings.tests
-    n = len(tests)
-    cols = min(4, n)
-    rows = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(
-        rows, cols, figsize=(3.2 * cols, 2.4 * rows + 0.5), squeeze=False, layout="constrained"
-    )
+    fig, axes = panels_by_test(len(tests), 2.4, 0.5)
     some = fit.on_draws(1000)
     lo, hi = fit.height_range_m
     xs = np.linspace(lo, hi, 80)
+    named = f"{fit.name} 90 % band"
     for ax, t in zip(axes.flat, tests, strict=False):
         m, lo_b, hi_b = band(some.force_draws(xs, t.pressure_bar), axis=0)
-        at_pts = some.force_draws(t.height_m, t.pressure_bar).mean(axis=0)
+        r = t.force_N - some.force_draws(t.height_m, t.pressure_bar).mean(axis=0)
         ax.fill_between(
-            xs * 1e3,
-            lo_b - m,
-            hi_b - m,
-            alpha=0.35,
-            color="tab:blue",
-            lw=0,
-            label=f"{fit.name} 90 % band",
+            xs * 1e3, lo_b - m, hi_b - m, alpha=0.35, color="tab:blue", lw=0, label=named
         )
         ax.axhline(0, color="k", lw=0.6)
         comp = t.compression
         if comp is None:  # one pass in unknown order (a catalogue table)
-            ax.plot(t.height_m * 1e3, t.force_N - at_pts, ".", ms=3, color="k", label="readings")
+            ax.plot(t.height_m * 1e3, r, ".", ms=3, color="k", label="readings")
         else:
             for sel, mark, color, label in (
                 (comp, ".", "tab:red", "compression"),
                 (~comp, "x", "tab:green", "rebound"),
             ):
-                ax.plot(
-                    t.height_m[sel] * 1e3,
-                    (t.force_N - at_pts)[sel],
-                    mark,
-                    ms=3,
-                    color=color,
-                    label=label,
-                )
+                ax.plot(t.height_m[sel] * 1e3, r[sel], mark, ms=3, color=color, label=label)
         ax.set_title(f"{t.pressure_bar:g} bar", fontsize=9)
         ax.tick_params(labelsize=7)
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside upper center", ncol=3, fontsize=7, frameon=False)
+    legend = axes.flat[0].get_legend_handles_labels()
+    fig.legend(*legend, loc="outside upper center", ncol=3, fontsize=7, frameon=False)
     fig.supxlabel("height x, mm", fontsize=9)
     fig.supylabel(f"reading - {fit.name} mean force, N", fontsize=9)
     return fig

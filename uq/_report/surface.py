@@ -57,19 +57,13 @@ def figure_spread(fit: SurfaceFit, n_x: int = 46, n_p: int = 41):
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     vmax = float(np.max(np.abs(reg["mean"])))
     im = ax.pcolormesh(xs, ps, reg["mean"].T, shading="auto", cmap="RdBu_r", vmin=-vmax, vmax=vmax)
-    if reg["credibly_nonzero"].any() and not reg["credibly_nonzero"].all():
-        ax.contour(
-            xs,
-            ps,
-            reg["credibly_nonzero"].T.astype(float),
-            levels=[0.5],
-            colors="k",
-            linewidths=1.5,
-        )
+    out = reg["credibly_nonzero"]
+    if out.any() and not out.all():
+        ax.contour(xs, ps, out.T.astype(float), levels=[0.5], colors="k", linewidths=1.5)
     fig.colorbar(im, ax=ax, label="p_u (-dV/dx) - P, N (posterior mean)")
     ax.set_xlabel("height x, mm")
     ax.set_ylabel("overpressure p_u, bar")
-    share = 100 * reg["credibly_nonzero"].mean()
+    share = 100 * out.mean()
     ax.set_title(
         f"Traditional minus measured force\noutlined: 90 % band excludes 0 ({share:.0f} % of the range)",
         fontsize=9,

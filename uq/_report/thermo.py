@@ -24,7 +24,7 @@ from uq._models.registry import CUBICS
 from uq._models.thermo import ThermoFit
 from uq._physics.quantities import BAR_PA
 from uq._report.html import check_format, pyplot
-from uq._report.model_page import figure_residual_overlay, write_page
+from uq._report.model_page import figure_residual_overlay, panels_by_test, write_page
 
 PAGE = "thermodynamic.html"
 #: what the preference means for a model that ties force and volume through one potential
@@ -49,14 +49,8 @@ def _grid(fit: ThermoFit, n: int):
 def figure_areas(fit: ThermoFit):
     """Per test: the effective area from the force, F_eff = P/p_u (eq. 1), and from the volume,
     dV/dx (eq. 1, second formula), with their 90 % bands, and the readings' P/p_u."""
-    plt = pyplot()
     tests = fit.recordings.tests
-    n = len(tests)
-    cols = min(4, n)
-    rows = -(-n // cols)
-    fig, axes = plt.subplots(
-        rows, cols, figsize=(3.2 * cols, 2.5 * rows + 0.6), squeeze=False, layout="constrained"
-    )
+    fig, axes = panels_by_test(len(tests), 2.5, 0.6)
     some = fit.on_draws(N_DRAWS)
     xs = _grid(fit, 80)
     for ax, t in zip(axes.flat, tests, strict=False):
@@ -74,12 +68,10 @@ def figure_areas(fit: ThermoFit):
         ax.set_title(f"{p:g} bar", fontsize=9)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
     for ax in axes[-1]:
         ax.set_xlabel("height x, mm", fontsize=8)
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    legend = axes.flat[0].get_legend_handles_labels()
+    fig.legend(*legend, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
     fig.supylabel("effective area, cm²", fontsize=9)
     fig.suptitle(
         "Effective area two ways, 90 % bands: equal in the traditional theory", fontsize=10

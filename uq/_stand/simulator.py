@@ -354,12 +354,7 @@ def _test(spring, effects, p, heights, comp, rng, stand, piston_area_m2) -> dict
     )
 
 
-def simulate_planned(
-    spring_name: str,
-    planned: list[dict],
-    *,
-    seed: int = 0,
-) -> list[dict]:
+def simulate_planned(spring_name: str, planned: list[dict], *, seed: int = 0) -> list[dict]:
     """The paper's virtual stand, without effects, reading planned tests (the ``tests`` of ``uq plan
     --json``: dicts with pressure_bar, heights_mm in recording order and optional branches,
     compression when absent), with the same errors as :func:`simulate`; returns one dict of arrays

@@ -54,6 +54,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from coverage_tables import model_check_table  # noqa: E402  (scripts/ is no package)
 from scipy import stats  # noqa: E402
 
 from uq._data.stand_description import PAPER_STAND, read_stand  # noqa: E402
@@ -348,11 +349,7 @@ def _check_lines(checked: dict) -> list[str]:
     """The markdown section on the model check, where the runs recorded it."""
     if not checked:
         return []
-
-    def pct(v):
-        return "-" if v is None else f"{v:.2f}"
-
-    lines = [
+    return [
         "## The model check",
         "",
         "`uq margin` and `uq design` run a posterior-predictive check at the tested points with "
@@ -360,18 +357,9 @@ def _check_lines(checked: dict) -> list[str]:
         "it flags, and the pooled share of force queries covered in all campaigns and in those it "
         "passes:",
         "",
-        "| spring | grid | model | flagged | covered, all | covered, check passed |",
-        "|---|---|---|---|---|---|",
+        *model_check_table(checked, CHECKED),
+        "",
     ]
-    for key, c in checked.items():
-        spring, gname = key.split("/")
-        for m in CHECKED:
-            r = c[m]
-            lines.append(
-                f"| {spring} | {gname} | {m} | {r['flagged']}/{c['campaigns']} | "
-                f"{pct(r['force_covered_all'])} | {pct(r['force_covered_when_passed'])} |"
-            )
-    return lines + [""]
 
 
 def main(argv=None) -> int:

@@ -53,6 +53,9 @@ WORKSPACE_COPIES = ("data", "fits", "docs/examples")
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_tables import MEMORY, SCALING, table  # noqa: E402  (benchmarks/ is no package)
 
+sys.path.insert(0, str(ROOT / "scripts"))
+from coverage_tables import model_check_table  # noqa: E402  (scripts/ is no package)
+
 
 def pages() -> list[Path]:
     """Every page that may hold generated blocks: README.md and the Markdown pages of docs/."""
@@ -952,7 +955,6 @@ def plan_proof_summary(rel: str) -> Callable[[], str]:
             f"- Achieved over predicted posterior sd: mean {d['ratio_mean']:.2f}, range "
             f"{d['ratio_min']:.2f}-{d['ratio_max']:.2f}.",
         ]
-        sys.path.insert(0, str(ROOT / "scripts"))
         from plan_proof import claim_lines, theta_lines, theta_updated_lines  # the proof's own
 
         lines += claim_lines(d)
@@ -1139,20 +1141,8 @@ def between_coverage_summary(rel: str) -> Callable[[], str]:
                 "model misses the readings it was fitted to): campaigns it flagged, and the pooled "
                 "share of force queries covered in all campaigns and in those it passed:",
                 "",
-                "| spring | grid | model | flagged | covered, all | covered, check passed |",
-                "| --- | --- | --- | --- | --- | --- |",
+                *model_check_table(checked),
             ]
-            for key in sorted(checked, key=lambda k: (k.split("/")[1], k)):
-                spring, grid = key.split("/")
-                for m in ("discrepancy", "surface"):
-                    c = checked[key][m]
-                    passed = c["force_covered_when_passed"]
-                    lines.append(
-                        f"| {spring} | {grid} | {m} | {c['flagged']} of {checked[key]['campaigns']} "
-                        f"| {c['force_covered_all']:.2f} | "
-                        + ("-" if passed is None else f"{passed:.2f}")
-                        + " |"
-                    )
         return "\n".join(lines) + "\n"
 
     return make

@@ -39,6 +39,8 @@ RUN_BY = {
     "scripts/margin_coverage.py": "test_margin_coverage_tiny",
     "scripts/plan_proof.py": "test_plan_proof_tiny",
     "scripts/between_coverage.py": "tests/models/test_discrepancy_scripts.py",
+    "scripts/coverage_tables.py": "imported by between_coverage.py (its tests) and readme_numbers.py "
+    "(tests/test_docs.py's --check regenerates docs/validation.md's model-check table with it)",
     "scripts/n50_bands.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/between_decomposition.py": "tests/models/test_discrepancy_scripts.py",
     "scripts/importance_coverage.py": "test_importance_coverage_tiny",

@@ -281,6 +281,29 @@ def test_sheet_shows_a_design_charge_that_was_not_tested_and_ranks_the_model(
     assert json.loads((tmp_path / "n.json").read_text())["comparison"] is None
 
 
+def test_figures_drawn_by_the_worker_are_the_ones_drawn_here(
+    thermo_campaign, given_fit, tmp_path, monkeypatch
+):
+    """With a comparison worker, ``uq design --out`` has it draw the sheet's figures after it has
+    compared (uq._report.design.compare_then_draw); the sheet is the one drawn without a worker,
+    file for file and byte for byte, and the comparison the same."""
+    from uq._derived import comparison_worker
+
+    _, path, _, v_c = thermo_campaign
+    argv = ["design", path, "--height-mm", 112, "--charge-bar", 5, "--volume-l", f"{v_c:.6f}"]
+    argv += ["--charges-bar", "3,7", "--draws", 200, "--quiet", "--allow-unconverged"]
+    monkeypatch.setattr(comparison_worker, "WORKER_MIN_READINGS", 0)
+    sheets = {}
+    for n in (1, 2):  # one CPU: no worker; two: the worker compares and draws
+        monkeypatch.setattr(comparison_worker, "cores", lambda n=n: n)
+        out = tmp_path / f"cores{n}"
+        assert run([*argv, "--out", out / "sheet", "--json", out / "r.json"]) == 0
+        sheets[n] = {f.name: f.read_bytes() for f in sorted((out / "sheet").iterdir())}
+        sheets[n]["r.json"] = (out / "r.json").read_bytes()
+    assert sheets[1] == sheets[2]
+    assert {"design_isobaric.png", "design_sealed.png", "design_frequency.png"} <= set(sheets[2])
+
+
 def test_sheet_in_a_browser(sheet, tmp_path):
     """The data sheet rendered by headless Chromium: a real page with figures, nothing off the edge."""
     from browser import assert_real_page, screenshot

@@ -289,7 +289,10 @@ def command_design(args) -> int:
     # beside the model and compared with it in a worker while the design is worked out; the
     # worker starts before this process imports JAX (uq._derived.comparison_worker)
     kw = {"seed": args.seed, "settings": settings, "stand": stand}
-    with comparison_worker.running(rec, compare, **kw) as worker:
+    # with --out the worker also draws the sheet's figures once it has compared (the design's
+    # own process has the rest of the sheet to make meanwhile)
+    target = {"target": "uq._report.design:compare_then_draw"} if args.out else {}
+    with comparison_worker.running(rec, compare, **kw, **target) as worker:
         return _design(args, rec, compare, worker, t0, **kw)
 
 
@@ -336,17 +339,25 @@ def _design(args, rec, compare: bool, worker, t0: float, **kw) -> int:
         doc["isobaric"] = D.isobaric_table(model, pressures, heights, x_c)
         doc["tested_pressures_bar"] = tested
         source = _source(args, rec, fit)
-        if args.out:  # the sheet's figures need no comparison: drawn while it runs
-            from uq._report.design import design_figures, write_design_sheet
+        drawn = worker is not None and args.out  # the worker draws the sheet's figures
+        if drawn:
+            worker.send((doc | {"source": source}, curves, args.figures))
+        elif args.out:  # the sheet's figures need no comparison: drawn while it runs
+            from uq._report.design import design_figures
 
             figures = design_figures(
                 doc | {"source": source}, curves=curves, figure_format=args.figures
             )
-        doc["comparison"] = compared()[1]
+        answer = compared()
+        doc["comparison"] = answer[1]
+        if drawn:
+            figures = answer[2]
     doc["model_check"] = check
     doc["source"] = source
     (_print_sealed if rec.has_piston else _print_force_only)(rec, model, doc)
     if args.out:
+        from uq._report.design import write_design_sheet
+
         page = write_design_sheet(
             doc,
             args.out,

@@ -44,6 +44,7 @@ from uq._inference.loo import (
     held_out_density,
     kfold,
     psis,
+    reloo,
     remedy,
     verdict,
 )
@@ -141,12 +142,17 @@ def force_side(rec):
     )
 
 
-def cubic_terms(cubic_fit) -> tuple[Loo, Loo, float]:
+def cubic_terms(cubic_fit, *, seed: int, settings: Settings) -> tuple[Loo, Loo, float, Loo | None]:
     """The cubics' side of :func:`compare`, which needs no model fit (a worker makes it while the
-    model is fitted): their PSIS-LOO, their plain PSIS-LOO at the drawn coefficients, their lppd."""
+    model is fitted): their PSIS-LOO, their plain PSIS-LOO at the drawn coefficients, their lppd,
+    and their PSIS-LOO with its terms of Pareto k > 0.7 refitted exactly (the remedy's refits;
+    None where there are more than ``MAX_REFITS``, whose remedy is K-fold)."""
     plain = _concat([t.posterior.loglik_total() for t in cubic_fit.tests])
     loo = psis(_concat([t.posterior.loglik_loo for t in cubic_fit.tests]))
-    return loo, psis(plain), _lppd(plain)
+    refitted = None
+    if loo.n_bad <= MAX_REFITS:
+        refitted = reloo(loo, _cubic_refit(cubic_fit, settings, seed))
+    return loo, psis(plain), _lppd(plain), refitted
 
 
 def compare(
@@ -155,7 +161,7 @@ def compare(
     *,
     seed: int = 0,
     settings: Settings = Settings(),
-    cubic_side: tuple[Loo, Loo, float] | None = None,
+    cubic_side: tuple[Loo, Loo, float, Loo | None] | None = None,
 ) -> dict:
     """PSIS-LOO of a model over all tests (its registry ``name`` keys the document) against the
     per-pressure cubics, per (force, piston) reading (module docstring); the ``comparison``
@@ -173,7 +179,8 @@ def compare(
         raise ValueError(
             "the force surface is compared with cubics fitted to the force alone (force_side)"
         )
-    loo_c, plain_c, lppd_c = cubic_side or cubic_terms(cubic_fit)
+    side = cubic_side or cubic_terms(cubic_fit, seed=seed, settings=settings)
+    loo_c, plain_c, lppd_c, refitted = side
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.n_coefficients, 8 * len(cubic_fit.tests)
     if force_only:
@@ -183,7 +190,7 @@ def compare(
     loo_s, loo_c, how = remedy(
         loo_s,
         loo_c,
-        refit=(None, _cubic_refit(cubic_fit, settings, seed)),
+        refit=(None, None if refitted is None else lambda j: float(refitted.loo_i[j])),
         kfold_both=_kfold_both(surface_fit, cubic_fit, seed=seed),
     )
     plain_s, lppd_s = psis(sur_plain), _lppd(sur_plain)
@@ -224,10 +231,8 @@ def cubics_then_compare(rec, asked, *, seed: int, settings: Settings, stand):
     """The worker of :func:`fitting_both`: the cubics, then, once the model's fit comes through
     the pipe ``asked``, the comparison of the two: (cubics, comparison)."""
     cub = _cubics(rec, seed=seed, settings=settings, stand=stand)
-    side = cubic_terms(cub)  # while the model is still being fitted
-    fit = asked.recv()
-    asked.close()
-    return cub, compare(fit, cub, seed=seed, settings=settings, cubic_side=side)
+    side = cubic_terms(cub, seed=seed, settings=settings)  # while the model is being fitted
+    return cub, compare(asked.recv(), cub, seed=seed, settings=settings, cubic_side=side)
 
 
 @contextlib.contextmanager

@@ -29,29 +29,38 @@ WORKER_MIN_READINGS = 250
 WHAT = "fitting the per-pressure cubics and comparing them with the model"
 
 
+#: the worker's function (``"module:attribute"``, :class:`~uq._io.processes.Beside`): given the
+#: recordings and the pipe it is sent the model's fit through, it returns (cubics, comparison, ...)
+TARGET = "uq._derived.comparison:cubics_then_compare"
+
+
 def _send(conn, obj) -> None:
     """``obj`` down the pipe ``conn`` (in a thread: the worker reads it only after its own fit); a
     worker that died is reported by its :meth:`~uq._io.processes.Beside.result`."""
     with contextlib.suppress(OSError):
         conn.send(obj)
-    conn.close()
 
 
 class ComparisonWorker:
     """A started worker (:func:`start`): :meth:`compare` sends it the model's fit, :meth:`result`
     waits for (cubics, comparison). A context manager: leaving it stops a worker still running."""
 
-    def __init__(self, rec, *, seed: int, settings, stand):
+    def __init__(self, rec, *, seed: int, settings, stand, target: str = TARGET):
         asked, self._ask = multiprocessing.get_context("spawn").Pipe(duplex=False)
         kw = {"seed": seed, "settings": settings, "stand": stand}
-        target = "uq._derived.comparison:cubics_then_compare"
         self._worker = Beside(WHAT, target, rec, asked, **kw)
         asked.close()  # the worker's copy is left
         self._sender = None
 
-    def compare(self, fit) -> None:
-        self._sender = threading.Thread(target=_send, args=(self._ask, fit), daemon=True)
+    def send(self, obj) -> None:
+        """``obj`` to the worker (the model's fit first, then what its ``target`` asks next),
+        sent in a thread after what was sent before."""
+        if self._sender is not None:
+            self._sender.join()
+        self._sender = threading.Thread(target=_send, args=(self._ask, obj), daemon=True)
         self._sender.start()
+
+    compare = send  # the model's fit, which the worker compares with its cubics
 
     def result(self):
         if self._sender is not None:
@@ -69,20 +78,20 @@ class ComparisonWorker:
         return stopped
 
 
-def start(rec, *, seed: int, settings, stand, jobs: int | None = 1) -> ComparisonWorker | None:
-    """The comparison's worker for ``rec``, started now, or None where the cubics are fitted in
-    this process (``jobs``: processes that fit, None for one per CPU; a worker from two on and
-    ``WORKER_MIN_READINGS`` readings)."""
+def start(rec, *, jobs: int | None = 1, **kw) -> ComparisonWorker | None:
+    """The comparison's worker for ``rec`` (``kw``: :class:`ComparisonWorker`'s), started now, or
+    None where the cubics are fitted in this process (``jobs``: processes that fit, None for one
+    per CPU; a worker from two on and ``WORKER_MIN_READINGS`` readings)."""
     jobs = cores() if jobs is None else jobs
     if jobs < 2 or rec.n_points < WORKER_MIN_READINGS:
         return None
-    return ComparisonWorker(rec, seed=seed, settings=settings, stand=stand)
+    return ComparisonWorker(rec, **kw)
 
 
 @contextlib.contextmanager
-def running(rec, wanted: bool, *, seed: int, settings, stand):
+def running(rec, wanted: bool, **kw):
     """A command's worker for ``rec`` (:func:`start`, one process per CPU) when ``wanted``, else
     None; stopped, if still running, when the block ends."""
-    worker = start(rec, jobs=None, seed=seed, settings=settings, stand=stand) if wanted else None
+    worker = start(rec, jobs=None, **kw) if wanted else None
     with worker or contextlib.nullcontext():
         yield worker

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uq._derived.comparison import words
+from uq._derived.comparison import cubics_then_compare, words
 from uq._derived.model_check import words as check_words
 from uq._io.files import dumps_json, remove_stale, staged_folder
 from uq._report.html import Figure, check_format, encode, pyplot, render, stamp_unconverged
@@ -347,6 +347,19 @@ def design_figures(doc: dict, *, curves: dict | None = None, figure_format: str 
         stem: Figure(f"{stem}.{figure_format}", encode(fig, figure_format), alt)
         for stem, (fig, alt) in figs.items()
     }
+
+
+def compare_then_draw(rec, asked, **kw):
+    """``uq design --out``'s worker (:mod:`uq._derived.comparison_worker`): matplotlib imported
+    first (the worker has time while the model is fitted), then
+    :func:`~uq._derived.comparison.cubics_then_compare`, then the sheet's figures of what is sent
+    next ((document, curves, figure format): :func:`design_figures`), drawn while the command
+    writes the rest: (None, comparison, figures); the cubics are not sent back (the design does
+    not use them)."""
+    pyplot()
+    _, comparison = cubics_then_compare(rec, asked, **kw)
+    doc, curves, figure_format = asked.recv()
+    return None, comparison, design_figures(doc, curves=curves, figure_format=figure_format)
 
 
 def write_design_sheet(

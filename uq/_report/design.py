@@ -350,14 +350,14 @@ def design_figures(doc: dict, *, curves: dict | None = None, figure_format: str 
 
 
 def compare_then_draw(rec, asked, **kw):
-    """``uq design --out``'s worker (:mod:`uq._derived.comparison_worker`): matplotlib imported
-    first (the worker has time while the model is fitted), then
-    :func:`~uq._derived.comparison.cubics_then_compare`, then the sheet's figures of what is sent
-    next ((document, curves, figure format): :func:`design_figures`), drawn while the command
-    writes the rest: (None, comparison, figures); the cubics are not sent back (the design does
-    not use them)."""
-    pyplot()
+    """``uq design --out``'s worker (:mod:`uq._derived.comparison_worker`):
+    :func:`~uq._derived.comparison.cubics_then_compare`, then matplotlib imported (while the
+    command's process still works out its design: earlier, it would take CPU from the model's
+    fit), then the sheet's figures of what is sent next ((document, curves, figure format):
+    :func:`design_figures`), drawn while the command writes the rest: (None, comparison,
+    figures); the cubics are not sent back (the design does not use them)."""
     _, comparison = cubics_then_compare(rec, asked, **kw)
+    pyplot()
     doc, curves, figure_format = asked.recv()
     return None, comparison, design_figures(doc, curves=curves, figure_format=figure_format)
 

@@ -685,9 +685,7 @@ def pointwise_loo(theta, d):
     b = -forms(uf, ul)
     r1 = yf - forms(uf, None)
     r2 = yl - forms(ul, None)
-    det = a * e - b * b
-    quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
-    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI - jnp.log(L11) - jnp.log(L22)
+    return pair.block_logpdf(a, e, b, r1, r2) - jnp.log(L11) - jnp.log(L22)
 
 
 def predict(theta, beta, key, d):

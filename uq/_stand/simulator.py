@@ -78,7 +78,6 @@ from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 # The paper's stand (section 3.2); a different stand is a StandDescription (``--stand FILE``).
 ELEMENT_VOLUME_AT_XMAX_M3 = PAPER_STAND.element_volume_at_xmax_m3
-pressure_sd_bar = PAPER_STAND.pressure_sd_bar
 
 
 class N50Spring:

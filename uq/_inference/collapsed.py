@@ -50,7 +50,7 @@ import numpy as np
 from uq._inference.convergence import Convergence, convergence, importance_convergence
 from uq._inference.exported import persistent_jit
 from uq._inference.float64 import jax, jnp
-from uq._inference.linear import map_rows, seed_row_keys
+from uq._inference.linear import map_rows, row_keys, seed_row_keys
 from uq._inference.sampler import INDEPENDENCE_MIX, Chains, Settings, run_many, thin
 from uq._inference.summary import thin_rows, thin_step
 
@@ -157,6 +157,22 @@ def _gradient_hessian(fn, x, active, data):
     leaves it); traced only then."""
     objective = _objective(fn)
     return jax.grad(objective)(x, (active, data)), jax.hessian(objective)(x, (active, data))
+
+
+def replicates(model: CollapsedModel, posterior: Posterior, n_draws: int, seed: int = 0):
+    """Posterior-predictive replicates of the readings ``posterior`` was fitted to (the model's
+    ``predict``: the mean plus the reading noise of each draw) on at most ``n_draws`` of its draws,
+    thinned evenly: {name: (S, n)} as numpy, or None when the model has no ``predict`` or the
+    posterior keeps no data. Deterministic for ``seed``."""
+    if model.predict is None or posterior.data is None:
+        return None
+    C, D, nt = posterior.theta.shape
+    rows = posterior.theta.reshape(C * D, nt)
+    beta = np.asarray(posterior.beta).reshape(C * D, -1)
+    rows, beta = (thin_rows(a, max(int(n_draws), 1)) for a in (rows, beta))
+    keys = row_keys(jax.random.PRNGKey(seed), rows.shape[0])
+    out = map_rows(model.predict, (rows, beta, keys), (posterior.data,))
+    return {k: np.asarray(v) for k, v in out.items()}
 
 
 LOO_DRAWS = 2000  # draws of theta for the integrated leave-one-out densities

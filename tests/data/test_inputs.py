@@ -381,10 +381,11 @@ ISSUE_21_ROWS = {
     "no piston column": [
         "piston-column-of-zeros",
         "test_force_only_campaign",
-        "test_force_only_and_one_pass_tables_pass_fit_report_batch",
+        "test_force_only_and_one_pass_tables_read",
+        "test_a_command_that_needs_piston_readings_refuses_in_one_line",
     ],
     "catalogue data sheet": [
-        "test_force_only_and_one_pass_tables_pass_fit_report_batch",
+        "test_force_only_and_one_pass_tables_read",
         "catalogue-volume-on-some-rows",
         "catalogue-volume-column-empty",
         "catalogue-height-twice",

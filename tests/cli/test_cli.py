@@ -682,8 +682,9 @@ def test_simulate_with_another_stand(tmp_path):
 def test_sampling_runs_show_a_step_bar(monkeypatch, restore_progress):
     """Single sampling runs (surface, diagnose) count emcee steps; per-test fits (desc=None) stay silent."""
     import numpy as np
+    from sampling_helpers import run_one
 
-    from uq._inference.sampler import Settings, run_ensembles
+    from uq._inference.sampler import Settings
 
     def lp(th):
         return -0.5 * np.sum(np.asarray(th) ** 2, axis=1)
@@ -692,10 +693,10 @@ def test_sampling_runs_show_a_step_bar(monkeypatch, restore_progress):
     tty = FakeTerminal()
     monkeypatch.setattr(sys, "stderr", tty)
     _progress.set_enabled(True)
-    run_ensembles(
+    run_one(
         lp, np.zeros(2), np.eye(2), ("a", "b"), seed=1, settings=settings, desc="surface sampling"
     )
     assert "surface sampling" in tty.getvalue() and "step" in tty.getvalue()
     before = tty.getvalue()
-    run_ensembles(lp, np.zeros(2), np.eye(2), ("a", "b"), seed=1, settings=settings)
+    run_one(lp, np.zeros(2), np.eye(2), ("a", "b"), seed=1, settings=settings)
     assert tty.getvalue() == before

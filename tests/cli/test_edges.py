@@ -250,9 +250,10 @@ def test_sampling_bar_shows_no_made_up_total(monkeypatch):
     import io
 
     import numpy as np
+    from sampling_helpers import run_one
 
     import uq._io.progress as progress
-    from uq._inference.sampler import Settings, run_ensembles
+    from uq._inference.sampler import Settings
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:
@@ -262,7 +263,7 @@ def test_sampling_bar_shows_no_made_up_total(monkeypatch):
     monkeypatch.setattr(sys, "stderr", tty)
     monkeypatch.setattr(progress, "_enabled", True)
     settings = Settings(n_walkers=8, n_ensembles=2, max_steps=5000, min_steps=40, chunk=20)
-    run_ensembles(
+    run_one(
         lambda th: -0.5 * np.sum(np.asarray(th) ** 2, axis=1),
         np.zeros(2),
         np.eye(2),

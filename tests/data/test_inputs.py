@@ -381,10 +381,11 @@ ISSUE_21_ROWS = {
     "no piston column": [
         "piston-column-of-zeros",
         "test_force_only_campaign",
-        "test_force_only_and_one_pass_tables_pass_fit_report_batch",
+        "test_force_only_and_one_pass_tables_read",
+        "test_a_command_that_needs_piston_readings_refuses_in_one_line",
     ],
     "catalogue data sheet": [
-        "test_force_only_and_one_pass_tables_pass_fit_report_batch",
+        "test_force_only_and_one_pass_tables_read",
         "catalogue-volume-on-some-rows",
         "catalogue-volume-column-empty",
         "catalogue-height-twice",
@@ -547,26 +548,22 @@ def test_force_only_campaign():
         require(rec, {"piston"})
 
 
-def test_commands_refuse_in_one_place_and_the_refusal_lifts(tmp_path, monkeypatch, capsys):
+def test_a_command_that_needs_piston_readings_refuses_in_one_line(tmp_path, capsys):
     import argparse
 
     from uq._cli.common import load
-    from uq._data import recordings
 
     path = tmp_path / "rec.csv"
     path.write_text(_text(_drop(GOOD, "piston_mm")))
-    # every command takes force-only campaigns now (or soon): the table's mechanism is what is tested
-    monkeypatch.setitem(recordings.COMMAND_NEEDS, "surface", frozenset({"piston", "order"}))
-    for command in ("surface",):
-        assert _run([command, str(path)]) == 2
-        err = capsys.readouterr().err.strip()
-        assert err.count("\n") == 0 and err.startswith(f"uq {command}: error: {path}: force-only")
+    # uq design with a model of the volume needs piston readings; every other use takes the file
+    argv = ["design", str(path), "--height-mm", "112", "--charge-bar", "5", "--volume-l", "3.4"]
+    assert _run([*argv, "--model", "thermodynamic"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith(f"uq design: error: {path}: force-only")
     args = argparse.Namespace(file=str(path), piston_area_cm2=54.82, x0_mm=112.0, _name="surface")
     with pytest.raises(InputError, match="force-only"):
-        load(args)
-    assert load(args, needs=()).n_points == 74
-    monkeypatch.setitem(recordings.COMMAND_NEEDS, "surface", frozenset())
-    assert not load(args).has_volume
+        load(args, needs=("piston", "order"))
+    assert load(args).n_points == 74 and not load(args).has_volume
 
 
 @pytest.mark.parametrize(
@@ -578,15 +575,10 @@ def test_commands_refuse_in_one_place_and_the_refusal_lifts(tmp_path, monkeypatc
     ],
     ids=["no-piston-column", "catalogue-one-pass", "catalogue-with-volume"],
 )
-def test_force_only_and_one_pass_tables_pass_fit_report_batch(lines, has_volume):
+def test_force_only_and_one_pass_tables_read(lines, has_volume):
     """Every command takes them (fitted in tests/cli/test_force_only_commands.py and
-    tests/cli/test_surface_catalogue.py): none of them refuses these shapes any more."""
-    from uq._data.recordings import require_for
-
-    rec = _from_lines(lines)
-    assert rec.has_volume == has_volume
-    for command in ("fit", "report", "batch", "diagnose", "surface", "margin"):
-        assert require_for(rec, command) is rec
+    tests/cli/test_surface_catalogue.py)."""
+    assert _from_lines(lines).has_volume == has_volume
 
 
 def test_catalogue_table_reads():
@@ -965,7 +957,7 @@ def test_report_removes_stale_figures_of_an_earlier_run(small_cubics, tmp_path):
 # ----------------------------------------------------------------------------- options elsewhere
 
 
-def test_fit_definition_and_batch_take_the_reading_options(tmp_path, monkeypatch):
+def test_fit_definition_and_batch_take_the_reading_options(tmp_path):
     from uq._cli.cmd_basic import read_fit_config
     from uq._drivers import batch
 
@@ -991,11 +983,5 @@ def test_fit_definition_and_batch_take_the_reading_options(tmp_path, monkeypatch
     for task in ("fit", "surface"):  # each task reads what its command takes: force-only too
         fo = {"file": str(tmp_path / "fo.csv"), "options": {}, "task": task}
         assert not batch._recordings(fo).has_volume
-    # ... and a command's needs, were it to have any, refuse the task in one line
-    from uq._data import recordings
-
-    monkeypatch.setitem(recordings.COMMAND_NEEDS, "surface", frozenset({"piston"}))
-    with pytest.raises(InputError, match="force-only campaign"):
-        batch._recordings({"file": str(tmp_path / "fo.csv"), "options": {}, "task": "surface"})
     with pytest.raises(InputError, match="column 'absolute_pressure': expected true or false"):
         batch._campaign(entry | {"absolute_pressure": "maybe"}, tmp_path, "cat.csv, row 2")

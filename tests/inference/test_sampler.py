@@ -6,9 +6,10 @@ import arviz as az
 import emcee
 import numpy as np
 import pytest
+from sampling_helpers import run_one
 
 from uq._inference.convergence import ESS_MIN, RHAT_MAX, chain_diagnostics
-from uq._inference.sampler import Settings, run_ensembles
+from uq._inference.sampler import Settings
 
 
 def _gauss(theta):
@@ -71,7 +72,7 @@ def test_sampler_runs_past_the_tau_rule_until_ess_passes():
         chunk=40,
         max_steps=5000,
     )
-    ch = run_ensembles(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=3, settings=s)
+    ch = run_one(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=3, settings=s)
     assert ch.n_steps > s.min_steps
     assert not ch.problems, ch.problems
     for i in range(2):
@@ -89,7 +90,7 @@ def test_failed_rule_is_named_when_max_steps_is_reached():
         chunk=20,
         max_steps=40,
     )
-    ch = run_ensembles(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=4, settings=s)
+    ch = run_one(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=4, settings=s)
     assert ch.n_steps == 40
     assert any("effective sample size" in p.message() for p in ch.problems), ch.problems
 
@@ -100,7 +101,7 @@ def test_non_finite_draws_fail_the_verdict_loudly():
     from uq._inference.convergence import Failure, convergence
 
     s = Settings(n_walkers=8, n_ensembles=4, min_steps=200, chunk=100, max_steps=2000)
-    ch = run_ensembles(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=4, settings=s)
+    ch = run_one(_gauss, np.zeros(2), np.eye(2), ("a", "b"), seed=4, settings=s)
     a = ch.samples[..., 0].copy()
     assert convergence({"a": a}, ch).converged
     a[1, 5] = np.nan
@@ -118,7 +119,7 @@ def test_starts_are_overdispersed_across_four_ensembles():
         return np.where(theta[:, 0] > 0, _gauss(theta - 1.0), -np.inf)
 
     s = Settings(min_steps=20, max_steps=20)
-    ch = run_ensembles(half_line, np.ones(2), np.eye(2), ("a", "b"), seed=5, settings=s)
+    ch = run_one(half_line, np.ones(2), np.eye(2), ("a", "b"), seed=5, settings=s)
     assert s.n_ensembles == 4 and ch.start.shape == (4, s.n_walkers, 2)
     assert np.all(ch.start[..., 0] > 0)
     spread = ch.start[..., 1].std(axis=1)  # the unconstrained coordinate: posterior sd 1

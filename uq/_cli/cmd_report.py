@@ -99,10 +99,6 @@ def command_report(args) -> int:
     rec = load(args)
     if args.model is not None and not args.surface:
         raise InputError(f"option --model {args.model}: only with --surface (the model it fits)")
-    if args.surface:  # refused before fitting: what the surface model cannot yet do without
-        from uq._data.recordings import COMMAND_NEEDS, require
-
-        require(rec, COMMAND_NEEDS["surface"])
     # the figure workers (one per further CPU) start now: their imports run beside the fit
     with FigureWorkers(None, len(rec.tests)) as workers:
         t0 = time.perf_counter()

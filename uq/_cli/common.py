@@ -309,14 +309,14 @@ def add_json(p: argparse.ArgumentParser) -> None:
     )
 
 
-def load(args, min_points: int = 6, needs=None):
+def load(args, min_points: int = 6, needs=()):
     """The recordings of ``args.file`` read with the command's reading options.
 
-    ``needs``: what the command cannot yet do without ("piston", "order"); by default the
-    command's entry of uq._data.recordings.COMMAND_NEEDS, the one table to edit when a command
-    learns to use force-only campaigns or campaigns in unknown order.
+    ``needs``: what the command cannot do without ("piston", "order"; ``uq._data.recordings.
+    require``): every command takes force-only campaigns and campaigns in unknown order but
+    ``uq design`` with a model of the volume.
     """
-    from uq._data.recordings import COMMAND_NEEDS, READING_OPTIONS, read_recordings, require
+    from uq._data.recordings import READING_OPTIONS, read_recordings, require
 
     rec = read_recordings(
         args.file,
@@ -324,7 +324,7 @@ def load(args, min_points: int = 6, needs=None):
         on_note=_note,  # what the reader decided by itself (a units row, a title), said at once
         **{k: getattr(args, k) for k in READING_OPTIONS if hasattr(args, k)},
     )
-    require(rec, COMMAND_NEEDS.get(getattr(args, "_name", ""), ()) if needs is None else needs)
+    require(rec, needs)
     check_memory(args, rec)
     return rec
 

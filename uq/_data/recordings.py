@@ -228,17 +228,6 @@ class Recordings:
 
 # ----------------------------------------------------------------------------- what commands need
 
-#: What each command cannot yet work without: "piston" (piston coordinates in every test) and
-#: "order" (branch and step). One table, so a command that learns to do without is one edit here.
-COMMAND_NEEDS: dict[str, frozenset[str]] = {
-    "fit": frozenset(),  # force-only tests: the force block; one pass: no order check
-    "report": frozenset(),
-    "surface": frozenset(),  # force-only and one-pass campaigns: the force surface (volume omitted)
-    "margin": frozenset(),  # the force surface answers; design margins refused without piston
-    "diagnose": frozenset(),  # force-only and one-pass campaigns: what they can identify is offered
-    "batch": frozenset(),
-}
-
 
 def require(rec: Recordings, needs) -> None:
     """Refuse, in one line, a campaign that lacks what the caller ``needs`` ("piston", "order")."""
@@ -258,12 +247,6 @@ def require(rec: Recordings, needs) -> None:
             f"{rec.path}: one pass in unknown order (no branch and step columns): this command needs branch "
             "and step (not yet supported for campaigns in unknown order)"
         )
-
-
-def require_for(rec: Recordings, command: str) -> Recordings:
-    """:func:`require` what ``command`` needs (COMMAND_NEEDS); returns ``rec``."""
-    require(rec, COMMAND_NEEDS.get(command, ()))
-    return rec
 
 
 # ----------------------------------------------------------------------------- options

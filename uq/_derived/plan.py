@@ -528,6 +528,11 @@ APPROXIMATIONS = (
 
 def plan_document(plan: Plan, model_info: dict | None = None) -> dict:
     """The JSON document of ``uq plan`` (docs/formats.md): the contract's keys and more."""
+
+    def timed(layout: dict) -> dict:  # a compared layout with its stand time, as Plan.cost
+        n, changes = layout["n_readings"], layout["n_pressure_changes"]
+        return layout | {"stand_time_readings": n + plan.cost_per_pressure * changes}
+
     targets = []
     for i, t in enumerate(plan.targets):
         row = {
@@ -573,16 +578,8 @@ def plan_document(plan: Plan, model_info: dict | None = None) -> dict:
         "stand_time_readings": plan.cost,
         "tests": tests,
         "targets": targets,
-        "uniform_grid": plan.uniform
-        | {
-            "stand_time_readings": plan.uniform["n_readings"]
-            + plan.cost_per_pressure * plan.uniform["n_pressure_changes"]
-        },
-        "paper_protocol": plan.paper
-        | {
-            "stand_time_readings": plan.paper["n_readings"]
-            + plan.cost_per_pressure * plan.paper["n_pressure_changes"]
-        },
+        "uniform_grid": timed(plan.uniform),
+        "paper_protocol": timed(plan.paper),
         "search": {
             "stop": plan.path.stop,
             "plans_tried": plan.tried,

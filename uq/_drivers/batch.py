@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import uq._inference.float64  # noqa: F401  float64 in every worker, before any array is made
-from uq._data.recordings import READING_OPTIONS, read_recordings, require_for
+from uq._data.recordings import READING_OPTIONS, read_recordings
 from uq._data.stand_description import stand_or_paper
 from uq._derived.bands import campaign_bands
 from uq._diagnose.engine import diagnose, shorter_sampling
@@ -360,9 +360,7 @@ def run_job(job: dict, *, fitted=None, fit_seconds: float = 0.0) -> dict:
 def _recordings(job: dict):
     o = job["options"]
     kw = {k: o[k] for k in READING_OPTIONS if k in o}
-    # what each task needs (COMMAND_NEEDS of its command): a force-only campaign's surface task
-    # is refused in its row's one line while the surface model needs piston coordinates
-    return require_for(read_recordings(job["file"], **kw), job["task"])
+    return read_recordings(job["file"], **kw)
 
 
 def _settings(job: dict):

@@ -609,40 +609,6 @@ def _starts(log_prob, centers, chols, n_walkers: int, rng, tries: int = 20) -> n
     return np.where(bad[..., None], draw(1e-6, p0.shape), p0)
 
 
-def run_ensembles(
-    log_prob,
-    center,
-    cov,
-    names,
-    *,
-    seed: int,
-    settings: Settings = Settings(),
-    desc: str | None = None,
-    mix: tuple[float, float, float] = INDEPENDENCE_MIX,
-) -> Chains:
-    """Sample ``log_prob`` (vectorised: (W, D) -> (W,)) with emcee until the rules pass.
-
-    ``center`` is the optimiser's solution and ``cov`` (D, D) an estimate of the posterior
-    covariance there; see the module docstring for the starts and storage.
-    ``desc``: show a progress bar of the steps (uq._io.progress; on a terminal only) under this name.
-    ``mix``: the weights of the moves (``INDEPENDENCE_MIX``, ``DE_MIX``; see :func:`effective_mix`).
-    """
-
-    def many(thetas):  # (1, m, D) -> (1, m)
-        return np.asarray(log_prob(thetas[0]))[None]
-
-    return run_many(
-        many,
-        np.asarray(center, float)[None],
-        np.asarray(cov, float)[None],
-        names,
-        seed=seed,
-        settings=settings,
-        desc=desc,
-        mix=mix,
-    )[0]
-
-
 def run_many(
     log_prob,
     centers,

@@ -518,9 +518,5 @@ def with_model(d: Data, names, order: int) -> Data:
 def active_of(names) -> np.ndarray:
     """The free coordinates of theta for a model with mechanisms ``names`` (bool, (N_THETA,))."""
     act = np.zeros(N_THETA, bool)
-    act[active_dims(names)] = True
+    act[[0, 1, *(NONLINEAR[m] for m in names if m in NONLINEAR)]] = True
     return act
-
-
-def active_dims(names) -> list[int]:
-    return [0, 1, *sorted(NONLINEAR[m] for m in names if m in NONLINEAR)]

@@ -231,30 +231,7 @@ def dev_data(
 ) -> DevData:
     """The model's arrays for a campaign with piston readings."""
     base = surface_likelihood.surface_data(rec, orders, stand)
-    t, idx, p_bar, n_k, A, D = _spans(rec, orders, np.asarray(base.Xf), np.asarray(base.Xl))
-    rate = gp.amplitude_rate(reference_area(base.feff_hat))
-    return DevData(
-        jnp.asarray(t),
-        jnp.asarray(idx),
-        base.F,
-        base.L,
-        base.phat,
-        base.feff_hat,
-        base.dp_pa,
-        base.p_abs_pa,
-        base.area,
-        base.prior_mean,
-        base.weight,
-        base.dp_meas,
-        jnp.asarray(p_bar * BAR_PA),
-        jnp.asarray(p_bar),
-        jnp.asarray(np.stack(A)),
-        jnp.asarray(np.stack(D)),
-        jnp.full(n_k, gp.COEFFICIENT_SCALE),
-        jnp.full(len(BLOCKS), rate),
-        *span_products(np.stack(A), np.stack(D), len(BLOCKS)),
-        *padded_rows(t, idx, len(p_bar), 2 * span_degree(orders) + 3),
-    )
+    return _dev_data(DevData, BLOCKS, rec, orders, base, base.Xf, base.Xl)
 
 
 def force_dev_data(
@@ -262,25 +239,34 @@ def force_dev_data(
 ) -> ForceDevData:
     """The model's arrays for a campaign without piston readings (force-only, catalogue tables)."""
     base = surface_likelihood.surface_force_data(rec, orders, stand)
-    t, idx, p_bar, n_k, A, D = _spans(rec, orders, np.asarray(base.X), None)
-    return ForceDevData(
-        jnp.asarray(t),
-        jnp.asarray(idx),
-        base.F,
-        base.phat,
-        base.feff_hat,
-        base.dp_pa,
-        base.dp_meas,
-        base.prior_mean,
-        base.weight,
-        jnp.asarray(p_bar * BAR_PA),
-        jnp.asarray(p_bar),
-        jnp.asarray(np.stack(A)),
-        jnp.asarray(np.stack(D)),
-        jnp.full(n_k, gp.COEFFICIENT_SCALE),
-        jnp.full(len(FORCE_BLOCKS), gp.amplitude_rate(reference_area(base.feff_hat))),
-        *span_products(np.stack(A), np.stack(D), len(FORCE_BLOCKS)),
-        *padded_rows(t, idx, len(p_bar), 2 * span_degree(orders) + 1),
+    return _dev_data(ForceDevData, FORCE_BLOCKS, rec, orders, base, base.X, None)
+
+
+def _dev_data(cls, blocks, rec: Recordings, orders: surface.Orders, base, Xf, Xl):
+    """``cls``'s arrays (one field per deviation block of ``blocks``): the readings' fields as the
+    surface's data ``base`` has them, then the spans' maps, their products and the padded rows
+    (the piston's rows, ``Xl``, take two more powers of t than the force's)."""
+    t, idx, p_bar, n_k, A, D = _spans(
+        rec, orders, np.asarray(Xf), None if Xl is None else np.asarray(Xl)
+    )
+    A, D = np.stack(A), np.stack(D)
+    AAt, E = span_products(A, D, len(blocks))
+    n_powers = 2 * span_degree(orders) + (1 if Xl is None else 3)
+    rows, powers = padded_rows(t, idx, len(p_bar), n_powers)
+    return cls(
+        t=jnp.asarray(t),
+        test=jnp.asarray(idx),
+        **{f: getattr(base, f) for f in cls._fields if f in base._fields},
+        p_pa=jnp.asarray(p_bar * BAR_PA),
+        p_bar=jnp.asarray(p_bar),
+        A=jnp.asarray(A),
+        D=jnp.asarray(D),
+        s=jnp.full(n_k, gp.COEFFICIENT_SCALE),
+        rates=jnp.full(len(blocks), gp.amplitude_rate(reference_area(base.feff_hat))),
+        AAt=AAt,
+        E=E,
+        rows=rows,
+        powers=powers,
     )
 
 
@@ -699,9 +685,7 @@ def pointwise_loo(theta, d):
     b = -forms(uf, ul)
     r1 = yf - forms(uf, None)
     r2 = yl - forms(ul, None)
-    det = a * e - b * b
-    quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
-    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI - jnp.log(L11) - jnp.log(L22)
+    return pair.block_logpdf(a, e, b, r1, r2) - jnp.log(L11) - jnp.log(L22)
 
 
 def predict(theta, beta, key, d):

@@ -234,7 +234,12 @@ def block_loo(X, y, n, chol, mean):
     Zf, Zl = Z[:, :n], Z[:, n:]
     a, e, b = 1.0 - jnp.sum(Zf**2, 0), 1.0 - jnp.sum(Zl**2, 0), -jnp.sum(Zf * Zl, 0)
     r = y - X @ mean
-    r1, r2 = r[:n], r[n:]
+    return block_logpdf(a, e, b, r[:n], r[n:])
+
+
+def block_logpdf(a, e, b, r1, r2):
+    """log N((r1, r2); 0, M^-1) of each reading's whitened pair of residuals, M = [[a, b], [b, e]]
+    (I - H_i, the precision of its leave-one-out predictive), (n,) each."""
     det = a * e - b * b
     quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
     return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI
@@ -264,10 +269,7 @@ def pointwise_loo(noise, d: PairData, scale=1.0):
     yf = F / L11
     r1 = yf - mf / L11
     r2 = (L - L21 * yf) / L22 - (scale * (d.Xl @ post.mean) - c * mf) / L22
-    a, e, b = 1.0 - hff, 1.0 - hll, -hfl
-    det = a * e - b * b
-    quad = (e * r1**2 - 2.0 * b * r1 * r2 + a * r2**2) / det
-    return -0.5 * quad + 0.5 * jnp.log(det) - LOG_2PI - jnp.log(L11) - jnp.log(L22)
+    return block_logpdf(1.0 - hff, 1.0 - hll, -hfl, r1, r2) - jnp.log(L11) - jnp.log(L22)
 
 
 def observed(d: PairData) -> dict:

@@ -15,7 +15,7 @@ from uq._inference.collapsed import CollapsedModel, hold_out_by_weight
 from uq._inference.sampler import INDEPENDENCE_MIX, Settings
 from uq._io.errors import InputError
 from uq._models import pair, surface_force
-from uq._models.pair import NOISE_NAMES, PairData, noise_prior_mean
+from uq._models.pair import NOISE_NAMES, PairData
 from uq._models.surface import (
     CANDIDATES,
     MAX_DRAWS,
@@ -29,8 +29,6 @@ from uq._models.surface import (
     orders_for,
     tq_columns,
 )
-
-NOISE_PRIOR_MEAN = noise_prior_mean(PAPER_STAND)
 
 #: the sampler's moves for the (force, piston) surface's five noise logs (DE, DE-snooker,
 #: independence t; ``uq._inference.sampler.effective_mix``): mostly independence proposals, a

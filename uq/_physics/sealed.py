@@ -77,7 +77,6 @@ class SealedPath(NamedTuple):
     overpressure_pa: np.ndarray  # p_u(x), (S1)
     force_N: np.ndarray  # P(x, p_u(x))
     rate_N_per_m: np.ndarray  # k = -dP/dx along the path, (S3)
-    dp_dx_pa_per_m: np.ndarray  # (S2)
     volume_m3: np.ndarray  # the element's absolute internal volume V(x, p_u(x))
     in_range: np.ndarray  # bool
 
@@ -266,7 +265,7 @@ def sealed_path(
     k = sealed_rate(element.dforce_dx(x, p), element.dforce_dp(x, p), dpdx)
     P = element.force_N(x, p)
     nan = np.where(in_range, 1.0, np.nan)
-    return SealedPath(x, p * nan, P * nan, k * nan, dpdx * nan, V * nan, in_range)
+    return SealedPath(x, p * nan, P * nan, k * nan, V * nan, in_range)
 
 
 def natural_frequency_Hz(rate_N_per_m, load_N, where: str = "", g: float = G_STANDARD):

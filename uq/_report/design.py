@@ -102,27 +102,30 @@ def figure_sealed_curves(doc: dict, curves: dict):
     return fig
 
 
+def _load_and_frequency(rows):
+    """(load kN, natural frequency Hz) of the chart's rows, (n, 3) each: mean, q05, q95."""
+    L = np.array([[r["load_N"][k] for k in ("mean", "q05", "q95")] for r in rows]) * 1e-3
+    F = np.array([[r["natural_frequency_Hz"][k] for k in ("mean", "q05", "q95")] for r in rows])
+    return L, F
+
+
+def _with_intervals(ax, L, F, **style) -> None:
+    """Points at the mean load and frequency with their 90 % intervals in both directions."""
+    xerr = [L[:, 0] - L[:, 1], L[:, 2] - L[:, 0]]
+    ax.errorbar(L[:, 0], F[:, 0], xerr=xerr, yerr=[F[:, 0] - F[:, 1], F[:, 2] - F[:, 0]], **style)
+
+
 def figure_frequency_chart(doc: dict):
     """Natural frequency against load at the design height, one point per charge pressure with
     its 90 % intervals in both directions (the catalogue's chart)."""
     rows = doc["frequency_chart"]["rows"]
     fig, ax = _subplots(1, (7.2, 4.4))
-    L = np.array([[r["load_N"][k] for k in ("mean", "q05", "q95")] for r in rows]) * 1e-3
-    F = np.array([[r["natural_frequency_Hz"][k] for k in ("mean", "q05", "q95")] for r in rows])
+    L, F = _load_and_frequency(rows)
     ax.fill_between(
         L[:, 0], F[:, 1], F[:, 2], color="tab:blue", alpha=0.25, lw=0, label="90 % interval"
     )
-    ax.errorbar(
-        L[:, 0],
-        F[:, 0],
-        xerr=[L[:, 0] - L[:, 1], L[:, 2] - L[:, 0]],
-        yerr=[F[:, 0] - F[:, 1], F[:, 2] - F[:, 0]],
-        fmt="o-",
-        color="tab:blue",
-        ms=4,
-        lw=1,
-        capsize=2,
-        label="posterior mean",
+    _with_intervals(
+        ax, L, F, fmt="o-", color="tab:blue", ms=4, lw=1, capsize=2, label="posterior mean"
     )
     for r, x, y in zip(rows, L[:, 0], F[:, 0], strict=True):
         ax.annotate(
@@ -134,13 +137,9 @@ def figure_frequency_chart(doc: dict):
         )
     d = design_row(doc)
     if d is not None:  # the design point itself, whether or not its charge is one of the chart's
-        dl = np.array([d["load_N"][k] for k in ("mean", "q05", "q95")]) * 1e-3
-        df = np.array([d["natural_frequency_Hz"][k] for k in ("mean", "q05", "q95")])
-        ax.errorbar(
-            [dl[0]],
-            [df[0]],
-            xerr=[[dl[0] - dl[1]], [dl[2] - dl[0]]],
-            yerr=[[df[0] - df[1]], [df[2] - df[0]]],
+        _with_intervals(
+            ax,
+            *_load_and_frequency([d]),
             fmt="*",
             color="tab:red",
             ms=12,

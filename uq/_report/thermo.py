@@ -36,8 +36,6 @@ PHYSICS_NOTES = {
     "model": " The force and the volume obey one potential (the Maxwell relation dP/dp_u = dV/dx) "
     "to within the noise, as a casing that stores energy elastically does.",
 }
-#: the files the page writes, by pattern (for pruning what an earlier run left)
-OUTPUTS = ("thermo_*.png", "thermo_*.svg", PAGE)
 N_DRAWS = 1000  # posterior draws behind each band
 
 

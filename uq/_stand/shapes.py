@@ -95,19 +95,11 @@ def catalogue(
         }
         d["volume_m3"] = None
         p = float(t["pressure_bar"])
-        if abs(p - volume_at_bar) < 1e-9:
-            x = np.asarray(d["height_m"], float)
-            _, L = true_curves(spring, physical, x, p, d["compression"], d["step"], piston_area_m2)
-            _, L_top = true_curves(
-                spring,
-                physical,
-                np.array([x_max_m]),
-                p,
-                np.array([True]),
-                np.array([0]),
-                piston_area_m2,
-            )
-            d["volume_m3"] = element_volume_at_xmax_m3 - piston_area_m2 * (L - L_top[0])
+        if abs(p - volume_at_bar) < 1e-9:  # the piston at the heights and, last, at x_max
+            x = np.append(np.asarray(d["height_m"], float), x_max_m)
+            comp, step = np.append(d["compression"], True), np.append(d["step"], 0)
+            _, L = true_curves(spring, physical, x, p, comp, step, piston_area_m2)
+            d["volume_m3"] = element_volume_at_xmax_m3 - piston_area_m2 * (L[:-1] - L[-1])
         out.append(d)
     return out
 

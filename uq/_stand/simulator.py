@@ -78,7 +78,6 @@ from uq._physics.quantities import BAR_PA, BASIS_SCALE_M
 
 # The paper's stand (section 3.2); a different stand is a StandDescription (``--stand FILE``).
 ELEMENT_VOLUME_AT_XMAX_M3 = PAPER_STAND.element_volume_at_xmax_m3
-pressure_sd_bar = PAPER_STAND.pressure_sd_bar
 
 
 class N50Spring:
@@ -108,6 +107,17 @@ class N50Spring:
                 param="pressures_bar",
             )
         return self._force(p_bar), self._piston(p_bar)
+
+    def _check(self, p_bar) -> None:
+        """Refuse pressures (a number or an array) outside ``pressure_range_bar``: the springs
+        defined beyond Table 1's pressures (n50 itself refuses in ``_coef``)."""
+        lo, hi = self.pressure_range_bar
+        p = np.asarray(p_bar, float)
+        if not np.all((lo <= p) & (p <= hi)):
+            raise InputError(
+                f"pressures_bar: {float(np.ravel(p)[0]):g} bar is outside {lo:g}..{hi:g} bar",
+                param="pressures_bar",
+            )
 
     def _a_L(self, p_bar: float) -> float:
         """Table 1's a_L at ``p_bar``, held at its end values beyond the tested pressures (the
@@ -148,13 +158,6 @@ class TraditionalSpring(N50Spring):
         self._feff = t.force[t.index(5.0)] / (5.0 * BAR_PA)  # m^2, m, 1, 1/m
         self._area = piston_area_m2
         self.pressure_range_bar = (0.01, 50.0)
-
-    def _check(self, p_bar: float) -> None:
-        lo, hi = self.pressure_range_bar
-        if not lo <= p_bar <= hi:
-            raise InputError(
-                f"pressures_bar: {p_bar:g} bar is outside {lo:g}..{hi:g} bar", param="pressures_bar"
-            )
 
     def effective_area_m2(self, height_m, p_bar):
         self._check(p_bar)
@@ -662,15 +665,6 @@ class ThermoSpring(N50Spring):
             ys += [force * w[:, 0], -pa * piston_area_m2 * cubic_slope(cl, u) * w[:, 0]]
         coef, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(ys), rcond=None)
         return coef[:4], coef[4:7], coef[7:]
-
-    def _check(self, p_bar) -> None:
-        lo, hi = self.pressure_range_bar
-        p = np.asarray(p_bar, float)
-        if np.any(p < lo) or np.any(p > hi):
-            raise InputError(
-                f"pressures_bar: {float(np.ravel(p)[0]):g} bar is outside {lo:g}..{hi:g} bar",
-                param="pressures_bar",
-            )
 
     def _t(self, height_m):
         return (np.asarray(height_m, float) - self.x0_m) / self.H

@@ -354,7 +354,8 @@ NOISY_STAND = PAPER_STAND.replace(load_cell_rel_sd=0.008, pressure_holding_bar=0
 
 def test_stand_description_reaches_the_likelihood_and_priors():
     """fit_surface(stand=...) takes dp, p_atm and the prior centres from the stand, not constants."""
-    from uq._models.surface_likelihood import noise_prior_mean, surface_data
+    from uq._models.pair import noise_prior_mean
+    from uq._models.surface_likelihood import surface_data
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     stand = NOISY_STAND.replace(p_atm_bar=0.9)
@@ -420,11 +421,12 @@ def test_posterior_from_the_gram_plan_is_the_whitened_posterior():
     from uq._inference.linear import linear_posterior
     from uq._models import pair
     from uq._models import surface_likelihood as S
+    from uq._models.pair import noise_prior_mean
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)
     rng = np.random.default_rng(0)
-    for theta in S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((4, 5)):
+    for theta in noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((4, 5)):
         L11, L21, L22 = pair.cov_factors(theta, d)
         yf, xf = d.F / L11, d.Xf / L11[:, None]
         yl = (d.L - L21 * yf) / L22
@@ -448,12 +450,13 @@ def test_pointwise_loo_from_the_plan_is_block_loo_of_the_whitened_pair():
 
     from uq._models import pair
     from uq._models import surface_likelihood as S
+    from uq._models.pair import noise_prior_mean
 
     rec = read_recordings(ROOT / "data" / "n50" / "recordings.csv")
     d = S.surface_data(rec, DEFAULT_ORDERS, PAPER_STAND)
     rng = np.random.default_rng(1)
     for theta, scale in zip(
-        S.noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((3, 5)),
+        noise_prior_mean(PAPER_STAND) + 0.5 * rng.standard_normal((3, 5)),
         (1.0, 1.03, 0.98),
         strict=True,
     ):

@@ -266,3 +266,19 @@ def test_stand_of_another_noise_form(tmp_path):
         with pytest.raises(InputError, match=what) as exc:
             read_stand(f)
         assert str(f) in str(exc.value) and "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("name", ["n50-traditional", "n50-thermo", "n50-kink"])
+def test_a_spring_refuses_the_pressure_outside_its_range_by_name(name):
+    """A spring defined beyond Table 1's pressures refuses, in one line, the first pressure outside
+    its range (not the first it is given), a NaN as well."""
+    from uq._stand.simulator import SPRINGS
+
+    spring = SPRINGS[name]()
+    lo, hi = spring.pressure_range_bar
+    x = 0.11
+    assert np.all(np.isfinite(spring.effective_area_m2(x, np.array([lo, hi]))))  # the ends are in
+    with pytest.raises(InputError, match=f"^pressures_bar: {hi + 1:g} bar is outside "):
+        spring.effective_area_m2(x, np.array([1.0, hi + 1, 2.0]))
+    with pytest.raises(InputError, match="^pressures_bar: nan bar is outside "):
+        spring.effective_area_m2(x, float("nan"))

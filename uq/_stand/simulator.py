@@ -113,9 +113,10 @@ class N50Spring:
         defined beyond Table 1's pressures (n50 itself refuses in ``_coef``)."""
         lo, hi = self.pressure_range_bar
         p = np.asarray(p_bar, float)
-        if not np.all((lo <= p) & (p <= hi)):
+        outside = p[~((lo <= p) & (p <= hi))]  # NaN too
+        if outside.size:
             raise InputError(
-                f"pressures_bar: {float(np.ravel(p)[0]):g} bar is outside {lo:g}..{hi:g} bar",
+                f"pressures_bar: {float(outside[0]):g} bar is outside {lo:g}..{hi:g} bar",
                 param="pressures_bar",
             )
 

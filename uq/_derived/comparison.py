@@ -179,8 +179,9 @@ def compare(
         raise ValueError(
             "the force surface is compared with cubics fitted to the force alone (force_side)"
         )
-    side = cubic_side or cubic_terms(cubic_fit, seed=seed, settings=settings)
-    loo_c, plain_c, lppd_c, refitted = side
+    loo_c, plain_c, lppd_c, refitted = cubic_side or cubic_terms(
+        cubic_fit, seed=seed, settings=settings
+    )
     sur_plain = surface_fit.posterior.loglik_total()
     n_s, n_c = surface_fit.n_coefficients, 8 * len(cubic_fit.tests)
     if force_only:
@@ -271,7 +272,7 @@ def fitting_both(
         return
     with contextlib.nullcontext() if given else worker:
         fit = registry.fit(name, rec, **kw)
-        worker.compare(fit)
+        worker.send(fit)  # compared with the cubics there
         yield fit, functools.cache(worker.result)
 
 

@@ -42,8 +42,9 @@ def _send(conn, obj) -> None:
 
 
 class ComparisonWorker:
-    """A started worker (:func:`start`): :meth:`compare` sends it the model's fit, :meth:`result`
-    waits for (cubics, comparison). A context manager: leaving it stops a worker still running."""
+    """A started worker (:func:`start`): :meth:`send` sends it the model's fit (and then what its
+    ``target`` asks for next), :meth:`result` waits for its answer ((cubics, comparison) for the
+    default ``TARGET``). A context manager: leaving it stops a worker still running."""
 
     def __init__(self, rec, *, seed: int, settings, stand, target: str = TARGET):
         asked, self._ask = multiprocessing.get_context("spawn").Pipe(duplex=False)
@@ -59,8 +60,6 @@ class ComparisonWorker:
             self._sender.join()
         self._sender = threading.Thread(target=_send, args=(self._ask, obj), daemon=True)
         self._sender.start()
-
-    compare = send  # the model's fit, which the worker compares with its cubics
 
     def result(self):
         if self._sender is not None:

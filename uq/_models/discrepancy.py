@@ -364,9 +364,7 @@ def channel_scales(amplitudes, d):
 def coefficient_map(theta, d):
     """C (T, m, K): every test's Z-coefficients from the model's standardised coefficients
     (beta: the surface's k_s, then z: channel-major, n_c x T)."""
-    _, amps, length = _split(theta, d)
-    Lr = jnp.linalg.cholesky(gp.correlation(d.p_bar, length, jnp))
-    g = channel_scales(amps, d)
+    Lr, g = deviation_map(theta, d)
     T, m, _ = d.D.shape
     Cz = jnp.einsum("imc,c,ij->imcj", d.D, g, Lr).reshape(T, m, -1)
     return jnp.concatenate([d.A, Cz], axis=-1)

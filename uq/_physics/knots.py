@@ -23,6 +23,11 @@ def _basis(knots: tuple[float, ...]) -> CubicSpline:
     return CubicSpline(np.asarray(knots), np.eye(len(knots)))
 
 
+def _spline(knots) -> CubicSpline:
+    """:func:`_basis` of ``knots`` (any sequence of numbers), made once per set of knots."""
+    return _basis(tuple(np.asarray(knots, float)))
+
+
 def _along(op: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray:
     """``op`` (M, K) applied to ``values``' ``axis`` (of length K): that axis becomes length M."""
     out = np.tensordot(op, np.asarray(values, float), axes=([1], [axis]))
@@ -31,20 +36,20 @@ def _along(op: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray:
 
 def coefficients(knots, values, axis: int) -> np.ndarray:
     """``CubicSpline(knots, values, axis=axis).c``: (4, K - 1, *values' other axes)."""
-    c = _basis(tuple(np.asarray(knots, float)))
+    c = _spline(knots)
     return np.tensordot(c.c, np.asarray(values, float), axes=([2], [axis]))
 
 
 def derivative_at_knots(knots, values, axis: int) -> np.ndarray:
     """The spline's first derivative at its own knots, the shape of ``values``."""
-    s = _basis(tuple(np.asarray(knots, float)))
+    s = _spline(knots)
     return _along(s.derivative()(s.x), values, axis)
 
 
 def integral_from(knots, values, axis: int, start: float, to=None) -> np.ndarray:
     """The spline's integral from ``start`` to each point of ``to`` (default: the knots), along
     ``axis``, whose length becomes len(to)."""
-    s = _basis(tuple(np.asarray(knots, float)))
+    s = _spline(knots)
     anti = s.antiderivative()
     to = s.x if to is None else np.asarray(to, float)
     return _along(anti(to) - anti(np.array([start])), values, axis)

@@ -179,6 +179,14 @@ def test_volume_uncertainty_and_polytropic_range_are_propagated():
         assert np.array_equal(got["load_N"]["q95"], want["load_N"]["q95"])
     with pytest.raises(InputError, match="12 bar is outside"):
         sealed_paths(grid, d, [5.0, 12.0])
+    # one charge per draw (a design margin's): the first outside the range is named, NaN too
+    per_draw = np.full(grid.n_draws, 5.0)
+    per_draw[[7, 9]] = np.nan, 12.0
+    with pytest.raises(InputError, match="^charge pressure nan bar is outside"):
+        sealed_draws(grid, d, per_draw, heights_m=[0.112])
+    per_draw[7] = 5.0
+    with pytest.raises(InputError, match="^charge pressure 12 bar is outside"):
+        sealed_draws(grid, d, per_draw, heights_m=[0.112])
     out = design_point(m, d)
     assert (
         out["polytropic"] == pytest.approx(1.2)

@@ -346,10 +346,10 @@ def _check_charge(grid: DesignGrid, design: SealedDesign, charge_bar) -> np.ndar
     if p_c.ndim not in (0, 1) or (p_c.ndim == 1 and p_c.size != grid.n_draws):
         raise ValueError(f"charge_bar: a number or one per draw ({grid.n_draws}), got {p_c.shape}")
     plo, phi = grid.model.pressure_range_bar
-    if np.any(p_c < plo - 1e-9) or np.any(p_c > phi + 1e-9) or not np.all(np.isfinite(p_c)):
-        bad = p_c if p_c.ndim == 0 else p_c[(p_c < plo - 1e-9) | (p_c > phi + 1e-9)][0]
+    outside = p_c[~((plo - 1e-9 <= p_c) & (p_c <= phi + 1e-9))]  # NaN too
+    if outside.size:
         raise InputError(
-            f"charge pressure {float(bad):g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
+            f"charge pressure {float(outside[0]):g} bar is outside the tested pressures {plo:g}..{phi:g} bar"
         )
     return p_c
 
